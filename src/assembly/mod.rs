@@ -1,0 +1,118 @@
+//! Assembly of a body's internal force and effective stiffness.
+//!
+//! The stiffness is stored as the lower triangle of a CSC matrix over the free degrees of
+//! freedom. Its pattern and a per-element scatter map (local entry -> value index) are built once,
+//! so each Newton iteration only adds numbers; the GPU backend will reuse the same maps.
+
+use crate::mesh::Mesh;
+use crate::precision::Real;
+
+/// Numbering of a body's degrees of freedom: `node * dim + component`.
+#[derive(Debug, Clone)]
+pub struct DofMap {
+    pub dim: usize,
+    /// Index among the free dofs, or `None` for a prescribed dof.
+    pub free: Vec<Option<u32>>,
+    pub free_count: usize,
+}
+
+impl DofMap {
+    pub fn new(dim: usize, prescribed: &[bool]) -> Self {
+        let mut next = 0u32;
+        let free = prescribed
+            .iter()
+            .map(|&p| {
+                (!p).then(|| {
+                    next += 1;
+                    next - 1
+                })
+            })
+            .collect();
+        Self { dim, free, free_count: next as usize }
+    }
+}
+
+/// Sentinel for a local entry that is not stored (upper triangle or prescribed dof).
+pub const SKIP: u32 = u32::MAX;
+
+/// Lower-triangular CSC pattern of the free-dof stiffness with the element scatter maps.
+#[derive(Debug, Clone)]
+pub struct StiffnessPattern {
+    pub n: usize,
+    pub col_ptr: Vec<u32>,
+    pub row_idx: Vec<u32>,
+    /// Value index of each free dof's diagonal entry.
+    pub diagonal: Vec<u32>,
+    /// Per element, `(nen*dim)²` entries in row-major local order.
+    pub scatter: Vec<u32>,
+    pub element_dofs: usize,
+}
+
+impl StiffnessPattern {
+    pub fn new(mesh: &Mesh, dofs: &DofMap) -> Self {
+        let dim = dofs.dim;
+        let nen = mesh.kind.nodes();
+        let ndof = nen * dim;
+        let n = dofs.free_count;
+        let local_free = |e: usize| -> Vec<Option<u32>> {
+            mesh.element(e).iter().flat_map(|&node| (0..dim).map(move |i| node as usize * dim + i)).map(|g| dofs.free[g]).collect()
+        };
+        let mut columns: Vec<Vec<u32>> = vec![Vec::new(); n];
+        for e in 0..mesh.element_count() {
+            let f = local_free(e);
+            for r in f.iter().flatten() {
+                for c in f.iter().flatten() {
+                    if r >= c {
+                        columns[*c as usize].push(*r);
+                    }
+                }
+            }
+        }
+        let mut col_ptr = Vec::with_capacity(n + 1);
+        let mut row_idx = Vec::new();
+        col_ptr.push(0u32);
+        for (c, col) in columns.iter_mut().enumerate() {
+            col.push(c as u32); // every free dof has its diagonal (mass), even if isolated
+            col.sort_unstable();
+            col.dedup();
+            row_idx.extend_from_slice(col);
+            col_ptr.push(row_idx.len() as u32);
+        }
+        let position = |r: u32, c: u32| -> u32 {
+            let (s, e) = (col_ptr[c as usize] as usize, col_ptr[c as usize + 1] as usize);
+            s as u32 + row_idx[s..e].binary_search(&r).expect("entry in pattern") as u32
+        };
+        let diagonal = (0..n as u32).map(|i| position(i, i)).collect();
+        let mut scatter = Vec::with_capacity(mesh.element_count() * ndof * ndof);
+        for e in 0..mesh.element_count() {
+            let f = local_free(e);
+            for r in &f {
+                for c in &f {
+                    scatter.push(match (r, c) {
+                        (Some(r), Some(c)) if r >= c => position(*r, *c),
+                        _ => SKIP,
+                    });
+                }
+            }
+        }
+        Self { n, col_ptr, row_idx, diagonal, scatter, element_dofs: ndof }
+    }
+
+    pub fn nnz(&self) -> usize {
+        self.row_idx.len()
+    }
+
+    pub fn element_scatter(&self, e: usize) -> &[u32] {
+        let m = self.element_dofs * self.element_dofs;
+        &self.scatter[e * m..(e + 1) * m]
+    }
+}
+
+/// Adds `factor *` an element matrix into the CSC values through its scatter map.
+pub fn scatter_add(values: &mut [Real], scatter: &[u32], local: &[Real], factor: Real) {
+    for (&idx, &k) in scatter.iter().zip(local) {
+        if idx != SKIP {
+            values[idx as usize] += factor * k;
+        }
+    }
+}

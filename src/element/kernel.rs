@@ -1,0 +1,138 @@
+//! The per-element kernel: deformation gradient, stress and consistent tangent at each
+//! quadrature point, integrated into the element force vector and stiffness matrix.
+
+use super::GaussPoint;
+use crate::material::tensor::{green_lagrange, to_voigt, von_mises, Mat3, VOIGT};
+use crate::material::Hyperelastic;
+use crate::precision::Real;
+use nalgebra::Vector6;
+use thiserror::Error;
+
+#[derive(Debug, Error, Clone, Copy, PartialEq)]
+pub enum ElementError {
+    #[error("inverted element (det F = {0:.3e})")]
+    Inverted(Real),
+    #[error("non-finite stress or tangent")]
+    NonFinite,
+}
+
+/// Element results in local ordering `(node a, component i) -> a * dim + i`.
+#[derive(Debug, Clone, Default)]
+pub struct ElementOutput {
+    /// Internal force `f_int`.
+    pub force: Vec<Real>,
+    /// Tangent stiffness `d f_int / d u`, row-major, `(nen * dim)²` entries.
+    pub tangent: Vec<Real>,
+}
+
+/// Deformation gradient `F = I + Σ_a u_a ⊗ dN_a/dX` at one quadrature point.
+fn deformation_gradient(gp: &GaussPoint, u: &[[Real; 3]]) -> Mat3 {
+    let mut f = Mat3::identity();
+    for (ua, g) in u.iter().zip(&gp.dn_dx) {
+        for i in 0..3 {
+            for k in 0..3 {
+                f[(i, k)] += ua[i] * g[k];
+            }
+        }
+    }
+    f
+}
+
+/// Internal force and tangent stiffness of one element; `u` holds its nodal displacements.
+pub fn element_force_tangent<M: Hyperelastic>(
+    material: &M,
+    points: &[GaussPoint],
+    u: &[[Real; 3]],
+    dim: usize,
+    with_tangent: bool,
+    out: &mut ElementOutput,
+) -> Result<(), ElementError> {
+    let nen = u.len();
+    let ndof = nen * dim;
+    out.force.clear();
+    out.force.resize(ndof, 0.0);
+    out.tangent.clear();
+    if with_tangent {
+        out.tangent.resize(ndof * ndof, 0.0);
+    }
+    let mut b = vec![Vector6::<Real>::zeros(); ndof];
+    for gp in points {
+        let f = deformation_gradient(gp, u);
+        let det = f.determinant();
+        if !(det > 0.0) {
+            return Err(ElementError::Inverted(det));
+        }
+        let e = green_lagrange(&f);
+        let s = material.stress(&e);
+        let fs = f * s;
+        for (a, g) in gp.dn_dx.iter().enumerate() {
+            for i in 0..dim {
+                out.force[a * dim + i] += gp.dv * (fs[(i, 0)] * g[0] + fs[(i, 1)] * g[1] + fs[(i, 2)] * g[2]);
+            }
+        }
+        if !with_tangent {
+            continue;
+        }
+        let d = material.tangent(&e);
+        if !d.iter().all(|v| v.is_finite()) {
+            return Err(ElementError::NonFinite);
+        }
+        // Nonlinear strain-displacement operator, engineering shear components.
+        for (a, g) in gp.dn_dx.iter().enumerate() {
+            for i in 0..dim {
+                b[a * dim + i] = Vector6::from_fn(|r, _| {
+                    let (k, l) = VOIGT[r];
+                    if k == l {
+                        f[(i, k)] * g[k]
+                    } else {
+                        f[(i, k)] * g[l] + f[(i, l)] * g[k]
+                    }
+                });
+            }
+        }
+        let db: Vec<Vector6<Real>> = b.iter().map(|col| d * col).collect();
+        for (a, ga) in gp.dn_dx.iter().enumerate() {
+            let sga = s * nalgebra::Vector3::new(ga[0], ga[1], ga[2]);
+            for (bn, gb) in gp.dn_dx.iter().enumerate() {
+                let geometric = sga[0] * gb[0] + sga[1] * gb[1] + sga[2] * gb[2];
+                for i in 0..dim {
+                    let row = a * dim + i;
+                    for j in 0..dim {
+                        let col = bn * dim + j;
+                        let mut k = b[row].dot(&db[col]);
+                        if i == j {
+                            k += geometric;
+                        }
+                        out.tangent[row * ndof + col] += gp.dv * k;
+                    }
+                }
+            }
+        }
+    }
+    if !out.force.iter().all(|v| v.is_finite()) {
+        return Err(ElementError::NonFinite);
+    }
+    Ok(())
+}
+
+/// Strain energy of one element.
+pub fn element_energy<M: Hyperelastic>(material: &M, points: &[GaussPoint], u: &[[Real; 3]]) -> Real {
+    points.iter().map(|gp| gp.dv * material.energy(&green_lagrange(&deformation_gradient(gp, u)))).sum()
+}
+
+/// Volume-averaged von Mises stress of the Cauchy stress over the element's quadrature points.
+pub fn element_von_mises<M: Hyperelastic>(material: &M, points: &[GaussPoint], u: &[[Real; 3]]) -> Real {
+    let (mut sum, mut vol) = (0.0, 0.0);
+    for gp in points {
+        let f = deformation_gradient(gp, u);
+        let s = material.stress(&green_lagrange(&f));
+        sum += gp.dv * von_mises(&f, &s);
+        vol += gp.dv;
+    }
+    sum / vol
+}
+
+/// Second Piola-Kirchhoff stress at each quadrature point, Voigt order (for closed-form checks).
+pub fn element_stresses<M: Hyperelastic>(material: &M, points: &[GaussPoint], u: &[[Real; 3]]) -> Vec<Vector6<Real>> {
+    points.iter().map(|gp| to_voigt(&material.stress(&green_lagrange(&deformation_gradient(gp, u))))).collect()
+}

@@ -1,0 +1,103 @@
+//! Total Lagrangian finite elements: reference geometry (computed once) and the per-element
+//! kernel that evaluates internal force, tangent stiffness, strain energy and stresses.
+
+mod kernel;
+pub mod shape;
+
+pub use kernel::{element_energy, element_force_tangent, element_stresses, element_von_mises, ElementError, ElementOutput};
+
+use crate::mesh::{ElementKind, Mesh};
+use crate::precision::Real;
+use nalgebra::Matrix3;
+use thiserror::Error;
+
+/// Reference-configuration data of one quadrature point.
+#[derive(Debug, Clone)]
+pub struct GaussPoint {
+    /// `dN_a/dX` for each node (z component 0 in 2D).
+    pub dn_dx: Vec<[Real; 3]>,
+    /// Quadrature weight times reference Jacobian determinant (volume, or area per unit thickness).
+    pub dv: Real,
+}
+
+/// Reference geometry of every element of a mesh, with the lumped nodal masses.
+#[derive(Debug, Clone)]
+pub struct ReferenceGeometry {
+    pub kind: ElementKind,
+    /// `quadrature points per element` entries per element, flattened.
+    pub points: Vec<GaussPoint>,
+    pub points_per_element: usize,
+    /// Reference volume of each element.
+    pub volumes: Vec<Real>,
+}
+
+#[derive(Debug, Error)]
+#[error("element {element} is {what} in the reference configuration (Jacobian determinant {det:.3e})")]
+pub struct BadReferenceElement {
+    pub element: usize,
+    pub what: &'static str,
+    pub det: Real,
+}
+
+impl ReferenceGeometry {
+    /// Computes shape-function gradients; rejects inverted or degenerate elements.
+    pub fn new(mesh: &Mesh) -> Result<Self, BadReferenceElement> {
+        let kind = mesh.kind;
+        let dim = kind.dim();
+        let rule = shape::quadrature(kind);
+        let scale = mesh.min_edge_length().max(Real::MIN_POSITIVE).powi(dim as i32);
+        let mut points = Vec::with_capacity(rule.len() * mesh.element_count());
+        let mut volumes = Vec::with_capacity(mesh.element_count());
+        for e in 0..mesh.element_count() {
+            let nodes = mesh.element(e);
+            let mut volume = 0.0;
+            for qp in &rule {
+                let dn_dxi = shape::gradients(kind, qp.xi);
+                let mut jac = Matrix3::<Real>::identity();
+                for r in 0..dim {
+                    for c in 0..dim {
+                        jac[(r, c)] = nodes.iter().zip(&dn_dxi).map(|(&n, g)| mesh.nodes[n as usize][r] * g[c]).sum();
+                    }
+                }
+                let det = jac.determinant();
+                if !(det > 1e-10 * scale) {
+                    let what = if det < 0.0 { "inverted" } else { "degenerate" };
+                    return Err(BadReferenceElement { element: e, what, det });
+                }
+                let inv_t = jac.try_inverse().expect("non-singular").transpose();
+                let dn_dx = dn_dxi
+                    .iter()
+                    .map(|g| {
+                        let v = inv_t * nalgebra::Vector3::new(g[0], g[1], g[2]);
+                        [v[0], v[1], if dim == 3 { v[2] } else { 0.0 }]
+                    })
+                    .collect();
+                let dv = qp.weight * det;
+                volume += dv;
+                points.push(GaussPoint { dn_dx, dv });
+            }
+            volumes.push(volume);
+        }
+        Ok(Self { kind, points, points_per_element: rule.len(), volumes })
+    }
+
+    pub fn element_points(&self, e: usize) -> &[GaussPoint] {
+        &self.points[e * self.points_per_element..(e + 1) * self.points_per_element]
+    }
+
+    /// Row-sum lumped nodal masses `m_a = ρ ∫ N_a dV` (the row sums of the consistent mass;
+    /// positive for all four linear elements).
+    pub fn lumped_masses(&self, mesh: &Mesh, density: Real) -> Vec<Real> {
+        let rule = shape::quadrature(self.kind);
+        let values: Vec<Vec<Real>> = rule.iter().map(|qp| shape::values(self.kind, qp.xi)).collect();
+        let mut m = vec![0.0; mesh.nodes.len()];
+        for e in 0..mesh.element_count() {
+            for (gp, n) in self.element_points(e).iter().zip(&values) {
+                for (&node, na) in mesh.element(e).iter().zip(n) {
+                    m[node as usize] += density * na * gp.dv;
+                }
+            }
+        }
+        m
+    }
+}

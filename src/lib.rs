@@ -1,0 +1,15 @@
+//! bifirst: finite-element dynamics of frictional contact and impact between hyperelastic
+//! bodies, after Feng, He, Magnain and Cros (2006), "Bi-First".
+//!
+//! The pipeline follows the folders: [`scene`] -> [`mesh`] -> [`material`] -> [`element`] ->
+//! [`assembly`] -> [`solver`] -> [`output`].
+
+pub mod assembly;
+pub mod element;
+pub mod material;
+pub mod mesh;
+pub mod precision;
+pub mod scene;
+pub mod solver;
+pub mod output;
+pub mod run;

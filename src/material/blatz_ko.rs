@@ -1,0 +1,42 @@
+//! Blatz-Ko foam rubber, paper eqs. (2)-(3):
+//! `W = G/2 (I2/I3 + 2 sqrt(I3) - 5)`, `S = G (sqrt(I3) C⁻¹ - C⁻²)`, `C = 2E + I`.
+
+use super::tensor::{odot, outer, Mat3, Tangent};
+use super::Hyperelastic;
+use crate::precision::Real;
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct BlatzKo {
+    /// Shear modulus G.
+    pub g: Real,
+}
+
+fn right_cauchy_green(e: &Mat3) -> Mat3 {
+    e * 2.0 + Mat3::identity()
+}
+
+impl Hyperelastic for BlatzKo {
+    fn energy(&self, e: &Mat3) -> Real {
+        let c = right_cauchy_green(e);
+        let i3 = c.determinant();
+        // I2 = ((tr C)² - tr(C²)) / 2
+        let i2 = 0.5 * (c.trace().powi(2) - (c * c).trace());
+        0.5 * self.g * (i2 / i3 + 2.0 * i3.sqrt() - 5.0)
+    }
+
+    fn stress(&self, e: &Mat3) -> Mat3 {
+        let c = right_cauchy_green(e);
+        let j = c.determinant().sqrt();
+        let ci = c.try_inverse().unwrap_or_else(|| Mat3::from_element(Real::NAN));
+        (ci * j - ci * ci) * self.g
+    }
+
+    /// `dS/dE = 2 dS/dC = 2G [ J/2 C⁻¹⊗C⁻¹ - J C⁻¹⊙C⁻¹ + C⁻¹⊙C⁻² + C⁻²⊙C⁻¹ ]`.
+    fn tangent(&self, e: &Mat3) -> Tangent {
+        let c = right_cauchy_green(e);
+        let j = c.determinant().sqrt();
+        let ci = c.try_inverse().unwrap_or_else(|| Mat3::from_element(Real::NAN));
+        let ci2 = ci * ci;
+        (outer(&ci, &ci) * (0.5 * j) - odot(&ci, &ci) * j + odot(&ci, &ci2) + odot(&ci2, &ci)) * (2.0 * self.g)
+    }
+}

@@ -1,0 +1,73 @@
+//! Hyperelastic materials in total Lagrangian form: energy W(E), stress S = dW/dE and the
+//! consistent tangent dS/dE. Adding a model is one file implementing [`Hyperelastic`] plus an
+//! entry in [`Model`].
+
+mod blatz_ko;
+mod lvf;
+mod neo_hookean;
+pub mod tensor;
+
+pub use blatz_ko::BlatzKo;
+pub use lvf::Lvf;
+pub use neo_hookean::NeoHookean;
+
+use crate::precision::Real;
+use tensor::{Mat3, Tangent};
+
+/// A hyperelastic law written in the Green-Lagrange strain E (3x3, symmetric).
+///
+/// Plane strain uses the same 3D law with E33 = E13 = E23 = 0.
+pub trait Hyperelastic {
+    /// Strain energy density per unit reference volume.
+    fn energy(&self, e: &Mat3) -> Real;
+    /// Second Piola-Kirchhoff stress `S = dW/dE`.
+    fn stress(&self, e: &Mat3) -> Mat3;
+    /// Consistent tangent `dS/dE` in Voigt form (see [`tensor`]).
+    fn tangent(&self, e: &Mat3) -> Tangent;
+}
+
+/// The material models a scene can name.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Model {
+    BlatzKo(BlatzKo),
+    Lvf(Lvf),
+    NeoHookean(NeoHookean),
+}
+
+impl Model {
+    /// Small-strain (Young's modulus, Poisson ratio), used for wave speeds and time-step hints.
+    pub fn small_strain_moduli(&self) -> (Real, Real) {
+        let (k, g) = match self {
+            Model::BlatzKo(m) => (5.0 * m.g / 3.0, m.g),
+            Model::Lvf(m) => (m.k, m.g),
+            Model::NeoHookean(m) => (m.k, m.g),
+        };
+        let e = 9.0 * k * g / (3.0 * k + g);
+        let nu = (3.0 * k - 2.0 * g) / (2.0 * (3.0 * k + g));
+        (e, nu)
+    }
+}
+
+impl Hyperelastic for Model {
+    fn energy(&self, e: &Mat3) -> Real {
+        match self {
+            Model::BlatzKo(m) => m.energy(e),
+            Model::Lvf(m) => m.energy(e),
+            Model::NeoHookean(m) => m.energy(e),
+        }
+    }
+    fn stress(&self, e: &Mat3) -> Mat3 {
+        match self {
+            Model::BlatzKo(m) => m.stress(e),
+            Model::Lvf(m) => m.stress(e),
+            Model::NeoHookean(m) => m.stress(e),
+        }
+    }
+    fn tangent(&self, e: &Mat3) -> Tangent {
+        match self {
+            Model::BlatzKo(m) => m.tangent(e),
+            Model::Lvf(m) => m.tangent(e),
+            Model::NeoHookean(m) => m.tangent(e),
+        }
+    }
+}

@@ -1,0 +1,43 @@
+//! Compressible Neo-Hookean:
+//! `W = G/2 (tr C - 3) - G ln J + λ/2 (ln J)²`, `λ = K - 2G/3`.
+
+use super::tensor::{odot, outer, Mat3, Tangent};
+use super::Hyperelastic;
+use crate::precision::Real;
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct NeoHookean {
+    /// Shear modulus G.
+    pub g: Real,
+    /// Bulk modulus K.
+    pub k: Real,
+}
+
+impl NeoHookean {
+    fn lambda(&self) -> Real {
+        self.k - 2.0 * self.g / 3.0
+    }
+}
+
+impl Hyperelastic for NeoHookean {
+    fn energy(&self, e: &Mat3) -> Real {
+        let c = e * 2.0 + Mat3::identity();
+        let ln_j = 0.5 * c.determinant().ln();
+        0.5 * self.g * (c.trace() - 3.0) - self.g * ln_j + 0.5 * self.lambda() * ln_j * ln_j
+    }
+
+    fn stress(&self, e: &Mat3) -> Mat3 {
+        let c = e * 2.0 + Mat3::identity();
+        let ln_j = 0.5 * c.determinant().ln();
+        let ci = c.try_inverse().unwrap_or_else(|| Mat3::from_element(Real::NAN));
+        (Mat3::identity() - ci) * self.g + ci * (self.lambda() * ln_j)
+    }
+
+    /// `dS/dE = λ C⁻¹⊗C⁻¹ + 2(G - λ ln J) C⁻¹⊙C⁻¹`.
+    fn tangent(&self, e: &Mat3) -> Tangent {
+        let c = e * 2.0 + Mat3::identity();
+        let ln_j = 0.5 * c.determinant().ln();
+        let ci = c.try_inverse().unwrap_or_else(|| Mat3::from_element(Real::NAN));
+        outer(&ci, &ci) * self.lambda() + odot(&ci, &ci) * (2.0 * (self.g - self.lambda() * ln_j))
+    }
+}

@@ -1,0 +1,131 @@
+//! Structured mesh generators: rectangle and disk in 2D, box in 3D.
+//!
+//! Node sets: `all` always; rectangle and box add `x_min`, `x_max`, `y_min`, `y_max`
+//! (and `z_min`, `z_max`); the disk adds `boundary` and `center`.
+
+use super::{ElementKind, Mesh};
+use crate::precision::Real;
+use std::collections::BTreeMap;
+
+/// Rectangle `[x0, x0+lx] x [y0, y0+ly]` with `nx x ny` cells; Tri3 splits each cell in two.
+pub fn rectangle(origin: [Real; 2], size: [Real; 2], div: [usize; 2], kind: ElementKind) -> Mesh {
+    let [nx, ny] = div;
+    let id = |i: usize, j: usize| (j * (nx + 1) + i) as u32;
+    let mut nodes = Vec::with_capacity((nx + 1) * (ny + 1));
+    for j in 0..=ny {
+        for i in 0..=nx {
+            nodes.push([origin[0] + size[0] * i as Real / nx as Real, origin[1] + size[1] * j as Real / ny as Real, 0.0]);
+        }
+    }
+    let connectivity = quad_grid_cells(nx, ny, kind, id);
+    let mut sets = BTreeMap::new();
+    sets.insert("x_min".into(), (0..=ny).map(|j| id(0, j)).collect());
+    sets.insert("x_max".into(), (0..=ny).map(|j| id(nx, j)).collect());
+    sets.insert("y_min".into(), (0..=nx).map(|i| id(i, 0)).collect());
+    sets.insert("y_max".into(), (0..=nx).map(|i| id(i, ny)).collect());
+    let mut mesh = Mesh { kind, nodes, connectivity, node_sets: sets };
+    mesh.finish_sets();
+    mesh
+}
+
+fn quad_grid_cells(nx: usize, ny: usize, kind: ElementKind, id: impl Fn(usize, usize) -> u32) -> Vec<u32> {
+    let mut conn = Vec::new();
+    for j in 0..ny {
+        for i in 0..nx {
+            let (a, b, c, d) = (id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1));
+            match kind {
+                ElementKind::Quad4 => conn.extend([a, b, c, d]),
+                _ => conn.extend([a, b, c, a, c, d]),
+            }
+        }
+    }
+    conn
+}
+
+/// Disk of radius `r` about `center`: a `2n x 2n` square grid mapped onto the disk by the
+/// elliptical grid mapping `(u √(1 - v²/2), v √(1 - u²/2))`. Cells near the 45° diagonals are
+/// the most distorted; every Jacobian stays positive.
+pub fn disk(center: [Real; 2], radius: Real, n: usize, kind: ElementKind) -> Mesh {
+    let m = 2 * n;
+    let id = |i: usize, j: usize| (j * (m + 1) + i) as u32;
+    let mut nodes = Vec::with_capacity((m + 1) * (m + 1));
+    let mut boundary = Vec::new();
+    for j in 0..=m {
+        for i in 0..=m {
+            let u = -1.0 + 2.0 * i as Real / m as Real;
+            let v = -1.0 + 2.0 * j as Real / m as Real;
+            let x = u * (1.0 - 0.5 * v * v).sqrt();
+            let y = v * (1.0 - 0.5 * u * u).sqrt();
+            nodes.push([center[0] + radius * x, center[1] + radius * y, 0.0]);
+            if i == 0 || j == 0 || i == m || j == m {
+                boundary.push(id(i, j));
+            }
+        }
+    }
+    let connectivity = quad_grid_cells(m, m, kind, id);
+    let mut sets = BTreeMap::new();
+    sets.insert("boundary".into(), boundary);
+    sets.insert("center".into(), vec![id(n, n)]);
+    let mut mesh = Mesh { kind, nodes, connectivity, node_sets: sets };
+    mesh.finish_sets();
+    mesh
+}
+
+/// Box `origin + [0,lx]x[0,ly]x[0,lz]` with `nx x ny x nz` cells; Tet4 uses the six-tetrahedron
+/// Kuhn split of each cell (conforming across cells).
+pub fn cuboid(origin: [Real; 3], size: [Real; 3], div: [usize; 3], kind: ElementKind) -> Mesh {
+    let [nx, ny, nz] = div;
+    let id = |i: usize, j: usize, k: usize| ((k * (ny + 1) + j) * (nx + 1) + i) as u32;
+    let mut nodes = Vec::with_capacity((nx + 1) * (ny + 1) * (nz + 1));
+    for k in 0..=nz {
+        for j in 0..=ny {
+            for i in 0..=nx {
+                nodes.push([
+                    origin[0] + size[0] * i as Real / nx as Real,
+                    origin[1] + size[1] * j as Real / ny as Real,
+                    origin[2] + size[2] * k as Real / nz as Real,
+                ]);
+            }
+        }
+    }
+    let mut conn = Vec::new();
+    for k in 0..nz {
+        for j in 0..ny {
+            for i in 0..nx {
+                let c = [
+                    id(i, j, k), id(i + 1, j, k), id(i + 1, j + 1, k), id(i, j + 1, k),
+                    id(i, j, k + 1), id(i + 1, j, k + 1), id(i + 1, j + 1, k + 1), id(i, j + 1, k + 1),
+                ];
+                match kind {
+                    ElementKind::Hex8 => conn.extend(c),
+                    _ => {
+                        // Kuhn split along the diagonal c0-c6; each path 0 -> 6 through the cube
+                        // gives one tetrahedron, ordered for a positive volume.
+                        for [a, b] in [[1, 2], [2, 3], [3, 7], [7, 4], [4, 5], [5, 1]] {
+                            conn.extend([c[0], c[a], c[b], c[6]]);
+                        }
+                    }
+                }
+            }
+        }
+    }
+    let mut sets: BTreeMap<String, Vec<u32>> = BTreeMap::new();
+    for k in 0..=nz {
+        for j in 0..=ny {
+            for i in 0..=nx {
+                let n = id(i, j, k);
+                for (name, on) in [
+                    ("x_min", i == 0), ("x_max", i == nx), ("y_min", j == 0),
+                    ("y_max", j == ny), ("z_min", k == 0), ("z_max", k == nz),
+                ] {
+                    if on {
+                        sets.entry(name.into()).or_default().push(n);
+                    }
+                }
+            }
+        }
+    }
+    let mut mesh = Mesh { kind, nodes, connectivity: conn, node_sets: sets };
+    mesh.finish_sets();
+    mesh
+}

@@ -1,0 +1,140 @@
+//! Gmsh `.msh` 4.1 input (ASCII or binary) through the `mshio` crate.
+//!
+//! The mesh is made of the elements of the highest dimension present (Tri3/Quad4 in 2D,
+//! Tet4/Hex8 in 3D; one kind per mesh). Node sets come from physical groups of any dimension,
+//! named by `$PhysicalNames` (or `physical_<tag>` when unnamed). Nodes no element uses are dropped.
+
+use super::{ElementKind, Mesh};
+use crate::precision::Real;
+use mshio::mshfile::ElementType;
+use std::collections::{BTreeMap, HashMap};
+
+#[derive(Debug, thiserror::Error)]
+pub enum GmshError {
+    #[error("cannot parse it as MSH: {0}")]
+    Parse(String),
+    #[error("MSH version {0} is not supported (write version 4.1, e.g. `gmsh -format msh41`)")]
+    Version(f64),
+    #[error("it has no Tri3, Quad4, Tet4 or Hex8 elements")]
+    NoElements,
+    #[error("it mixes {0} and {1} elements; one kind per mesh is supported")]
+    Mixed(&'static str, &'static str),
+    #[error("element {element} refers to node tag {tag}, which the file does not define")]
+    MissingNode { element: u64, tag: u64 },
+    #[error("a 2D mesh must lie in the plane z = 0 (node tag {0} has z = {1})")]
+    NotPlanar(u64, Real),
+}
+
+fn kind_of(t: ElementType) -> Option<ElementKind> {
+    match t {
+        ElementType::Tri3 => Some(ElementKind::Tri3),
+        ElementType::Qua4 => Some(ElementKind::Quad4),
+        ElementType::Tet4 => Some(ElementKind::Tet4),
+        ElementType::Hex8 => Some(ElementKind::Hex8),
+        _ => None,
+    }
+}
+
+/// `$PhysicalNames` is not parsed by mshio: read `dim tag "name"` lines ourselves.
+fn physical_names(bytes: &[u8]) -> HashMap<(i32, i32), String> {
+    let text = String::from_utf8_lossy(bytes);
+    let mut names = HashMap::new();
+    let Some(start) = text.find("$PhysicalNames") else { return names };
+    for line in text[start..].lines().skip(2) {
+        if line.starts_with("$End") {
+            break;
+        }
+        let mut parts = line.splitn(3, char::is_whitespace);
+        if let (Some(d), Some(t), Some(n)) = (parts.next(), parts.next(), parts.next()) {
+            if let (Ok(d), Ok(t)) = (d.parse(), t.parse()) {
+                names.insert((d, t), n.trim().trim_matches('"').to_string());
+            }
+        }
+    }
+    names
+}
+
+pub fn read(bytes: &[u8]) -> Result<Mesh, GmshError> {
+    // mshio can panic on some malformed inputs; a scene error must never be a panic.
+    let parsed = std::panic::catch_unwind(|| mshio::parse_msh_bytes(bytes).map_err(|e| GmshError::Parse(format!("{e}").lines().next().unwrap_or("").to_string())))
+        .map_err(|_| GmshError::Parse("the parser rejected the file".into()))??;
+    if (parsed.header.version - 4.1).abs() > 1e-9 {
+        return Err(GmshError::Version(parsed.header.version));
+    }
+    let data = parsed.data;
+    let mut coords: HashMap<u64, [Real; 3]> = HashMap::new();
+    if let Some(nodes) = &data.nodes {
+        let mut next = nodes.min_node_tag;
+        for block in &nodes.node_blocks {
+            let mut tags: Vec<(u64, usize)> = match &block.node_tags {
+                Some(map) => map.iter().map(|(&t, &i)| (t, i)).collect(),
+                None => (0..block.nodes.len()).map(|i| (next + i as u64, i)).collect(),
+            };
+            tags.sort_unstable();
+            next += block.nodes.len() as u64;
+            for (tag, i) in tags {
+                let n = &block.nodes[i];
+                coords.insert(tag, [n.x, n.y, n.z]);
+            }
+        }
+    }
+    let blocks = data.elements.map(|e| e.element_blocks).unwrap_or_default();
+    let kind = blocks
+        .iter()
+        .filter_map(|b| kind_of(b.element_type))
+        .max_by_key(|k| k.dim())
+        .ok_or(GmshError::NoElements)?;
+    let mut index: HashMap<u64, u32> = HashMap::new();
+    let mut nodes = Vec::new();
+    let mut connectivity = Vec::new();
+    for b in blocks.iter().filter(|b| kind_of(b.element_type).is_some_and(|k| k.dim() == kind.dim())) {
+        let k = kind_of(b.element_type).expect("filtered");
+        if k != kind {
+            return Err(GmshError::Mixed(kind.name(), k.name()));
+        }
+        for e in &b.elements {
+            for &tag in &e.nodes {
+                let id = match index.get(&tag) {
+                    Some(&i) => i,
+                    None => {
+                        let x = *coords.get(&tag).ok_or(GmshError::MissingNode { element: e.element_tag, tag })?;
+                        if kind.dim() == 2 && x[2] != 0.0 {
+                            return Err(GmshError::NotPlanar(tag, x[2]));
+                        }
+                        nodes.push(x);
+                        index.insert(tag, nodes.len() as u32 - 1);
+                        nodes.len() as u32 - 1
+                    }
+                };
+                connectivity.push(id);
+            }
+        }
+    }
+    let names = physical_names(bytes);
+    let mut entity_groups: HashMap<(i32, i32), Vec<i32>> = HashMap::new();
+    if let Some(ent) = &data.entities {
+        for p in &ent.points {
+            entity_groups.insert((0, p.tag), p.physical_tags.clone());
+        }
+        for c in &ent.curves {
+            entity_groups.insert((1, c.tag), c.physical_tags.clone());
+        }
+        for s in &ent.surfaces {
+            entity_groups.insert((2, s.tag), s.physical_tags.clone());
+        }
+        for v in &ent.volumes {
+            entity_groups.insert((3, v.tag), v.physical_tags.clone());
+        }
+    }
+    let mut node_sets: BTreeMap<String, Vec<u32>> = BTreeMap::new();
+    for b in &blocks {
+        for &phys in entity_groups.get(&(b.entity_dim, b.entity_tag)).map(Vec::as_slice).unwrap_or_default() {
+            let name = names.get(&(b.entity_dim, phys.abs())).cloned().unwrap_or_else(|| format!("physical_{}", phys.abs()));
+            let set = node_sets.entry(name).or_default();
+            set.extend(b.elements.iter().flat_map(|e| e.nodes.iter()).filter_map(|t| index.get(t).copied()));
+        }
+    }
+    let mut mesh = Mesh { kind, nodes, connectivity, node_sets };
+    mesh.finish_sets();
+    Ok(mesh)
+}

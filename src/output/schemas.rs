@@ -1,0 +1,86 @@
+//! JSON schemas of the run-log channels (documented in doc/mcap.md).
+
+use serde_json::{json, Map, Value};
+
+fn vector(dim: usize) -> Value {
+    json!({"type": "array", "items": {"type": "number"}, "minItems": dim, "maxItems": dim})
+}
+
+fn object(title: &str, fields: &[(&str, Value)]) -> Value {
+    let props: Map<String, Value> = fields.iter().map(|(k, v)| (k.to_string(), v.clone())).collect();
+    let required: Vec<&str> = fields.iter().map(|(k, _)| *k).collect();
+    json!({"title": title, "type": "object", "properties": props, "required": required})
+}
+
+fn number() -> Value {
+    json!({"type": "number"})
+}
+
+fn integer() -> Value {
+    json!({"type": "integer"})
+}
+
+pub fn run() -> Value {
+    object(
+        "bifirst.Run",
+        &[
+            ("version", json!({"type": "string"})),
+            ("scene_name", json!({"type": "string"})),
+            ("scene", json!({"type": "string", "description": "resolved scene after --set, TOML"})),
+            ("backend", json!({"type": "string"})),
+            ("precision", json!({"type": "string"})),
+            ("adapter", json!({"type": ["string", "null"]})),
+        ],
+    )
+}
+
+pub fn energy() -> Value {
+    let f = ["t", "kinetic", "strain", "potential", "external_work", "friction_dissipation", "total"];
+    object("bifirst.Energy", &f.map(|k| (k, number())))
+}
+
+pub fn solver() -> Value {
+    let phases = ["elements", "assembly", "factorization", "solve", "contact", "total"];
+    object(
+        "bifirst.Solver",
+        &[
+            ("t", number()),
+            ("step", integer()),
+            ("dt", number()),
+            ("newton_iterations", integer()),
+            ("uzawa_iterations", integer()),
+            ("residual_norm", number()),
+            ("cutbacks", integer()),
+            ("wall_s", object("bifirst.WallTimes", &phases.map(|k| (k, number())))),
+            ("status", json!({"type": "string", "enum": ["converged", "failed"]})),
+            ("message", json!({"type": ["string", "null"]})),
+        ],
+    )
+}
+
+/// In 2D the angular momentum is the scalar z component; in 3D a vector.
+pub fn body(dim: usize) -> Value {
+    let angular = if dim == 2 { number() } else { vector(3) };
+    object(
+        "bifirst.Body",
+        &[
+            ("t", number()),
+            ("mass", number()),
+            ("center_of_mass", vector(dim)),
+            ("linear_momentum", vector(dim)),
+            ("angular_momentum", angular),
+            ("kinetic", number()),
+        ],
+    )
+}
+
+pub fn probe(dim: usize) -> Value {
+    object(
+        "bifirst.Probe",
+        &[("t", number()), ("position", vector(dim)), ("displacement", vector(dim)), ("velocity", vector(dim)), ("von_mises", number())],
+    )
+}
+
+pub fn reaction(dim: usize) -> Value {
+    object("bifirst.Reaction", &[("t", number()), ("force", vector(dim))])
+}

@@ -1,0 +1,13 @@
+//! Scene files (TOML): the types, loading with `--set` overrides, and validation.
+//!
+//! Every bad input becomes a [`SceneError`] that names the file, the line (when the key is in
+//! the file) and the dotted key.
+
+mod error;
+mod load;
+mod types;
+mod validate;
+
+pub use error::{SceneError, SceneErrorKind};
+pub use load::{load_scene, parse_scene, LoadedScene};
+pub use types::*;

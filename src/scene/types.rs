@@ -1,0 +1,174 @@
+//! The scene format. Unknown keys are rejected everywhere.
+
+use crate::mesh::ElementKind;
+use crate::precision::Real;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scene {
+    /// Defaults to the file stem.
+    pub name: Option<String>,
+    /// Gravity acceleration, 2 or 3 components; zero when absent.
+    pub gravity: Option<Vec<Real>>,
+    pub time: TimeSpec,
+    #[serde(default)]
+    pub solver: SolverSpec,
+    pub material: BTreeMap<String, MaterialSpec>,
+    pub body: BTreeMap<String, BodySpec>,
+    #[serde(default)]
+    pub boundary: BTreeMap<String, BoundarySpec>,
+    #[serde(default)]
+    pub probe: BTreeMap<String, ProbeSpec>,
+    #[serde(default)]
+    pub output: OutputSpec,
+}
+
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct TimeSpec {
+    pub end: Real,
+    pub dt: Real,
+    /// Weight of the end-of-step forces, eq. (13).
+    #[serde(default = "half")]
+    pub xi: Real,
+    /// Weight of the end-of-step velocity, eq. (15).
+    #[serde(default = "half")]
+    pub theta: Real,
+}
+
+fn half() -> Real {
+    0.5
+}
+
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SolverSpec {
+    /// Newton stops when the residual norm is below this fraction of the step's force scale...
+    pub residual_tolerance: Real,
+    /// ...and the last increment is below this fraction of the step's displacement change.
+    pub increment_tolerance: Real,
+    pub max_iterations: usize,
+    /// How many times a failed step may be halved (recursively) before the run stops.
+    pub max_cutbacks: usize,
+}
+
+impl Default for SolverSpec {
+    fn default() -> Self {
+        Self { residual_tolerance: 1e-9, increment_tolerance: 1e-9, max_iterations: 25, max_cutbacks: 6 }
+    }
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ModelName {
+    BlatzKo,
+    Lvf,
+    NeoHookean,
+}
+
+/// A material: its model, density and the model's parameters (each model takes exactly its own).
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+#[allow(non_snake_case)]
+pub struct MaterialSpec {
+    pub model: ModelName,
+    pub density: Real,
+    pub G: Option<Real>,
+    pub K: Option<Real>,
+    pub a1: Option<Real>,
+    pub a2: Option<Real>,
+    pub a3: Option<Real>,
+    pub a4: Option<Real>,
+    pub a5: Option<Real>,
+}
+
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct BodySpec {
+    pub material: String,
+    pub mesh: MeshSpec,
+    /// Translational velocity at t = 0.
+    pub initial_velocity: Option<Vec<Real>>,
+    /// Rotation about the centre of mass at t = 0: a number (2D) or a vector (3D).
+    pub angular_velocity: Option<AngularVelocity>,
+}
+
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(untagged)]
+pub enum AngularVelocity {
+    Planar(Real),
+    Spatial(Vec<Real>),
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Generator {
+    Rectangle,
+    Disk,
+    Box,
+}
+
+/// Either a generator with its parameters or a Gmsh `.msh` 4.1 file (relative to the scene).
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct MeshSpec {
+    pub generator: Option<Generator>,
+    pub file: Option<PathBuf>,
+    pub element: Option<ElementKind>,
+    /// Rectangle and box: lower corner.
+    pub origin: Option<Vec<Real>>,
+    /// Rectangle and box: edge lengths.
+    pub size: Option<Vec<Real>>,
+    /// Rectangle and box: cells per direction; disk: one number, cells per radius.
+    pub divisions: Option<Vec<usize>>,
+    /// Disk: centre and radius.
+    pub center: Option<Vec<Real>>,
+    pub radius: Option<Real>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Axis {
+    X,
+    Y,
+    Z,
+}
+
+/// A node set whose components are fixed (zero velocity) or driven at a constant velocity.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct BoundarySpec {
+    pub body: String,
+    /// A named node set of the body's mesh.
+    pub nodes: String,
+    /// Prescribed components; all when absent.
+    pub components: Option<Vec<Axis>>,
+    /// Prescribed velocity (all components, as many as the dimension); zero when absent.
+    pub velocity: Option<Vec<Real>>,
+}
+
+/// A probe follows the mesh node nearest to `point` (reference configuration).
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ProbeSpec {
+    pub body: String,
+    pub point: Vec<Real>,
+}
+
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct OutputSpec {
+    /// MCAP file, relative to the working directory; `<name>.mcap` when absent.
+    pub mcap: Option<PathBuf>,
+    /// Write the per-step channels every this many steps.
+    pub every: usize,
+}
+
+impl Default for OutputSpec {
+    fn default() -> Self {
+        Self { mcap: None, every: 1 }
+    }
+}

@@ -1,0 +1,197 @@
+//! Builds a [`Simulation`] from a validated scene: meshes, materials, constraints, probes.
+//! Every failure here is a [`SceneError`] pointing at the key responsible.
+
+use super::body::{Body, Prescribed};
+use super::{BoundarySet, Probe, Simulation};
+use crate::element::ReferenceGeometry;
+use crate::material::{BlatzKo, Lvf, Model, NeoHookean};
+use crate::mesh::{generate, gmsh, Mesh};
+use crate::precision::Real;
+use crate::scene::SceneErrorKind::{Invalid, Mesh as MeshError, Reference};
+use crate::scene::{AngularVelocity, Axis, Generator, LoadedScene, MaterialSpec, MeshSpec, ModelName, SceneError};
+use std::collections::HashMap;
+
+pub fn model_of(m: &MaterialSpec) -> Model {
+    let g = m.G.unwrap_or_default();
+    let k = m.K.unwrap_or_default();
+    match m.model {
+        ModelName::BlatzKo => Model::BlatzKo(BlatzKo { g }),
+        ModelName::NeoHookean => Model::NeoHookean(NeoHookean { g, k }),
+        ModelName::Lvf => Model::Lvf(Lvf {
+            g,
+            k,
+            a1: m.a1.unwrap_or(0.0),
+            a2: m.a2.unwrap_or(0.0),
+            a3: m.a3.unwrap_or(0.0),
+            a4: m.a4.unwrap_or(0.0),
+            a5: m.a5.unwrap_or(0.0),
+        }),
+    }
+}
+
+fn build_mesh(loaded: &LoadedScene, key: &str, spec: &MeshSpec) -> Result<Mesh, SceneError> {
+    let v = |o: &Option<Vec<Real>>, i: usize| o.as_ref().map(|x| x[i]).unwrap_or(0.0);
+    let kind = spec.element;
+    Ok(match (spec.generator, &spec.file) {
+        (Some(Generator::Rectangle), _) => {
+            let (s, d) = (spec.size.as_ref().expect("validated"), spec.divisions.as_ref().expect("validated"));
+            generate::rectangle([v(&spec.origin, 0), v(&spec.origin, 1)], [s[0], s[1]], [d[0], d[1]], kind.expect("validated"))
+        }
+        (Some(Generator::Disk), _) => generate::disk(
+            [v(&spec.center, 0), v(&spec.center, 1)],
+            spec.radius.expect("validated"),
+            spec.divisions.as_ref().expect("validated")[0],
+            kind.expect("validated"),
+        ),
+        (Some(Generator::Box), _) => {
+            let (s, d) = (spec.size.as_ref().expect("validated"), spec.divisions.as_ref().expect("validated"));
+            generate::cuboid([v(&spec.origin, 0), v(&spec.origin, 1), v(&spec.origin, 2)], [s[0], s[1], s[2]], [d[0], d[1], d[2]], kind.expect("validated"))
+        }
+        (None, Some(file)) => {
+            let path = loaded.base_dir().join(file);
+            let bytes = std::fs::read(&path).map_err(|e| loaded.error(Reference, &format!("{key}.file"), format!("cannot read the mesh file `{}`: {e}.", path.display())))?;
+            gmsh::read(&bytes).map_err(|e| loaded.error(MeshError, &format!("{key}.file"), format!("the Gmsh file `{}` is not usable: {e}.", path.display())))?
+        }
+        (None, None) => unreachable!("validated: a mesh has a generator or a file"),
+    })
+}
+
+/// Sets up every body, boundary set and probe of the scene.
+pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> {
+    let scene = &loaded.scene;
+    let mut meshes = Vec::new();
+    let mut dim = None;
+    for (name, spec) in &scene.body {
+        let key = format!("body.{name}.mesh");
+        let mesh = build_mesh(loaded, &key, &spec.mesh)?;
+        match dim {
+            Some(d) if d != mesh.dim() => return Err(loaded.error(Invalid, &key, format!("a {}D mesh in a {d}D scene.", mesh.dim()))),
+            _ => dim = Some(mesh.dim()),
+        }
+        let geometry = ReferenceGeometry::new(&mesh).map_err(|e| {
+            let where_ = if spec.mesh.file.is_some() { format!("{key}.file") } else { key.clone() };
+            loaded.error(MeshError, &where_, format!("{e}; the mesh must have positive element volumes at t = 0."))
+        })?;
+        meshes.push((name.clone(), mesh, geometry));
+    }
+    let dim = dim.expect("a scene has a body");
+    let vec_len_check = |key: &str, v: &[Real]| {
+        if v.len() == dim {
+            Ok(())
+        } else {
+            Err(loaded.error(Invalid, key, format!("expected {dim} components (the scene is {dim}D), got {}.", v.len())))
+        }
+    };
+    let body_index: HashMap<&str, usize> = scene.body.keys().enumerate().map(|(i, n)| (n.as_str(), i)).collect();
+
+    // Boundary sets -> prescribed dofs per body.
+    let mut sets = Vec::new();
+    let mut prescribed: Vec<Vec<Prescribed>> = vec![Vec::new(); meshes.len()];
+    let mut owner: HashMap<(usize, usize), String> = HashMap::new();
+    for (set_index, (name, bc)) in scene.boundary.iter().enumerate() {
+        let key = format!("boundary.{name}");
+        let b = body_index[bc.body.as_str()];
+        let mesh = &meshes[b].1;
+        let nodes = mesh.node_sets.get(&bc.nodes).ok_or_else(|| {
+            let known: Vec<&str> = mesh.node_sets.keys().map(String::as_str).collect();
+            loaded.error(Reference, &format!("{key}.nodes"), format!("body `{}` has no node set `{}` (it has: {}).", bc.body, bc.nodes, known.join(", ")))
+        })?;
+        if nodes.is_empty() {
+            return Err(loaded.error(Invalid, &format!("{key}.nodes"), format!("the node set `{}` of body `{}` names no nodes.", bc.nodes, bc.body)));
+        }
+        let velocity = bc.velocity.clone().unwrap_or_else(|| vec![0.0; dim]);
+        vec_len_check(&format!("{key}.velocity"), &velocity)?;
+        let components: Vec<usize> = match &bc.components {
+            Some(c) => c.iter().map(|a| match a {
+                Axis::X => 0,
+                Axis::Y => 1,
+                Axis::Z => 2,
+            }).collect(),
+            None => (0..dim).collect(),
+        };
+        if components.iter().any(|&c| c >= dim) {
+            return Err(loaded.error(Invalid, &format!("{key}.components"), format!("`z` in a {dim}D scene.")));
+        }
+        for &n in nodes {
+            for &c in &components {
+                let dof = n as usize * dim + c;
+                if let Some(first) = owner.get(&(b, dof)) {
+                    // A dof shared by two sets keeps its first owner; their velocities must agree.
+                    let existing = prescribed[b].iter().find(|p| p.dof == dof).expect("owned dof is prescribed");
+                    if (existing.velocity - velocity[c]).abs() > 0.0 {
+                        return Err(loaded.error(Invalid, &format!("{key}.velocity"), format!("node {n} is also prescribed by `boundary.{first}` with another velocity.")));
+                    }
+                    continue;
+                }
+                owner.insert((b, dof), name.clone());
+                prescribed[b].push(Prescribed { dof, velocity: velocity[c], set: set_index });
+            }
+        }
+        sets.push(BoundarySet { name: name.clone(), body: b });
+    }
+
+    let mut bodies = Vec::new();
+    for (b, ((name, mesh, geometry), spec)) in meshes.into_iter().zip(scene.body.values()).enumerate() {
+        let key = format!("body.{name}");
+        let material = &scene.material[&spec.material];
+        let v0 = spec.initial_velocity.clone().unwrap_or_else(|| vec![0.0; dim]);
+        vec_len_check(&format!("{key}.initial_velocity"), &v0)?;
+        let omega = match (&spec.angular_velocity, dim) {
+            (None, _) => [0.0; 3],
+            (Some(AngularVelocity::Planar(w)), 2) => [0.0, 0.0, *w],
+            (Some(AngularVelocity::Spatial(w)), 3) if w.len() == 3 => [w[0], w[1], w[2]],
+            _ => return Err(loaded.error(Invalid, &format!("{key}.angular_velocity"), "give one number in 2D and a vector of 3 components in 3D.")),
+        };
+        let masses = geometry.lumped_masses(&mesh, material.density);
+        let total: Real = masses.iter().sum();
+        let mut c = [0.0; 3];
+        for (m, x) in masses.iter().zip(&mesh.nodes) {
+            for i in 0..3 {
+                c[i] += m * x[i] / total;
+            }
+        }
+        let mut v = [0.0; 3];
+        v[..dim].copy_from_slice(&v0);
+        let initial = move |x: [Real; 3]| {
+            let r = [x[0] - c[0], x[1] - c[1], x[2] - c[2]];
+            [v[0] + omega[1] * r[2] - omega[2] * r[1], v[1] + omega[2] * r[0] - omega[0] * r[2], v[2] + omega[0] * r[1] - omega[1] * r[0]]
+        };
+        let body = Body::new(name.clone(), mesh, geometry, model_of(material), material.density, std::mem::take(&mut prescribed[b]), initial)
+            .map_err(|e| loaded.error(MeshError, &format!("{key}.mesh"), e.to_string()))?;
+        bodies.push(body);
+    }
+
+    let mut probes = Vec::new();
+    for (name, p) in &scene.probe {
+        let b = body_index[p.body.as_str()];
+        let mesh = &bodies[b].mesh;
+        let dist = |x: &[Real; 3]| (0..dim).map(|i| (x[i] - p.point[i]).powi(2)).sum::<Real>();
+        let node = (0..mesh.nodes.len()).min_by(|&i, &j| dist(&mesh.nodes[i]).total_cmp(&dist(&mesh.nodes[j]))).expect("a mesh has nodes");
+        let elements = (0..mesh.element_count()).filter(|&e| mesh.element(e).contains(&(node as u32))).collect();
+        probes.push(Probe { name: name.clone(), body: b, node, elements });
+    }
+
+    let mut gravity = [0.0; 3];
+    if let Some(g) = &scene.gravity {
+        vec_len_check("gravity", g)?;
+        gravity[..dim].copy_from_slice(g);
+    }
+    Ok(Simulation {
+        dim,
+        bodies,
+        sets,
+        probes,
+        gravity,
+        t: 0.0,
+        step: 0,
+        end: scene.time.end,
+        dt: scene.time.dt,
+        xi: scene.time.xi,
+        theta: scene.time.theta,
+        residual_tolerance: scene.solver.residual_tolerance,
+        increment_tolerance: scene.solver.increment_tolerance,
+        max_iterations: scene.solver.max_iterations,
+        max_cutbacks: scene.solver.max_cutbacks,
+        external_work: 0.0,
+    })
+}
