@@ -2,7 +2,7 @@
 //! small-strain limits, and the LVF invariants against the paper's eq. (5) written with the
 //! Lode angle.
 
-#[path = "common_random.rs"]
+#[path = "common/random.rs"]
 mod common_random;
 
 use bifirst::material::tensor::{green_lagrange, to_voigt, Mat3, Tangent, VOIGT};

@@ -1,6 +1,6 @@
 //! The engine-core scenes against their known answers (see the comment block of each scene).
 
-#[path = "common_run.rs"]
+#[path = "common/run.rs"]
 mod common_run;
 use common_run::run;
 

@@ -74,20 +74,11 @@ pub fn parse_scene(path: &Path, source: String, sets: &[String]) -> Result<Loade
     }
     let err = |kind, key: String, message: String| locate(path, &source, &overrides, kind, &key, message);
     let scene: Scene = serde_path_to_error::deserialize(toml::Value::Table(table)).map_err(|e| {
-        let mut key = dotted(e.path());
+        // For an unknown field the path already ends with that field's name.
+        let key = dotted(e.path());
         let inner = e.into_inner().to_string();
         let message = inner.lines().next().unwrap_or_default().trim().to_string();
-        let kind = if message.starts_with("unknown field") {
-            if let Some(field) = message.split('`').nth(1) {
-                if !key.is_empty() {
-                    key.push('.');
-                }
-                key.push_str(field);
-            }
-            SceneErrorKind::UnknownKey
-        } else {
-            SceneErrorKind::Type
-        };
+        let kind = if message.starts_with("unknown field") { SceneErrorKind::UnknownKey } else { SceneErrorKind::Type };
         err(kind, key, format!("{message}."))
     })?;
     validate(&scene).map_err(|(kind, key, message)| err(kind, key, message))?;

@@ -1,0 +1,178 @@
+//! Bad input: each kind gives a one-paragraph error naming the file, the line (where one exists)
+//! and the key, a non-zero exit, and no panic. Run through the real binary.
+
+#[path = "common/gmsh.rs"]
+mod common_gmsh;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+const GOOD: &str = r#"# a valid scene; each test breaks one thing
+[time]
+end = 0.05
+dt = 0.01
+
+[material.rubber]
+model = "blatz_ko"
+G = 1000.0
+density = 1.0
+
+[body.block]
+material = "rubber"
+mesh = { generator = "rectangle", element = "quad4", size = [1.0, 1.0], divisions = [2, 2] }
+
+[boundary.base]
+body = "block"
+nodes = "y_min"
+"#;
+
+fn dir() -> PathBuf {
+    let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join("bad_input");
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// Writes `scene` as `<tag>.toml`, runs `bifirst check` on it, returns (exit code, stderr, path).
+fn check(tag: &str, scene: &str, sets: &[&str]) -> (i32, String, PathBuf) {
+    let path = dir().join(format!("{tag}.toml"));
+    std::fs::write(&path, scene).unwrap();
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_bifirst"));
+    cmd.arg("check").arg(&path);
+    for s in sets {
+        cmd.arg("--set").arg(s);
+    }
+    let out = cmd.output().expect("binary runs");
+    let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+    (out.status.code().unwrap_or(-1), stderr, path)
+}
+
+/// The error must name the file, the key (empty: a syntax error, which has none), the line
+/// (if given), say `expect`, and not panic.
+fn assert_error(tag: &str, scene: &str, sets: &[&str], key: &str, line: Option<usize>, expect: &str) {
+    let (code, stderr, path) = check(tag, scene, sets);
+    println!("{tag}: {stderr}");
+    assert_eq!(code, 2, "{tag}: exit code (stderr: {stderr})");
+    assert!(!stderr.contains("panicked"), "{tag}: panicked: {stderr}");
+    assert_eq!(stderr.trim().lines().count(), 1, "{tag}: one paragraph: {stderr}");
+    assert!(stderr.contains(&path.display().to_string()), "{tag}: names the file: {stderr}");
+    if !key.is_empty() {
+        assert!(stderr.contains(&format!("key `{key}`")), "{tag}: names the key `{key}`: {stderr}");
+    }
+    if let Some(line) = line {
+        let named = [",", ":"].iter().any(|end| stderr.contains(&format!("line {line}{end}")));
+        assert!(named, "{tag}: names line {line}: {stderr}");
+    }
+    assert!(stderr.contains(expect), "{tag}: says `{expect}`: {stderr}");
+}
+
+#[test]
+fn the_good_scene_is_valid() {
+    let (code, stderr, _) = check("good", GOOD, &[]);
+    assert_eq!(code, 0, "{stderr}");
+}
+
+#[test]
+fn unknown_key() {
+    assert_error("unknown_key", &GOOD.replace("dt = 0.01", "dt = 0.01\nsteps = 5"), &[], "time.steps", Some(5), "unknown field");
+}
+
+#[test]
+fn wrong_type() {
+    assert_error("wrong_type", &GOOD.replace("dt = 0.01", "dt = \"fast\""), &[], "time.dt", Some(4), "invalid type");
+}
+
+#[test]
+fn zero_or_negative_modulus() {
+    assert_error("negative_modulus", &GOOD.replace("G = 1000.0", "G = -5.0"), &[], "material.rubber.G", Some(8), "positive");
+    assert_error("zero_modulus", &GOOD.replace("G = 1000.0", "G = 0"), &[], "material.rubber.G", Some(8), "positive");
+}
+
+#[test]
+fn negative_density() {
+    assert_error("negative_density", &GOOD.replace("density = 1.0", "density = -1.0"), &[], "material.rubber.density", Some(9), "density must be positive");
+}
+
+#[test]
+fn non_positive_time_step() {
+    assert_error("zero_dt", &GOOD.replace("dt = 0.01", "dt = 0.0"), &[], "time.dt", Some(4), "time step must be positive");
+    assert_error("negative_dt", &GOOD.replace("dt = 0.01", "dt = -0.01"), &[], "time.dt", Some(4), "time step must be positive");
+}
+
+#[test]
+fn non_positive_end_time() {
+    assert_error("zero_end", &GOOD.replace("end = 0.05", "end = 0"), &[], "time.end", Some(3), "end time must be positive");
+}
+
+#[test]
+fn unknown_material() {
+    assert_error("unknown_material", &GOOD.replace("material = \"rubber\"", "material = \"steel\""), &[], "body.block.material", Some(12), "unknown material `steel`");
+}
+
+#[test]
+fn missing_mesh_file() {
+    let scene = GOOD.replace(r#"{ generator = "rectangle", element = "quad4", size = [1.0, 1.0], divisions = [2, 2] }"#, r#"{ file = "nowhere.msh" }"#);
+    assert_error("missing_mesh", &scene, &[], "body.block.mesh.file", Some(13), "cannot read the mesh file");
+}
+
+#[test]
+fn malformed_gmsh_file() {
+    std::fs::write(dir().join("malformed.msh"), "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 2 1 2\nthis is not a node block\n").unwrap();
+    let scene = GOOD.replace(r#"{ generator = "rectangle", element = "quad4", size = [1.0, 1.0], divisions = [2, 2] }"#, r#"{ file = "malformed.msh" }"#);
+    assert_error("malformed_gmsh", &scene, &[], "body.block.mesh.file", Some(13), "is not usable");
+}
+
+#[test]
+fn inverted_element_at_t0() {
+    std::fs::write(dir().join("inverted.msh"), common_gmsh::unit_square_msh(true)).unwrap();
+    let scene = GOOD
+        .replace(r#"{ generator = "rectangle", element = "quad4", size = [1.0, 1.0], divisions = [2, 2] }"#, r#"{ file = "inverted.msh" }"#)
+        .replace("nodes = \"y_min\"", "nodes = \"left\"");
+    assert_error("inverted_element", &scene, &[], "body.block.mesh.file", Some(13), "element 1 is inverted");
+}
+
+#[test]
+fn degenerate_element_at_t0() {
+    // All four corners of the rectangle's cells collapse onto a line when one size is zero... the
+    // generator rejects a zero size first, so collapse a Gmsh triangle instead.
+    let msh = common_gmsh::unit_square_msh(false).replace("1 1 0\n0 1 0\n$EndNodes", "1 0 0\n0 1 0\n$EndNodes");
+    std::fs::write(dir().join("degenerate.msh"), msh).unwrap();
+    let scene = GOOD
+        .replace(r#"{ generator = "rectangle", element = "quad4", size = [1.0, 1.0], divisions = [2, 2] }"#, r#"{ file = "degenerate.msh" }"#)
+        .replace("nodes = \"y_min\"", "nodes = \"left\"");
+    assert_error("degenerate_element", &scene, &[], "body.block.mesh.file", Some(13), "element 0 is degenerate");
+}
+
+#[test]
+fn set_on_a_key_that_does_not_exist() {
+    assert_error("set_unknown_field", GOOD, &["time.steps=3"], "time.steps", None, "(from --set time.steps=3)");
+    assert_error("set_unknown_entry", GOOD, &["material.steel.G=3"], "material.steel.G", None, "there is no material named `steel`");
+}
+
+#[test]
+fn set_with_a_bad_value() {
+    assert_error("set_bad_literal", GOOD, &["time.dt=fast"], "time.dt", None, "not a TOML literal");
+    assert_error("set_negative_dt", GOOD, &["time.dt=-1"], "time.dt", None, "time step must be positive");
+}
+
+#[test]
+fn node_set_that_names_no_nodes() {
+    assert_error("unknown_node_set", &GOOD.replace("nodes = \"y_min\"", "nodes = \"bottom\""), &[], "boundary.base.nodes", Some(17), "has no node set `bottom`");
+}
+
+#[test]
+fn invalid_toml() {
+    assert_error("invalid_toml", &GOOD.replace("dt = 0.01", "dt = = 0.01"), &[], "", Some(4), "not valid TOML");
+}
+
+#[test]
+fn parameter_of_another_model() {
+    assert_error("foreign_parameter", &GOOD.replace("G = 1000.0", "G = 1000.0\na5 = 3.0"), &[], "material.rubber.a5", Some(9), "not a parameter of the blatz_ko model");
+}
+
+#[test]
+fn missing_scene_file() {
+    let out = Command::new(env!("CARGO_BIN_EXE_bifirst")).args(["run", "no/such/scene.toml"]).output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2));
+    assert!(stderr.contains("no/such/scene.toml") && stderr.contains("cannot read the scene file"), "{stderr}");
+}

@@ -1,0 +1,82 @@
+//! The MCAP run log read back: every channel of the contract (doc/mcap.md), its schema, its
+//! field names, and one message per step.
+
+#[path = "common/run.rs"]
+mod common_run;
+use common_run::run;
+use serde_json::Value;
+
+fn schema_fields(schema: &Value) -> Vec<String> {
+    let mut f: Vec<String> = schema["properties"].as_object().expect("object schema").keys().cloned().collect();
+    f.sort();
+    f
+}
+
+fn message_fields(m: &Value) -> Vec<String> {
+    let mut f: Vec<String> = m.as_object().expect("object message").keys().cloned().collect();
+    f.sort();
+    f
+}
+
+fn sorted(v: &[&str]) -> Vec<String> {
+    let mut v: Vec<String> = v.iter().map(|s| s.to_string()).collect();
+    v.sort();
+    v
+}
+
+#[test]
+fn run_log_has_every_channel_of_the_contract() {
+    let log = run("uniaxial_blatz_ko", &["time.end=0.1"], "contract");
+    let steps = 10;
+    let expected: &[(&str, &str, &[&str], usize)] = &[
+        ("/run", "bifirst.Run", &["version", "scene_name", "scene", "backend", "precision", "adapter"], 1),
+        ("/energy", "bifirst.Energy", &["t", "kinetic", "strain", "potential", "external_work", "friction_dissipation", "total"], steps + 1),
+        (
+            "/solver",
+            "bifirst.Solver",
+            &["t", "step", "dt", "newton_iterations", "uzawa_iterations", "residual_norm", "cutbacks", "wall_s", "status", "message"],
+            steps,
+        ),
+        ("/body/cube", "bifirst.Body", &["t", "mass", "center_of_mass", "linear_momentum", "angular_momentum", "kinetic"], steps + 1),
+        ("/probe/corner", "bifirst.Probe", &["t", "position", "displacement", "velocity", "von_mises"], steps + 1),
+        ("/reaction/pull", "bifirst.Reaction", &["t", "force"], steps + 1),
+        ("/reaction/sym_x", "bifirst.Reaction", &["t", "force"], steps + 1),
+    ];
+    for (topic, schema_name, fields, count) in expected {
+        let (name, schema) = log.schemas.get(*topic).unwrap_or_else(|| panic!("channel {topic} missing"));
+        assert_eq!(name, schema_name);
+        assert_eq!(schema_fields(schema), sorted(fields), "{topic} schema fields");
+        let messages = &log.topics[*topic];
+        assert_eq!(messages.len(), *count, "{topic}: one message per step (plus the initial state)");
+        for m in messages {
+            assert_eq!(message_fields(m), sorted(fields), "{topic} message fields");
+        }
+    }
+    let run = &log.topics["/run"][0];
+    assert_eq!(run["backend"], "cpu");
+    assert_eq!(run["precision"], "f64");
+    assert!(run["adapter"].is_null());
+    assert_eq!(run["scene_name"], "uniaxial_blatz_ko");
+    // The resolved scene carries the --set override and parses back.
+    let scene: toml::Table = toml::from_str(run["scene"].as_str().unwrap()).expect("resolved scene is TOML");
+    assert_eq!(scene["time"]["end"].as_float(), Some(0.1));
+    assert_eq!(log.attachments, vec!["scene.toml".to_string()]);
+    assert_eq!(log.metadata, vec!["bifirst.run".to_string()]);
+    let wall = &log.topics["/solver"][0]["wall_s"];
+    assert_eq!(message_fields(wall), sorted(&["elements", "assembly", "factorization", "solve", "contact", "total"]));
+    // Vectors are arrays of 3 numbers in 3D; steps are numbered 1..=N with t increasing.
+    assert_eq!(log.topics["/body/cube"][0]["center_of_mass"].as_array().unwrap().len(), 3);
+    let step: Vec<u64> = log.topics["/solver"].iter().map(|m| m["step"].as_u64().unwrap()).collect();
+    assert_eq!(step, (1..=steps as u64).collect::<Vec<_>>());
+    assert!(log.topics["/solver"].iter().all(|m| m["status"] == "converged"));
+}
+
+#[test]
+fn run_log_vectors_have_two_components_in_2d() {
+    let log = run("free_vibration_2d", &["time.end=0.03"], "contract_2d");
+    let body = &log.topics["/body/beam"][1];
+    assert_eq!(body["center_of_mass"].as_array().unwrap().len(), 2);
+    assert!(body["angular_momentum"].is_number(), "2D angular momentum is the z component");
+    assert_eq!(log.topics["/probe/tip"][1]["velocity"].as_array().unwrap().len(), 2);
+    assert_eq!(log.topics["/reaction/clamp"][1]["force"].as_array().unwrap().len(), 2);
+}
