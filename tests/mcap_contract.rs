@@ -80,3 +80,20 @@ fn run_log_vectors_have_two_components_in_2d() {
     assert_eq!(log.topics["/probe/tip"][1]["velocity"].as_array().unwrap().len(), 2);
     assert_eq!(log.topics["/reaction/clamp"][1]["force"].as_array().unwrap().len(), 2);
 }
+
+#[test]
+fn a_failed_run_leaves_a_valid_log_that_reports_the_failure() {
+    use bifirst::run::{run_scene, RunError, Silent};
+    // A violent kick inverts elements: every cut-back fails too, and the run must stop cleanly.
+    let sets: Vec<String> = ["body.beam.initial_velocity=[0.0, 2000.0]", "solver.max_cutbacks=2", "solver.max_iterations=8"].map(String::from).to_vec();
+    let loaded = bifirst::scene::load_scene(&common_run::scene_path("free_vibration_2d"), &sets).unwrap();
+    let out = common_run::temp_path("failed_run.mcap");
+    let err = run_scene(&loaded, &out, &mut Silent).expect_err("the run must fail");
+    let RunError::Failed { failure, summary } = err else { panic!("expected a step failure, got {err}") };
+    assert_eq!(failure.cutbacks, 2);
+    let log = common_run::read_log(&out);
+    let last = log.topics["/solver"].last().unwrap();
+    assert_eq!(last["status"], "failed");
+    assert!(last["message"].as_str().unwrap().contains("failed after 2 cut-backs"), "{last}");
+    assert_eq!(log.topics["/energy"].len(), summary.steps + 1, "every finished step is in the log");
+}

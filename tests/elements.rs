@@ -1,0 +1,143 @@
+//! Elements: homogeneous deformations give the closed-form stress at every quadrature point;
+//! the internal force is the gradient of the strain energy and the tangent the gradient of the
+//! force (finite differences), for every element type and material.
+
+#[path = "common/random.rs"]
+mod common_random;
+
+use bifirst::element::{element_energy, element_force_tangent, element_stresses, ElementOutput, ReferenceGeometry};
+use bifirst::material::tensor::{green_lagrange, to_voigt, Mat3};
+use bifirst::material::{BlatzKo, Hyperelastic, Lvf, Model, NeoHookean};
+use bifirst::mesh::{generate, ElementKind, Mesh};
+use common_random::{random_f, rng};
+use rand::Rng;
+
+fn models() -> Vec<Model> {
+    vec![
+        Model::BlatzKo(BlatzKo { g: 3.0 }),
+        Model::NeoHookean(NeoHookean { g: 2.0, k: 7.0 }),
+        Model::Lvf(Lvf { g: 5.0, k: 3.333, a1: 0.05, a2: 0.05, a3: 0.4, a4: 2.0, a5: 0.1 }),
+    ]
+}
+
+/// One element of each kind with its reference nodes moved randomly (still valid).
+fn distorted_element(kind: ElementKind, r: &mut impl Rng) -> Mesh {
+    let mut mesh = match kind.dim() {
+        2 => generate::rectangle([0.0, 0.0], [1.0, 1.0], [1, 1], kind),
+        _ => generate::cuboid([0.0; 3], [1.0; 3], [1, 1, 1], kind),
+    };
+    for x in &mut mesh.nodes {
+        for c in x.iter_mut().take(kind.dim()) {
+            *c += r.random_range(-0.1..0.1);
+        }
+    }
+    mesh
+}
+
+fn plane_strain(mut f: Mat3) -> Mat3 {
+    f[(0, 2)] = 0.0;
+    f[(1, 2)] = 0.0;
+    f[(2, 0)] = 0.0;
+    f[(2, 1)] = 0.0;
+    f[(2, 2)] = 1.0;
+    f
+}
+
+const KINDS: [ElementKind; 4] = [ElementKind::Tri3, ElementKind::Quad4, ElementKind::Tet4, ElementKind::Hex8];
+
+#[test]
+fn homogeneous_deformation_gives_the_closed_form_stress() {
+    let mut r = rng(21);
+    for kind in KINDS {
+        for model in models() {
+            for _ in 0..10 {
+                let mesh = distorted_element(kind, &mut r);
+                let geometry = ReferenceGeometry::new(&mesh).unwrap();
+                let mut f = random_f(&mut r);
+                if kind.dim() == 2 {
+                    while plane_strain(f).determinant() <= 0.3 {
+                        f = random_f(&mut r);
+                    }
+                    f = plane_strain(f);
+                }
+                let u: Vec<[f64; 3]> = mesh.element(0).iter().map(|&n| {
+                    let x = mesh.nodes[n as usize];
+                    let v = (f - Mat3::identity()) * nalgebra::Vector3::new(x[0], x[1], x[2]);
+                    [v[0], v[1], v[2]]
+                }).collect();
+                let expected = to_voigt(&model.stress(&green_lagrange(&f)));
+                for s in element_stresses(&model, geometry.element_points(0), &u) {
+                    let err = (s - expected).norm() / expected.norm();
+                    assert!(err < 1e-10, "{kind:?} {model:?}: stress error {err:e}");
+                }
+            }
+        }
+    }
+}
+
+fn random_displacements(mesh: &Mesh, r: &mut impl Rng) -> Vec<[f64; 3]> {
+    let dim = mesh.dim();
+    mesh.element(0).iter().map(|_| {
+        let mut u = [0.0; 3];
+        for c in u.iter_mut().take(dim) {
+            *c = r.random_range(-0.12..0.12);
+        }
+        u
+    }).collect()
+}
+
+#[test]
+fn force_is_the_gradient_of_the_energy_and_tangent_the_gradient_of_the_force() {
+    let mut r = rng(22);
+    let mut out = ElementOutput::default();
+    let mut plus = ElementOutput::default();
+    let mut minus = ElementOutput::default();
+    for kind in KINDS {
+        let dim = kind.dim();
+        for model in models() {
+            for _ in 0..5 {
+                let mesh = distorted_element(kind, &mut r);
+                let geometry = ReferenceGeometry::new(&mesh).unwrap();
+                let points = geometry.element_points(0);
+                let u = random_displacements(&mesh, &mut r);
+                element_force_tangent(&model, points, &u, dim, true, &mut out).expect("valid deformation");
+                let n = u.len() * dim;
+                let h = 1e-6;
+                let (mut fd_force, mut fd_tangent) = (vec![0.0; n], vec![0.0; n * n]);
+                for j in 0..n {
+                    let (mut up, mut um) = (u.clone(), u.clone());
+                    up[j / dim][j % dim] += h;
+                    um[j / dim][j % dim] -= h;
+                    fd_force[j] = (element_energy(&model, points, &up) - element_energy(&model, points, &um)) / (2.0 * h);
+                    element_force_tangent(&model, points, &up, dim, false, &mut plus).unwrap();
+                    element_force_tangent(&model, points, &um, dim, false, &mut minus).unwrap();
+                    for i in 0..n {
+                        fd_tangent[i * n + j] = (plus.force[i] - minus.force[i]) / (2.0 * h);
+                    }
+                }
+                let rel = |a: &[f64], b: &[f64]| {
+                    let d: f64 = a.iter().zip(b).map(|(x, y)| (x - y).powi(2)).sum::<f64>().sqrt();
+                    d / b.iter().map(|y| y * y).sum::<f64>().sqrt()
+                };
+                let (ef, ek) = (rel(&fd_force, &out.force), rel(&fd_tangent, &out.tangent));
+                assert!(ef < 1e-6, "{kind:?} {model:?}: force error {ef:e}");
+                assert!(ek < 1e-6, "{kind:?} {model:?}: tangent error {ek:e}");
+            }
+        }
+    }
+}
+
+#[test]
+fn lumped_masses_sum_to_the_body_mass() {
+    for (kind, volume) in [(ElementKind::Tri3, 2.0), (ElementKind::Quad4, 2.0), (ElementKind::Tet4, 6.0), (ElementKind::Hex8, 6.0)] {
+        let mesh = match kind.dim() {
+            2 => generate::rectangle([0.0, 0.0], [2.0, 1.0], [3, 2], kind),
+            _ => generate::cuboid([0.0; 3], [1.0, 2.0, 3.0], [2, 2, 3], kind),
+        };
+        let m: f64 = ReferenceGeometry::new(&mesh).unwrap().lumped_masses(&mesh, 1.5).iter().sum();
+        assert!((m - 1.5 * volume).abs() < 1e-12, "{kind:?}: mass {m}");
+    }
+    let disk = generate::disk([0.0, 0.0], 1.0, 8, ElementKind::Quad4);
+    let area: f64 = ReferenceGeometry::new(&disk).unwrap().volumes.iter().sum();
+    assert!((area - std::f64::consts::PI).abs() < 0.02, "disk area {area}");
+}
