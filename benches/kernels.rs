@@ -1,1 +1,102 @@
-fn main() {}
+//! Criterion benchmarks of the CPU engine:
+//! - `element/<model>/<element>`: internal force + tangent of 1000 elements (elements/s);
+//! - `newton_hex8_50k/{assembly,factorization,solve}`: the three phases of one Newton iteration
+//!   of a 3D Hex8 block with about 50k unknowns.
+//! Results are recorded in doc/benchmarks.md.
+
+use bifirst::element::{element_force_tangent, ElementOutput, ReferenceGeometry};
+use bifirst::material::{BlatzKo, Lvf, Model, NeoHookean};
+use bifirst::mesh::{generate, ElementKind, Mesh};
+use bifirst::solver::body::{Body, Prescribed};
+use bifirst::solver::PhaseTimes;
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use std::hint::black_box;
+
+fn models() -> [(&'static str, Model); 3] {
+    [
+        ("blatz_ko", Model::BlatzKo(BlatzKo { g: 1000.0 })),
+        ("lvf", Model::Lvf(Lvf { g: 5000.0, k: 3333.0, a1: 50.0, a2: 50.0, a3: 0.0, a4: 2000.0, a5: 100.0 })),
+        ("neo_hookean", Model::NeoHookean(NeoHookean { g: 1000.0, k: 3000.0 })),
+    ]
+}
+
+/// About 1000 elements of a kind.
+fn mesh_of(kind: ElementKind) -> Mesh {
+    match kind {
+        ElementKind::Tri3 => generate::rectangle([0.0; 2], [1.0; 2], [23, 22], kind),
+        ElementKind::Quad4 => generate::rectangle([0.0; 2], [1.0; 2], [32, 32], kind),
+        ElementKind::Tet4 => generate::cuboid([0.0; 3], [1.0; 3], [6, 6, 5], kind),
+        ElementKind::Hex8 => generate::cuboid([0.0; 3], [1.0; 3], [10, 10, 10], kind),
+    }
+}
+
+/// A smooth, moderate deformation field (a twist and a stretch).
+fn deform(x: [f64; 3]) -> [f64; 3] {
+    [0.1 * x[0] + 0.05 * x[1] * x[2], -0.03 * x[1] + 0.04 * x[0] * x[2], 0.02 * x[2] - 0.05 * x[0] * x[1]]
+}
+
+fn element_kernels(c: &mut Criterion) {
+    let mut group = c.benchmark_group("element");
+    for kind in [ElementKind::Tri3, ElementKind::Quad4, ElementKind::Tet4, ElementKind::Hex8] {
+        let mesh = mesh_of(kind);
+        let geometry = ReferenceGeometry::new(&mesh).unwrap();
+        let u: Vec<Vec<[f64; 3]>> = (0..mesh.element_count())
+            .map(|e| mesh.element(e).iter().map(|&n| {
+                let mut d = deform(mesh.nodes[n as usize]);
+                if kind.dim() == 2 {
+                    d[2] = 0.0;
+                }
+                d
+            }).collect())
+            .collect();
+        group.throughput(Throughput::Elements(mesh.element_count() as u64));
+        for (name, model) in models() {
+            group.bench_with_input(BenchmarkId::new(name, kind.name()), &model, |b, model| {
+                let mut out = ElementOutput::default();
+                b.iter(|| {
+                    for (e, ue) in u.iter().enumerate() {
+                        element_force_tangent(model, geometry.element_points(e), ue, kind.dim(), true, &mut out).unwrap();
+                        black_box(&out);
+                    }
+                })
+            });
+        }
+    }
+    group.finish();
+}
+
+fn newton_iteration(c: &mut Criterion) {
+    // 24 x 24 x 28 cells: 25 * 25 * 29 nodes, 54 375 dofs, 1875 of them clamped on z = 0.
+    let mesh = generate::cuboid([0.0; 3], [1.0, 1.0, 1.2], [24, 24, 28], ElementKind::Hex8);
+    let geometry = ReferenceGeometry::new(&mesh).unwrap();
+    let prescribed: Vec<Prescribed> = mesh.node_sets["z_min"].iter().flat_map(|&n| (0..3).map(move |i| Prescribed { dof: n as usize * 3 + i, velocity: 0.0, set: 0 })).collect();
+    let model = Model::NeoHookean(NeoHookean { g: 1000.0, k: 3000.0 });
+    let mut body = Body::new("block".into(), mesh.clone(), geometry, model, 1.0, prescribed, |_| [0.0; 3]).unwrap();
+    let u: Vec<f64> = mesh.nodes.iter().flat_map(|&x| deform(x)).collect();
+    let mut f_int = vec![0.0; u.len()];
+    let (dt, theta, xi) = (1e-3, 0.5, 0.5);
+    let c1 = 1.0 / (theta * dt * dt);
+    let mut times = PhaseTimes::default();
+    println!("newton_hex8_50k: {} free dofs, {} stored non-zeros", body.dofs.free_count, body.pattern.nnz());
+    let mut group = c.benchmark_group("newton_hex8_50k");
+    group.sample_size(10);
+    group.bench_function("assembly", |b| b.iter(|| body.assemble(&u, &mut f_int, Some(xi), &mut times).unwrap()));
+    group.bench_function("factorization", |b| {
+        b.iter(|| {
+            body.assemble(&u, &mut f_int, Some(xi), &mut times).unwrap();
+            body.factorize_effective(c1, &mut times).unwrap()
+        })
+    });
+    let rhs0: Vec<f64> = (0..body.dofs.free_count).map(|i| (i as f64).sin()).collect();
+    group.bench_function("solve", |b| {
+        b.iter(|| {
+            let mut rhs = rhs0.clone();
+            body.solve_effective(&mut rhs, &mut times);
+            black_box(rhs)
+        })
+    });
+    group.finish();
+}
+
+criterion_group!(benches, element_kernels, newton_iteration);
+criterion_main!(benches);

@@ -145,7 +145,7 @@ impl Body {
 
     /// Internal force at `u` into `f_int`; with `stiffness_factor`, also that multiple of the
     /// tangent into the CSC values (which are zeroed first).
-    fn assemble(&mut self, u: &[Real], f_int: &mut [Real], stiffness_factor: Option<Real>, times: &mut PhaseTimes) -> Result<(), StepFailure> {
+    pub fn assemble(&mut self, u: &[Real], f_int: &mut [Real], stiffness_factor: Option<Real>, times: &mut PhaseTimes) -> Result<(), StepFailure> {
         f_int.iter_mut().for_each(|f| *f = 0.0);
         if stiffness_factor.is_some() {
             self.values.iter_mut().for_each(|v| *v = 0.0);
@@ -236,22 +236,13 @@ impl Body {
             }
             for (d, free) in self.dofs.free.iter().enumerate() {
                 if let Some(f) = free {
-                    self.values[self.pattern.diagonal[*f as usize] as usize] += c1 * self.mass[d];
-                }
-            }
-            for (d, free) in self.dofs.free.iter().enumerate() {
-                if let Some(f) = free {
                     rhs[*f as usize] = -g[d];
                 }
             }
-            let t0 = Instant::now();
-            if let Err(e) = self.solver.factorize(&self.values) {
-                break Err(StepFailure::Linear { body: self.name.clone(), error: e.to_string() });
+            if let Err(e) = self.factorize_effective(c1, times) {
+                break Err(e);
             }
-            let t1 = Instant::now();
-            self.solver.solve(&mut rhs);
-            times.factorization += (t1 - t0).as_secs_f64();
-            times.solve += t1.elapsed().as_secs_f64();
+            self.solve_effective(&mut rhs, times);
             let mut du2 = 0.0;
             for (d, free) in self.dofs.free.iter().enumerate() {
                 if let Some(f) = free {
@@ -279,6 +270,26 @@ impl Body {
         }
         self.trial = State { u, v, f_int };
         Ok(stats)
+    }
+
+    /// Adds `c1 M` to the assembled `ξ K` and factorises `K̄ = ξ K + c1 M` (eq. 17).
+    pub fn factorize_effective(&mut self, c1: Real, times: &mut PhaseTimes) -> Result<(), StepFailure> {
+        for (d, free) in self.dofs.free.iter().enumerate() {
+            if let Some(f) = free {
+                self.values[self.pattern.diagonal[*f as usize] as usize] += c1 * self.mass[d];
+            }
+        }
+        let t0 = Instant::now();
+        let result = self.solver.factorize(&self.values).map_err(|e| StepFailure::Linear { body: self.name.clone(), error: e.to_string() });
+        times.factorization += t0.elapsed().as_secs_f64();
+        result
+    }
+
+    /// Solves `K̄ x = rhs` in place (free dofs) with the last factorisation.
+    pub fn solve_effective(&self, rhs: &mut [Real], times: &mut PhaseTimes) {
+        let t0 = Instant::now();
+        self.solver.solve(rhs);
+        times.solve += t0.elapsed().as_secs_f64();
     }
 
     /// Work done by the reactions over the trial step: `Σ R_c (u_c - u_c,t)`.
