@@ -23,6 +23,9 @@ pub struct ElementOutput {
     pub force: Vec<Real>,
     /// Tangent stiffness `d f_int / d u`, row-major, `(nen * dim)²` entries.
     pub tangent: Vec<Real>,
+    /// Scratch: strain-displacement columns `B` and `D B`, reused across calls.
+    b: Vec<Vector6<Real>>,
+    db: Vec<Vector6<Real>>,
 }
 
 /// Deformation gradient `F = I + Σ_a u_a ⊗ dN_a/dX` at one quadrature point.
@@ -55,7 +58,8 @@ pub fn element_force_tangent<M: Hyperelastic>(
     if with_tangent {
         out.tangent.resize(ndof * ndof, 0.0);
     }
-    let mut b = vec![Vector6::<Real>::zeros(); ndof];
+    out.b.resize(ndof, Vector6::zeros());
+    out.db.resize(ndof, Vector6::zeros());
     for gp in points {
         let f = deformation_gradient(gp, u);
         let det = f.determinant();
@@ -80,7 +84,7 @@ pub fn element_force_tangent<M: Hyperelastic>(
         // Nonlinear strain-displacement operator, engineering shear components.
         for (a, g) in gp.dn_dx.iter().enumerate() {
             for i in 0..dim {
-                b[a * dim + i] = Vector6::from_fn(|r, _| {
+                out.b[a * dim + i] = Vector6::from_fn(|r, _| {
                     let (k, l) = VOIGT[r];
                     if k == l {
                         f[(i, k)] * g[k]
@@ -90,7 +94,9 @@ pub fn element_force_tangent<M: Hyperelastic>(
                 });
             }
         }
-        let db: Vec<Vector6<Real>> = b.iter().map(|col| d * col).collect();
+        for (db, b) in out.db.iter_mut().zip(&out.b) {
+            *db = d * b;
+        }
         for (a, ga) in gp.dn_dx.iter().enumerate() {
             let sga = s * nalgebra::Vector3::new(ga[0], ga[1], ga[2]);
             for (bn, gb) in gp.dn_dx.iter().enumerate() {
@@ -99,7 +105,7 @@ pub fn element_force_tangent<M: Hyperelastic>(
                     let row = a * dim + i;
                     for j in 0..dim {
                         let col = bn * dim + j;
-                        let mut k = b[row].dot(&db[col]);
+                        let mut k = out.b[row].dot(&out.db[col]);
                         if i == j {
                             k += geometric;
                         }
