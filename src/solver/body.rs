@@ -73,6 +73,9 @@ pub struct Body {
     pub trial: State,
     /// Reaction at each prescribed dof (same order as `prescribed`) at the end of the trial step.
     pub reactions: Vec<Real>,
+    /// Floors of the convergence tests: smallest edge length, and a residual below round-off.
+    length_scale: Real,
+    max_mass: Real,
     solver: CholeskySolver,
     values: Vec<Real>,
     element_out: ElementOutput,
@@ -112,6 +115,8 @@ impl Body {
         let state = State { u: vec![0.0; ndof], v, f_int: vec![0.0; ndof] };
         let values = vec![0.0; pattern.nnz()];
         let reactions = vec![0.0; prescribed.len()];
+        let length_scale = mesh.min_edge_length();
+        let max_mass = mass.iter().cloned().fold(0.0, Real::max);
         Ok(Self {
             name,
             mesh,
@@ -125,6 +130,8 @@ impl Body {
             trial: state.clone(),
             state,
             reactions,
+            length_scale,
+            max_mass,
             solver,
             values,
             element_out: ElementOutput::default(),
@@ -199,7 +206,8 @@ impl Body {
         let mut f_int = std::mem::take(&mut self.trial.f_int);
         let mut g = vec![0.0; ndof];
         let mut rhs = vec![0.0; self.dofs.free_count];
-        let length = self.mesh.min_edge_length();
+        let length = self.length_scale;
+        let floor = 1e-14 * c1 * self.max_mass * length;
         let mut last_increment = None;
         let mut iterations = 0;
         let result = loop {
@@ -225,7 +233,6 @@ impl Body {
             if !residual.is_finite() {
                 break Err(StepFailure::NotFinite { body: self.name.clone() });
             }
-            let floor = 1e-14 * c1 * self.mass.iter().cloned().fold(0.0, Real::max) * length;
             let tolerance = p.residual_tolerance * scale2.sqrt() + floor;
             let increment_ok = last_increment.is_none_or(|du: Real| du <= p.increment_tolerance * step2.sqrt().max(1e-12 * length));
             if residual <= tolerance && increment_ok {
