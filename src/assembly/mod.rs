@@ -30,6 +30,11 @@ impl DofMap {
             .collect();
         Self { dim, free, free_count: next as usize }
     }
+
+    /// `(dof, index among the free dofs)` for every free dof, in dof order.
+    pub fn free_pairs(&self) -> impl Iterator<Item = (usize, usize)> + '_ {
+        self.free.iter().enumerate().filter_map(|(d, f)| f.map(|f| (d, f as usize)))
+    }
 }
 
 /// Sentinel for a local entry that is not stored (upper triangle or prescribed dof).

@@ -73,8 +73,9 @@ pub struct Body {
     pub trial: State,
     /// Reaction at each prescribed dof (same order as `prescribed`) at the end of the trial step.
     pub reactions: Vec<Real>,
-    /// Floors of the convergence tests: smallest edge length, and a residual below round-off.
+    /// Smallest edge length: the floor of the increment test.
     length_scale: Real,
+    /// Largest dof mass: with `length_scale`, sets the residual floor below round-off.
     max_mass: Real,
     solver: CholeskySolver,
     values: Vec<Real>,
@@ -241,21 +242,17 @@ impl Body {
             if iterations == p.max_iterations {
                 break Err(StepFailure::NotConverged { body: self.name.clone(), iterations, residual, tolerance });
             }
-            for (d, free) in self.dofs.free.iter().enumerate() {
-                if let Some(f) = free {
-                    rhs[*f as usize] = -g[d];
-                }
+            for (d, f) in self.dofs.free_pairs() {
+                rhs[f] = -g[d];
             }
             if let Err(e) = self.factorize_effective(c1, times) {
                 break Err(e);
             }
             self.solve_effective(&mut rhs, times);
             let mut du2 = 0.0;
-            for (d, free) in self.dofs.free.iter().enumerate() {
-                if let Some(f) = free {
-                    u[d] += rhs[*f as usize];
-                    du2 += rhs[*f as usize].powi(2);
-                }
+            for (d, f) in self.dofs.free_pairs() {
+                u[d] += rhs[f];
+                du2 += rhs[f].powi(2);
             }
             last_increment = Some(du2.sqrt());
             iterations += 1;
@@ -281,10 +278,8 @@ impl Body {
 
     /// Adds `c1 M` to the assembled `ξ K` and factorises `K̄ = ξ K + c1 M` (eq. 17).
     pub fn factorize_effective(&mut self, c1: Real, times: &mut PhaseTimes) -> Result<(), StepFailure> {
-        for (d, free) in self.dofs.free.iter().enumerate() {
-            if let Some(f) = free {
-                self.values[self.pattern.diagonal[*f as usize] as usize] += c1 * self.mass[d];
-            }
+        for (d, f) in self.dofs.free_pairs() {
+            self.values[self.pattern.diagonal[f] as usize] += c1 * self.mass[d];
         }
         let t0 = Instant::now();
         let result = self.solver.factorize(&self.values).map_err(|e| StepFailure::Linear { body: self.name.clone(), error: e.to_string() });
