@@ -139,16 +139,20 @@ impl Body {
         })
     }
 
+    /// Nodal displacements of element `e`, padded to 3 components, into `out`.
+    fn gather_displacements(mesh: &Mesh, dim: usize, u: &[Real], e: usize, out: &mut Vec<[Real; 3]>) {
+        out.clear();
+        out.extend(mesh.element(e).iter().map(|&n| {
+            let mut d = [0.0; 3];
+            d[..dim].copy_from_slice(&u[n as usize * dim..(n as usize + 1) * dim]);
+            d
+        }));
+    }
+
     fn element_displacements(&self, u: &[Real], e: usize) -> Vec<[Real; 3]> {
-        self.mesh
-            .element(e)
-            .iter()
-            .map(|&n| {
-                let mut d = [0.0; 3];
-                d[..self.dim].copy_from_slice(&u[n as usize * self.dim..(n as usize + 1) * self.dim]);
-                d
-            })
-            .collect()
+        let mut out = Vec::new();
+        Self::gather_displacements(&self.mesh, self.dim, u, e, &mut out);
+        out
     }
 
     /// Internal force at `u` into `f_int`; with `stiffness_factor`, also that multiple of the
@@ -159,8 +163,9 @@ impl Body {
             self.values.iter_mut().for_each(|v| *v = 0.0);
         }
         let dim = self.dim;
+        let mut ue = Vec::with_capacity(self.mesh.kind.nodes());
         for e in 0..self.mesh.element_count() {
-            let ue = self.element_displacements(u, e);
+            Self::gather_displacements(&self.mesh, dim, u, e, &mut ue);
             let t0 = Instant::now();
             element_force_tangent(&self.model, self.geometry.element_points(e), &ue, dim, stiffness_factor.is_some(), &mut self.element_out)
                 .map_err(|error| StepFailure::Element { body: self.name.clone(), element: e, error })?;
