@@ -26,6 +26,12 @@ body = "block"
 nodes = "y_min"
 "#;
 
+/// `GOOD` with its body meshed from `file` (written to `dir()` by the caller) and the boundary
+/// on the node set `nodes`.
+fn with_mesh_file(file: &str, nodes: &str) -> String {
+    GOOD.replace(r#"{ generator = "rectangle", element = "quad4", size = [1.0, 1.0], divisions = [2, 2] }"#, &format!(r#"{{ file = "{file}" }}"#)).replace("nodes = \"y_min\"", &format!("nodes = \"{nodes}\""))
+}
+
 fn dir() -> PathBuf {
     let d = Path::new(env!("CARGO_TARGET_TMPDIR")).join("bad_input");
     std::fs::create_dir_all(&d).unwrap();
@@ -110,36 +116,28 @@ fn unknown_material() {
 
 #[test]
 fn missing_mesh_file() {
-    let scene = GOOD.replace(r#"{ generator = "rectangle", element = "quad4", size = [1.0, 1.0], divisions = [2, 2] }"#, r#"{ file = "nowhere.msh" }"#);
-    assert_error("missing_mesh", &scene, &[], "body.block.mesh.file", Some(13), "cannot read the mesh file");
+    assert_error("missing_mesh", &with_mesh_file("nowhere.msh", "y_min"), &[], "body.block.mesh.file", Some(13), "cannot read the mesh file");
 }
 
 #[test]
 fn malformed_gmsh_file() {
     std::fs::write(dir().join("malformed.msh"), "$MeshFormat\n4.1 0 8\n$EndMeshFormat\n$Nodes\n1 2 1 2\nthis is not a node block\n").unwrap();
-    let scene = GOOD.replace(r#"{ generator = "rectangle", element = "quad4", size = [1.0, 1.0], divisions = [2, 2] }"#, r#"{ file = "malformed.msh" }"#);
-    assert_error("malformed_gmsh", &scene, &[], "body.block.mesh.file", Some(13), "is not usable");
+    assert_error("malformed_gmsh", &with_mesh_file("malformed.msh", "y_min"), &[], "body.block.mesh.file", Some(13), "is not usable");
 }
 
 #[test]
 fn inverted_element_at_t0() {
     std::fs::write(dir().join("inverted.msh"), common_gmsh::unit_square_msh(true)).unwrap();
-    let scene = GOOD
-        .replace(r#"{ generator = "rectangle", element = "quad4", size = [1.0, 1.0], divisions = [2, 2] }"#, r#"{ file = "inverted.msh" }"#)
-        .replace("nodes = \"y_min\"", "nodes = \"left\"");
-    assert_error("inverted_element", &scene, &[], "body.block.mesh.file", Some(13), "element 1 is inverted");
+    assert_error("inverted_element", &with_mesh_file("inverted.msh", "left"), &[], "body.block.mesh.file", Some(13), "element 1 is inverted");
 }
 
 #[test]
 fn degenerate_element_at_t0() {
-    // All four corners of the rectangle's cells collapse onto a line when one size is zero... the
-    // generator rejects a zero size first, so collapse a Gmsh triangle instead.
+    // The generators reject zero sizes before meshing, so collapse a Gmsh triangle instead:
+    // node 3 moves onto node 2, and triangle 0 (nodes 1, 2, 3) has zero area.
     let msh = common_gmsh::unit_square_msh(false).replace("1 1 0\n0 1 0\n$EndNodes", "1 0 0\n0 1 0\n$EndNodes");
     std::fs::write(dir().join("degenerate.msh"), msh).unwrap();
-    let scene = GOOD
-        .replace(r#"{ generator = "rectangle", element = "quad4", size = [1.0, 1.0], divisions = [2, 2] }"#, r#"{ file = "degenerate.msh" }"#)
-        .replace("nodes = \"y_min\"", "nodes = \"left\"");
-    assert_error("degenerate_element", &scene, &[], "body.block.mesh.file", Some(13), "element 0 is degenerate");
+    assert_error("degenerate_element", &with_mesh_file("degenerate.msh", "left"), &[], "body.block.mesh.file", Some(13), "element 0 is degenerate");
 }
 
 #[test]
