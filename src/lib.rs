@@ -5,6 +5,7 @@
 //! [`assembly`] -> [`solver`] -> [`output`].
 
 pub mod assembly;
+pub mod contact;
 pub mod element;
 pub mod material;
 pub mod mesh;

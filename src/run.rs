@@ -72,6 +72,12 @@ impl Logger {
         for s in &sim.sets {
             log.add_channel(&format!("/reaction/{}", s.name), "bifirst.Reaction", &schemas::reaction(dim))?;
         }
+        if let Some(c) = &sim.contact {
+            log.add_channel("/contact", "bifirst.Contact", &schemas::contact())?;
+            for o in &c.obstacles {
+                log.add_channel(&format!("/reaction/{}", o.name), "bifirst.Reaction", &schemas::reaction(dim))?;
+            }
+        }
         let run = json!({
             "version": env!("CARGO_PKG_VERSION"),
             "scene_name": loaded.name,
@@ -127,12 +133,27 @@ impl Logger {
         for (s, r) in sim.sets.iter().zip(sim.reactions()) {
             self.log.write(&format!("/reaction/{}", s.name), t, &json!({"t": t, "force": vec_of(&r, dim)}))?;
         }
+        if let Some(c) = &sim.contact {
+            for (o, r) in c.obstacles.iter().zip(&sim.obstacle_reactions) {
+                self.log.write(&format!("/reaction/{}", o.name), t, &json!({"t": t, "force": vec_of(r, dim)}))?;
+            }
+        }
         Ok(())
+    }
+
+    /// The `/contact` channel of a step (only in scenes with contact).
+    fn contact(&mut self, sim: &Simulation, r: &StepReport) -> Result<(), OutputError> {
+        if sim.contact.is_none() {
+            return Ok(());
+        }
+        let mut msg = serde_json::to_value(r.contact).expect("serializes");
+        msg["t"] = json!(sim.t);
+        self.log.write("/contact", sim.t, &msg)
     }
 
     fn solver(&mut self, r: &StepReport, t: Real, failure: Option<String>) -> Result<(), OutputError> {
         let msg = json!({
-            "t": t, "step": r.step, "dt": r.dt, "newton_iterations": r.newton_iterations, "uzawa_iterations": 0,
+            "t": t, "step": r.step, "dt": r.dt, "newton_iterations": r.newton_iterations, "uzawa_iterations": r.uzawa_iterations,
             "residual_norm": r.residual_norm, "cutbacks": r.cutbacks, "wall_s": r.wall,
             "status": if failure.is_some() { "failed" } else { "converged" }, "message": failure,
         });
@@ -144,6 +165,7 @@ impl Logger {
 pub fn run_scene(loaded: &LoadedScene, out: &Path, monitor: &mut dyn Monitor) -> Result<RunSummary, RunError> {
     let started = std::time::Instant::now();
     let mut sim = build_simulation(loaded)?;
+    sim.start();
     let mut logger = Logger::new(out, loaded, &sim)?;
     let every = loaded.scene.output.every;
     let total = sim.step_count();
@@ -174,6 +196,7 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, monitor: &mut dyn Monitor) ->
                 newton += report.newton_iterations;
                 if report.step % every == 0 || sim.finished() {
                     logger.solver(&report, sim.t, None)?;
+                    logger.contact(&sim, &report)?;
                     logger.state(&sim)?;
                 }
                 monitor.step(&report, total);

@@ -35,7 +35,7 @@ pub fn run() -> Value {
 }
 
 pub fn energy() -> Value {
-    let f = ["t", "kinetic", "strain", "potential", "external_work", "friction_dissipation", "total"];
+    let f = ["t", "kinetic", "strain", "potential", "external_work", "friction_dissipation", "numerical_dissipation", "total", "energy_balance_error"];
     object("bifirst.Energy", &f.map(|k| (k, number())))
 }
 
@@ -83,4 +83,19 @@ pub fn probe(dim: usize) -> Value {
 
 pub fn reaction(dim: usize) -> Value {
     object("bifirst.Reaction", &[("t", number()), ("force", vector(dim))])
+}
+
+pub fn contact() -> Value {
+    object(
+        "bifirst.Contact",
+        &[
+            ("t", number()),
+            ("active", integer()),
+            ("sticking", integer()),
+            ("sliding", integer()),
+            ("max_penetration", number()),
+            ("normal_impulse", number()),
+            ("friction_dissipation_step", number()),
+        ],
+    )
 }

@@ -6,7 +6,7 @@ use super::validate::validate;
 use std::path::{Path, PathBuf};
 
 /// Sections whose entries are named by the user; `--set` may not invent new entries there.
-const NAMED_SECTIONS: [&str; 4] = ["material", "body", "boundary", "probe"];
+const NAMED_SECTIONS: [&str; 5] = ["material", "body", "boundary", "probe", "obstacle"];
 
 /// A validated scene together with what is needed to point errors back at the input.
 #[derive(Debug, Clone)]

@@ -23,6 +23,10 @@ pub struct Scene {
     #[serde(default)]
     pub probe: BTreeMap<String, ProbeSpec>,
     #[serde(default)]
+    pub contact: ContactSpec,
+    #[serde(default)]
+    pub obstacle: BTreeMap<String, ObstacleSpec>,
+    #[serde(default)]
     pub output: OutputSpec,
 }
 
@@ -171,4 +175,82 @@ impl Default for OutputSpec {
     fn default() -> Self {
         Self { mcap: None, every: 1 }
     }
+}
+
+/// Contact between bodies and the settings of the contact solver (`[contact]`).
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct ContactSpec {
+    /// Friction coefficient of every pair and obstacle that does not set its own.
+    pub friction: Real,
+    /// Treat each body pair from both sides, so that neither body's nodes can pass through the
+    /// other's facets; otherwise the body with the finer mesh is the slave.
+    pub two_pass: bool,
+    /// Every pair of bodies may touch; when false only the pairs listed in `pair`.
+    pub all_pairs: bool,
+    /// Relative tolerance on the reactions: Uzawa change and complementarity residual.
+    pub tolerance: Real,
+    /// Uzawa iterations allowed per Newton iteration.
+    pub max_iterations: usize,
+    /// Body pairs with their own friction coefficient (or, with `all_pairs = false`, the only
+    /// pairs in contact).
+    pub pair: BTreeMap<String, PairSpec>,
+}
+
+impl Default for ContactSpec {
+    fn default() -> Self {
+        Self { friction: 0.0, two_pass: false, all_pairs: true, tolerance: 1e-8, max_iterations: 5000, pair: BTreeMap::new() }
+    }
+}
+
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct PairSpec {
+    /// The two bodies.
+    pub bodies: Vec<String>,
+    pub friction: Option<Real>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ObstacleShape {
+    /// Half-plane (2D) or half-space (3D): `point`, `normal` towards the bodies.
+    Plane,
+    /// Axis-aligned box `min`..`max`: solid, or a container with `inside = true`.
+    Box,
+    /// Convex polygon (2D) through `points`, bodies outside.
+    Polygon,
+    /// Open polyline (2D) through `points`, bodies on its left.
+    Polyline,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Interpolation {
+    Step,
+    Linear,
+}
+
+/// A rigid obstacle. Its reaction on the bodies goes to `/reaction/<name>`.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct ObstacleSpec {
+    pub shape: ObstacleShape,
+    pub point: Option<Vec<Real>>,
+    pub normal: Option<Vec<Real>>,
+    pub min: Option<Vec<Real>>,
+    pub max: Option<Vec<Real>>,
+    /// Box only: the bodies are inside (a container) rather than outside (a solid).
+    pub inside: Option<bool>,
+    pub points: Option<Vec<Vec<Real>>>,
+    /// Friction coefficient against this obstacle; `contact.friction` when absent.
+    pub friction: Option<Real>,
+    /// Constant velocity.
+    pub velocity: Option<Vec<Real>>,
+    /// Velocity history, rows `[t, vx, vy(, vz)]` with increasing `t`.
+    pub motion: Option<Vec<Vec<Real>>>,
+    /// How `motion` is read between rows; `linear` when absent.
+    pub interpolation: Option<Interpolation>,
+    /// The bodies it touches; all when absent.
+    pub bodies: Option<Vec<String>>,
 }

@@ -108,6 +108,13 @@ pub(super) fn validate(s: &Scene) -> Result<(), Failure> {
             }
         }
     }
+    validate_contact(s, dim)?;
+    for (name, o) in &s.obstacle {
+        if s.boundary.contains_key(name) {
+            fail(Invalid, format!("obstacle.{name}"), format!("a boundary set is also named `{name}`; both would log to /reaction/{name}."))?;
+        }
+        validate_obstacle(s, &format!("obstacle.{name}"), o, dim)?;
+    }
     for (name, p) in &s.probe {
         let key = format!("probe.{name}");
         if !s.body.contains_key(&p.body) {
@@ -204,4 +211,143 @@ fn validate_mesh(key: &str, m: &MeshSpec) -> Result<(), Failure> {
         }
     }
     Ok(())
+}
+
+fn friction(key: String, mu: Real) -> Result<(), Failure> {
+    if mu >= 0.0 && mu.is_finite() {
+        Ok(())
+    } else {
+        fail(Invalid, key, format!("a friction coefficient must be zero or positive and finite (got {mu})."))
+    }
+}
+
+fn validate_contact(s: &Scene, _dim: Option<usize>) -> Result<(), Failure> {
+    let c = &s.contact;
+    friction("contact.friction".into(), c.friction)?;
+    positive("contact.tolerance".into(), "the contact tolerance", c.tolerance)?;
+    if c.max_iterations == 0 {
+        fail(Invalid, "contact.max_iterations", "at least one Uzawa iteration is needed.")?;
+    }
+    for (name, pair) in &c.pair {
+        let key = format!("contact.pair.{name}");
+        if pair.bodies.len() != 2 || pair.bodies[0] == pair.bodies[1] {
+            fail(Invalid, format!("{key}.bodies"), "a pair names two different bodies.")?;
+        }
+        for (i, b) in pair.bodies.iter().enumerate() {
+            if !s.body.contains_key(b) {
+                fail(Reference, format!("{key}.bodies.{i}"), format!("unknown body `{b}` (the scene defines: {}).", names(s.body.keys())))?;
+            }
+        }
+        if let Some(mu) = pair.friction {
+            friction(format!("{key}.friction"), mu)?;
+        }
+    }
+    Ok(())
+}
+
+fn validate_obstacle(s: &Scene, key: &str, o: &ObstacleSpec, dim: Option<usize>) -> Result<(), Failure> {
+    let fields = [
+        ("point", o.point.is_some()),
+        ("normal", o.normal.is_some()),
+        ("min", o.min.is_some()),
+        ("max", o.max.is_some()),
+        ("inside", o.inside.is_some()),
+        ("points", o.points.is_some()),
+    ];
+    let wanted: &[&str] = match o.shape {
+        ObstacleShape::Plane => &["point", "normal"],
+        ObstacleShape::Box => &["min", "max", "inside"],
+        ObstacleShape::Polygon | ObstacleShape::Polyline => &["points"],
+    };
+    let optional = ["inside"];
+    for (field, present) in fields {
+        match (wanted.contains(&field), present) {
+            (false, true) => fail(Invalid, format!("{key}.{field}"), format!("a {:?} obstacle takes {}.", o.shape, wanted.join(", ")).to_lowercase())?,
+            (true, false) if !optional.contains(&field) => fail(Invalid, format!("{key}.{field}"), format!("this obstacle needs `{field}`."))?,
+            _ => {}
+        }
+    }
+    if let Some(p) = &o.point {
+        finite_vec(&format!("{key}.point"), p, dim)?;
+    }
+    if let Some(n) = &o.normal {
+        finite_vec(&format!("{key}.normal"), n, dim)?;
+        if n.iter().all(|&x| x == 0.0) {
+            fail(Invalid, format!("{key}.normal"), "the normal is zero.")?;
+        }
+    }
+    if let (Some(lo), Some(hi)) = (&o.min, &o.max) {
+        finite_vec(&format!("{key}.min"), lo, dim)?;
+        finite_vec(&format!("{key}.max"), hi, Some(lo.len()))?;
+        if let Some(i) = (0..lo.len()).find(|&i| hi[i] <= lo[i]) {
+            fail(Invalid, format!("{key}.max.{i}"), format!("max must exceed min in every direction ({} <= {}).", hi[i], lo[i]))?;
+        }
+    }
+    if let Some(points) = &o.points {
+        if dim == Some(3) {
+            fail(Invalid, format!("{key}.shape"), "polygons and polylines are 2D obstacles; use planes or boxes in 3D.")?;
+        }
+        let least = if o.shape == ObstacleShape::Polygon { 3 } else { 2 };
+        if points.len() < least {
+            fail(Invalid, format!("{key}.points"), format!("at least {least} points are needed."))?;
+        }
+        for (i, p) in points.iter().enumerate() {
+            finite_vec(&format!("{key}.points.{i}"), p, Some(2))?;
+        }
+        for i in 0..points.len().saturating_sub(1) {
+            if points[i] == points[i + 1] {
+                fail(Invalid, format!("{key}.points.{}", i + 1), "two consecutive points coincide.")?;
+            }
+        }
+        if o.shape == ObstacleShape::Polygon && !convex(points) {
+            fail(Invalid, format!("{key}.points"), "the polygon is not convex; build a concave outline from polylines.")?;
+        }
+    }
+    if let Some(mu) = o.friction {
+        friction(format!("{key}.friction"), mu)?;
+    }
+    if o.velocity.is_some() && o.motion.is_some() {
+        fail(Invalid, format!("{key}.motion"), "give either `velocity` or `motion`, not both.")?;
+    }
+    if o.interpolation.is_some() && o.motion.is_none() {
+        fail(Invalid, format!("{key}.interpolation"), "`interpolation` applies to a `motion` table.")?;
+    }
+    if let Some(v) = &o.velocity {
+        finite_vec(&format!("{key}.velocity"), v, dim)?;
+    }
+    if let Some(rows) = &o.motion {
+        if rows.is_empty() {
+            fail(Invalid, format!("{key}.motion"), "the motion table is empty.")?;
+        }
+        for (i, row) in rows.iter().enumerate() {
+            let width = dim.map(|d| d + 1);
+            finite_vec(&format!("{key}.motion.{i}"), row, None)?;
+            if width.is_some_and(|w| row.len() != w) || row.len() < 3 {
+                fail(Invalid, format!("{key}.motion.{i}"), "each row is [t, vx, vy] in 2D or [t, vx, vy, vz] in 3D.")?;
+            }
+            if i > 0 && row[0] <= rows[i - 1][0] {
+                fail(Invalid, format!("{key}.motion.{i}"), "the times of the motion table must increase.")?;
+            }
+        }
+    }
+    if let Some(bodies) = &o.bodies {
+        for (i, b) in bodies.iter().enumerate() {
+            if !s.body.contains_key(b) {
+                fail(Reference, format!("{key}.bodies.{i}"), format!("unknown body `{b}` (the scene defines: {}).", names(s.body.keys())))?;
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Whether the closed polygon turns the same way at every vertex.
+fn convex(points: &[Vec<Real>]) -> bool {
+    let n = points.len();
+    let turns: Vec<Real> = (0..n)
+        .map(|i| {
+            let (a, b, c) = (&points[i], &points[(i + 1) % n], &points[(i + 2) % n]);
+            (b[0] - a[0]) * (c[1] - b[1]) - (b[1] - a[1]) * (c[0] - b[0])
+        })
+        .collect();
+    turns.iter().all(|&t| t > 0.0) || turns.iter().all(|&t| t < 0.0)
 }

@@ -16,6 +16,8 @@ pub struct State {
     pub u: Vec<Real>,
     pub v: Vec<Real>,
     pub f_int: Vec<Real>,
+    /// Strain energy `Σ ∫ W dV`.
+    pub strain: Real,
 }
 
 /// A prescribed dof: its constant velocity and the boundary set that owns its reaction.
@@ -50,11 +52,15 @@ pub enum StepFailure {
     NotFinite { body: String },
 }
 
-/// Outcome of a converged step of one body.
+/// Energy terms of one body over a step (see doc/ARCHITECTURE.md, "Energy balance").
 #[derive(Debug, Clone, Copy, Default)]
-pub struct BodyStepStats {
-    pub iterations: usize,
-    pub residual: Real,
+pub struct StepEnergy {
+    /// `(θ - 1/2) Σ m (v - v_t)²`: the theta scheme's own dissipation.
+    pub theta_dissipation: Real,
+    /// `Δu · ((1-ξ) F_int,t + ξ F_int) - ΔW`: the xi weighting's deviation from the strain energy.
+    pub force_dissipation: Real,
+    /// Work of the support reactions, `Σ R_c Δu_c`.
+    pub support_work: Real,
 }
 
 pub struct Body {
@@ -80,6 +86,13 @@ pub struct Body {
     solver: CholeskySolver,
     values: Vec<Real>,
     element_out: ElementOutput,
+    f_ext: Vec<Real>,
+    /// Contact-free residual of the last evaluation, every dof.
+    pub g: Vec<Real>,
+    /// Nodal forces of the current contact reactions, every dof.
+    pub contact_force: Vec<Real>,
+    force_scale: Real,
+    last_increment: Option<Real>,
 }
 
 impl Body {
@@ -113,7 +126,7 @@ impl Body {
         for p in &prescribed {
             v[p.dof] = p.velocity;
         }
-        let state = State { u: vec![0.0; ndof], v, f_int: vec![0.0; ndof] };
+        let state = State { u: vec![0.0; ndof], v, f_int: vec![0.0; ndof], strain: 0.0 };
         let values = vec![0.0; pattern.nnz()];
         let reactions = vec![0.0; prescribed.len()];
         let length_scale = mesh.min_edge_length();
@@ -136,6 +149,11 @@ impl Body {
             solver,
             values,
             element_out: ElementOutput::default(),
+            f_ext: vec![0.0; ndof],
+            g: vec![0.0; ndof],
+            contact_force: vec![0.0; ndof],
+            force_scale: 0.0,
+            last_increment: None,
         })
     }
 
@@ -189,96 +207,135 @@ impl Body {
         let u = std::mem::take(&mut self.state.u);
         let mut f = std::mem::take(&mut self.state.f_int);
         let result = self.assemble(&u, &mut f, None, &mut PhaseTimes::default());
+        self.state.strain = self.energy_of(&u);
         self.state.u = u;
         self.state.f_int = f;
         result
     }
 
-    /// Solves one step of length `dt` from `state` into `trial` (not committed).
-    ///
-    /// Residual of eqs. (16)-(19), with `F = F_ext - F_int`:
-    /// `g(u) = M (u - u_t - dt v_t) / (θ dt²) - (1-ξ) F_t - ξ F(u)`, zero at free dofs and equal
-    /// to the reaction at prescribed dofs. Newton: `(ξ K + M/(θ dt²)) Δu = -g`.
-    pub fn solve_step(&mut self, p: &StepParams, gravity: &[Real; 3], times: &mut PhaseTimes) -> Result<BodyStepStats, StepFailure> {
-        let (dt, xi, theta) = (p.dt, p.xi, p.theta);
-        let c1 = 1.0 / (theta * dt * dt);
+    /// Starts a step of length `p.dt`: external forces, the predictor `u_t + dt v_t` (zero
+    /// inertia residual) with the prescribed dofs at their final values, no contact force.
+    pub fn begin_step(&mut self, p: &StepParams, gravity: &[Real; 3]) {
         let dim = self.dim;
-        let ndof = self.mass.len();
-        let f_ext: Vec<Real> = (0..ndof).map(|d| self.mass[d] * gravity[d % dim]).collect();
-        let mut u: Vec<Real> = (0..ndof).map(|d| self.state.u[d] + dt * self.state.v[d]).collect();
+        for d in 0..self.mass.len() {
+            self.f_ext[d] = self.mass[d] * gravity[d % dim];
+            self.trial.u[d] = self.state.u[d] + p.dt * self.state.v[d];
+            self.contact_force[d] = 0.0;
+        }
         for pr in &self.prescribed {
-            u[pr.dof] = self.state.u[pr.dof] + dt * pr.velocity;
+            self.trial.u[pr.dof] = self.state.u[pr.dof] + p.dt * pr.velocity;
         }
+        self.last_increment = None;
+    }
+
+    /// Assembles force and `ξ K` at the trial displacement and the contact-free residual
+    /// `g(u) = M (u - u_t - dt v_t) / (θ dt²) - (1-ξ) F_t - ξ F(u)` at every dof.
+    pub fn evaluate(&mut self, p: &StepParams, times: &mut PhaseTimes) -> Result<(), StepFailure> {
+        let (dt, xi) = (p.dt, p.xi);
+        let c1 = 1.0 / (p.theta * dt * dt);
+        let u = std::mem::take(&mut self.trial.u);
         let mut f_int = std::mem::take(&mut self.trial.f_int);
-        let mut g = vec![0.0; ndof];
-        let mut rhs = vec![0.0; self.dofs.free_count];
-        let length = self.length_scale;
-        let floor = 1e-14 * c1 * self.max_mass * length;
-        let mut last_increment = None;
-        let mut iterations = 0;
-        let result = loop {
-            if let Err(e) = self.assemble(&u, &mut f_int, Some(xi), times) {
-                break Err(e);
-            }
-            let (mut res2, mut scale2) = (0.0, 0.0);
-            let mut step2: Real = 0.0;
-            for d in 0..ndof {
-                let inertia = c1 * self.mass[d] * (u[d] - self.state.u[d] - dt * self.state.v[d]);
-                let f_t = f_ext[d] - self.state.f_int[d];
-                let f_new = f_ext[d] - f_int[d];
-                g[d] = inertia - (1.0 - xi) * f_t - xi * f_new;
-                // The force scale spans all dofs: at equilibrium the free-dof forces nearly cancel,
-                // while round-off follows the element forces, which the reactions reflect.
-                scale2 += inertia * inertia + (xi * f_int[d]).powi(2) + ((1.0 - xi) * self.state.f_int[d]).powi(2) + f_ext[d] * f_ext[d];
-                if self.dofs.free[d].is_some() {
-                    res2 += g[d] * g[d];
-                    step2 += (u[d] - self.state.u[d]).powi(2);
-                }
-            }
-            let residual = res2.sqrt();
-            if !residual.is_finite() {
-                break Err(StepFailure::NotFinite { body: self.name.clone() });
-            }
-            let tolerance = p.residual_tolerance * scale2.sqrt() + floor;
-            let increment_ok = last_increment.is_none_or(|du: Real| du <= p.increment_tolerance * step2.sqrt().max(1e-12 * length));
-            if residual <= tolerance && increment_ok {
-                break Ok(BodyStepStats { iterations, residual });
-            }
-            if iterations == p.max_iterations {
-                break Err(StepFailure::NotConverged { body: self.name.clone(), iterations, residual, tolerance });
-            }
-            for (d, f) in self.dofs.free_pairs() {
-                rhs[f] = -g[d];
-            }
-            if let Err(e) = self.factorize_effective(c1, times) {
-                break Err(e);
-            }
-            self.solve_effective(&mut rhs, times);
-            let mut du2 = 0.0;
-            for (d, f) in self.dofs.free_pairs() {
-                u[d] += rhs[f];
-                du2 += rhs[f].powi(2);
-            }
-            last_increment = Some(du2.sqrt());
-            iterations += 1;
-        };
-        let stats = match result {
-            Ok(s) => s,
-            Err(e) => {
-                self.trial.f_int = f_int;
-                return Err(e);
-            }
-        };
-        let mut v = vec![0.0; ndof];
-        for d in 0..ndof {
-            v[d] = (u[d] - self.state.u[d] - dt * (1.0 - theta) * self.state.v[d]) / (theta * dt);
+        let result = self.assemble(&u, &mut f_int, Some(xi), times);
+        let mut scale2 = 0.0;
+        for d in 0..self.mass.len() {
+            let inertia = c1 * self.mass[d] * (u[d] - self.state.u[d] - dt * self.state.v[d]);
+            let f_t = self.f_ext[d] - self.state.f_int[d];
+            let f_new = self.f_ext[d] - f_int[d];
+            self.g[d] = inertia - (1.0 - xi) * f_t - xi * f_new;
+            // The force scale spans all dofs: at equilibrium the free-dof forces nearly cancel,
+            // while round-off follows the element forces, which the reactions reflect.
+            scale2 += inertia * inertia + (xi * f_int[d]).powi(2) + ((1.0 - xi) * self.state.f_int[d]).powi(2) + self.f_ext[d].powi(2);
         }
+        self.force_scale = scale2.sqrt();
+        self.trial.u = u;
+        self.trial.f_int = f_int;
+        result
+    }
+
+    /// Size of the forces of the last evaluation (the residual's scale).
+    pub fn force_scale(&self) -> Real {
+        self.force_scale
+    }
+
+    /// Smallest edge length of the mesh.
+    pub fn length_scale(&self) -> Real {
+        self.length_scale
+    }
+
+    /// Norm of the residual with contact, `g - f_c`, over the free dofs.
+    pub fn residual_norm(&self) -> Real {
+        self.dofs.free_pairs().map(|(d, _)| (self.g[d] - self.contact_force[d]).powi(2)).sum::<Real>().sqrt()
+    }
+
+    /// Whether the last evaluation meets the Newton tolerances: the residual below
+    /// `residual_tolerance` times the force scale (plus a round-off floor), and the last increment
+    /// below `increment_tolerance` times the displacement over the step.
+    pub fn converged(&self, p: &StepParams) -> Result<bool, StepFailure> {
+        let residual = self.residual_norm();
+        if !residual.is_finite() {
+            return Err(StepFailure::NotFinite { body: self.name.clone() });
+        }
+        let c1 = 1.0 / (p.theta * p.dt * p.dt);
+        let tolerance = p.residual_tolerance * self.force_scale + 1e-14 * c1 * self.max_mass * self.length_scale;
+        let step = self.dofs.free_pairs().map(|(d, _)| (self.trial.u[d] - self.state.u[d]).powi(2)).sum::<Real>().sqrt();
+        let increment_ok = self.last_increment.is_none_or(|du| du <= p.increment_tolerance * step.max(1e-12 * self.length_scale));
+        Ok(residual <= tolerance && increment_ok)
+    }
+
+    /// The failure to report when Newton runs out of iterations.
+    pub fn not_converged(&self, p: &StepParams, iterations: usize) -> StepFailure {
+        let c1 = 1.0 / (p.theta * p.dt * p.dt);
+        let tolerance = p.residual_tolerance * self.force_scale + 1e-14 * c1 * self.max_mass * self.length_scale;
+        StepFailure::NotConverged { body: self.name.clone(), iterations, residual: self.residual_norm(), tolerance }
+    }
+
+    /// `-(g - f_c)` at the free dofs into `rhs`.
+    pub fn newton_rhs(&self, rhs: &mut [Real]) {
+        for (d, f) in self.dofs.free_pairs() {
+            rhs[f] = self.contact_force[d] - self.g[d];
+        }
+    }
+
+    /// Adds a free-dof increment to the trial displacement and records its size.
+    pub fn apply_increment(&mut self, du: &[Real]) {
+        let mut du2 = 0.0;
+        for (d, f) in self.dofs.free_pairs() {
+            self.trial.u[d] += du[f];
+            du2 += du[f] * du[f];
+        }
+        self.last_increment = Some(du2.sqrt());
+    }
+
+    /// Velocity of dof `d` implied by the trial displacement (eq. 15).
+    pub fn trial_velocity(&self, p: &StepParams, d: usize) -> Real {
+        (self.trial.u[d] - self.state.u[d] - p.dt * (1.0 - p.theta) * self.state.v[d]) / (p.theta * p.dt)
+    }
+
+    /// Ends a converged step: end velocities, support reactions `g - f_c` at the prescribed dofs,
+    /// and the step's energy terms.
+    pub fn finish_step(&mut self, p: &StepParams) -> StepEnergy {
+        let ndof = self.mass.len();
+        let v: Vec<Real> = (0..ndof).map(|d| self.trial_velocity(p, d)).collect();
+        self.trial.v = v;
         for (k, pr) in self.prescribed.iter().enumerate() {
-            v[pr.dof] = pr.velocity;
-            self.reactions[k] = g[pr.dof];
+            self.trial.v[pr.dof] = pr.velocity;
+            self.reactions[k] = self.g[pr.dof] - self.contact_force[pr.dof];
         }
-        self.trial = State { u, v, f_int };
-        Ok(stats)
+        self.trial.strain = self.energy_of(&self.trial.u);
+        let (mut theta_term, mut force_work, mut support_work) = (0.0, 0.0, 0.0);
+        for d in 0..ndof {
+            let du = self.trial.u[d] - self.state.u[d];
+            theta_term += self.mass[d] * (self.trial.v[d] - self.state.v[d]).powi(2);
+            force_work += du * ((1.0 - p.xi) * self.state.f_int[d] + p.xi * self.trial.f_int[d]);
+        }
+        for (pr, r) in self.prescribed.iter().zip(&self.reactions) {
+            support_work += r * (self.trial.u[pr.dof] - self.state.u[pr.dof]);
+        }
+        StepEnergy {
+            theta_dissipation: (p.theta - 0.5) * theta_term,
+            force_dissipation: force_work - (self.trial.strain - self.state.strain),
+            support_work,
+        }
     }
 
     /// Adds `c1 M` to the assembled `ξ K` and factorises `K̄ = ξ K + c1 M` (eq. 17).
@@ -292,16 +349,12 @@ impl Body {
         result
     }
 
-    /// Solves `K̄ x = rhs` in place (free dofs) with the last factorisation.
+    /// Solves `K̄ x = rhs` in place (free dofs) with the last factorisation, for one or more
+    /// column-major right-hand sides.
     pub fn solve_effective(&self, rhs: &mut [Real], times: &mut PhaseTimes) {
         let t0 = Instant::now();
-        self.solver.solve(rhs);
+        self.solver.solve_columns(rhs, self.dofs.free_count);
         times.solve += t0.elapsed().as_secs_f64();
-    }
-
-    /// Work done by the reactions over the trial step: `Σ R_c (u_c - u_c,t)`.
-    pub fn reaction_work(&self) -> Real {
-        self.prescribed.iter().zip(&self.reactions).map(|(p, r)| r * (self.trial.u[p.dof] - self.state.u[p.dof])).sum()
     }
 
     pub fn commit(&mut self) {
@@ -313,9 +366,11 @@ impl Body {
     }
 
     pub fn strain_energy(&self) -> Real {
-        (0..self.mesh.element_count())
-            .map(|e| element_energy(&self.model, self.geometry.element_points(e), &self.element_displacements(&self.state.u, e)))
-            .sum()
+        self.state.strain
+    }
+
+    fn energy_of(&self, u: &[Real]) -> Real {
+        (0..self.mesh.element_count()).map(|e| element_energy(&self.model, self.geometry.element_points(e), &self.element_displacements(u, e))).sum()
     }
 
     /// Current position of a node.

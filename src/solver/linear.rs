@@ -41,7 +41,13 @@ impl CholeskySolver {
     /// Solves in place with the last factorisation.
     pub fn solve(&self, rhs: &mut [Real]) {
         let n = rhs.len();
+        self.solve_columns(rhs, n);
+    }
+
+    /// Solves in place for the columns of a column-major `n x k` block (`k = rhs.len() / n`).
+    pub fn solve_columns(&self, rhs: &mut [Real], n: usize) {
+        let k = rhs.len() / n.max(1);
         let llt = self.factor.as_ref().expect("factorize before solve");
-        llt.solve_in_place(faer::MatMut::from_column_major_slice_mut(rhs, n, 1));
+        llt.solve_in_place(faer::MatMut::from_column_major_slice_mut(rhs, n, k));
     }
 }

@@ -2,14 +2,19 @@
 //! automatic cut-back of failed steps; energies and per-body, probe and reaction quantities.
 
 pub mod body;
+pub mod coupling;
 pub mod linear;
 mod setup;
 
 pub use body::{Body, StepFailure};
 pub use setup::build_simulation;
 
+use crate::contact::detect::detect;
+use crate::contact::{ContactModel, ContactPoint, ContactStats, Master};
 use crate::precision::Real;
 use body::StepParams;
+use coupling::ContactStep;
+use std::collections::HashMap;
 
 /// Wall-clock seconds spent per phase.
 #[derive(Debug, Clone, Copy, Default, serde::Serialize)]
@@ -45,8 +50,12 @@ pub struct StepReport {
     pub t: Real,
     pub dt: Real,
     pub newton_iterations: usize,
+    /// Uzawa iterations, summed over the Newton iterations and sub-steps.
+    pub uzawa_iterations: usize,
     pub residual_norm: Real,
     pub cutbacks: usize,
+    /// Contact totals over the step (sub-steps added up; penetration the largest).
+    pub contact: ContactStats,
     pub wall: PhaseTimes,
     /// One line per cut-back: why the step failed and the new time step.
     pub events: Vec<String>,
@@ -73,7 +82,12 @@ pub struct Energies {
     pub potential: Real,
     pub external_work: Real,
     pub friction_dissipation: Real,
+    /// The scheme's own dissipation: theta and xi weighting, and the normal (impact) part of
+    /// the contact work.
+    pub numerical_dissipation: Real,
     pub total: Real,
+    /// `|E(0) + W_ext - E - D_friction - D_numerical| / scale` (see [`Simulation::energies`]).
+    pub energy_balance_error: Real,
 }
 
 pub struct Simulation {
@@ -92,8 +106,17 @@ pub struct Simulation {
     pub increment_tolerance: Real,
     pub max_iterations: usize,
     pub max_cutbacks: usize,
-    /// Cumulative work of the reactions of prescribed sets.
+    /// Cumulative work of the reactions of prescribed sets and of moving obstacles.
     pub external_work: Real,
+    pub friction_dissipation: Real,
+    pub numerical_dissipation: Real,
+    /// Total energy at t = 0 (set by [`Simulation::start`]).
+    pub initial_energy: Real,
+    pub contact: Option<ContactModel>,
+    /// Contact points of the last step, with their solution.
+    pub contact_points: Vec<ContactPoint>,
+    /// Net force of each obstacle on the bodies over the last step (mean over the step).
+    pub obstacle_reactions: Vec<[Real; 3]>,
 }
 
 impl Simulation {
@@ -138,7 +161,7 @@ impl Simulation {
     }
 
     fn try_step(&mut self, dt: Real, report: &mut StepReport) -> Result<(), StepFailure> {
-        let params = StepParams {
+        let p = StepParams {
             dt,
             xi: self.xi,
             theta: self.theta,
@@ -146,29 +169,163 @@ impl Simulation {
             increment_tolerance: self.increment_tolerance,
             max_iterations: self.max_iterations,
         };
-        let mut residual: Real = 0.0;
+        let started = std::time::Instant::now();
+        let (points, velocity_scale) = self.detect(dt);
+        let warm: HashMap<(u32, u32, Master), [Real; 3]> = self.contact_points.iter().map(|c| (c.key(), c.r)).collect();
+        let mut contact = ContactStep::new(points, &self.bodies, &p, &warm, velocity_scale);
+        report.wall.contact += started.elapsed().as_secs_f64();
+        let (tolerance, max_uzawa) = self.contact.as_ref().map_or((0.0, 0), |c| (c.settings.tolerance, c.settings.max_iterations));
         for body in &mut self.bodies {
-            let stats = body.solve_step(&params, &self.gravity, &mut report.wall)?;
-            report.newton_iterations += stats.iterations;
-            residual = residual.max(stats.residual);
+            body.begin_step(&p, &self.gravity);
         }
+        let mut iterations = 0;
+        let mut last_change: Option<Real> = None;
+        let mut uzawa_converged = true;
+        loop {
+            for body in &mut self.bodies {
+                body.evaluate(&p, &mut report.wall)?;
+            }
+            contact.apply_forces(&mut self.bodies);
+            let mut converged = true;
+            for body in &self.bodies {
+                converged &= body.converged(&p)?;
+            }
+            if !contact.is_empty() {
+                let settled = last_change.is_some_and(|c| c <= tolerance) && uzawa_converged;
+                converged &= settled && contact.complementarity(&self.bodies, &p) <= tolerance;
+            }
+            if converged {
+                break;
+            }
+            if iterations == p.max_iterations {
+                let worst = self.bodies.iter().max_by(|a, b| a.residual_norm().total_cmp(&b.residual_norm())).expect("a body");
+                return Err(worst.not_converged(&p, iterations));
+            }
+            for body in &mut self.bodies {
+                body.factorize_effective(1.0 / (p.theta * dt * dt), &mut report.wall)?;
+            }
+            if contact.is_empty() {
+                for body in &mut self.bodies {
+                    let mut rhs = vec![0.0; body.dofs.free_count];
+                    body.newton_rhs(&mut rhs);
+                    body.solve_effective(&mut rhs, &mut report.wall);
+                    body.apply_increment(&rhs);
+                }
+            } else {
+                let (outcome, change) = contact.newton_increment(&mut self.bodies, &p, tolerance, max_uzawa, &mut report.wall);
+                report.uzawa_iterations += outcome.iterations;
+                uzawa_converged = outcome.converged;
+                last_change = Some(change);
+            }
+            iterations += 1;
+        }
+        report.newton_iterations += iterations;
+        report.residual_norm = report.residual_norm.max(self.bodies.iter().map(Body::residual_norm).fold(0.0, Real::max));
+        contact.finish(&self.bodies, &p);
+        self.book_step(&p, &contact.points);
+        let stats = ContactStats::of(&contact.points, dt);
+        let r = &mut report.contact;
+        r.active = r.active.max(stats.active);
+        r.sticking = r.sticking.max(stats.sticking);
+        r.sliding = r.sliding.max(stats.sliding);
+        r.max_penetration = r.max_penetration.max(stats.max_penetration);
+        r.normal_impulse += stats.normal_impulse;
+        r.friction_dissipation_step += stats.friction_dissipation_step;
+        self.contact_points = contact.points;
         for body in &mut self.bodies {
-            self.external_work += body.reaction_work();
             body.commit();
         }
         self.t += dt;
-        report.residual_norm = residual;
         Ok(())
     }
 
+    /// Contact points for a step of length `dt` from the committed state, and the step's
+    /// velocity scale (fastest body or obstacle, or what gravity adds in one step).
+    fn detect(&self, dt: Real) -> (Vec<ContactPoint>, Real) {
+        let Some(model) = &self.contact else { return (Vec::new(), 0.0) };
+        let positions: Vec<Vec<[Real; 3]>> = self.bodies.iter().map(|b| (0..b.mesh.nodes.len()).map(|n| b.position(n)).collect()).collect();
+        // The search reaches as far as anything can travel in two steps, plus a little.
+        let dim = self.dim;
+        let body_speed = self
+            .bodies
+            .iter()
+            .flat_map(|b| b.state.v.chunks(dim).map(|v| v.iter().map(|x| x * x).sum::<Real>().sqrt()))
+            .fold(0.0, Real::max);
+        let obstacle_speed = model
+            .obstacles
+            .iter()
+            .flat_map(|o| [o.motion.velocity(self.t), o.motion.velocity(self.t + dt)])
+            .map(|v| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt())
+            .fold(0.0, Real::max);
+        let h = self.bodies.iter().map(|b| b.length_scale()).fold(Real::INFINITY, Real::min);
+        let margin = 2.0 * dt * (2.0 * body_speed + obstacle_speed) + 0.01 * h;
+        let gravity = self.gravity.iter().map(|g| g * g).sum::<Real>().sqrt();
+        let velocity_scale = body_speed.max(obstacle_speed).max(gravity * dt).max(1e-9 * h / dt);
+        (detect(model, &positions, dim, self.t, dt, margin), velocity_scale)
+    }
+
+    /// Energy bookkeeping of a converged step (before commit): external work, friction and
+    /// numerical dissipation, and the obstacles' reactions.
+    fn book_step(&mut self, p: &StepParams, points: &[ContactPoint]) {
+        for body in &mut self.bodies {
+            let e = body.finish_step(p);
+            self.external_work += e.support_work;
+            self.numerical_dissipation += e.theta_dissipation + e.force_dissipation;
+        }
+        let dim = self.dim;
+        let mut reactions = vec![[0.0; 3]; self.contact.as_ref().map_or(0, |c| c.obstacles.len())];
+        let (mut relative_work, mut friction) = (0.0, 0.0);
+        for c in points {
+            let f = c.force();
+            let mut du = c.obstacle_displacement.map(|x| -x);
+            for t in c.terms() {
+                let b = &self.bodies[t.body as usize];
+                for i in 0..dim {
+                    let d = t.node as usize * dim + i;
+                    du[i] += t.coef * (b.trial.u[d] - b.state.u[d]);
+                }
+            }
+            relative_work += f[0] * du[0] + f[1] * du[1] + f[2] * du[2];
+            friction -= p.dt * (c.r[1] * c.v[1] + c.r[2] * c.v[2]);
+            if let Master::Obstacle { obstacle, .. } = c.master {
+                let d = c.obstacle_displacement;
+                self.external_work += f[0] * d[0] + f[1] * d[1] + f[2] * d[2];
+                for i in 0..3 {
+                    reactions[obstacle as usize][i] += f[i];
+                }
+            }
+        }
+        self.friction_dissipation += friction;
+        self.numerical_dissipation += -relative_work - friction;
+        self.obstacle_reactions = reactions;
+    }
+
+    /// Records the initial energy, the reference of the energy balance.
+    pub fn start(&mut self) {
+        self.initial_energy = self.energies().total;
+    }
+
+    /// Energies now. The balance error is scaled by the largest of `|E(0)|`, `|E|`, `|W_ext|`
+    /// and the dissipations, so that it stays meaningful when `E(0)` is zero.
     pub fn energies(&self) -> Energies {
-        let mut e = Energies { external_work: self.external_work, ..Default::default() };
+        let mut e = Energies {
+            external_work: self.external_work,
+            friction_dissipation: self.friction_dissipation,
+            numerical_dissipation: self.numerical_dissipation,
+            ..Default::default()
+        };
         for b in &self.bodies {
             e.kinetic += b.kinetic_energy();
             e.strain += b.strain_energy();
             e.potential += b.potential_energy(&self.gravity);
         }
         e.total = e.kinetic + e.strain + e.potential;
+        let e0 = self.initial_energy;
+        let scale = [e0, e.total, e.external_work, e.friction_dissipation, e.numerical_dissipation, e.kinetic, e.strain]
+            .iter()
+            .map(|x| x.abs())
+            .fold(Real::MIN_POSITIVE, Real::max);
+        e.energy_balance_error = (e0 + e.external_work - e.total - e.friction_dissipation - e.numerical_dissipation).abs() / scale;
         e
     }
 

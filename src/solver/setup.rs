@@ -3,12 +3,13 @@
 
 use super::body::{Body, Prescribed};
 use super::{BoundarySet, Probe, Simulation};
+use crate::contact::{ContactModel, Motion, Obstacle, Settings, Surface};
 use crate::element::ReferenceGeometry;
 use crate::material::{BlatzKo, Lvf, Model, NeoHookean};
 use crate::mesh::{generate, gmsh, Mesh};
 use crate::precision::Real;
 use crate::scene::SceneErrorKind::{Invalid, Mesh as MeshError, Reference};
-use crate::scene::{AngularVelocity, Axis, Generator, LoadedScene, MaterialSpec, MeshSpec, ModelName, SceneError};
+use crate::scene::{AngularVelocity, Axis, Generator, Interpolation, LoadedScene, MaterialSpec, MeshSpec, ModelName, ObstacleShape, SceneError};
 use std::collections::HashMap;
 
 pub fn model_of(m: &MaterialSpec) -> Model {
@@ -176,6 +177,7 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
         vec_len_check("gravity", g)?;
         gravity[..dim].copy_from_slice(g);
     }
+    let contact = build_contact(loaded, &bodies, dim)?;
     Ok(Simulation {
         dim,
         bodies,
@@ -193,5 +195,95 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
         max_iterations: scene.solver.max_iterations,
         max_cutbacks: scene.solver.max_cutbacks,
         external_work: 0.0,
+        friction_dissipation: 0.0,
+        numerical_dissipation: 0.0,
+        initial_energy: 0.0,
+        obstacle_reactions: vec![[0.0; 3]; contact.as_ref().map_or(0, |c| c.obstacles.len())],
+        contact,
+        contact_points: Vec::new(),
     })
+}
+
+fn vec3(v: &[Real]) -> [Real; 3] {
+    let mut x = [0.0; 3];
+    x[..v.len()].copy_from_slice(v);
+    x
+}
+
+/// The contact model: boundary surfaces, obstacles and the friction of each body pair; `None`
+/// when nothing in the scene can touch anything.
+fn build_contact(loaded: &LoadedScene, bodies: &[Body], dim: usize) -> Result<Option<ContactModel>, SceneError> {
+    let scene = &loaded.scene;
+    let spec = &scene.contact;
+    let index: HashMap<&str, usize> = scene.body.keys().enumerate().map(|(i, n)| (n.as_str(), i)).collect();
+    let n = bodies.len();
+    let mut pairs: Vec<Vec<Option<Real>>> = vec![vec![None; n]; n];
+    if spec.all_pairs {
+        for a in 0..n {
+            for b in a + 1..n {
+                pairs[a][b] = Some(spec.friction);
+            }
+        }
+    }
+    for pair in spec.pair.values() {
+        let (a, b) = (index[pair.bodies[0].as_str()], index[pair.bodies[1].as_str()]);
+        pairs[a.min(b)][a.max(b)] = Some(pair.friction.unwrap_or(spec.friction));
+    }
+    // Slave/master roles: both ways with two passes, else the finer mesh is the slave.
+    let mut friction: Vec<Vec<Option<Real>>> = vec![vec![None; n]; n];
+    for a in 0..n {
+        for b in a + 1..n {
+            let Some(mu) = pairs[a][b] else { continue };
+            if spec.two_pass {
+                friction[a][b] = Some(mu);
+                friction[b][a] = Some(mu);
+            } else if bodies[b].length_scale() < bodies[a].length_scale() {
+                friction[b][a] = Some(mu);
+            } else {
+                friction[a][b] = Some(mu);
+            }
+        }
+    }
+    let mut obstacles = Vec::new();
+    for (name, o) in &scene.obstacle {
+        let key = format!("obstacle.{name}");
+        let check = |field: &str, v: &Option<Vec<Real>>| match v {
+            Some(v) if v.len() != dim => Err(loaded.error(Invalid, &format!("{key}.{field}"), format!("expected {dim} components (the scene is {dim}D), got {}.", v.len()))),
+            _ => Ok(()),
+        };
+        for (field, v) in [("point", &o.point), ("normal", &o.normal), ("min", &o.min), ("max", &o.max), ("velocity", &o.velocity)] {
+            check(field, v)?;
+        }
+        if dim == 3 && o.points.is_some() {
+            return Err(loaded.error(Invalid, &format!("{key}.shape"), "polygons and polylines are 2D obstacles; use planes or boxes in 3D."));
+        }
+        let (faces, mode) = match o.shape {
+            ObstacleShape::Plane => Obstacle::plane(vec3(o.point.as_deref().expect("validated")), vec3(o.normal.as_deref().expect("validated"))),
+            ObstacleShape::Box => Obstacle::cuboid(vec3(o.min.as_deref().expect("validated")), vec3(o.max.as_deref().expect("validated")), dim, o.inside.unwrap_or(false)),
+            ObstacleShape::Polygon => Obstacle::polygon(&o.points.as_ref().expect("validated").iter().map(|p| vec3(p)).collect::<Vec<_>>()),
+            ObstacleShape::Polyline => Obstacle::polyline(&o.points.as_ref().expect("validated").iter().map(|p| vec3(p)).collect::<Vec<_>>()),
+        };
+        let motion = match (&o.velocity, &o.motion) {
+            (Some(v), _) => Motion { rows: vec![(0.0, vec3(v))], linear: false },
+            (None, Some(rows)) => {
+                if let Some(i) = rows.iter().position(|r| r.len() != dim + 1) {
+                    return Err(loaded.error(Invalid, &format!("{key}.motion.{i}"), format!("each row is [t, velocity] with {dim} velocity components.")));
+                }
+                Motion { rows: rows.iter().map(|r| (r[0], vec3(&r[1..]))).collect(), linear: o.interpolation != Some(Interpolation::Step) }
+            }
+            (None, None) => Motion::default(),
+        };
+        let touches = match &o.bodies {
+            Some(list) => (0..n).map(|b| list.iter().any(|name| index[name.as_str()] == b)).collect(),
+            None => vec![true; n],
+        };
+        obstacles.push(Obstacle { name: name.clone(), faces, mode, friction: o.friction.unwrap_or(spec.friction), motion, bodies: touches });
+    }
+    let any_pair = friction.iter().flatten().any(Option::is_some);
+    if obstacles.is_empty() && !any_pair {
+        return Ok(None);
+    }
+    let settings = Settings { tolerance: spec.tolerance, max_iterations: spec.max_iterations };
+    let surfaces = bodies.iter().map(|b| Surface::of(&b.mesh)).collect();
+    Ok(Some(ContactModel { settings, surfaces, obstacles, friction }))
 }

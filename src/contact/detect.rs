@@ -1,0 +1,159 @@
+//! Contact detection at the start of a step: rigid obstacles against every boundary node, and
+//! body pairs through the broad phase (hash grid over facets) and the narrow phase (projection
+//! of each slave node on the facets of the master body).
+
+use super::geometry::{self, frame, norm, sub, Projection, Vec3};
+use super::grid::Grid;
+use super::obstacle::Touch;
+use super::{ContactModel, ContactPoint, Master, Status, Term};
+use crate::precision::Real;
+
+/// How far beyond a facet's edge (relative) a projection is still accepted, so that a node
+/// cannot slip between two neighbouring facets.
+const EDGE_TOLERANCE: Real = 0.02;
+
+fn point(slave_body: usize, slave_node: u32, master: Master, frame: [Vec3; 3], gap: Real, friction: Real) -> ContactPoint {
+    let mut terms = [Term::default(); 5];
+    terms[0] = Term { body: slave_body as u32, node: slave_node, coef: 1.0 };
+    ContactPoint {
+        slave_body: slave_body as u32,
+        slave_node,
+        master,
+        terms,
+        term_count: 1,
+        frame,
+        gap,
+        friction,
+        obstacle_velocity: [[0.0; 3]; 2],
+        obstacle_displacement: [0.0; 3],
+        shift: 0.0,
+        rho: 0.0,
+        r: [0.0; 3],
+        v: [0.0; 3],
+        status: Status::Separated,
+        end_gap: gap,
+    }
+}
+
+/// Largest edge of a facet: a size for search boxes and for the penetration depth accepted.
+fn facet_size(x: &[Vec3]) -> Real {
+    let mut h: Real = 0.0;
+    for (i, a) in x.iter().enumerate() {
+        for b in &x[i + 1..] {
+            h = h.max(norm(sub(*a, *b)));
+        }
+    }
+    h
+}
+
+fn project(x: Vec3, f: &[Vec3]) -> Option<Projection> {
+    match f.len() {
+        2 => geometry::on_segment(x, f[0], f[1], EDGE_TOLERANCE),
+        3 => geometry::on_triangle(x, f[0], f[1], f[2], EDGE_TOLERANCE),
+        _ => geometry::on_quad(x, [f[0], f[1], f[2], f[3]], EDGE_TOLERANCE),
+    }
+}
+
+/// All contact points of the configuration `positions` (current node positions per body) at
+/// time `t`, for a step of length `dt`. A point is kept when its gap is at most `margin`.
+pub fn detect(model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, t: Real, dt: Real, margin: Real) -> Vec<ContactPoint> {
+    let mut points = Vec::new();
+    obstacles(model, positions, dim, t, dt, margin, &mut points);
+    body_pairs(model, positions, dim, margin, &mut points);
+    points
+}
+
+fn obstacles(model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, t: Real, dt: Real, margin: Real, out: &mut Vec<ContactPoint>) {
+    let mut touches: Vec<Touch> = Vec::new();
+    for (o, obstacle) in model.obstacles.iter().enumerate() {
+        let offset = obstacle.motion.displacement(t);
+        let velocity = [obstacle.motion.velocity(t), obstacle.motion.velocity(t + dt)];
+        let displacement = sub(obstacle.motion.displacement(t + dt), offset);
+        for (b, surface) in model.surfaces.iter().enumerate() {
+            if !obstacle.bodies[b] {
+                continue;
+            }
+            for &node in &surface.nodes {
+                obstacle.touches(positions[b][node as usize], offset, margin, &mut touches);
+                for touch in &touches {
+                    let master = Master::Obstacle { obstacle: o as u32, face: touch.face };
+                    let mut p = point(b, node, master, frame(touch.normal, touch.tangent, dim), touch.gap, obstacle.friction);
+                    p.obstacle_velocity = velocity;
+                    p.obstacle_displacement = displacement;
+                    out.push(p);
+                }
+            }
+        }
+    }
+}
+
+fn body_pairs(model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, margin: Real, out: &mut Vec<ContactPoint>) {
+    let is_master: Vec<bool> = (0..model.surfaces.len()).map(|m| model.friction.iter().any(|row| row[m].is_some())).collect();
+    // Every facet of a master body, with its id packed as (body, facet).
+    let mut ids: Vec<(u32, u32)> = Vec::new();
+    let mut boxes: Vec<(Vec3, Vec3, Real)> = Vec::new();
+    let mut xs: Vec<Vec3> = Vec::with_capacity(4);
+    for (b, surface) in model.surfaces.iter().enumerate().filter(|(b, _)| is_master[*b]) {
+        for f in 0..surface.facet_count() {
+            xs.clear();
+            xs.extend(surface.facet(f).iter().map(|&n| positions[b][n as usize]));
+            let lo = [0, 1, 2].map(|i| xs.iter().map(|x| x[i]).fold(Real::INFINITY, Real::min));
+            let hi = [0, 1, 2].map(|i| xs.iter().map(|x| x[i]).fold(Real::NEG_INFINITY, Real::max));
+            ids.push((b as u32, f as u32));
+            boxes.push((lo, hi, facet_size(&xs)));
+        }
+    }
+    if ids.is_empty() {
+        return;
+    }
+    let mean_size = boxes.iter().map(|b| b.2).sum::<Real>() / boxes.len() as Real;
+    let reach = |size: Real| margin.max(0.5 * size);
+    let cell = mean_size + 2.0 * margin;
+    let grid = Grid::new(
+        boxes.iter().enumerate().map(|(i, &(lo, hi, size))| {
+            let r = reach(size);
+            (i as u32, lo.map(|c| c - r), hi.map(|c| c + r))
+        }),
+        cell,
+    );
+    let bodies = model.surfaces.len();
+    let mut best: Vec<Option<(Real, usize, Projection)>> = vec![None; bodies];
+    for (s, surface) in model.surfaces.iter().enumerate() {
+        if model.friction[s].iter().all(Option::is_none) {
+            continue;
+        }
+        for &node in &surface.nodes {
+            let x = positions[s][node as usize];
+            best.iter_mut().for_each(|b| *b = None);
+            for &id in grid.query(x) {
+                let (m, f) = ids[id as usize];
+                let m = m as usize;
+                if model.friction[s][m].is_none() {
+                    continue;
+                }
+                let facet = model.surfaces[m].facet(f as usize);
+                xs.clear();
+                xs.extend(facet.iter().map(|&n| positions[m][n as usize]));
+                let Some(p) = project(x, &xs) else { continue };
+                // Penetrations deeper than half a facet are the far side of the master body.
+                if p.gap > margin || p.gap < -0.5 * boxes[id as usize].2 {
+                    continue;
+                }
+                if best[m].as_ref().is_none_or(|(g, _, _)| p.gap.abs() < g.abs()) {
+                    best[m] = Some((p.gap, f as usize, p));
+                }
+            }
+            for (m, found) in best.iter().enumerate() {
+                let Some((gap, f, p)) = found else { continue };
+                let facet = model.surfaces[m].facet(*f);
+                let mu = model.friction[s][m].expect("pair checked");
+                let mut c = point(s, node, Master::Body(m as u32), frame(p.normal, Some(p.tangent), dim), *gap, mu);
+                for (k, &n) in facet.iter().enumerate() {
+                    c.terms[1 + k] = Term { body: m as u32, node: n, coef: -p.weights[k] };
+                }
+                c.term_count = 1 + facet.len();
+                out.push(c);
+            }
+        }
+    }
+}

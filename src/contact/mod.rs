@@ -1,0 +1,140 @@
+//! Frictional contact by the bi-potential method (paper section 3): detection of contact
+//! points between bodies and against rigid obstacles, the local law of eq. (10), and the Uzawa
+//! iterations on the contact problem of one Newton iteration.
+//!
+//! A contact point couples a slave node with a master (a facet of another body, or an
+//! obstacle). Its frame `[n, t1, t2]`, the facet weights and the gap are fixed at the start of
+//! the step, so the relative velocity at the end of the step is linear in the displacements.
+
+pub mod detect;
+pub mod geometry;
+pub mod grid;
+pub mod law;
+pub mod obstacle;
+pub mod surface;
+pub mod uzawa;
+
+pub use law::{project_on_cone, uzawa_step, Status};
+pub use obstacle::{Motion, Obstacle};
+pub use surface::Surface;
+
+use crate::precision::Real;
+use geometry::Vec3;
+
+/// The other side of a contact point.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
+pub enum Master {
+    /// A facet of a deformable body.
+    Body(u32),
+    /// A face of a rigid obstacle.
+    Obstacle { obstacle: u32, face: u32 },
+}
+
+/// One node of a contact point's relative velocity `v = Σ coef v_node - v_obstacle`.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Term {
+    pub body: u32,
+    pub node: u32,
+    pub coef: Real,
+}
+
+/// A contact point and, after the step, its solution.
+#[derive(Debug, Clone)]
+pub struct ContactPoint {
+    pub slave_body: u32,
+    pub slave_node: u32,
+    pub master: Master,
+    /// The slave node (coef 1) and the master facet's nodes (coef `-weight`).
+    pub terms: [Term; 5],
+    pub term_count: usize,
+    /// `[n, t1, t2]`, `n` pointing from the master towards the slave.
+    pub frame: [Vec3; 3],
+    /// Signed gap at the start of the step (negative: penetration).
+    pub gap: Real,
+    pub friction: Real,
+    /// Obstacle velocity at the start and the end of the step, and its displacement over it.
+    pub obstacle_velocity: [Vec3; 2],
+    pub obstacle_displacement: Vec3,
+    /// Added to the end-of-step normal velocity: `max(g + (1 - θ) dt v_n,t, 0) / (θ dt)`, so that
+    /// a point that is still open may close its gap but not more.
+    pub shift: Real,
+    /// Uzawa step length, from the local response.
+    pub rho: Real,
+    /// Mean reaction over the step in the contact frame (`[r_n, r_t1, r_t2]`), force on the slave.
+    pub r: Vec3,
+    /// Relative velocity at the end of the step in the contact frame (unshifted).
+    pub v: Vec3,
+    pub status: Status,
+    /// Linearised gap at the end of the step.
+    pub end_gap: Real,
+}
+
+impl ContactPoint {
+    pub fn terms(&self) -> &[Term] {
+        &self.terms[..self.term_count]
+    }
+
+    /// Reaction on the slave in global coordinates.
+    pub fn force(&self) -> Vec3 {
+        let f = &self.frame;
+        [0, 1, 2].map(|i| self.r[0] * f[0][i] + self.r[1] * f[1][i] + self.r[2] * f[2][i])
+    }
+
+    /// Identity across steps, to warm-start the Uzawa iterations.
+    pub fn key(&self) -> (u32, u32, Master) {
+        let master = match self.master {
+            Master::Body(b) => Master::Body(b),
+            m @ Master::Obstacle { .. } => m,
+        };
+        (self.slave_body, self.slave_node, master)
+    }
+}
+
+/// Contact settings of a scene (`[contact]`).
+#[derive(Debug, Clone)]
+pub struct Settings {
+    /// Relative tolerance on the reactions (Uzawa change and complementarity residual).
+    pub tolerance: Real,
+    /// Uzawa iterations allowed per Newton iteration.
+    pub max_iterations: usize,
+}
+
+/// Everything the engine knows about contact in a scene, built once.
+#[derive(Debug, Clone)]
+pub struct ContactModel {
+    pub settings: Settings,
+    pub surfaces: Vec<Surface>,
+    pub obstacles: Vec<Obstacle>,
+    /// `friction[slave][master]`: the coefficient of a body pair treated with that body as the
+    /// slave, `None` when that pass is not done.
+    pub friction: Vec<Vec<Option<Real>>>,
+}
+
+/// Contact totals of one step (the `/contact` channel).
+#[derive(Debug, Clone, Copy, Default, serde::Serialize)]
+pub struct ContactStats {
+    pub active: usize,
+    pub sticking: usize,
+    pub sliding: usize,
+    pub max_penetration: Real,
+    pub normal_impulse: Real,
+    pub friction_dissipation_step: Real,
+}
+
+impl ContactStats {
+    pub fn of(points: &[ContactPoint], dt: Real) -> Self {
+        let mut s = ContactStats::default();
+        for p in points {
+            s.max_penetration = s.max_penetration.max(-p.end_gap);
+            match p.status {
+                Status::Separated => continue,
+                Status::Sticking => s.sticking += 1,
+                Status::Sliding => s.sliding += 1,
+            }
+            s.active += 1;
+            s.normal_impulse += dt * p.r[0];
+            s.friction_dissipation_step -= dt * (p.r[1] * p.v[1] + p.r[2] * p.v[2]);
+        }
+        s
+    }
+}

@@ -1,0 +1,287 @@
+//! Contact inside the Newton iterations of a theta step (method.md section 3).
+//!
+//! Contact enters only through the reactions on the right-hand side, so each body keeps its own
+//! factorisation. Each Newton iteration: the contact-free increment `x0 = K̄⁻¹(-g)` gives the
+//! free velocities at the contact points; back-substitutions with the same factorisation give the
+//! Delassus blocks `W = H K̄⁻¹ Hᵀ / (θ dt)`; Uzawa iterations solve `v = v_free + W r` with the
+//! local law; a last solve applies the reactions, `Δu = K̄⁻¹(-g + Hᵀ r)`.
+
+use super::body::{Body, StepParams};
+use super::PhaseTimes;
+use crate::contact::uzawa::{self, Delassus, Local, Outcome};
+use crate::contact::{uzawa_step, ContactPoint, Status};
+use crate::precision::Real;
+use std::collections::HashMap;
+use std::time::Instant;
+
+/// Columns solved together: bounds the dense right-hand-side block to `64 x free dofs`.
+const COLUMN_BATCH: usize = 64;
+
+/// The contact points of a step with what the Newton iterations need of them.
+pub struct ContactStep {
+    pub points: Vec<ContactPoint>,
+    pub delassus: Delassus,
+    /// Per body: the points with a node on it, and for each of them the block index of every
+    /// pair (row-major over that list).
+    per_body: Vec<(Vec<u32>, Vec<u32>)>,
+    /// Per body and listed point, the non-zero entries `(free dof, value)` of `H` in each of
+    /// the point's directions.
+    h: Vec<Vec<[Vec<(u32, Real)>; 3]>>,
+    pub r: Vec<[Real; 3]>,
+    pub local: Vec<Local>,
+    dim: usize,
+    /// A velocity that matters in this step (the fastest body or obstacle, or what gravity adds
+    /// in one step): reactions are compared with `max ρ` times it, so that round-off in a
+    /// vanishing reaction is not mistaken for a change.
+    velocity_scale: Real,
+    floor: Real,
+}
+
+impl ContactStep {
+    /// Sets up a step's contact points: their gap shift and the block pattern of `W`.
+    pub fn new(mut points: Vec<ContactPoint>, bodies: &[Body], p: &StepParams, warm: &HashMap<(u32, u32, crate::contact::Master), [Real; 3]>, velocity_scale: Real) -> Self {
+        let dim = bodies[0].dim;
+        let (dt, theta) = (p.dt, p.theta);
+        for c in &mut points {
+            // g_TT: the end-of-step gap if the end normal velocity were zero.
+            let vn_start = normal_velocity(c, dim, |b, d| bodies[b].state.v[d], 0);
+            let g_tt = c.gap + (1.0 - theta) * dt * vn_start;
+            c.shift = g_tt.max(0.0) / (theta * dt);
+        }
+        let mut lists: Vec<Vec<u32>> = vec![Vec::new(); bodies.len()];
+        for (i, c) in points.iter().enumerate() {
+            for t in c.terms() {
+                let list = &mut lists[t.body as usize];
+                if list.last() != Some(&(i as u32)) {
+                    list.push(i as u32);
+                }
+            }
+        }
+        let mut delassus = Delassus { rows: vec![Vec::new(); points.len()], blocks: Vec::new() };
+        let mut index: HashMap<(u32, u32), u32> = HashMap::new();
+        let mut per_body = Vec::with_capacity(bodies.len());
+        let mut h = Vec::with_capacity(bodies.len());
+        for (b, list) in lists.into_iter().enumerate() {
+            let mut blocks = Vec::with_capacity(list.len() * list.len());
+            for &l in &list {
+                for &k in &list {
+                    let next = index.len() as u32;
+                    let id = *index.entry((l, k)).or_insert_with(|| {
+                        delassus.rows[l as usize].push((k, next));
+                        next
+                    });
+                    blocks.push(id);
+                }
+            }
+            let body = &bodies[b];
+            let entries = list
+                .iter()
+                .map(|&k| {
+                    let c = &points[k as usize];
+                    [0, 1, 2].map(|a| {
+                        let mut e = Vec::new();
+                        if a < dim {
+                            for t in c.terms().iter().filter(|t| t.body as usize == b) {
+                                for comp in 0..dim {
+                                    if let Some(f) = body.dofs.free[t.node as usize * dim + comp] {
+                                        e.push((f, t.coef * c.frame[a][comp]));
+                                    }
+                                }
+                            }
+                        }
+                        e
+                    })
+                })
+                .collect();
+            per_body.push((list, blocks));
+            h.push(entries);
+        }
+        delassus.blocks = vec![[0.0; 9]; index.len()];
+        let r = points.iter().map(|c| warm.get(&c.key()).copied().unwrap_or([0.0; 3])).collect();
+        let local = points.iter().map(|c| Local { v_free: [0.0; 3], shift: c.shift, mu: c.friction, rho: 0.0 }).collect();
+        Self { points, delassus, per_body, h, r, local, dim, velocity_scale, floor: 0.0 }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.points.is_empty()
+    }
+
+    /// Writes the nodal forces of the reactions `r` into each body's `contact_force`.
+    pub fn apply_forces(&self, bodies: &mut [Body]) {
+        let dim = self.dim;
+        for b in bodies.iter_mut() {
+            b.contact_force.iter_mut().for_each(|f| *f = 0.0);
+        }
+        for (c, r) in self.points.iter().zip(&self.r) {
+            let f = global(c, r);
+            for t in c.terms() {
+                let body = &mut bodies[t.body as usize];
+                for i in 0..dim {
+                    body.contact_force[t.node as usize * dim + i] += t.coef * f[i];
+                }
+            }
+        }
+    }
+
+    /// Largest Uzawa residual `|r - proj(r - ρ ṽ)|` at the trial displacements, relative to
+    /// `max(max |r|, ρ v_scale)`: zero when the reactions satisfy the law with the current velocities.
+    pub fn complementarity(&self, bodies: &[Body], p: &StepParams) -> Real {
+        let floor = self.floor;
+        let (mut worst, mut size): (Real, Real) = (0.0, 0.0);
+        for (i, c) in self.points.iter().enumerate() {
+            let l = &self.local[i];
+            let r = self.r[i];
+            size = size.max(norm3(&r));
+            if l.rho == 0.0 {
+                continue;
+            }
+            let mut v = end_velocity(c, bodies, p);
+            v[0] += l.shift;
+            let (next, _) = uzawa_step(r, v, l.mu, l.rho);
+            worst = worst.max(norm3(&[next[0] - r[0], next[1] - r[1], next[2] - r[2]]));
+        }
+        worst / size.max(floor)
+    }
+
+    /// One Newton increment of every body with the reactions solved on the linearised contact
+    /// problem. Returns the Uzawa outcome and the relative change of the reactions.
+    pub fn newton_increment(&mut self, bodies: &mut [Body], p: &StepParams, tolerance: Real, max_iterations: usize, times: &mut PhaseTimes) -> (Outcome, Real) {
+        let dim = self.dim;
+        let theta_dt = p.theta * p.dt;
+        let started = Instant::now();
+        let mut solve_time = 0.0;
+        // Free velocities: the trial velocity plus the contact-free increment.
+        let mut x0: Vec<Vec<Real>> = Vec::with_capacity(bodies.len());
+        for body in bodies.iter() {
+            let mut rhs = vec![0.0; body.dofs.free_count];
+            for (d, f) in body.dofs.free_pairs() {
+                rhs[f] = -body.g[d];
+            }
+            if !rhs.is_empty() {
+                let t0 = Instant::now();
+                body.solve_effective(&mut rhs, times);
+                solve_time += t0.elapsed().as_secs_f64();
+            }
+            x0.push(rhs);
+        }
+        for (i, c) in self.points.iter().enumerate() {
+            let v = local_velocity(c, dim, |b, d| {
+                let body = &bodies[b];
+                let dv = body.dofs.free[d].map_or(0.0, |f| x0[b][f as usize] / theta_dt);
+                body.trial_velocity(p, d) + dv
+            }, 1);
+            self.local[i].v_free = v;
+        }
+        // Delassus blocks by back-substitution, a batch of columns at a time.
+        self.delassus.blocks.iter_mut().for_each(|b| *b = [0.0; 9]);
+        for (b, body) in bodies.iter().enumerate() {
+            let (list, blocks) = &self.per_body[b];
+            let n = body.dofs.free_count;
+            if list.is_empty() || n == 0 {
+                continue;
+            }
+            let columns: Vec<(usize, usize)> = (0..list.len()).flat_map(|k| (0..dim).map(move |a| (k, a))).collect();
+            for batch in columns.chunks(COLUMN_BATCH) {
+                let mut x = vec![0.0; n * batch.len()];
+                for (j, &(k, a)) in batch.iter().enumerate() {
+                    for &(f, val) in &self.h[b][k][a] {
+                        x[j * n + f as usize] += val;
+                    }
+                }
+                let t0 = Instant::now();
+                body.solve_effective(&mut x, times);
+                solve_time += t0.elapsed().as_secs_f64();
+                for (j, &(k, a)) in batch.iter().enumerate() {
+                    let col = &x[j * n..(j + 1) * n];
+                    for l in 0..list.len() {
+                        let block = &mut self.delassus.blocks[blocks[l * list.len() + k] as usize];
+                        for c in 0..dim {
+                            let s: Real = self.h[b][l][c].iter().map(|&(f, val)| val * col[f as usize]).sum();
+                            block[3 * c + a] += s / theta_dt;
+                        }
+                    }
+                }
+            }
+        }
+        for i in 0..self.points.len() {
+            self.local[i].rho = self.delassus.rho(i, dim);
+        }
+        self.floor = self.velocity_scale * self.local.iter().map(|l| l.rho).fold(0.0, Real::max);
+        let floor = self.floor;
+        let before = self.r.clone();
+        let outcome = uzawa::solve(&self.delassus, &self.local, &mut self.r, tolerance, floor, max_iterations);
+        let (mut change, mut size): (Real, Real) = (0.0, 0.0);
+        for (a, b) in self.r.iter().zip(&before) {
+            change = change.max(norm3(&[a[0] - b[0], a[1] - b[1], a[2] - b[2]]));
+            size = size.max(norm3(a));
+        }
+        self.apply_forces(bodies);
+        for body in bodies.iter_mut() {
+            let mut rhs = vec![0.0; body.dofs.free_count];
+            body.newton_rhs(&mut rhs);
+            if !rhs.is_empty() {
+                let t0 = Instant::now();
+                body.solve_effective(&mut rhs, times);
+                solve_time += t0.elapsed().as_secs_f64();
+            }
+            body.apply_increment(&rhs);
+        }
+        times.contact += started.elapsed().as_secs_f64() - solve_time;
+        (outcome, change / size.max(floor))
+    }
+
+    /// Records the end-of-step velocity, status and linearised end gap of every point.
+    pub fn finish(&mut self, bodies: &[Body], p: &StepParams) {
+        let dim = self.dim;
+        for (i, c) in self.points.iter_mut().enumerate() {
+            c.r = self.r[i];
+            c.rho = self.local[i].rho;
+            c.v = end_velocity(c, bodies, p);
+            c.status = status_of(&c.r, c.friction);
+            c.end_gap = c.gap + p.dt * ((1.0 - p.theta) * normal_velocity(c, dim, |b, d| bodies[b].state.v[d], 0) + p.theta * c.v[0]);
+        }
+    }
+}
+
+/// Classifies a reaction: zero, strictly inside the cone, or on its surface.
+pub fn status_of(r: &[Real; 3], mu: Real) -> Status {
+    let rt = (r[1] * r[1] + r[2] * r[2]).sqrt();
+    if r[0] <= 0.0 {
+        Status::Separated
+    } else if mu > 0.0 && rt < mu * r[0] * (1.0 - 1e-9) {
+        Status::Sticking
+    } else {
+        Status::Sliding
+    }
+}
+
+fn norm3(x: &[Real; 3]) -> Real {
+    (x[0] * x[0] + x[1] * x[1] + x[2] * x[2]).sqrt()
+}
+
+/// Reaction in global coordinates.
+fn global(c: &ContactPoint, r: &[Real; 3]) -> [Real; 3] {
+    let f = &c.frame;
+    [0, 1, 2].map(|i| r[0] * f[0][i] + r[1] * f[1][i] + r[2] * f[2][i])
+}
+
+/// Relative velocity in the contact frame, from a dof-velocity function `vel(body, dof)`;
+/// `which` picks the obstacle velocity at the start (0) or the end (1) of the step.
+fn local_velocity(c: &ContactPoint, dim: usize, vel: impl Fn(usize, usize) -> Real, which: usize) -> [Real; 3] {
+    let mut g = c.obstacle_velocity[which].map(|x| -x);
+    for t in c.terms() {
+        for i in 0..dim {
+            g[i] += t.coef * vel(t.body as usize, t.node as usize * dim + i);
+        }
+    }
+    c.frame.map(|e| e[0] * g[0] + e[1] * g[1] + e[2] * g[2])
+}
+
+fn normal_velocity(c: &ContactPoint, dim: usize, vel: impl Fn(usize, usize) -> Real, which: usize) -> Real {
+    local_velocity(c, dim, vel, which)[0]
+}
+
+/// Relative velocity at the end of the step implied by the trial displacements.
+fn end_velocity(c: &ContactPoint, bodies: &[Body], p: &StepParams) -> [Real; 3] {
+    local_velocity(c, bodies[0].dim, |b, d| bodies[b].trial_velocity(p, d), 1)
+}

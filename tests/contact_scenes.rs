@@ -1,0 +1,51 @@
+//! The contact scenes against their known answers (see the comment block of each scene), each
+//! at its defaults and at one other parameter set in the same regime.
+
+#[path = "common/run.rs"]
+mod common_run;
+use common_run::{run, Log};
+
+fn max(v: &[f64]) -> f64 {
+    v.iter().cloned().fold(f64::NEG_INFINITY, f64::max)
+}
+
+/// Largest penetration over the run, and the energy balance error at the end.
+fn penetration_and_balance(log: &Log) -> (f64, f64) {
+    (max(&log.series("/contact", "max_penetration")), *log.series("/energy", "energy_balance_error").last().unwrap())
+}
+
+/// Bar of length 1 on a wall: (contact duration, rebound velocity, energy ratio).
+fn bar_impact(sets: &[&str], tag: &str, length: f64, modulus: f64, density: f64, speed: f64, h: f64) {
+    let log = run("bar_impact", sets, tag);
+    let t = log.series("/contact", "t");
+    let active = log.series("/contact", "active");
+    let dt = t[1] - t[0];
+    let touching: Vec<f64> = t.iter().zip(&active).filter(|(_, &a)| a > 0.0).map(|(t, _)| *t).collect();
+    let duration = touching.last().unwrap() - touching.first().unwrap() + dt;
+    let expected = 2.0 * length / (modulus / density).sqrt();
+    let body = &log.topics["/body/bar"];
+    let last = body.last().unwrap();
+    let rebound = last["linear_momentum"][0].as_f64().unwrap() / last["mass"].as_f64().unwrap();
+    let total = log.series("/energy", "total");
+    let restored = total.last().unwrap() / total[0];
+    let (penetration, balance) = penetration_and_balance(&log);
+    println!("{tag}: duration {duration:.5} (2L/c = {expected:.5}), rebound {rebound:.5} (V = {speed}), energy ratio {restored:.5}, penetration/h {:.2e}, balance {balance:.1e}", penetration / h);
+    assert!((duration - expected).abs() <= 0.03 * expected, "duration {duration} vs {expected}");
+    assert!((rebound - speed).abs() <= 0.02 * speed, "rebound {rebound} vs {speed}");
+    assert!((restored - 1.0).abs() <= 0.01, "energy ratio {restored}");
+    assert!(penetration <= 0.01 * h, "penetration {penetration}");
+    assert!(balance < 1e-6, "energy balance error {balance}");
+}
+
+#[test]
+fn bar_impact_lasts_2l_over_c_and_rebounds() {
+    bar_impact(&[], "bar_default", 1.0, 10000.0, 1.0, 0.5, 0.005);
+}
+
+#[test]
+fn bar_impact_holds_for_a_softer_heavier_faster_bar() {
+    // c = sqrt((2000 + 4 * 1500 / 3) / 4) = sqrt(1000) ~ 31.6; V / c ~ 0.6 %; Courant number 1.
+    let sets = ["material.bar.G=1500.0", "material.bar.K=2000.0", "material.bar.density=4.0", "body.bar.initial_velocity=[-0.2, 0.0]", "time.dt=1.5811e-4", "time.end=0.09"];
+    bar_impact(&sets, "bar_other", 1.0, 4000.0, 4.0, 0.2, 0.005);
+}
+
