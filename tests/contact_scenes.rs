@@ -49,3 +49,41 @@ fn bar_impact_holds_for_a_softer_heavier_faster_bar() {
     bar_impact(&sets, "bar_other", 1.0, 4000.0, 4.0, 0.2, 0.005);
 }
 
+
+/// Block on a floor: stopping distance and friction dissipation against the kinetic energy lost.
+fn sliding_block(sets: &[&str], tag: &str, v0: f64, mu: f64, g: f64, h: f64) {
+    let log = run("sliding_block", sets, tag);
+    let body = &log.topics["/body/block"];
+    let x = |m: &serde_json::Value| m["center_of_mass"][0].as_f64().unwrap();
+    let distance = x(body.last().unwrap()) - x(&body[0]);
+    let expected = v0 * v0 / (2.0 * mu * g);
+    let speed_end = body.last().unwrap()["linear_momentum"][0].as_f64().unwrap() / body[0]["mass"].as_f64().unwrap();
+    let e = |field: &str| log.series("/energy", field);
+    let lost = e("total")[0] - e("total").last().unwrap();
+    let friction = *e("friction_dissipation").last().unwrap();
+    let (penetration, balance) = penetration_and_balance(&log);
+    let c = &log.topics["/contact"];
+    let (sliding, sticking) = (c[5]["sliding"].as_f64().unwrap(), c.last().unwrap()["sticking"].as_f64().unwrap());
+    println!(
+        "{tag}: distance {distance:.5} (v0^2/(2 mu g) = {expected:.5}), end speed {speed_end:.2e}, friction {friction:.5} vs energy lost {lost:.5}, penetration/h {:.2e}, balance {balance:.1e}, sliding early {sliding}, sticking at the end {sticking}",
+        penetration / h
+    );
+    assert!((distance - expected).abs() <= 0.02 * expected, "distance {distance} vs {expected}");
+    assert!(speed_end.abs() < 1e-3 * v0, "the block must have stopped: {speed_end}");
+    assert!((friction - lost).abs() <= 0.01 * lost, "friction dissipation {friction} vs kinetic energy lost {lost}");
+    assert!(sliding > 0.0 && sticking > 0.0, "it slides first and sticks at the end");
+    assert!(penetration <= 0.01 * h, "penetration {penetration}");
+    assert!(balance < 1e-6, "energy balance error {balance}");
+}
+
+#[test]
+fn sliding_block_stops_after_v0_squared_over_2_mu_g() {
+    sliding_block(&[], "sliding_default", 2.0, 0.5, 9.81, 0.025);
+}
+
+#[test]
+fn sliding_block_holds_for_other_speed_friction_and_gravity() {
+    // d = 1.5^2 / (2 * 0.3 * 5) = 0.75, stopping time 1.0.
+    let sets = ["body.block.initial_velocity=[1.5, 0.0]", "contact.friction=0.3", "gravity=[0.0, -5.0]", "time.end=1.2"];
+    sliding_block(&sets, "sliding_other", 1.5, 0.3, 5.0, 0.025);
+}

@@ -97,6 +97,7 @@ pub struct Settings {
     pub tolerance: Real,
     /// Uzawa iterations allowed per Newton iteration.
     pub max_iterations: usize,
+    pub sweep: uzawa::Sweep,
 }
 
 /// Everything the engine knows about contact in a scene, built once.

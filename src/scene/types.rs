@@ -1,5 +1,6 @@
 //! The scene format. Unknown keys are rejected everywhere.
 
+pub use crate::contact::uzawa::Sweep;
 use crate::mesh::ElementKind;
 use crate::precision::Real;
 use serde::{Deserialize, Serialize};
@@ -192,6 +193,8 @@ pub struct ContactSpec {
     pub tolerance: Real,
     /// Uzawa iterations allowed per Newton iteration.
     pub max_iterations: usize,
+    /// Order of the Uzawa updates: `gauss_seidel` (robust) or `jacobi` (parallel, as on the GPU).
+    pub sweep: Sweep,
     /// Body pairs with their own friction coefficient (or, with `all_pairs = false`, the only
     /// pairs in contact).
     pub pair: BTreeMap<String, PairSpec>,
@@ -199,7 +202,7 @@ pub struct ContactSpec {
 
 impl Default for ContactSpec {
     fn default() -> Self {
-        Self { friction: 0.0, two_pass: false, all_pairs: true, tolerance: 1e-8, max_iterations: 5000, pair: BTreeMap::new() }
+        Self { friction: 0.0, two_pass: false, all_pairs: true, tolerance: 1e-8, max_iterations: 5000, sweep: Sweep::GaussSeidel, pair: BTreeMap::new() }
     }
 }
 

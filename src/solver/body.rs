@@ -277,8 +277,16 @@ impl Body {
         }
         let c1 = 1.0 / (p.theta * p.dt * p.dt);
         let tolerance = p.residual_tolerance * self.force_scale + 1e-14 * c1 * self.max_mass * self.length_scale;
-        let step = self.dofs.free_pairs().map(|(d, _)| (self.trial.u[d] - self.state.u[d]).powi(2)).sum::<Real>().sqrt();
-        let increment_ok = self.last_increment.is_none_or(|du| du <= p.increment_tolerance * step.max(1e-12 * self.length_scale));
+        let (mut step2, mut size2) = (0.0, 0.0);
+        for (d, _) in self.dofs.free_pairs() {
+            step2 += (self.trial.u[d] - self.state.u[d]).powi(2);
+            size2 += self.trial.u[d].powi(2);
+        }
+        // A body at rest changes its displacement by round-off only: an increment of the order
+        // of the round-off of u itself counts as no change.
+        let round_off = 1e3 * Real::EPSILON * size2.sqrt();
+        let allowed = p.increment_tolerance * step2.sqrt().max(1e-12 * self.length_scale) + round_off;
+        let increment_ok = self.last_increment.is_none_or(|du| du <= allowed);
         Ok(residual <= tolerance && increment_ok)
     }
 

@@ -9,7 +9,7 @@
 use super::body::{Body, StepParams};
 use super::PhaseTimes;
 use crate::contact::uzawa::{self, Delassus, Local, Outcome};
-use crate::contact::{uzawa_step, ContactPoint, Status};
+use crate::contact::{uzawa_step, ContactPoint, Settings, Status};
 use crate::precision::Real;
 use std::collections::HashMap;
 use std::time::Instant;
@@ -145,7 +145,7 @@ impl ContactStep {
 
     /// One Newton increment of every body with the reactions solved on the linearised contact
     /// problem. Returns the Uzawa outcome and the relative change of the reactions.
-    pub fn newton_increment(&mut self, bodies: &mut [Body], p: &StepParams, tolerance: Real, max_iterations: usize, times: &mut PhaseTimes) -> (Outcome, Real) {
+    pub fn newton_increment(&mut self, bodies: &mut [Body], p: &StepParams, settings: &Settings, times: &mut PhaseTimes) -> (Outcome, Real) {
         let dim = self.dim;
         let theta_dt = p.theta * p.dt;
         let started = Instant::now();
@@ -204,12 +204,12 @@ impl ContactStep {
             }
         }
         for i in 0..self.points.len() {
-            self.local[i].rho = self.delassus.rho(i, dim);
+            self.local[i].rho = self.delassus.rho(i, dim, settings.sweep);
         }
         self.floor = self.velocity_scale * self.local.iter().map(|l| l.rho).fold(0.0, Real::max);
         let floor = self.floor;
         let before = self.r.clone();
-        let outcome = uzawa::solve(&self.delassus, &self.local, &mut self.r, tolerance, floor, max_iterations);
+        let outcome = uzawa::solve(&self.delassus, &self.local, &mut self.r, settings.sweep, settings.tolerance, floor, settings.max_iterations);
         let (mut change, mut size): (Real, Real) = (0.0, 0.0);
         for (a, b) in self.r.iter().zip(&before) {
             change = change.max(norm3(&[a[0] - b[0], a[1] - b[1], a[2] - b[2]]));

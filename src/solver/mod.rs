@@ -174,7 +174,7 @@ impl Simulation {
         let warm: HashMap<(u32, u32, Master), [Real; 3]> = self.contact_points.iter().map(|c| (c.key(), c.r)).collect();
         let mut contact = ContactStep::new(points, &self.bodies, &p, &warm, velocity_scale);
         report.wall.contact += started.elapsed().as_secs_f64();
-        let (tolerance, max_uzawa) = self.contact.as_ref().map_or((0.0, 0), |c| (c.settings.tolerance, c.settings.max_iterations));
+        let settings = self.contact.as_ref().map(|c| c.settings.clone());
         for body in &mut self.bodies {
             body.begin_step(&p, &self.gravity);
         }
@@ -191,6 +191,7 @@ impl Simulation {
                 converged &= body.converged(&p)?;
             }
             if !contact.is_empty() {
+                let tolerance = settings.as_ref().expect("contact points need contact settings").tolerance;
                 let settled = last_change.is_some_and(|c| c <= tolerance) && uzawa_converged;
                 converged &= settled && contact.complementarity(&self.bodies, &p) <= tolerance;
             }
@@ -212,7 +213,7 @@ impl Simulation {
                     body.apply_increment(&rhs);
                 }
             } else {
-                let (outcome, change) = contact.newton_increment(&mut self.bodies, &p, tolerance, max_uzawa, &mut report.wall);
+                let (outcome, change) = contact.newton_increment(&mut self.bodies, &p, settings.as_ref().expect("contact settings"), &mut report.wall);
                 report.uzawa_iterations += outcome.iterations;
                 uzawa_converged = outcome.converged;
                 last_change = Some(change);

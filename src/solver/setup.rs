@@ -283,7 +283,7 @@ fn build_contact(loaded: &LoadedScene, bodies: &[Body], dim: usize) -> Result<Op
     if obstacles.is_empty() && !any_pair {
         return Ok(None);
     }
-    let settings = Settings { tolerance: spec.tolerance, max_iterations: spec.max_iterations };
+    let settings = Settings { tolerance: spec.tolerance, max_iterations: spec.max_iterations, sweep: spec.sweep };
     let surfaces = bodies.iter().map(|b| Surface::of(&b.mesh)).collect();
     Ok(Some(ContactModel { settings, surfaces, obstacles, friction }))
 }
