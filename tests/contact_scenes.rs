@@ -87,3 +87,48 @@ fn sliding_block_holds_for_other_speed_friction_and_gravity() {
     let sets = ["body.block.initial_velocity=[1.5, 0.0]", "contact.friction=0.3", "gravity=[0.0, -5.0]", "time.end=1.2"];
     sliding_block(&sets, "sliding_other", 1.5, 0.3, 5.0, 0.025);
 }
+
+/// Two blocks on a floor: the floor's reaction against the weight, and no motion once settled.
+fn stack_3d(sets: &[&str], tag: &str, density: f64, g: f64, h: f64) {
+    let log = run("stack_3d", sets, tag);
+    let weight = density * g * (1.0 * 1.0 * 0.5 + 0.6 * 0.6 * 0.4);
+    let floor = log.vectors("/reaction/floor", "force");
+    let reaction = floor.last().unwrap()[2];
+    // Once settled (second half of the run), the upper block must not move.
+    let com = log.vectors("/body/upper", "center_of_mass");
+    let half = com.len() / 2;
+    let drift = (0..3).map(|i| (com.last().unwrap()[i] - com[half][i]).abs()).fold(0.0, f64::max);
+    let speed = log.vectors("/body/upper", "linear_momentum").last().unwrap().iter().map(|p| p.abs()).fold(0.0, f64::max);
+    let (penetration, balance) = penetration_and_balance(&log);
+    let reaction_spread = floor[half..].iter().map(|f| (f[2] - weight).abs() / weight).fold(0.0, f64::max);
+    println!("{tag}: floor reaction {reaction:.3} (weight {weight:.3}), worst over the second half {reaction_spread:.1e}, drift {drift:.1e}, momentum {speed:.1e}, penetration/h {:.2e}, balance {balance:.1e}", penetration / h);
+    assert!(reaction_spread <= 0.01, "floor reaction off the weight by {reaction_spread}");
+    assert!(drift <= 1e-6 * h, "the upper block drifts by {drift}");
+    assert!(penetration <= 0.01 * h, "penetration {penetration}");
+    assert!(balance < 1e-6, "energy balance error {balance}");
+}
+
+#[test]
+fn stack_3d_floor_carries_the_weight_without_creep() {
+    stack_3d(&[], "stack_default", 1000.0, 9.81, 0.2);
+}
+
+#[test]
+fn stack_3d_holds_for_a_softer_lighter_stack_in_lower_gravity() {
+    let sets = ["material.rubber.G=2.0e5", "material.rubber.K=6.0e5", "material.rubber.density=500.0", "gravity=[0.0, 0.0, -3.0]", "contact.friction=0.8"];
+    stack_3d(&sets, "stack_other", 500.0, 3.0, 0.2);
+}
+
+#[test]
+#[ignore]
+fn probe_solver_totals() {
+    let scene = std::env::var("PROBE_SCENE").unwrap();
+    let log = run(&scene, &[], "probe");
+    let s = &log.topics["/solver"];
+    let sum = |f: &str| s.iter().map(|m| m[f].as_f64().unwrap()).sum::<f64>();
+    let wall = |f: &str| s.iter().map(|m| m["wall_s"][f].as_f64().unwrap()).sum::<f64>();
+    println!("newton {} uzawa {} max uzawa {} | wall total {:.3} contact {:.3} solve {:.3} fact {:.3} assembly {:.3}", sum("newton_iterations"), sum("uzawa_iterations"), s.iter().map(|m| m["uzawa_iterations"].as_f64().unwrap()).fold(0.0, f64::max), wall("total"), wall("contact"), wall("solve"), wall("factorization"), wall("assembly"));
+    let per_step: Vec<u64> = s.iter().map(|m| m["newton_iterations"].as_u64().unwrap()).collect();
+    println!("newton per step: {:?}", &per_step[per_step.len().saturating_sub(40)..]);
+    println!("newton per step (start): {:?}", &per_step[..40.min(per_step.len())]);
+}

@@ -269,8 +269,10 @@ impl Body {
 
     /// Whether the last evaluation meets the Newton tolerances: the residual below
     /// `residual_tolerance` times the force scale (plus a round-off floor), and the last increment
-    /// below `increment_tolerance` times the displacement over the step.
-    pub fn converged(&self, p: &StepParams) -> Result<bool, StepFailure> {
+    /// below `increment_tolerance` times the larger of the displacement over the step and
+    /// `motion_scale` (how far the scene's fastest motion goes in a step: a body at rest has no
+    /// displacement of its own to compare with).
+    pub fn converged(&self, p: &StepParams, motion_scale: Real) -> Result<bool, StepFailure> {
         let residual = self.residual_norm();
         if !residual.is_finite() {
             return Err(StepFailure::NotFinite { body: self.name.clone() });
@@ -285,7 +287,7 @@ impl Body {
         // A body at rest changes its displacement by round-off only: an increment of the order
         // of the round-off of u itself counts as no change.
         let round_off = 1e3 * Real::EPSILON * size2.sqrt();
-        let allowed = p.increment_tolerance * step2.sqrt().max(1e-12 * self.length_scale) + round_off;
+        let allowed = p.increment_tolerance * step2.sqrt().max(motion_scale).max(1e-12 * self.length_scale) + round_off;
         let increment_ok = self.last_increment.is_none_or(|du| du <= allowed);
         Ok(residual <= tolerance && increment_ok)
     }

@@ -14,6 +14,10 @@ use crate::precision::Real;
 use std::collections::HashMap;
 use std::time::Instant;
 
+/// The Uzawa iterations of a Newton iteration go this much below the contact tolerance, so that
+/// their own error does not keep the reactions from settling between Newton iterations.
+const INNER_TOLERANCE: Real = 0.01;
+
 /// Columns solved together: bounds the dense right-hand-side block to `64 x free dofs`.
 const COLUMN_BATCH: usize = 64;
 
@@ -39,7 +43,7 @@ pub struct ContactStep {
 
 impl ContactStep {
     /// Sets up a step's contact points: their gap shift and the block pattern of `W`.
-    pub fn new(mut points: Vec<ContactPoint>, bodies: &[Body], p: &StepParams, warm: &HashMap<(u32, u32, crate::contact::Master), [Real; 3]>, velocity_scale: Real) -> Self {
+    pub fn new(mut points: Vec<ContactPoint>, bodies: &[Body], p: &StepParams, warm: &HashMap<(u32, u32, crate::contact::Master), ([Real; 3], Real)>, velocity_scale: Real) -> Self {
         let dim = bodies[0].dim;
         let (dt, theta) = (p.dt, p.theta);
         for c in &mut points {
@@ -97,13 +101,22 @@ impl ContactStep {
             h.push(entries);
         }
         delassus.blocks = vec![[0.0; 9]; index.len()];
-        let r = points.iter().map(|c| warm.get(&c.key()).copied().unwrap_or([0.0; 3])).collect();
-        let local = points.iter().map(|c| Local { v_free: [0.0; 3], shift: c.shift, mu: c.friction, rho: 0.0 }).collect();
-        Self { points, delassus, per_body, h, r, local, dim, velocity_scale, floor: 0.0 }
+        // Reactions and step lengths carry over from the last step for the points found again.
+        let previous: Vec<([Real; 3], Real)> = points.iter().map(|c| warm.get(&c.key()).copied().unwrap_or(([0.0; 3], 0.0))).collect();
+        let r = previous.iter().map(|p| p.0).collect();
+        let local: Vec<Local> = points.iter().zip(&previous).map(|(c, p)| Local { v_free: [0.0; 3], shift: c.shift, mu: c.friction, rho: p.1 }).collect();
+        let floor = velocity_scale * local.iter().map(|l| l.rho).fold(0.0, Real::max);
+        Self { points, delassus, per_body, h, r, local, dim, velocity_scale, floor }
     }
 
     pub fn is_empty(&self) -> bool {
         self.points.is_empty()
+    }
+
+    /// Whether every point has a step length (carried over from the last step), so that the
+    /// complementarity residual can be judged before any Uzawa iteration of this step.
+    pub fn all_warm(&self) -> bool {
+        self.local.iter().all(|l| l.rho > 0.0)
     }
 
     /// Writes the nodal forces of the reactions `r` into each body's `contact_force`.
@@ -209,7 +222,7 @@ impl ContactStep {
         self.floor = self.velocity_scale * self.local.iter().map(|l| l.rho).fold(0.0, Real::max);
         let floor = self.floor;
         let before = self.r.clone();
-        let outcome = uzawa::solve(&self.delassus, &self.local, &mut self.r, settings.sweep, settings.tolerance, floor, settings.max_iterations);
+        let outcome = uzawa::solve(&self.delassus, &self.local, &mut self.r, settings.sweep, INNER_TOLERANCE * settings.tolerance, floor, settings.max_iterations);
         let (mut change, mut size): (Real, Real) = (0.0, 0.0);
         for (a, b) in self.r.iter().zip(&before) {
             change = change.max(norm3(&[a[0] - b[0], a[1] - b[1], a[2] - b[2]]));

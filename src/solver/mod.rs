@@ -171,7 +171,7 @@ impl Simulation {
         };
         let started = std::time::Instant::now();
         let (points, velocity_scale) = self.detect(dt);
-        let warm: HashMap<(u32, u32, Master), [Real; 3]> = self.contact_points.iter().map(|c| (c.key(), c.r)).collect();
+        let warm: HashMap<(u32, u32, Master), ([Real; 3], Real)> = self.contact_points.iter().map(|c| (c.key(), (c.r, c.rho))).collect();
         let mut contact = ContactStep::new(points, &self.bodies, &p, &warm, velocity_scale);
         report.wall.contact += started.elapsed().as_secs_f64();
         let settings = self.contact.as_ref().map(|c| c.settings.clone());
@@ -188,11 +188,12 @@ impl Simulation {
             contact.apply_forces(&mut self.bodies);
             let mut converged = true;
             for body in &self.bodies {
-                converged &= body.converged(&p)?;
+                converged &= body.converged(&p, velocity_scale * dt)?;
             }
             if !contact.is_empty() {
                 let tolerance = settings.as_ref().expect("contact points need contact settings").tolerance;
-                let settled = last_change.is_some_and(|c| c <= tolerance) && uzawa_converged;
+                // A step that starts from last step's solution may already satisfy everything.
+                let settled = last_change.map_or(contact.all_warm(), |c| c <= tolerance) && uzawa_converged;
                 converged &= settled && contact.complementarity(&self.bodies, &p) <= tolerance;
             }
             if converged {
@@ -243,26 +244,37 @@ impl Simulation {
     /// Contact points for a step of length `dt` from the committed state, and the step's
     /// velocity scale (fastest body or obstacle, or what gravity adds in one step).
     fn detect(&self, dt: Real) -> (Vec<ContactPoint>, Real) {
-        let Some(model) = &self.contact else { return (Vec::new(), 0.0) };
+        let velocity_scale = self.velocity_scale(dt);
+        let Some(model) = &self.contact else { return (Vec::new(), velocity_scale) };
         let positions: Vec<Vec<[Real; 3]>> = self.bodies.iter().map(|b| (0..b.mesh.nodes.len()).map(|n| b.position(n)).collect()).collect();
         // The search reaches as far as anything can travel in two steps, plus a little.
+        let (body_speed, obstacle_speed) = self.speeds(dt);
+        let h = self.bodies.iter().map(|b| b.length_scale()).fold(Real::INFINITY, Real::min);
+        let margin = 2.0 * dt * (2.0 * body_speed + obstacle_speed) + 0.01 * h;
+        (detect(model, &positions, self.dim, self.t, dt, margin), velocity_scale)
+    }
+
+    /// Fastest node of any body and fastest obstacle over a step of length `dt`.
+    fn speeds(&self, dt: Real) -> (Real, Real) {
         let dim = self.dim;
-        let body_speed = self
-            .bodies
+        let body = self.bodies.iter().flat_map(|b| b.state.v.chunks(dim).map(|v| v.iter().map(|x| x * x).sum::<Real>().sqrt())).fold(0.0, Real::max);
+        let obstacle = self
+            .contact
             .iter()
-            .flat_map(|b| b.state.v.chunks(dim).map(|v| v.iter().map(|x| x * x).sum::<Real>().sqrt()))
-            .fold(0.0, Real::max);
-        let obstacle_speed = model
-            .obstacles
-            .iter()
+            .flat_map(|c| &c.obstacles)
             .flat_map(|o| [o.motion.velocity(self.t), o.motion.velocity(self.t + dt)])
             .map(|v| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt())
             .fold(0.0, Real::max);
+        (body, obstacle)
+    }
+
+    /// A velocity that matters in a step: the fastest body or obstacle, or what gravity adds in
+    /// one step, but not below round-off of the smallest element per step.
+    fn velocity_scale(&self, dt: Real) -> Real {
+        let (body, obstacle) = self.speeds(dt);
         let h = self.bodies.iter().map(|b| b.length_scale()).fold(Real::INFINITY, Real::min);
-        let margin = 2.0 * dt * (2.0 * body_speed + obstacle_speed) + 0.01 * h;
         let gravity = self.gravity.iter().map(|g| g * g).sum::<Real>().sqrt();
-        let velocity_scale = body_speed.max(obstacle_speed).max(gravity * dt).max(1e-9 * h / dt);
-        (detect(model, &positions, dim, self.t, dt, margin), velocity_scale)
+        body.max(obstacle).max(gravity * dt).max(1e-9 * h / dt)
     }
 
     /// Energy bookkeeping of a converged step (before commit): external work, friction and
