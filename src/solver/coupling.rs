@@ -193,7 +193,10 @@ impl ContactStep {
             if list.is_empty() || n == 0 {
                 continue;
             }
-            let columns: Vec<(usize, usize)> = (0..list.len()).flat_map(|k| (0..dim).map(move |a| (k, a))).collect();
+            // A frictionless point needs only its normal column: its tangential reaction stays zero.
+            let points = &self.points;
+            let directions = |k: usize| if points[list[k] as usize].friction == 0.0 { 1 } else { dim };
+            let columns: Vec<(usize, usize)> = (0..list.len()).flat_map(|k| (0..directions(k)).map(move |a| (k, a))).collect();
             for batch in columns.chunks(COLUMN_BATCH) {
                 let mut x = vec![0.0; n * batch.len()];
                 for (j, &(k, a)) in batch.iter().enumerate() {
