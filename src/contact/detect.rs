@@ -117,6 +117,7 @@ fn body_pairs(model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, margin:
         cell,
     );
     let bodies = model.surfaces.len();
+    let normals: Vec<Vec<Vec3>> = model.surfaces.iter().enumerate().map(|(b, s)| node_normals(s, &positions[b])).collect();
     let mut best: Vec<Option<(Real, usize, Projection)>> = vec![None; bodies];
     for (s, surface) in model.surfaces.iter().enumerate() {
         if model.friction[s].iter().all(Option::is_none) {
@@ -135,6 +136,11 @@ fn body_pairs(model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, margin:
                 xs.clear();
                 xs.extend(facet.iter().map(|&n| positions[m][n as usize]));
                 let Some(p) = project(x, &xs) else { continue };
+                // Only facets that face the node's own surface: a corner node lies on the
+                // extension of the master's side facets with a zero gap, and must not take them.
+                if geometry::dot(normals[s][node as usize], p.normal) >= 0.0 {
+                    continue;
+                }
                 // Penetrations deeper than half a facet are the far side of the master body.
                 if p.gap > margin || p.gap < -0.5 * boxes[id as usize].2 {
                     continue;
@@ -156,4 +162,26 @@ fn body_pairs(model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, margin:
             }
         }
     }
+}
+
+/// Outward normal at each boundary node: the normalised sum of its facets' area-weighted
+/// normals (zero for nodes off the boundary).
+fn node_normals(surface: &super::Surface, x: &[Vec3]) -> Vec<Vec3> {
+    let mut normals = vec![[0.0; 3]; x.len()];
+    for f in 0..surface.facet_count() {
+        let facet = surface.facet(f);
+        let p: Vec<Vec3> = facet.iter().map(|&n| x[n as usize]).collect();
+        let n = match p.len() {
+            2 => {
+                let d = sub(p[1], p[0]);
+                [d[1], -d[0], 0.0]
+            }
+            3 => geometry::scale(geometry::cross(sub(p[1], p[0]), sub(p[2], p[0])), 0.5),
+            _ => geometry::scale(geometry::cross(sub(p[2], p[0]), sub(p[3], p[1])), 0.5),
+        };
+        for &k in facet {
+            normals[k as usize] = geometry::add(normals[k as usize], n);
+        }
+    }
+    normals.into_iter().map(|n| if norm(n) > 0.0 { geometry::normalize(n) } else { n }).collect()
 }

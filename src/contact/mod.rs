@@ -17,6 +17,7 @@ pub mod uzawa;
 pub use law::{project_on_cone, uzawa_step, Status};
 pub use obstacle::{Motion, Obstacle};
 pub use surface::Surface;
+pub use uzawa::Sweep;
 
 use crate::precision::Real;
 use geometry::Vec3;

@@ -152,7 +152,7 @@ pub fn solve(w: &Delassus, local: &[Local], r: &mut [[Real; 3]], sweep: Sweep, t
                 }
             }
         }
-        let scale = size.max(floor);
+        let scale = size.max(floor).max(Real::MIN_POSITIVE);
         let q = change / previous;
         previous = change;
         let error = if q < 1.0 { change * q / (1.0 - q) } else { Real::INFINITY };

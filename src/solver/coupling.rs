@@ -153,11 +153,11 @@ impl ContactStep {
             let (next, _) = uzawa_step(r, v, l.mu, l.rho);
             worst = worst.max(norm3(&[next[0] - r[0], next[1] - r[1], next[2] - r[2]]));
         }
-        worst / size.max(floor)
+        worst / size.max(floor).max(Real::MIN_POSITIVE)
     }
 
     /// One Newton increment of every body with the reactions solved on the linearised contact
-    /// problem. Returns the Uzawa outcome and the relative change of the reactions.
+    /// problem. Returns the Uzawa outcome and the relative change of the contact forces.
     pub fn newton_increment(&mut self, bodies: &mut [Body], p: &StepParams, settings: &Settings, times: &mut PhaseTimes) -> (Outcome, Real) {
         let dim = self.dim;
         let theta_dt = p.theta * p.dt;
@@ -224,14 +224,18 @@ impl ContactStep {
         }
         self.floor = self.velocity_scale * self.local.iter().map(|l| l.rho).fold(0.0, Real::max);
         let floor = self.floor;
-        let before = self.r.clone();
         let outcome = uzawa::solve(&self.delassus, &self.local, &mut self.r, settings.sweep, INNER_TOLERANCE * settings.tolerance, floor, settings.max_iterations);
-        let (mut change, mut size): (Real, Real) = (0.0, 0.0);
-        for (a, b) in self.r.iter().zip(&before) {
-            change = change.max(norm3(&[a[0] - b[0], a[1] - b[1], a[2] - b[2]]));
-            size = size.max(norm3(a));
-        }
+        // The change is judged on the nodal forces H^T r: with redundant constraints (two passes
+        // over matching nodes) r itself is not unique, but H^T r is.
+        let before: Vec<Vec<Real>> = bodies.iter().map(|b| b.contact_force.clone()).collect();
         self.apply_forces(bodies);
+        let (mut change, mut size): (Real, Real) = (0.0, 0.0);
+        for (body, old) in bodies.iter().zip(&before) {
+            for (a, b) in body.contact_force.iter().zip(old) {
+                change = change.max((a - b).abs());
+                size = size.max(a.abs());
+            }
+        }
         for body in bodies.iter_mut() {
             let mut rhs = vec![0.0; body.dofs.free_count];
             body.newton_rhs(&mut rhs);
@@ -243,7 +247,7 @@ impl ContactStep {
             body.apply_increment(&rhs);
         }
         times.contact += started.elapsed().as_secs_f64() - solve_time;
-        (outcome, change / size.max(floor))
+        (outcome, change / size.max(floor).max(Real::MIN_POSITIVE))
     }
 
     /// Records the end-of-step velocity, status and linearised end gap of every point.

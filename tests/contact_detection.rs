@@ -1,0 +1,159 @@
+//! Contact detection: boundary surfaces of every element kind, the narrow-phase projections,
+//! the broad phase against brute force, and node-to-segment contact between two bodies with the
+//! two-pass treatment.
+
+#[path = "common/run.rs"]
+mod common_run;
+use bifirst::contact::detect::detect;
+use bifirst::contact::geometry::{dot, on_quad, on_segment, sub};
+use bifirst::contact::{ContactModel, Master, Settings, Surface, Sweep};
+use bifirst::mesh::generate::{cuboid, disk, rectangle};
+use bifirst::mesh::{ElementKind, Mesh};
+use bifirst::scene::parse_scene;
+
+fn facet_normal(mesh: &Mesh, facet: &[u32]) -> [f64; 3] {
+    let x: Vec<[f64; 3]> = facet.iter().map(|&n| mesh.nodes[n as usize]).collect();
+    match x.len() {
+        2 => {
+            let d = sub(x[1], x[0]);
+            [d[1], -d[0], 0.0]
+        }
+        3 => bifirst::contact::geometry::cross(sub(x[1], x[0]), sub(x[2], x[0])),
+        _ => bifirst::contact::geometry::cross(sub(x[2], x[0]), sub(x[3], x[1])),
+    }
+}
+
+/// Facets of a convex body point away from its centre.
+fn assert_outward(mesh: &Mesh, surface: &Surface) {
+    let n = mesh.nodes.len() as f64;
+    let c = [0, 1, 2].map(|i| mesh.nodes.iter().map(|x| x[i]).sum::<f64>() / n);
+    for f in 0..surface.facet_count() {
+        let facet = surface.facet(f);
+        let m = [0, 1, 2].map(|i| facet.iter().map(|&k| mesh.nodes[k as usize][i]).sum::<f64>() / facet.len() as f64);
+        assert!(dot(facet_normal(mesh, facet), sub(m, c)) > 0.0, "facet {facet:?} points inwards");
+    }
+}
+
+#[test]
+fn boundary_surfaces_of_every_element_kind() {
+    for (kind, per_cell) in [(ElementKind::Quad4, 1), (ElementKind::Tri3, 1)] {
+        let mesh = rectangle([0.0, 0.0], [2.0, 1.0], [4, 3], kind);
+        let s = Surface::of(&mesh);
+        assert_eq!(s.facet_count(), per_cell * 2 * (4 + 3), "{kind:?}");
+        assert_eq!(s.nodes.len(), 2 * (4 + 3));
+        assert_outward(&mesh, &s);
+    }
+    for (kind, per_face) in [(ElementKind::Hex8, 1), (ElementKind::Tet4, 2)] {
+        let mesh = cuboid([0.0; 3], [1.0, 2.0, 3.0], [2, 3, 4], kind);
+        let s = Surface::of(&mesh);
+        assert_eq!(s.facet_count(), per_face * 2 * (2 * 3 + 3 * 4 + 2 * 4), "{kind:?}");
+        assert_eq!(s.nodes.len(), 3 * 4 * 5 - 1 * 2 * 3);
+        assert_outward(&mesh, &s);
+    }
+    let mesh = disk([0.0, 0.0], 1.0, 3, ElementKind::Quad4);
+    let s = Surface::of(&mesh);
+    assert_eq!(s.facet_count(), 4 * 6);
+    assert_outward(&mesh, &s);
+}
+
+#[test]
+fn projections_give_gap_weights_and_frame() {
+    let p = on_segment([0.25, 0.5, 0.0], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0], 0.0).unwrap();
+    // Outward normal of a -> b is the direction turned clockwise: -y here, so the point above has
+    // a negative gap (it is inside the body that owns the segment).
+    assert!((p.gap + 0.5).abs() < 1e-15 && (p.weights[0] - 0.75).abs() < 1e-15 && (p.weights[1] - 0.25).abs() < 1e-15);
+    assert!(on_segment([1.5, 0.5, 0.0], [0.0, 0.0, 0.0], [1.0, 0.0, 0.0], 0.02).is_none());
+    // A quadrilateral face (counter-clockwise seen from +z, normal +z).
+    let quad = [[0.0, 0.0, 0.0], [2.0, 0.0, 0.0], [2.0, 1.0, 0.0], [0.0, 1.0, 0.0]];
+    let p = on_quad([0.5, 0.25, 0.1], quad, 0.0).unwrap();
+    assert!((p.gap - 0.1).abs() < 1e-15);
+    // The weights interpolate the foot of the projection and sum to one.
+    let foot = [0, 1, 2].map(|i| (0..4).map(|k| p.weights[k] * quad[k][i]).sum::<f64>());
+    assert!((foot[0] - 0.5).abs() < 1e-14 && (foot[1] - 0.25).abs() < 1e-14 && foot[2].abs() < 1e-15);
+    assert!((p.weights.iter().sum::<f64>() - 1.0).abs() < 1e-15);
+}
+
+/// Two boxes, one slightly sunk into the other: the grid finds the same points as trying every
+/// facet, for node counts where the grid has many cells.
+#[test]
+fn broad_phase_finds_what_brute_force_finds() {
+    for kind in [ElementKind::Hex8, ElementKind::Tet4] {
+        let lower = cuboid([0.0; 3], [1.0, 1.0, 0.5], [6, 6, 3], kind);
+        let mut upper = cuboid([0.13, 0.21, 0.49], [0.6, 0.5, 0.4], [5, 4, 3], kind);
+        // A wavy bottom: some nodes in contact, some open, some just out of reach.
+        for x in &mut upper.nodes {
+            if x[2] < 0.5 {
+                x[2] += 0.015 * (11.0 * x[0]).sin() * (7.0 * x[1]).cos();
+            }
+        }
+        let meshes = [lower, upper];
+        let surfaces: Vec<Surface> = meshes.iter().map(Surface::of).collect();
+        let model = ContactModel {
+            settings: Settings { tolerance: 1e-8, max_iterations: 10, sweep: Sweep::GaussSeidel },
+            surfaces: surfaces.clone(),
+            obstacles: Vec::new(),
+            friction: vec![vec![None, None], vec![Some(0.2), None]],
+        };
+        let positions: Vec<Vec<[f64; 3]>> = meshes.iter().map(|m| m.nodes.clone()).collect();
+        let margin = 0.01;
+        let found = detect(&model, &positions, 3, 0.0, 0.1, margin);
+        // Brute force: every boundary node of the slave against every facet of the master.
+        let mut expected = 0;
+        for &node in &surfaces[1].nodes {
+            let x = positions[1][node as usize];
+            let best = (0..surfaces[0].facet_count())
+                .filter_map(|f| {
+                    let fx: Vec<[f64; 3]> = surfaces[0].facet(f).iter().map(|&n| positions[0][n as usize]).collect();
+                    let p = if fx.len() == 3 {
+                        bifirst::contact::geometry::on_triangle(x, fx[0], fx[1], fx[2], 0.02)
+                    } else {
+                        on_quad(x, [fx[0], fx[1], fx[2], fx[3]], 0.02)
+                    }?;
+                    let size = (0..fx.len()).flat_map(|i| (0..fx.len()).map(move |j| (i, j))).map(|(i, j)| dot(sub(fx[i], fx[j]), sub(fx[i], fx[j])).sqrt()).fold(0.0, f64::max);
+                    (p.gap <= margin && p.gap >= -0.5 * size).then_some(p.gap)
+                })
+                .min_by(|a, b| a.abs().total_cmp(&b.abs()));
+            if let Some(gap) = best {
+                expected += 1;
+                let c = found.iter().find(|c| c.slave_node == node).unwrap_or_else(|| panic!("node {node} missed"));
+                assert!((c.gap - gap).abs() < 1e-14, "node {node}: gap {} vs {gap}", c.gap);
+                assert_eq!(c.master, Master::Body(0));
+            }
+        }
+        assert_eq!(found.len(), expected, "{kind:?}");
+        assert!(expected > 10, "the test must exercise real contacts ({expected})");
+    }
+}
+
+/// Two identical confined bars meet head-on (node-to-segment, both bodies slave in turn): each
+/// behaves as a bar hitting a wall, so contact lasts 2 L / c and the velocities swap.
+#[test]
+fn two_bars_head_on_with_two_passes() {
+    let text = std::fs::read_to_string(common_run::scene_path("bar_impact")).unwrap();
+    let text = text.split("[obstacle.wall]").next().unwrap().replace("[body.bar]", "[body.left]").replace("body = \"bar\"", "body = \"left\"");
+    let text = format!(
+        "{text}\n[contact]\nfriction = 0.0\ntwo_pass = true\n\n[body.right]\nmaterial = \"bar\"\nmesh = {{ generator = \"rectangle\", element = \"quad4\", origin = [1.002, 0.0], size = [1.0, 0.01], divisions = [200, 1] }}\ninitial_velocity = [-0.5, 0.0]\n\n[boundary.confine_right]\nbody = \"right\"\nnodes = \"all\"\ncomponents = [\"y\"]\n"
+    );
+    let text = text.replacen("initial_velocity = [-0.5, 0.0]", "initial_velocity = [0.5, 0.0]", 1).replace("origin = [0.001, 0.0]", "origin = [0.0, 0.0]");
+    let path = common_run::temp_path("two_bars.toml");
+    std::fs::write(&path, &text).unwrap();
+    let loaded = parse_scene(&path, text, &[]).expect("scene parses");
+    let out = common_run::temp_path("two_bars.mcap");
+    bifirst::run::run_scene(&loaded, &out, &mut bifirst::run::Silent).expect("run");
+    let log = common_run::read_log(&out);
+    let t = log.series("/contact", "t");
+    let active = log.series("/contact", "active");
+    let touching: Vec<f64> = t.iter().zip(&active).filter(|(_, &a)| a > 0.0).map(|(t, _)| *t).collect();
+    let duration = touching.last().unwrap() - touching.first().unwrap() + (t[1] - t[0]);
+    let v = |b: &str| {
+        let m = log.topics[&format!("/body/{b}")].last().unwrap().clone();
+        m["linear_momentum"][0].as_f64().unwrap() / m["mass"].as_f64().unwrap()
+    };
+    let (left, right) = (v("left"), v("right"));
+    let penetration = log.series("/contact", "max_penetration").into_iter().fold(0.0, f64::max);
+    println!("two bars: duration {duration:.5} (2L/c = 0.02), velocities {left:.4} / {right:.4}, penetration {penetration:.1e}");
+    assert!((duration - 0.02).abs() <= 0.03 * 0.02);
+    assert!((left + 0.5).abs() <= 0.02 * 0.5 && (right - 0.5).abs() <= 0.02 * 0.5);
+    assert!((left + right).abs() < 1e-9, "momentum is conserved");
+    assert!(penetration <= 0.01 * 0.005);
+}

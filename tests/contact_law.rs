@@ -1,0 +1,126 @@
+//! The local contact law on its own: the projection onto the Coulomb cone in each of its cases
+//! (stick, slip, separation, the apex), the Uzawa step's fixed points, and the law at the
+//! converged contact points of a real run.
+
+#[path = "common/random.rs"]
+mod random;
+#[path = "common/run.rs"]
+mod common_run;
+use bifirst::contact::{project_on_cone, uzawa_step, Status};
+use bifirst::scene::load_scene;
+use bifirst::solver::build_simulation;
+use rand::Rng;
+
+fn tangential(x: &[f64; 3]) -> f64 {
+    (x[1] * x[1] + x[2] * x[2]).sqrt()
+}
+
+#[test]
+fn projection_keeps_points_inside_the_cone() {
+    let (r, s) = project_on_cone([2.0, 0.3, -0.4], 0.5);
+    assert_eq!(s, Status::Sticking);
+    assert_eq!(r, [2.0, 0.3, -0.4]);
+}
+
+#[test]
+fn projection_sends_the_polar_cone_to_zero() {
+    // mu |tau_t| <= -tau_n: the polar cone, separation.
+    let (r, s) = project_on_cone([-1.0, 1.5, 0.0], 0.5);
+    assert_eq!(s, Status::Separated);
+    assert_eq!(r, [0.0; 3]);
+}
+
+#[test]
+fn projection_onto_the_cone_surface_is_the_nearest_point() {
+    let mu = 0.4;
+    let tau = [1.0, 2.0, 1.0];
+    let (r, s) = project_on_cone(tau, mu);
+    assert_eq!(s, Status::Sliding);
+    assert!((tangential(&r) - mu * r[0]).abs() < 1e-14, "on the surface");
+    // The residual tau - r is normal to the cone at r (r . (tau - r) = 0) and lies in the polar
+    // cone, which characterises the Euclidean projection onto a closed convex cone.
+    let d = [tau[0] - r[0], tau[1] - r[1], tau[2] - r[2]];
+    assert!((r[0] * d[0] + r[1] * d[1] + r[2] * d[2]).abs() < 1e-14);
+    assert!(mu * tangential(&d) <= -d[0] + 1e-14);
+    // And no sampled point of the cone is nearer.
+    let mut rng = random::rng(7);
+    let dist = |x: [f64; 3]| ((x[0] - tau[0]).powi(2) + (x[1] - tau[1]).powi(2) + (x[2] - tau[2]).powi(2)).sqrt();
+    for _ in 0..2000 {
+        let n: f64 = rng.random_range(0.0..3.0);
+        let a: f64 = rng.random_range(0.0..std::f64::consts::TAU);
+        let t = mu * n * rng.random_range(0.0..=1.0);
+        assert!(dist([n, t * a.cos(), t * a.sin()]) >= dist(r) - 1e-12);
+    }
+}
+
+#[test]
+fn projection_at_the_apex_and_without_friction() {
+    assert_eq!(project_on_cone([0.0; 3], 0.3), ([0.0; 3], Status::Separated));
+    // mu = 0: the cone is the normal half-line; tangential parts are dropped.
+    assert_eq!(project_on_cone([2.0, 5.0, 1.0], 0.0), ([2.0, 0.0, 0.0], Status::Sliding));
+    assert_eq!(project_on_cone([-2.0, 5.0, 1.0], 0.0), ([0.0; 3], Status::Separated));
+}
+
+#[test]
+fn projection_result_is_always_admissible() {
+    let mut rng = random::rng(11);
+    for _ in 0..10_000 {
+        let mu: f64 = rng.random_range(0.0..1.5);
+        let tau = [rng.random_range(-5.0..5.0), rng.random_range(-5.0..5.0), rng.random_range(-5.0..5.0)];
+        let (r, _) = project_on_cone(tau, mu);
+        assert!(r[0] >= 0.0);
+        assert!(tangential(&r) <= mu * r[0] * (1.0 + 1e-10) + 1e-300, "{r:?} outside the cone of {mu}");
+    }
+}
+
+#[test]
+fn uzawa_step_fixed_points_are_the_three_coulomb_states() {
+    let (mu, rho) = (0.5, 0.7);
+    // Stick: zero relative velocity keeps an admissible reaction.
+    let r = [3.0, 0.5, -0.2];
+    assert_eq!(uzawa_step(r, [0.0; 3], mu, rho), (r, Status::Sticking));
+    // Slip: r_t = -mu r_n v_t / |v_t| with v_n = 0 is a fixed point.
+    let vt = [0.0, 0.6, -0.8];
+    let r = [2.0, -mu * 2.0 * 0.6, mu * 2.0 * 0.8];
+    let (next, s) = uzawa_step(r, vt, mu, rho);
+    assert_eq!(s, Status::Sliding);
+    assert!((0..3).all(|i| (next[i] - r[i]).abs() < 1e-14), "{next:?} vs {r:?}");
+    // Separation: a zero reaction with an opening velocity stays zero.
+    assert_eq!(uzawa_step([0.0; 3], [0.3, 1.0, 0.0], mu, rho), ([0.0; 3], Status::Separated));
+}
+
+/// The law at the converged points of a run: admissible reactions, sliding points opposing
+/// their slip at the full friction, sticking points at rest.
+#[test]
+fn converged_contact_points_satisfy_coulomb_law() {
+    let loaded = load_scene(&common_run::scene_path("sliding_block"), &["time.end=0.45".into()]).unwrap();
+    let mut sim = build_simulation(&loaded).unwrap();
+    sim.start();
+    let (mut sliding, mut sticking) = (0, 0);
+    while !sim.finished() {
+        sim.advance().unwrap();
+        for c in &sim.contact_points {
+            let (r, v, mu) = (c.r, c.v, c.friction);
+            let rt = tangential(&r);
+            assert!(r[0] >= 0.0);
+            assert!(rt <= mu * r[0] * (1.0 + 1e-10), "|r_t| {rt} > mu r_n {}", mu * r[0]);
+            let vt = tangential(&v);
+            match c.status {
+                Status::Sliding => {
+                    sliding += 1;
+                    assert!((rt - mu * r[0]).abs() <= 1e-10 * mu * r[0], "a sliding point is on the cone");
+                    if vt > 1e-6 {
+                        let cos = (r[1] * v[1] + r[2] * v[2]) / (rt * vt);
+                        assert!(cos < -1.0 + 1e-6, "r_t opposes v_t (cos = {cos})");
+                    }
+                }
+                Status::Sticking => {
+                    sticking += 1;
+                    assert!(vt < 1e-7, "a sticking point has |v_t| = {vt}");
+                }
+                Status::Separated => assert_eq!(r, [0.0; 3]),
+            }
+        }
+    }
+    assert!(sliding > 100 && sticking > 10, "both states occur ({sliding} sliding, {sticking} sticking)");
+}
