@@ -174,3 +174,38 @@ fn missing_scene_file() {
     assert_eq!(out.status.code(), Some(2));
     assert!(stderr.contains("no/such/scene.toml") && stderr.contains("cannot read the scene file"), "{stderr}");
 }
+
+const WALL: &str = "\n[obstacle.wall]\nshape = \"plane\"\npoint = [0.0, 0.0]\nnormal = [0.0, 1.0]\n";
+
+#[test]
+fn negative_friction() {
+    assert_error("negative_friction", &format!("{GOOD}{WALL}"), &["contact.friction=-0.2"], "contact.friction", None, "friction coefficient must be zero or positive");
+    let scene = format!("{GOOD}{WALL}friction = -1.0\n");
+    assert_error("negative_obstacle_friction", &scene, &[], "obstacle.wall.friction", Some(23), "friction coefficient must be zero or positive");
+}
+
+#[test]
+fn obstacle_missing_or_foreign_fields() {
+    assert_error("plane_without_normal", &format!("{GOOD}{WALL}").replace("normal = [0.0, 1.0]\n", ""), &[], "obstacle.wall.normal", Some(19), "this obstacle needs `normal`");
+    assert_error("plane_with_box_corner", &format!("{GOOD}{WALL}min = [0.0, 0.0]\n"), &[], "obstacle.wall.min", Some(23), "takes point, normal");
+    assert_error("zero_normal", &format!("{GOOD}{WALL}").replace("normal = [0.0, 1.0]", "normal = [0.0, 0.0]"), &[], "obstacle.wall.normal", Some(22), "the normal is zero");
+}
+
+#[test]
+fn concave_polygon() {
+    let polygon = "\n[obstacle.wall]\nshape = \"polygon\"\npoints = [[0.0, 0.0], [2.0, 0.0], [1.0, 0.5], [2.0, 1.0], [0.0, 1.0]]\n";
+    assert_error("concave_polygon", &format!("{GOOD}{polygon}"), &[], "obstacle.wall.points", Some(21), "not convex");
+}
+
+#[test]
+fn obstacle_or_pair_naming_an_unknown_body() {
+    assert_error("obstacle_unknown_body", &format!("{GOOD}{WALL}bodies = [\"block\", \"ghost\"]\n"), &[], "obstacle.wall.bodies.1", Some(23), "unknown body `ghost`");
+    let pair = "\n[contact.pair.self]\nbodies = [\"block\", \"block\"]\n";
+    assert_error("pair_twice_the_same_body", &format!("{GOOD}{pair}"), &[], "contact.pair.self.bodies", Some(20), "two different bodies");
+}
+
+#[test]
+fn motion_table_with_times_going_back() {
+    let scene = format!("{GOOD}{WALL}motion = [[0.0, 0.0, 1.0], [0.5, 0.0, 0.0], [0.2, 0.0, -1.0]]\n");
+    assert_error("motion_backwards", &scene, &[], "obstacle.wall.motion.2", Some(23), "must increase");
+}

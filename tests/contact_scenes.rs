@@ -119,16 +119,3 @@ fn stack_3d_holds_for_a_softer_lighter_stack_in_lower_gravity() {
     stack_3d(&sets, "stack_other", 500.0, 3.0, 0.2);
 }
 
-#[test]
-#[ignore]
-fn probe_solver_totals() {
-    let scene = std::env::var("PROBE_SCENE").unwrap();
-    let log = run(&scene, &[], "probe");
-    let s = &log.topics["/solver"];
-    let sum = |f: &str| s.iter().map(|m| m[f].as_f64().unwrap()).sum::<f64>();
-    let wall = |f: &str| s.iter().map(|m| m["wall_s"][f].as_f64().unwrap()).sum::<f64>();
-    println!("newton {} uzawa {} max uzawa {} | wall total {:.3} contact {:.3} solve {:.3} fact {:.3} assembly {:.3}", sum("newton_iterations"), sum("uzawa_iterations"), s.iter().map(|m| m["uzawa_iterations"].as_f64().unwrap()).fold(0.0, f64::max), wall("total"), wall("contact"), wall("solve"), wall("factorization"), wall("assembly"));
-    let per_step: Vec<u64> = s.iter().map(|m| m["newton_iterations"].as_u64().unwrap()).collect();
-    println!("newton per step: {:?}", &per_step[per_step.len().saturating_sub(40)..]);
-    println!("newton per step (start): {:?}", &per_step[..40.min(per_step.len())]);
-}

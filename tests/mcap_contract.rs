@@ -97,3 +97,21 @@ fn a_failed_run_leaves_a_valid_log_that_reports_the_failure() {
     assert!(last["message"].as_str().unwrap().contains("failed after 2 cut-backs"), "{last}");
     assert_eq!(log.topics["/energy"].len(), summary.steps + 1, "every finished step is in the log");
 }
+
+#[test]
+fn contact_scenes_log_the_contact_channel_and_obstacle_reactions() {
+    let log = run("bar_impact", &["time.end=0.005"], "contract_contact");
+    let (name, schema) = &log.schemas["/contact"];
+    assert_eq!(name, "bifirst.Contact");
+    let fields = ["t", "active", "sticking", "sliding", "max_penetration", "normal_impulse", "friction_dissipation_step"];
+    assert_eq!(schema_fields(schema), sorted(&fields));
+    assert_eq!(log.topics["/contact"].len(), 100, "one message per step");
+    assert!(log.topics["/contact"].iter().all(|m| message_fields(m) == sorted(&fields)));
+    // The wall pushes the bar back (+x) once they touch; Uzawa iterations are counted.
+    let wall = log.vectors("/reaction/wall", "force");
+    assert_eq!(wall.len(), 101);
+    assert!(wall.last().unwrap()[0] > 0.0 && wall.last().unwrap()[1] == 0.0);
+    assert!(log.topics["/solver"].iter().any(|m| m["uzawa_iterations"].as_u64().unwrap() > 0));
+    // Without contact in the scene there is no /contact channel.
+    assert!(!run("uniaxial_blatz_ko", &["time.end=0.02"], "contract_no_contact").topics.contains_key("/contact"));
+}

@@ -1,4 +1,5 @@
 // Shared by the test files through `#[path]`: random deformations with det F in [0.5, 2].
+#![allow(dead_code)]
 use bifirst::material::tensor::Mat3;
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
