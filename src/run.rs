@@ -31,8 +31,8 @@ pub struct RunSummary {
     pub cutbacks: usize,
     pub newton_iterations: usize,
     pub wall_s: f64,
-    /// `(E(t) - E(0) - W_ext) / max(|E(0)|, |W_ext|)`, with E = kinetic + strain + potential.
-    pub energy_drift: Real,
+    /// Energies at the end, with the dissipation and the energy balance error.
+    pub energy: crate::solver::Energies,
     pub output: PathBuf,
 }
 
@@ -171,7 +171,6 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, monitor: &mut dyn Monitor) ->
     let total = sim.step_count();
     monitor.started(total);
     logger.state(&sim)?;
-    let e0 = sim.energies().total;
     let (mut cutbacks, mut newton) = (0, 0);
     let summary = |sim: &Simulation, cutbacks, newton| {
         let e = sim.energies();
@@ -182,7 +181,7 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, monitor: &mut dyn Monitor) ->
             cutbacks,
             newton_iterations: newton,
             wall_s: started.elapsed().as_secs_f64(),
-            energy_drift: (e.total - e0 - e.external_work) / e0.abs().max(e.external_work.abs()).max(Real::MIN_POSITIVE),
+            energy: e,
             output: out.to_path_buf(),
         }
     };
