@@ -118,14 +118,16 @@ fn body_pairs(model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, margin:
     );
     let bodies = model.surfaces.len();
     let normals: Vec<Vec<Vec3>> = model.surfaces.iter().enumerate().map(|(b, s)| node_normals(s, &positions[b])).collect();
+    // Best facet per master body for the current node; `touched` lists the masters to visit and
+    // reset, so that a node costs what its neighbourhood holds, not the number of bodies.
     let mut best: Vec<Option<(Real, usize, Projection)>> = vec![None; bodies];
+    let mut touched: Vec<usize> = Vec::new();
     for (s, surface) in model.surfaces.iter().enumerate() {
         if model.friction[s].iter().all(Option::is_none) {
             continue;
         }
         for &node in &surface.nodes {
             let x = positions[s][node as usize];
-            best.iter_mut().for_each(|b| *b = None);
             for &id in grid.query(x) {
                 let (m, f) = ids[id as usize];
                 let m = m as usize;
@@ -145,15 +147,19 @@ fn body_pairs(model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, margin:
                 if p.gap > margin || p.gap < -0.5 * boxes[id as usize].2 {
                     continue;
                 }
+                if best[m].is_none() {
+                    touched.push(m);
+                }
                 if best[m].as_ref().is_none_or(|(g, _, _)| p.gap.abs() < g.abs()) {
                     best[m] = Some((p.gap, f as usize, p));
                 }
             }
-            for (m, found) in best.iter().enumerate() {
-                let Some((gap, f, p)) = found else { continue };
-                let facet = model.surfaces[m].facet(*f);
+            touched.sort_unstable();
+            for m in touched.drain(..) {
+                let Some((gap, f, p)) = best[m].take() else { continue };
+                let facet = model.surfaces[m].facet(f);
                 let mu = model.friction[s][m].expect("pair checked");
-                let mut c = point(s, node, Master::Body(m as u32), frame(p.normal, Some(p.tangent), dim), *gap, mu);
+                let mut c = point(s, node, Master::Body(m as u32), frame(p.normal, Some(p.tangent), dim), gap, mu);
                 for (k, &n) in facet.iter().enumerate() {
                     c.terms[1 + k] = Term { body: m as u32, node: n, coef: -p.weights[k] };
                 }
