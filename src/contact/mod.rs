@@ -77,17 +77,19 @@ impl ContactPoint {
 
     /// Reaction on the slave in global coordinates.
     pub fn force(&self) -> Vec3 {
-        let f = &self.frame;
-        [0, 1, 2].map(|i| self.r[0] * f[0][i] + self.r[1] * f[1][i] + self.r[2] * f[2][i])
+        self.to_global(&self.r)
     }
 
-    /// Identity across steps, to warm-start the Uzawa iterations.
+    /// A vector given in the contact frame, in global coordinates.
+    pub fn to_global(&self, x: &Vec3) -> Vec3 {
+        let f = &self.frame;
+        [0, 1, 2].map(|i| x[0] * f[0][i] + x[1] * f[1][i] + x[2] * f[2][i])
+    }
+
+    /// Identity across steps, to warm-start the Uzawa iterations (a slave node sliding from one
+    /// facet of a master body to the next keeps its key).
     pub fn key(&self) -> (u32, u32, Master) {
-        let master = match self.master {
-            Master::Body(b) => Master::Body(b),
-            m @ Master::Obstacle { .. } => m,
-        };
-        (self.slave_body, self.slave_node, master)
+        (self.slave_body, self.slave_node, self.master)
     }
 }
 

@@ -126,7 +126,7 @@ impl ContactStep {
             b.contact_force.iter_mut().for_each(|f| *f = 0.0);
         }
         for (c, r) in self.points.iter().zip(&self.r) {
-            let f = global(c, r);
+            let f = c.to_global(r);
             for t in c.terms() {
                 let body = &mut bodies[t.body as usize];
                 for i in 0..dim {
@@ -277,12 +277,6 @@ pub fn status_of(r: &[Real; 3], mu: Real) -> Status {
 
 fn norm3(x: &[Real; 3]) -> Real {
     (x[0] * x[0] + x[1] * x[1] + x[2] * x[2]).sqrt()
-}
-
-/// Reaction in global coordinates.
-fn global(c: &ContactPoint, r: &[Real; 3]) -> [Real; 3] {
-    let f = &c.frame;
-    [0, 1, 2].map(|i| r[0] * f[0][i] + r[1] * f[1][i] + r[2] * f[2][i])
 }
 
 /// Relative velocity in the contact frame, from a dof-velocity function `vel(body, dof)`;

@@ -224,8 +224,8 @@ impl Simulation {
         report.newton_iterations += iterations;
         report.residual_norm = report.residual_norm.max(self.bodies.iter().map(Body::residual_norm).fold(0.0, Real::max));
         contact.finish(&self.bodies, &p);
-        self.book_step(&p, &contact.points);
         let stats = ContactStats::of(&contact.points, dt);
+        self.book_step(&p, &contact.points, stats.friction_dissipation_step);
         let r = &mut report.contact;
         r.active = r.active.max(stats.active);
         r.sticking = r.sticking.max(stats.sticking);
@@ -277,9 +277,9 @@ impl Simulation {
         body.max(obstacle).max(gravity * dt).max(1e-9 * h / dt)
     }
 
-    /// Energy bookkeeping of a converged step (before commit): external work, friction and
-    /// numerical dissipation, and the obstacles' reactions.
-    fn book_step(&mut self, p: &StepParams, points: &[ContactPoint]) {
+    /// Energy bookkeeping of a converged step (before commit): external work, friction (as
+    /// [`ContactStats`] counts it) and numerical dissipation, and the obstacles' reactions.
+    fn book_step(&mut self, p: &StepParams, points: &[ContactPoint], friction: Real) {
         for body in &mut self.bodies {
             let e = body.finish_step(p);
             self.external_work += e.support_work;
@@ -287,7 +287,7 @@ impl Simulation {
         }
         let dim = self.dim;
         let mut reactions = vec![[0.0; 3]; self.contact.as_ref().map_or(0, |c| c.obstacles.len())];
-        let (mut relative_work, mut friction) = (0.0, 0.0);
+        let mut relative_work = 0.0;
         for c in points {
             let f = c.force();
             let mut du = c.obstacle_displacement.map(|x| -x);
@@ -299,7 +299,6 @@ impl Simulation {
                 }
             }
             relative_work += f[0] * du[0] + f[1] * du[1] + f[2] * du[2];
-            friction -= p.dt * (c.r[1] * c.v[1] + c.r[2] * c.v[2]);
             if let Master::Obstacle { obstacle, .. } = c.master {
                 let d = c.obstacle_displacement;
                 self.external_work += f[0] * d[0] + f[1] * d[1] + f[2] * d[2];
