@@ -24,6 +24,7 @@ fn point(slave_body: usize, slave_node: u32, master: Master, frame: [Vec3; 3], g
         frame,
         gap,
         friction,
+        predicted_gap: gap,
         obstacle_velocity: [[0.0; 3]; 2],
         obstacle_displacement: [0.0; 3],
         shift: 0.0,

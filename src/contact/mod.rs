@@ -53,6 +53,9 @@ pub struct ContactPoint {
     /// Signed gap at the start of the step (negative: penetration).
     pub gap: Real,
     pub friction: Real,
+    /// The gap at the end of the step if the end normal velocity were zero:
+    /// `g + (1 - θ) dt v_n,t` (linearised; set when the step starts).
+    pub predicted_gap: Real,
     /// Obstacle velocity at the start and the end of the step, and its displacement over it.
     pub obstacle_velocity: [Vec3; 2],
     pub obstacle_displacement: Vec3,

@@ -7,6 +7,7 @@
 //! `W` (the Delassus operator `H K̄⁻¹ Hᵀ / (θ dt)` in contact frames) is stored by blocks: one
 //! `3 x 3` block for each pair of points that share a body.
 
+use super::geometry::norm;
 use super::law::uzawa_step;
 use crate::precision::Real;
 
@@ -28,10 +29,7 @@ impl Delassus {
     pub fn row_times(&self, i: usize, r: &[[Real; 3]]) -> [Real; 3] {
         let mut out = [0.0; 3];
         for &(j, b) in &self.rows[i] {
-            let (w, rj) = (&self.blocks[b as usize], &r[j as usize]);
-            for a in 0..3 {
-                out[a] += w[3 * a] * rj[0] + w[3 * a + 1] * rj[1] + w[3 * a + 2] * rj[2];
-            }
+            add_block_times(&mut out, &self.blocks[b as usize], &r[j as usize]);
         }
         out
     }
@@ -57,12 +55,16 @@ impl Delassus {
                 own = Some(b);
                 continue;
             }
-            let (w, rj) = (&self.blocks[b as usize], &r[j as usize]);
-            for a in 0..3 {
-                out[a] += w[3 * a] * rj[0] + w[3 * a + 1] * rj[1] + w[3 * a + 2] * rj[2];
-            }
+            add_block_times(&mut out, &self.blocks[b as usize], &r[j as usize]);
         }
         (out, own)
+    }
+}
+
+/// `out += w r` for a row-major `3 x 3` block.
+fn add_block_times(out: &mut [Real; 3], w: &[Real; 9], r: &[Real; 3]) {
+    for a in 0..3 {
+        out[a] += w[3 * a] * r[0] + w[3 * a + 1] * r[1] + w[3 * a + 2] * r[2];
     }
 }
 
@@ -107,7 +109,6 @@ pub fn solve(w: &Delassus, local: &[Local], r: &mut [[Real; 3]], sweep: Sweep, t
     let mut next = vec![[0.0; 3]; n];
     let mut outcome = Outcome::default();
     let mut previous = Real::INFINITY;
-    let norm = |d: [Real; 3]| (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
     for it in 1..=max_iterations {
         let (mut change, mut size): (Real, Real) = (0.0, 0.0);
         match sweep {
@@ -134,10 +135,7 @@ pub fn solve(w: &Delassus, local: &[Local], r: &mut [[Real; 3]], sweep: Sweep, t
                     for _ in 0..LOCAL_STEPS {
                         let mut v = base;
                         if let Some(b) = own {
-                            let wb = &w.blocks[b as usize];
-                            for a in 0..3 {
-                                v[a] += wb[3 * a] * ri[0] + wb[3 * a + 1] * ri[1] + wb[3 * a + 2] * ri[2];
-                            }
+                            add_block_times(&mut v, &w.blocks[b as usize], &ri);
                         }
                         let stepped = uzawa_step(ri, v, l.mu, l.rho).0;
                         let moved = norm([stepped[0] - ri[0], stepped[1] - ri[1], stepped[2] - ri[2]]);

@@ -277,8 +277,7 @@ impl Body {
         if !residual.is_finite() {
             return Err(StepFailure::NotFinite { body: self.name.clone() });
         }
-        let c1 = 1.0 / (p.theta * p.dt * p.dt);
-        let tolerance = p.residual_tolerance * self.force_scale + 1e-14 * c1 * self.max_mass * self.length_scale;
+        let tolerance = self.residual_tolerance(p);
         let (mut step2, mut size2) = (0.0, 0.0);
         for (d, _) in self.dofs.free_pairs() {
             step2 += (self.trial.u[d] - self.state.u[d]).powi(2);
@@ -292,22 +291,33 @@ impl Body {
         Ok(residual <= tolerance && increment_ok)
     }
 
-    /// The failure to report when Newton runs out of iterations.
-    pub fn not_converged(&self, p: &StepParams, iterations: usize) -> StepFailure {
+    /// The residual's tolerance: `residual_tolerance` times the force scale, plus a floor below
+    /// which only round-off remains.
+    fn residual_tolerance(&self, p: &StepParams) -> Real {
         let c1 = 1.0 / (p.theta * p.dt * p.dt);
-        let tolerance = p.residual_tolerance * self.force_scale + 1e-14 * c1 * self.max_mass * self.length_scale;
-        StepFailure::NotConverged { body: self.name.clone(), iterations, residual: self.residual_norm(), tolerance }
+        p.residual_tolerance * self.force_scale + 1e-14 * c1 * self.max_mass * self.length_scale
     }
 
-    /// `-(g - f_c)` at the free dofs into `rhs`.
-    pub fn newton_rhs(&self, rhs: &mut [Real]) {
+    /// The failure to report when Newton runs out of iterations.
+    pub fn not_converged(&self, p: &StepParams, iterations: usize) -> StepFailure {
+        StepFailure::NotConverged { body: self.name.clone(), iterations, residual: self.residual_norm(), tolerance: self.residual_tolerance(p) }
+    }
+
+    /// One Newton increment with the current contact forces: solves `K̄ Δu = -(g - f_c)` with the
+    /// last factorisation and adds it to the trial displacement.
+    pub fn newton_step(&mut self, times: &mut PhaseTimes) {
+        let mut rhs = vec![0.0; self.dofs.free_count];
         for (d, f) in self.dofs.free_pairs() {
             rhs[f] = self.contact_force[d] - self.g[d];
         }
+        if !rhs.is_empty() {
+            self.solve_effective(&mut rhs, times);
+        }
+        self.apply_increment(&rhs);
     }
 
     /// Adds a free-dof increment to the trial displacement and records its size.
-    pub fn apply_increment(&mut self, du: &[Real]) {
+    fn apply_increment(&mut self, du: &[Real]) {
         let mut du2 = 0.0;
         for (d, f) in self.dofs.free_pairs() {
             self.trial.u[d] += du[f];

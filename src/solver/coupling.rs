@@ -9,10 +9,10 @@
 use super::body::{Body, StepParams};
 use super::PhaseTimes;
 use crate::contact::uzawa::{self, Delassus, Local, Outcome};
+use crate::contact::geometry::norm;
 use crate::contact::{uzawa_step, ContactPoint, Settings, Status};
 use crate::precision::Real;
 use std::collections::HashMap;
-use std::time::Instant;
 
 /// The Uzawa iterations of a Newton iteration go this much below the contact tolerance, so that
 /// their own error does not keep the reactions from settling between Newton iterations.
@@ -47,10 +47,9 @@ impl ContactStep {
         let dim = bodies[0].dim;
         let (dt, theta) = (p.dt, p.theta);
         for c in &mut points {
-            // g_TT: the end-of-step gap if the end normal velocity were zero.
-            let vn_start = normal_velocity(c, dim, |b, d| bodies[b].state.v[d], 0);
-            let g_tt = c.gap + (1.0 - theta) * dt * vn_start;
-            c.shift = g_tt.max(0.0) / (theta * dt);
+            let vn_start = local_velocity(c, dim, |b, d| bodies[b].state.v[d], 0)[0];
+            c.predicted_gap = c.gap + (1.0 - theta) * dt * vn_start;
+            c.shift = c.predicted_gap.max(0.0) / (theta * dt);
         }
         let mut lists: Vec<Vec<u32>> = vec![Vec::new(); bodies.len()];
         for (i, c) in points.iter().enumerate() {
@@ -144,14 +143,14 @@ impl ContactStep {
         for (i, c) in self.points.iter().enumerate() {
             let l = &self.local[i];
             let r = self.r[i];
-            size = size.max(norm3(&r));
+            size = size.max(norm(r));
             if l.rho == 0.0 {
                 continue;
             }
             let mut v = end_velocity(c, bodies, p);
             v[0] += l.shift;
             let (next, _) = uzawa_step(r, v, l.mu, l.rho);
-            worst = worst.max(norm3(&[next[0] - r[0], next[1] - r[1], next[2] - r[2]]));
+            worst = worst.max(norm([next[0] - r[0], next[1] - r[1], next[2] - r[2]]));
         }
         worst / size.max(floor).max(Real::MIN_POSITIVE)
     }
@@ -161,8 +160,8 @@ impl ContactStep {
     pub fn newton_increment(&mut self, bodies: &mut [Body], p: &StepParams, settings: &Settings, times: &mut PhaseTimes) -> (Outcome, Real) {
         let dim = self.dim;
         let theta_dt = p.theta * p.dt;
-        let started = Instant::now();
-        let mut solve_time = 0.0;
+        let started = std::time::Instant::now();
+        let solve_before = times.solve;
         // Free velocities: the trial velocity plus the contact-free increment.
         let mut x0: Vec<Vec<Real>> = Vec::with_capacity(bodies.len());
         for body in bodies.iter() {
@@ -171,9 +170,7 @@ impl ContactStep {
                 rhs[f] = -body.g[d];
             }
             if !rhs.is_empty() {
-                let t0 = Instant::now();
                 body.solve_effective(&mut rhs, times);
-                solve_time += t0.elapsed().as_secs_f64();
             }
             x0.push(rhs);
         }
@@ -204,9 +201,7 @@ impl ContactStep {
                         x[j * n + f as usize] += val;
                     }
                 }
-                let t0 = Instant::now();
                 body.solve_effective(&mut x, times);
-                solve_time += t0.elapsed().as_secs_f64();
                 for (j, &(k, a)) in batch.iter().enumerate() {
                     let col = &x[j * n..(j + 1) * n];
                     for l in 0..list.len() {
@@ -237,28 +232,21 @@ impl ContactStep {
             }
         }
         for body in bodies.iter_mut() {
-            let mut rhs = vec![0.0; body.dofs.free_count];
-            body.newton_rhs(&mut rhs);
-            if !rhs.is_empty() {
-                let t0 = Instant::now();
-                body.solve_effective(&mut rhs, times);
-                solve_time += t0.elapsed().as_secs_f64();
-            }
-            body.apply_increment(&rhs);
+            body.newton_step(times);
         }
-        times.contact += started.elapsed().as_secs_f64() - solve_time;
+        // The back-substitutions are counted as solves, the rest as contact.
+        times.contact += started.elapsed().as_secs_f64() - (times.solve - solve_before);
         (outcome, change / size.max(floor).max(Real::MIN_POSITIVE))
     }
 
     /// Records the end-of-step velocity, status and linearised end gap of every point.
     pub fn finish(&mut self, bodies: &[Body], p: &StepParams) {
-        let dim = self.dim;
         for (i, c) in self.points.iter_mut().enumerate() {
             c.r = self.r[i];
             c.rho = self.local[i].rho;
             c.v = end_velocity(c, bodies, p);
             c.status = status_of(&c.r, c.friction);
-            c.end_gap = c.gap + p.dt * ((1.0 - p.theta) * normal_velocity(c, dim, |b, d| bodies[b].state.v[d], 0) + p.theta * c.v[0]);
+            c.end_gap = c.predicted_gap + p.theta * p.dt * c.v[0];
         }
     }
 }
@@ -275,10 +263,6 @@ pub fn status_of(r: &[Real; 3], mu: Real) -> Status {
     }
 }
 
-fn norm3(x: &[Real; 3]) -> Real {
-    (x[0] * x[0] + x[1] * x[1] + x[2] * x[2]).sqrt()
-}
-
 /// Relative velocity in the contact frame, from a dof-velocity function `vel(body, dof)`;
 /// `which` picks the obstacle velocity at the start (0) or the end (1) of the step.
 fn local_velocity(c: &ContactPoint, dim: usize, vel: impl Fn(usize, usize) -> Real, which: usize) -> [Real; 3] {
@@ -289,10 +273,6 @@ fn local_velocity(c: &ContactPoint, dim: usize, vel: impl Fn(usize, usize) -> Re
         }
     }
     c.frame.map(|e| e[0] * g[0] + e[1] * g[1] + e[2] * g[2])
-}
-
-fn normal_velocity(c: &ContactPoint, dim: usize, vel: impl Fn(usize, usize) -> Real, which: usize) -> Real {
-    local_velocity(c, dim, vel, which)[0]
 }
 
 /// Relative velocity at the end of the step implied by the trial displacements.

@@ -208,10 +208,7 @@ impl Simulation {
             }
             if contact.is_empty() {
                 for body in &mut self.bodies {
-                    let mut rhs = vec![0.0; body.dofs.free_count];
-                    body.newton_rhs(&mut rhs);
-                    body.solve_effective(&mut rhs, &mut report.wall);
-                    body.apply_increment(&rhs);
+                    body.newton_step(&mut report.wall);
                 }
             } else {
                 let (outcome, change) = contact.newton_increment(&mut self.bodies, &p, settings.as_ref().expect("contact settings"), &mut report.wall);
@@ -243,38 +240,27 @@ impl Simulation {
 
     /// Contact points for a step of length `dt` from the committed state, and the step's
     /// velocity scale (fastest body or obstacle, or what gravity adds in one step).
+    ///
+    /// The velocity scale is what matters in a step: the fastest body or obstacle, or what
+    /// gravity adds in one step, but not below round-off of the smallest element per step.
     fn detect(&self, dt: Real) -> (Vec<ContactPoint>, Real) {
-        let velocity_scale = self.velocity_scale(dt);
-        let Some(model) = &self.contact else { return (Vec::new(), velocity_scale) };
-        let positions: Vec<Vec<[Real; 3]>> = self.bodies.iter().map(|b| (0..b.mesh.nodes.len()).map(|n| b.position(n)).collect()).collect();
-        // The search reaches as far as anything can travel in two steps, plus a little.
-        let (body_speed, obstacle_speed) = self.speeds(dt);
-        let h = self.bodies.iter().map(|b| b.length_scale()).fold(Real::INFINITY, Real::min);
-        let margin = 2.0 * dt * (2.0 * body_speed + obstacle_speed) + 0.01 * h;
-        (detect(model, &positions, self.dim, self.t, dt, margin), velocity_scale)
-    }
-
-    /// Fastest node of any body and fastest obstacle over a step of length `dt`.
-    fn speeds(&self, dt: Real) -> (Real, Real) {
         let dim = self.dim;
-        let body = self.bodies.iter().flat_map(|b| b.state.v.chunks(dim).map(|v| v.iter().map(|x| x * x).sum::<Real>().sqrt())).fold(0.0, Real::max);
-        let obstacle = self
+        let body_speed = self.bodies.iter().flat_map(|b| b.state.v.chunks(dim).map(|v| v.iter().map(|x| x * x).sum::<Real>().sqrt())).fold(0.0, Real::max);
+        let obstacle_speed = self
             .contact
             .iter()
             .flat_map(|c| &c.obstacles)
             .flat_map(|o| [o.motion.velocity(self.t), o.motion.velocity(self.t + dt)])
             .map(|v| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt())
             .fold(0.0, Real::max);
-        (body, obstacle)
-    }
-
-    /// A velocity that matters in a step: the fastest body or obstacle, or what gravity adds in
-    /// one step, but not below round-off of the smallest element per step.
-    fn velocity_scale(&self, dt: Real) -> Real {
-        let (body, obstacle) = self.speeds(dt);
         let h = self.bodies.iter().map(|b| b.length_scale()).fold(Real::INFINITY, Real::min);
         let gravity = self.gravity.iter().map(|g| g * g).sum::<Real>().sqrt();
-        body.max(obstacle).max(gravity * dt).max(1e-9 * h / dt)
+        let velocity_scale = body_speed.max(obstacle_speed).max(gravity * dt).max(1e-9 * h / dt);
+        let Some(model) = &self.contact else { return (Vec::new(), velocity_scale) };
+        let positions: Vec<Vec<[Real; 3]>> = self.bodies.iter().map(|b| (0..b.mesh.nodes.len()).map(|n| b.position(n)).collect()).collect();
+        // The search reaches as far as anything can travel in two steps, plus a little.
+        let margin = 2.0 * dt * (2.0 * body_speed + obstacle_speed) + 0.01 * h;
+        (detect(model, &positions, dim, self.t, dt, margin), velocity_scale)
     }
 
     /// Energy bookkeeping of a converged step (before commit): external work, friction (as
