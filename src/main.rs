@@ -1,7 +1,8 @@
-//! The `bifirst` command line: run, check and info.
+//! The `bifirst` command line: run, check, plot, summary and info.
 
 use anyhow::Result;
-use bifirst::run::{run_scene, Monitor, RunError, RunSummary};
+use bifirst::output::{plot, read_run, summary};
+use bifirst::run::{run_scene, Monitor, RunError, RunOptions, RunSummary, Stop};
 use bifirst::scene::load_scene;
 use bifirst::solver::StepReport;
 use clap::{Parser, Subcommand};
@@ -9,6 +10,8 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::process::ExitCode;
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
 use std::time::Instant;
 
 #[derive(Parser)]
@@ -29,6 +32,31 @@ enum Command {
         /// Override a scene value before validation, e.g. `--set time.dt=0.005` (TOML literal).
         #[arg(long = "set", value_name = "KEY=VALUE")]
         sets: Vec<String>,
+        /// Write VTU frames and `.pvd` series for ParaView into this directory.
+        #[arg(long, value_name = "DIR")]
+        vtu: Option<PathBuf>,
+        /// No progress and no summary line; only errors.
+        #[arg(long, short)]
+        quiet: bool,
+        /// Print the final summary as JSON on stdout.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Plot run logs into PNGs (energies, solver, probes); several logs are overlaid.
+    Plot {
+        #[arg(required = true)]
+        runs: Vec<PathBuf>,
+        /// Directory for the PNGs (default: `<first log without .mcap>_plots`).
+        #[arg(long)]
+        out: Option<PathBuf>,
+    },
+    /// Print the totals of run logs as a table (one column per log).
+    Summary {
+        #[arg(required = true)]
+        runs: Vec<PathBuf>,
+        /// Print JSON instead of a table.
+        #[arg(long)]
+        json: bool,
     },
     /// Validate a scene (and build its meshes) without running it.
     Check {
@@ -40,8 +68,10 @@ enum Command {
     Info,
 }
 
-/// A progress bar on a terminal; plain lines about every 10% (and at most every 2 s) otherwise.
+/// A progress bar on a terminal; otherwise plain lines about every 10% (at most every 2 s, at
+/// least every 30 s).
 struct Progress {
+    quiet: bool,
     bar: Option<ProgressBar>,
     last_line: Instant,
     last_fraction: f64,
@@ -49,13 +79,16 @@ struct Progress {
 
 impl Monitor for Progress {
     fn started(&mut self, total: usize) {
-        if std::io::stderr().is_terminal() {
+        if !self.quiet && std::io::stderr().is_terminal() {
             let bar = ProgressBar::with_draw_target(Some(total as u64), ProgressDrawTarget::stderr());
             bar.set_style(ProgressStyle::with_template("{bar:40} {pos}/{len} steps  t = {msg}  [{elapsed_precise} < {eta}]").expect("valid template"));
             self.bar = Some(bar);
         }
     }
     fn step(&mut self, r: &StepReport, total: usize) {
+        if self.quiet {
+            return;
+        }
         let fraction = r.step as f64 / total as f64;
         match &self.bar {
             Some(bar) => {
@@ -63,7 +96,8 @@ impl Monitor for Progress {
                 bar.set_message(format!("{:.4e}", r.t));
             }
             None => {
-                if fraction - self.last_fraction >= 0.1 - 1e-12 && self.last_line.elapsed().as_secs_f64() >= 2.0 || r.step == total {
+                let since = self.last_line.elapsed().as_secs_f64();
+                if fraction - self.last_fraction >= 0.1 - 1e-12 && since >= 2.0 || since >= 30.0 || r.step == total {
                     eprintln!("step {}/{}  t = {:.4e}  newton {}  cut-backs {}", r.step, total, r.t, r.newton_iterations, r.cutbacks);
                     self.last_line = Instant::now();
                     self.last_fraction = fraction;
@@ -72,6 +106,9 @@ impl Monitor for Progress {
         }
     }
     fn warning(&mut self, message: &str) {
+        if self.quiet {
+            return;
+        }
         match &self.bar {
             Some(bar) => bar.println(format!("warning: {message}")),
             None => eprintln!("warning: {message}"),
@@ -95,33 +132,87 @@ fn print_summary(s: &RunSummary) {
     );
 }
 
-fn run(scene: PathBuf, out: Option<PathBuf>, sets: Vec<String>) -> Result<ExitCode> {
-    let loaded = load_scene(&scene, &sets)?;
-    let out = out.or_else(|| loaded.scene.output.mcap.clone()).unwrap_or_else(|| PathBuf::from(format!("{}.mcap", loaded.name)));
-    eprintln!("bifirst {}: scene `{}`, backend cpu, precision {}", env!("CARGO_PKG_VERSION"), loaded.name, bifirst::precision::PRECISION_NAME);
-    let mut progress = Progress { bar: None, last_line: Instant::now(), last_fraction: 0.0 };
-    let result = run_scene(&loaded, &out, &mut progress);
+/// Interrupts (SIGINT, SIGTERM) set a flag that stops the run after its current step, so the log
+/// is closed properly; a second interrupt exits at once.
+fn interrupt_flag() -> Result<Arc<AtomicBool>> {
+    use signal_hook::consts::{SIGINT, SIGTERM};
+    let flag = Arc::new(AtomicBool::new(false));
+    for signal in [SIGINT, SIGTERM] {
+        signal_hook::flag::register_conditional_shutdown(signal, 130, Arc::clone(&flag))?;
+        signal_hook::flag::register(signal, Arc::clone(&flag))?;
+    }
+    Ok(flag)
+}
+
+struct RunArgs {
+    scene: PathBuf,
+    out: Option<PathBuf>,
+    sets: Vec<String>,
+    vtu: Option<PathBuf>,
+    quiet: bool,
+    json: bool,
+}
+
+fn run(args: RunArgs) -> Result<ExitCode> {
+    let loaded = load_scene(&args.scene, &args.sets)?;
+    let out = args.out.or_else(|| loaded.scene.output.mcap.clone()).unwrap_or_else(|| PathBuf::from(format!("{}.mcap", loaded.name)));
+    if !args.quiet {
+        eprintln!("bifirst {}: scene `{}`, backend cpu, precision {}", env!("CARGO_PKG_VERSION"), loaded.name, bifirst::precision::PRECISION_NAME);
+    }
+    let options = RunOptions { vtu: args.vtu, interrupt: Some(interrupt_flag()?) };
+    let mut progress = Progress { quiet: args.quiet, bar: None, last_line: Instant::now(), last_fraction: 0.0 };
+    let result = run_scene(&loaded, &out, &options, &mut progress);
     if let Some(bar) = &progress.bar {
         bar.finish_and_clear();
     }
+    let report = |s: &RunSummary| {
+        if args.json {
+            println!("{}", serde_json::to_string_pretty(s).expect("serializes"));
+        }
+        if !args.quiet {
+            print_summary(s);
+        }
+    };
     match result {
         Ok(summary) => {
-            print_summary(&summary);
+            report(&summary);
             Ok(ExitCode::SUCCESS)
         }
-        Err(RunError::Failed { failure, summary }) => {
-            print_summary(&summary);
-            eprintln!("error: {}", RunError::Failed { failure, summary: summary.clone() });
-            Ok(ExitCode::FAILURE)
+        Err(RunError::Stopped { reason, summary }) => {
+            report(&summary);
+            let interrupted = matches!(reason, Stop::Interrupted);
+            eprintln!("error: {}", RunError::Stopped { reason, summary });
+            Ok(if interrupted { ExitCode::from(130) } else { ExitCode::FAILURE })
         }
         Err(e) => Err(e.into()),
     }
 }
 
+fn plot_command(runs: Vec<PathBuf>, out: Option<PathBuf>) -> Result<ExitCode> {
+    let records = runs.iter().map(|p| read_run(p)).collect::<Result<Vec<_>, _>>()?;
+    let out = out.unwrap_or_else(|| runs[0].with_file_name(format!("{}_plots", runs[0].file_stem().map_or("run".into(), |s| s.to_string_lossy()))));
+    for file in plot::plot_runs(&records, &out)? {
+        println!("{}", file.display());
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn summary_command(runs: Vec<PathBuf>, json: bool) -> Result<ExitCode> {
+    let summaries = runs.iter().map(|p| read_run(p).and_then(|r| summary::summarize(&r))).collect::<Result<Vec<_>, _>>()?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&summaries)?);
+    } else {
+        print!("{}", summary::table(&summaries));
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
-        Command::Run { scene, out, sets } => run(scene, out, sets),
+        Command::Run { scene, out, sets, vtu, quiet, json } => run(RunArgs { scene, out, sets, vtu, quiet, json }),
+        Command::Plot { runs, out } => plot_command(runs, out),
+        Command::Summary { runs, json } => summary_command(runs, json),
         Command::Check { scene, sets } => load_scene(&scene, &sets).map_err(anyhow::Error::from).and_then(|loaded| {
             let sim = bifirst::solver::build_simulation(&loaded)?;
             let elements: usize = sim.bodies.iter().map(|b| b.mesh.element_count()).sum();
@@ -130,7 +221,7 @@ fn main() -> ExitCode {
             Ok(ExitCode::SUCCESS)
         }),
         Command::Info => {
-            println!("bifirst {}", env!("CARGO_PKG_VERSION"));
+            println!("bifirst {} (git {})", env!("CARGO_PKG_VERSION"), bifirst::run::GIT_REVISION.unwrap_or("unknown"));
             println!("build: {} profile, rustc target {}-{}", if cfg!(debug_assertions) { "debug" } else { "release" }, std::env::consts::ARCH, std::env::consts::OS);
             println!("precision: {}", bifirst::precision::PRECISION_NAME);
             println!("backends: cpu (GPU backend not built yet)");

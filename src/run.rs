@@ -1,12 +1,18 @@
-//! Running a scene end to end: set-up, time steps, the MCAP run log, and a summary.
+//! Running a scene end to end: set-up, time steps, the MCAP run log (with the Foxglove view),
+//! VTU frames, and a summary. However the run ends (finished, a step failure, a non-finite
+//! state, a panic, an interrupt), the log is closed with everything up to the last finished step.
 
-use crate::output::{schemas, OutputError, RunLog};
+use crate::element::CellFields;
+use crate::output::foxglove::{self, Level, View};
+use crate::output::{schemas, OutputError, RunLog, VtuSeries};
 use crate::precision::{Real, PRECISION_NAME};
-use crate::scene::{LoadedScene, SceneError};
-use crate::solver::{build_simulation, RunFailure, Simulation, StepReport};
+use crate::scene::{LoadedScene, OutputSpec, SceneError};
+use crate::solver::{build_simulation, PhaseTimes, RunFailure, Simulation, StepReport};
 use serde_json::{json, Value};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 
 /// Name of the CPU backend as logged in `/run`.
 pub const BACKEND: &str = "cpu";
@@ -17,20 +23,63 @@ pub enum RunError {
     Scene(#[from] SceneError),
     #[error("{0}")]
     Output(#[from] OutputError),
-    /// The run stopped early; the log holds everything up to the failure.
-    #[error("the run stopped: {failure}. The log `{}` holds everything up to t = {:.6e}.", .summary.output.display(), .summary.t_end)]
-    Failed { failure: Box<RunFailure>, summary: RunSummary },
+    /// The run stopped early; the log holds everything up to the last finished step.
+    #[error("the run stopped: {reason}. The log `{}` holds everything up to t = {:.6e}.", .summary.output.display(), .summary.t_end)]
+    Stopped { reason: Stop, summary: RunSummary },
+}
+
+/// Why a run stopped before its end time.
+#[derive(Debug, thiserror::Error)]
+pub enum Stop {
+    #[error("{0}")]
+    Failed(Box<RunFailure>),
+    #[error("the state is not finite after step {step} (t = {t:.6e})")]
+    NotFinite { step: usize, t: Real },
+    #[error("panic: {0}")]
+    Panicked(String),
+    #[error("interrupted")]
+    Interrupted,
+}
+
+impl Stop {
+    /// The `/solver` status and the `/run` summary status of a run that stopped this way.
+    pub fn status(&self) -> &'static str {
+        match self {
+            Stop::Interrupted => "interrupted",
+            _ => "failed",
+        }
+    }
+}
+
+/// What a run writes besides its MCAP log, and how it can be stopped.
+#[derive(Debug, Clone, Default)]
+pub struct RunOptions {
+    /// Directory for VTU frames; overrides the scene's `output.vtu`.
+    pub vtu: Option<PathBuf>,
+    /// When set (by a signal handler), the run stops after the current step.
+    pub interrupt: Option<Arc<AtomicBool>>,
 }
 
 /// What a run did, printed at its end.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct RunSummary {
     pub scene: String,
+    /// `finished`, `failed` or `interrupted`.
+    pub status: String,
+    /// Why the run stopped early.
+    pub message: Option<String>,
+    pub backend: String,
+    pub precision: String,
     pub steps: usize,
     pub t_end: Real,
     pub cutbacks: usize,
     pub newton_iterations: usize,
+    pub uzawa_iterations: usize,
+    /// Largest penetration over the run (0 without contact).
+    pub max_penetration: Real,
     pub wall_s: f64,
+    /// Wall time of the steps by phase, summed over the run.
+    pub wall_by_phase: PhaseTimes,
     /// Energies at the end, with the dissipation and the energy balance error.
     pub energy: crate::solver::Energies,
     pub output: PathBuf,
@@ -51,18 +100,38 @@ fn vec_of(v: &[Real; 3], dim: usize) -> Value {
     json!(v[..dim])
 }
 
+/// Commit the build came from, when it was built from a git checkout (see `src/build.rs`).
+pub const GIT_REVISION: Option<&str> = option_env!("BIFIRST_GIT_REVISION");
+
 struct Logger {
     log: RunLog,
     dim: usize,
+    view: Option<View>,
+    scene_every: usize,
+    vtu: Option<VtuSeries>,
+    vtu_every: usize,
+    /// Last step whose state channels / frames are in the outputs.
+    state_step: Option<usize>,
+    frame_step: Option<usize>,
 }
 
 impl Logger {
-    fn new(path: &Path, loaded: &LoadedScene, sim: &Simulation) -> Result<Self, OutputError> {
+    fn new(path: &Path, loaded: &LoadedScene, sim: &Simulation, options: &RunOptions) -> Result<Self, OutputError> {
         let mut log = RunLog::create(path)?;
         let dim = sim.dim;
+        let output = &loaded.scene.output;
+        let total = sim.step_count();
+        let scene_every = OutputSpec::frame_interval(output.scene_every, total);
+        let vtu_dir = options.vtu.clone().or_else(|| output.vtu.clone());
+        let vtu = vtu_dir.map(|dir| VtuSeries::create(&dir, sim)).transpose()?;
         log.add_channel("/run", "bifirst.Run", &schemas::run())?;
         log.add_channel("/energy", "bifirst.Energy", &schemas::energy())?;
         log.add_channel("/solver", "bifirst.Solver", &schemas::solver())?;
+        log.add_channel("/summary", "bifirst.Summary", &schemas::summary())?;
+        log.add_channel("/log", "foxglove.Log", &serde_json::from_str(foxglove::LOG_SCHEMA).expect("bundled schema is JSON"))?;
+        if scene_every > 0 {
+            log.add_channel("/scene", "foxglove.SceneUpdate", &serde_json::from_str(foxglove::SCENE_UPDATE_SCHEMA).expect("bundled schema is JSON"))?;
+        }
         for b in &sim.bodies {
             log.add_channel(&format!("/body/{}", b.name), "bifirst.Body", &schemas::body(dim))?;
         }
@@ -80,6 +149,7 @@ impl Logger {
         }
         let run = json!({
             "version": env!("CARGO_PKG_VERSION"),
+            "git_revision": GIT_REVISION,
             "scene_name": loaded.name,
             "scene": loaded.resolved_toml,
             "backend": BACKEND,
@@ -88,23 +158,33 @@ impl Logger {
         });
         log.write("/run", 0.0, &run)?;
         log.attach("scene.toml", "application/toml", loaded.resolved_toml.as_bytes())?;
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
         let meta: BTreeMap<String, String> = [
             ("version", env!("CARGO_PKG_VERSION").to_string()),
+            ("git_revision", GIT_REVISION.unwrap_or("unknown").to_string()),
             ("scene_name", loaded.name.clone()),
             ("scene_file", loaded.path.display().to_string()),
             ("scene", loaded.resolved_toml.clone()),
             ("backend", BACKEND.to_string()),
+            ("adapter", "none (CPU backend)".to_string()),
             ("precision", PRECISION_NAME.to_string()),
+            ("cores", cores.to_string()),
         ]
         .into_iter()
         .map(|(k, v)| (k.to_string(), v))
         .collect();
         log.metadata("bifirst.run", meta)?;
-        Ok(Self { log, dim })
+        let view = (scene_every > 0).then(|| View::new(sim));
+        let vtu_every = OutputSpec::frame_interval(output.vtu_every, total);
+        Ok(Self { log, dim, view, scene_every, vtu, vtu_every, state_step: None, frame_step: None })
     }
 
     /// State channels: energy, bodies, probes, reactions at the current time.
     fn state(&mut self, sim: &Simulation) -> Result<(), OutputError> {
+        if self.state_step == Some(sim.step) {
+            return Ok(());
+        }
+        self.state_step = Some(sim.step);
         let (t, dim) = (sim.t, self.dim);
         let e = sim.energies();
         let mut energy = serde_json::to_value(e).expect("serializes");
@@ -141,6 +221,29 @@ impl Logger {
         Ok(())
     }
 
+    /// The 3D view and the VTU frame when their cadence says so, or when `last`.
+    fn frames(&mut self, sim: &Simulation, last: bool) -> Result<(), OutputError> {
+        if self.frame_step == Some(sim.step) {
+            return Ok(());
+        }
+        let due = |every: usize| every > 0 && (last || sim.step % every == 0);
+        let scene = self.view.is_some() && due(self.scene_every);
+        let vtu = self.vtu.is_some() && due(self.vtu_every);
+        if !scene && !vtu {
+            return Ok(());
+        }
+        self.frame_step = Some(sim.step);
+        let fields: Vec<Vec<CellFields>> = sim.bodies.iter().map(|b| b.cell_fields()).collect();
+        if let (true, Some(view)) = (scene, &mut self.view) {
+            let update = view.scene_update(sim, &fields);
+            self.log.write("/scene", sim.t, &update)?;
+        }
+        if let (true, Some(series)) = (vtu, &mut self.vtu) {
+            series.write_frame(sim, &fields)?;
+        }
+        Ok(())
+    }
+
     /// The `/contact` channel of a step (only in scenes with contact).
     fn contact(&mut self, sim: &Simulation, r: &StepReport) -> Result<(), OutputError> {
         if sim.contact.is_none() {
@@ -151,68 +254,134 @@ impl Logger {
         self.log.write("/contact", sim.t, &msg)
     }
 
-    fn solver(&mut self, r: &StepReport, t: Real, failure: Option<String>) -> Result<(), OutputError> {
+    fn solver(&mut self, r: &StepReport, t: Real, status: &str, message: Option<String>) -> Result<(), OutputError> {
         let msg = json!({
             "t": t, "step": r.step, "dt": r.dt, "newton_iterations": r.newton_iterations, "uzawa_iterations": r.uzawa_iterations,
             "residual_norm": r.residual_norm, "cutbacks": r.cutbacks, "wall_s": r.wall,
-            "status": if failure.is_some() { "failed" } else { "converged" }, "message": failure,
+            "status": status, "message": message,
         });
         self.log.write("/solver", t, &msg)
     }
+
+    /// The run's totals on `/summary`, its last message.
+    fn summary(&mut self, summary: &RunSummary, t: Real) -> Result<(), OutputError> {
+        self.log.write("/summary", t, &serde_json::to_value(summary).expect("serializes"))
+    }
+
+    fn line(&mut self, t: Real, level: Level, message: &str) -> Result<(), OutputError> {
+        self.log.write("/log", t, &foxglove::log(t, level, message))
+    }
+}
+
+fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
+    payload
+        .downcast_ref::<&str>()
+        .map(|s| s.to_string())
+        .or_else(|| payload.downcast_ref::<String>().cloned())
+        .unwrap_or_else(|| "a panic without a message".into())
+}
+
+/// Totals kept while stepping, for the summary.
+#[derive(Default)]
+struct Totals {
+    cutbacks: usize,
+    newton: usize,
+    uzawa: usize,
+    max_penetration: Real,
+    wall: PhaseTimes,
 }
 
 /// Runs a loaded scene to its end time, logging to `out`.
-pub fn run_scene(loaded: &LoadedScene, out: &Path, monitor: &mut dyn Monitor) -> Result<RunSummary, RunError> {
+pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor: &mut dyn Monitor) -> Result<RunSummary, RunError> {
     let started = std::time::Instant::now();
     let mut sim = build_simulation(loaded)?;
     sim.start();
-    let mut logger = Logger::new(out, loaded, &sim)?;
+    let mut logger = Logger::new(out, loaded, &sim, options)?;
     let every = loaded.scene.output.every;
     let total = sim.step_count();
     monitor.started(total);
     logger.state(&sim)?;
-    let (mut cutbacks, mut newton) = (0, 0);
-    let summary = |sim: &Simulation, cutbacks, newton| {
-        let e = sim.energies();
-        RunSummary {
-            scene: loaded.name.clone(),
-            steps: sim.step,
-            t_end: sim.t,
-            cutbacks,
-            newton_iterations: newton,
-            wall_s: started.elapsed().as_secs_f64(),
-            energy: e,
-            output: out.to_path_buf(),
-        }
+    logger.frames(&sim, false)?;
+    let mut totals = Totals::default();
+    let summary = |sim: &Simulation, totals: &Totals, stop: Option<&Stop>| RunSummary {
+        scene: loaded.name.clone(),
+        status: stop.map_or("finished", Stop::status).to_string(),
+        message: stop.map(Stop::to_string),
+        backend: BACKEND.to_string(),
+        precision: PRECISION_NAME.to_string(),
+        steps: sim.step,
+        t_end: sim.t,
+        cutbacks: totals.cutbacks,
+        newton_iterations: totals.newton,
+        uzawa_iterations: totals.uzawa,
+        max_penetration: totals.max_penetration,
+        wall_s: started.elapsed().as_secs_f64(),
+        wall_by_phase: totals.wall,
+        energy: sim.energies(),
+        output: out.to_path_buf(),
     };
-    while !sim.finished() {
-        match sim.advance() {
-            Ok(report) => {
-                for ev in &report.events {
-                    monitor.warning(ev);
-                }
-                cutbacks += report.cutbacks;
-                newton += report.newton_iterations;
-                if report.step % every == 0 || sim.finished() {
-                    logger.solver(&report, sim.t, None)?;
-                    logger.contact(&sim, &report)?;
-                    logger.state(&sim)?;
-                }
-                monitor.step(&report, total);
-            }
-            Err(failure) => {
+    let interrupted = || options.interrupt.as_ref().is_some_and(|f| f.load(Ordering::SeqCst));
+    let stop = loop {
+        if sim.finished() {
+            break None;
+        }
+        if interrupted() {
+            break Some((Stop::Interrupted, StepReport { step: sim.step, t: sim.t, ..Default::default() }));
+        }
+        let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| sim.advance()));
+        let report = match result {
+            Ok(Ok(report)) => report,
+            Ok(Err(failure)) => {
+                totals.cutbacks += failure.cutbacks;
                 for ev in &failure.report.events {
                     monitor.warning(ev);
+                    logger.line(failure.t, Level::Warning, ev)?;
                 }
                 let mut report = failure.report.clone();
                 report.t = failure.t;
-                logger.solver(&report, failure.t, Some(failure.to_string()))?;
-                logger.log.finish()?;
-                let summary = summary(&sim, cutbacks + failure.cutbacks, newton);
-                return Err(RunError::Failed { failure: Box::new(failure), summary });
+                break Some((Stop::Failed(Box::new(failure)), report));
             }
+            Err(payload) => break Some((Stop::Panicked(panic_message(payload.as_ref())), StepReport { step: sim.step + 1, t: sim.t, ..Default::default() })),
+        };
+        for ev in &report.events {
+            monitor.warning(ev);
+            logger.line(sim.t, Level::Warning, ev)?;
+        }
+        totals.cutbacks += report.cutbacks;
+        totals.newton += report.newton_iterations;
+        totals.uzawa += report.uzawa_iterations;
+        totals.max_penetration = totals.max_penetration.max(report.contact.max_penetration);
+        totals.wall += report.wall;
+        if !sim.energies().total.is_finite() {
+            break Some((Stop::NotFinite { step: sim.step, t: sim.t }, report));
+        }
+        if report.step % every == 0 || sim.finished() {
+            logger.solver(&report, sim.t, "converged", None)?;
+            logger.contact(&sim, &report)?;
+            logger.state(&sim)?;
+        }
+        logger.frames(&sim, sim.finished())?;
+        monitor.step(&report, total);
+    };
+    match stop {
+        None => {
+            let summary = summary(&sim, &totals, None);
+            logger.summary(&summary, sim.t)?;
+            logger.log.finish()?;
+            Ok(summary)
+        }
+        Some((stop, report)) => {
+            // The last finished step goes into every output, then the reason for stopping.
+            logger.state(&sim)?;
+            logger.frames(&sim, true)?;
+            let level = if matches!(stop, Stop::Interrupted) { Level::Warning } else { Level::Error };
+            let message = stop.to_string();
+            logger.line(sim.t, level, &format!("the run stopped at t = {:.6e}: {message}", sim.t))?;
+            logger.solver(&report, report.t, stop.status(), Some(message))?;
+            let summary = summary(&sim, &totals, Some(&stop));
+            logger.summary(&summary, sim.t)?;
+            logger.log.finish()?;
+            Err(RunError::Stopped { reason: stop, summary })
         }
     }
-    logger.log.finish()?;
-    Ok(summary(&sim, cutbacks, newton))
 }

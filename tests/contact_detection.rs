@@ -139,7 +139,7 @@ fn two_bars_head_on_with_two_passes() {
     std::fs::write(&path, &text).unwrap();
     let loaded = parse_scene(&path, text, &[]).expect("scene parses");
     let out = common_run::temp_path("two_bars.mcap");
-    bifirst::run::run_scene(&loaded, &out, &mut bifirst::run::Silent).expect("run");
+    bifirst::run::run_scene(&loaded, &out, &Default::default(), &mut bifirst::run::Silent).expect("run");
     let log = common_run::read_log(&out);
     let t = log.series("/contact", "t");
     let active = log.series("/contact", "active");

@@ -55,7 +55,7 @@ fn gmsh_square_matches_generated_square() {
         std::fs::write(&path, text).unwrap();
         let loaded = bifirst::scene::load_scene(&path, &[]).expect("scene loads");
         let out = dir.join(format!("{tag}.mcap"));
-        bifirst::run::run_scene(&loaded, &out, &mut bifirst::run::Silent).expect("runs");
+        bifirst::run::run_scene(&loaded, &out, &Default::default(), &mut bifirst::run::Silent).expect("runs");
         let log = read_log(&out);
         finals.push((log.series("/energy", "total"), log.vectors("/reaction/clamp", "force")));
     }

@@ -29,7 +29,7 @@ fn run_log_has_every_channel_of_the_contract() {
     let log = run("uniaxial_blatz_ko", &["time.end=0.1"], "contract");
     let steps = 10;
     let expected: &[(&str, &str, &[&str], usize)] = &[
-        ("/run", "bifirst.Run", &["version", "scene_name", "scene", "backend", "precision", "adapter"], 1),
+        ("/run", "bifirst.Run", &["version", "git_revision", "scene_name", "scene", "backend", "precision", "adapter"], 1),
         ("/energy", "bifirst.Energy", &["t", "kinetic", "strain", "potential", "external_work", "friction_dissipation", "numerical_dissipation", "total", "energy_balance_error"], steps + 1),
         (
             "/solver",
@@ -41,11 +41,24 @@ fn run_log_has_every_channel_of_the_contract() {
         ("/probe/corner", "bifirst.Probe", &["t", "position", "displacement", "velocity", "von_mises"], steps + 1),
         ("/reaction/pull", "bifirst.Reaction", &["t", "force"], steps + 1),
         ("/reaction/sym_x", "bifirst.Reaction", &["t", "force"], steps + 1),
+        (
+            "/summary",
+            "bifirst.Summary",
+            &[
+                "scene", "status", "message", "backend", "precision", "steps", "t_end", "cutbacks", "newton_iterations", "uzawa_iterations",
+                "max_penetration", "wall_s", "wall_by_phase", "energy", "output",
+            ],
+            1,
+        ),
+        // Short runs draw the 3D view at every step (about 100 frames per run).
+        ("/scene", "foxglove.SceneUpdate", &["deletions", "entities"], steps + 1),
     ];
     for (topic, schema_name, fields, count) in expected {
         let (name, schema) = log.schemas.get(*topic).unwrap_or_else(|| panic!("channel {topic} missing"));
         assert_eq!(name, schema_name);
-        assert_eq!(schema_fields(schema), sorted(fields), "{topic} schema fields");
+        if !schema_name.starts_with("foxglove.") {
+            assert_eq!(schema_fields(schema), sorted(fields), "{topic} schema fields");
+        }
         let messages = &log.topics[*topic];
         assert_eq!(messages.len(), *count, "{topic}: one message per step (plus the initial state)");
         for m in messages {
@@ -62,6 +75,14 @@ fn run_log_has_every_channel_of_the_contract() {
     assert_eq!(scene["time"]["end"].as_float(), Some(0.1));
     assert_eq!(log.attachments, vec!["scene.toml".to_string()]);
     assert_eq!(log.metadata, vec!["bifirst.run".to_string()]);
+    let meta = &log.record.metadata["bifirst.run"];
+    for key in ["version", "git_revision", "backend", "adapter", "precision", "cores", "scene"] {
+        assert!(meta.contains_key(key), "metadata has {key}");
+    }
+    assert!(meta["cores"].parse::<usize>().unwrap() >= 1);
+    let summary = &log.topics["/summary"][0];
+    assert_eq!(summary["status"], "finished");
+    assert_eq!(summary["steps"], steps);
     let wall = &log.topics["/solver"][0]["wall_s"];
     assert_eq!(message_fields(wall), sorted(&["elements", "assembly", "factorization", "solve", "contact", "total"]));
     // Vectors are arrays of 3 numbers in 3D; steps are numbered 1..=N with t increasing.
@@ -83,19 +104,27 @@ fn run_log_vectors_have_two_components_in_2d() {
 
 #[test]
 fn a_failed_run_leaves_a_valid_log_that_reports_the_failure() {
-    use bifirst::run::{run_scene, RunError, Silent};
+    use bifirst::run::{run_scene, RunError, Silent, Stop};
     // A violent kick inverts elements: every cut-back fails too, and the run must stop cleanly.
     let sets: Vec<String> = ["body.beam.initial_velocity=[0.0, 2000.0]", "solver.max_cutbacks=2", "solver.max_iterations=8"].map(String::from).to_vec();
     let loaded = bifirst::scene::load_scene(&common_run::scene_path("free_vibration_2d"), &sets).unwrap();
     let out = common_run::temp_path("failed_run.mcap");
-    let err = run_scene(&loaded, &out, &mut Silent).expect_err("the run must fail");
-    let RunError::Failed { failure, summary } = err else { panic!("expected a step failure, got {err}") };
+    let err = run_scene(&loaded, &out, &Default::default(), &mut Silent).expect_err("the run must fail");
+    let RunError::Stopped { reason: Stop::Failed(failure), summary } = err else { panic!("expected a step failure, got {err}") };
     assert_eq!(failure.cutbacks, 2);
     let log = common_run::read_log(&out);
     let last = log.topics["/solver"].last().unwrap();
     assert_eq!(last["status"], "failed");
     assert!(last["message"].as_str().unwrap().contains("failed after 2 cut-backs"), "{last}");
     assert_eq!(log.topics["/energy"].len(), summary.steps + 1, "every finished step is in the log");
+    // Each cut-back is a Foxglove warning, the failure an error; the totals close the log.
+    let lines = &log.topics["/log"];
+    assert_eq!(lines.iter().filter(|l| l["level"] == 3).count(), 2, "{lines:?}");
+    let last_line = lines.last().unwrap();
+    assert_eq!(last_line["level"], 4);
+    assert!(last_line["message"].as_str().unwrap().contains("failed after 2 cut-backs"), "{last_line}");
+    assert_eq!(log.topics["/summary"][0]["status"], "failed");
+    assert_eq!(log.topics["/summary"][0]["steps"], summary.steps);
 }
 
 #[test]

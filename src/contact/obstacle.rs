@@ -73,9 +73,19 @@ pub enum Mode {
     Walls,
 }
 
+/// What an obstacle looks like at rest, for drawing it (contact only uses the faces).
+#[derive(Debug, Clone, PartialEq)]
+pub enum Shape {
+    Plane { point: Vec3, normal: Vec3 },
+    Box { min: Vec3, max: Vec3 },
+    Polygon(Vec<Vec3>),
+    Polyline(Vec<Vec3>),
+}
+
 #[derive(Debug, Clone)]
 pub struct Obstacle {
     pub name: String,
+    pub shape: Shape,
     pub faces: Vec<Face>,
     pub mode: Mode,
     pub friction: Real,

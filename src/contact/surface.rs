@@ -26,29 +26,32 @@ pub struct Surface {
     pub facets: Vec<u32>,
     /// Nodes on the boundary, sorted: the slave nodes of this body.
     pub nodes: Vec<u32>,
+    /// The element each facet belongs to (for colouring the boundary by element stress).
+    pub owners: Vec<u32>,
 }
 
 impl Surface {
     pub fn of(mesh: &Mesh) -> Self {
         let local = local_facets(mesh.kind);
         let facet_nodes = local[0].len();
-        let mut seen: HashMap<Vec<u32>, (usize, Vec<u32>)> = HashMap::new();
+        let mut seen: HashMap<Vec<u32>, (usize, Vec<u32>, u32)> = HashMap::new();
         for e in 0..mesh.element_count() {
             let nodes = mesh.element(e);
             for f in local {
                 let oriented: Vec<u32> = f.iter().map(|&a| nodes[a]).collect();
                 let mut key = oriented.clone();
                 key.sort_unstable();
-                seen.entry(key).and_modify(|(count, _)| *count += 1).or_insert((1, oriented));
+                seen.entry(key).and_modify(|(count, ..)| *count += 1).or_insert((1, oriented, e as u32));
             }
         }
-        let mut boundary: Vec<Vec<u32>> = seen.into_values().filter(|(count, _)| *count == 1).map(|(_, f)| f).collect();
+        let mut boundary: Vec<(Vec<u32>, u32)> = seen.into_values().filter(|(count, ..)| *count == 1).map(|(_, f, e)| (f, e)).collect();
         boundary.sort_unstable();
-        let facets: Vec<u32> = boundary.concat();
+        let facets: Vec<u32> = boundary.iter().flat_map(|(f, _)| f.iter().copied()).collect();
+        let owners = boundary.iter().map(|&(_, e)| e).collect();
         let mut nodes = facets.clone();
         nodes.sort_unstable();
         nodes.dedup();
-        Self { facet_nodes, facets, nodes }
+        Self { facet_nodes, facets, nodes, owners }
     }
 
     pub fn facet_count(&self) -> usize {

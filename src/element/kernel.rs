@@ -138,6 +138,33 @@ pub fn element_von_mises<M: Hyperelastic>(material: &M, points: &[GaussPoint], u
     sum / vol
 }
 
+/// Volume averages over one element of the quantities written for viewing (VTU cell data,
+/// colours of the 3D view).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CellFields {
+    /// Cauchy stress `σ = F S Fᵀ / J`, row-major 3×3.
+    pub cauchy: [Real; 9],
+    pub von_mises: Real,
+    /// Volume ratio `J = det F`.
+    pub jacobian: Real,
+}
+
+/// Volume-averaged Cauchy stress, von Mises stress and `J` of one element.
+pub fn element_cell_fields<M: Hyperelastic>(material: &M, points: &[GaussPoint], u: &[[Real; 3]]) -> CellFields {
+    let (mut cauchy, mut vm, mut jacobian, mut vol) = (Mat3::zeros(), 0.0, 0.0, 0.0);
+    for gp in points {
+        let f = deformation_gradient(gp, u);
+        let s = material.stress(&green_lagrange(&f));
+        let j = f.determinant();
+        cauchy += f * s * f.transpose() * (gp.dv / j);
+        vm += gp.dv * von_mises(&f, &s);
+        jacobian += gp.dv * j;
+        vol += gp.dv;
+    }
+    let cauchy = cauchy / vol;
+    CellFields { cauchy: std::array::from_fn(|k| cauchy[(k / 3, k % 3)]), von_mises: vm / vol, jacobian: jacobian / vol }
+}
+
 /// Second Piola-Kirchhoff stress at each quadrature point, Voigt order (for closed-form checks).
 pub fn element_stresses<M: Hyperelastic>(material: &M, points: &[GaussPoint], u: &[[Real; 3]]) -> Vec<Vector6<Real>> {
     points.iter().map(|gp| to_voigt(&material.stress(&green_lagrange(&deformation_gradient(gp, u))))).collect()

@@ -4,7 +4,7 @@
 mod kernel;
 pub mod shape;
 
-pub use kernel::{element_energy, element_force_tangent, element_stresses, element_von_mises, ElementError, ElementOutput};
+pub use kernel::{element_cell_fields, element_energy, element_force_tangent, element_stresses, element_von_mises, CellFields, ElementError, ElementOutput};
 
 use crate::mesh::{ElementKind, Mesh};
 use crate::precision::Real;

@@ -1,6 +1,14 @@
-//! Outputs: the MCAP run log (see doc/mcap.md for the contract).
+//! Outputs: the MCAP run log (see doc/mcap.md for the contract) with its Foxglove view, VTU
+//! files for ParaView, and what reads a run log back: plots and the summary table.
 
+pub mod foxglove;
 pub mod mcap_log;
+pub mod plot;
+pub mod read;
 pub mod schemas;
+pub mod summary;
+pub mod vtu;
 
 pub use mcap_log::{OutputError, RunLog};
+pub use read::{read_run, ReadError, RunRecord};
+pub use vtu::VtuSeries;

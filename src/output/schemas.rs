@@ -25,6 +25,7 @@ pub fn run() -> Value {
         "bifirst.Run",
         &[
             ("version", json!({"type": "string"})),
+            ("git_revision", json!({"type": ["string", "null"], "description": "commit the binary was built from, when known"})),
             ("scene_name", json!({"type": "string"})),
             ("scene", json!({"type": "string", "description": "resolved scene after --set, TOML"})),
             ("backend", json!({"type": "string"})),
@@ -52,7 +53,7 @@ pub fn solver() -> Value {
             ("residual_norm", number()),
             ("cutbacks", integer()),
             ("wall_s", object("bifirst.WallTimes", &phases.map(|k| (k, number())))),
-            ("status", json!({"type": "string", "enum": ["converged", "failed"]})),
+            ("status", json!({"type": "string", "enum": ["converged", "failed", "interrupted"]})),
             ("message", json!({"type": ["string", "null"]})),
         ],
     )
@@ -96,6 +97,32 @@ pub fn contact() -> Value {
             ("max_penetration", number()),
             ("normal_impulse", number()),
             ("friction_dissipation_step", number()),
+        ],
+    )
+}
+
+/// The run's totals, written once when it ends (however it ends).
+pub fn summary() -> Value {
+    let phases = ["elements", "assembly", "factorization", "solve", "contact", "total"];
+    let energies = ["kinetic", "strain", "potential", "external_work", "friction_dissipation", "numerical_dissipation", "total", "energy_balance_error"];
+    object(
+        "bifirst.Summary",
+        &[
+            ("scene", json!({"type": "string"})),
+            ("status", json!({"type": "string", "enum": ["finished", "failed", "interrupted"]})),
+            ("message", json!({"type": ["string", "null"]})),
+            ("backend", json!({"type": "string"})),
+            ("precision", json!({"type": "string"})),
+            ("steps", integer()),
+            ("t_end", number()),
+            ("cutbacks", integer()),
+            ("newton_iterations", integer()),
+            ("uzawa_iterations", integer()),
+            ("max_penetration", number()),
+            ("wall_s", number()),
+            ("wall_by_phase", object("bifirst.WallTimes", &phases.map(|k| (k, number())))),
+            ("energy", object("bifirst.Energies", &energies.map(|k| (k, number())))),
+            ("output", json!({"type": "string"})),
         ],
     )
 }

@@ -170,11 +170,25 @@ pub struct OutputSpec {
     pub mcap: Option<PathBuf>,
     /// Write the per-step channels every this many steps.
     pub every: usize,
+    /// Write the Foxglove 3D view (`/scene`) every this many steps; 0: never. When absent,
+    /// about 100 frames per run.
+    pub scene_every: Option<usize>,
+    /// Directory for ParaView files (VTU frames and `.pvd` series); `--vtu` overrides it.
+    pub vtu: Option<PathBuf>,
+    /// Write a VTU frame every this many steps. When absent, about 100 frames per run.
+    pub vtu_every: Option<usize>,
 }
 
 impl Default for OutputSpec {
     fn default() -> Self {
-        Self { mcap: None, every: 1 }
+        Self { mcap: None, every: 1, scene_every: None, vtu: None, vtu_every: None }
+    }
+}
+
+impl OutputSpec {
+    /// Steps between frames for a cadence that may be absent (about 100 frames per run).
+    pub fn frame_interval(cadence: Option<usize>, total_steps: usize) -> usize {
+        cadence.unwrap_or(total_steps.div_ceil(100).max(1))
     }
 }
 

@@ -57,6 +57,16 @@ pub(super) fn validate(s: &Scene) -> Result<(), Failure> {
     if s.output.every == 0 {
         fail(Invalid, "output.every", "the output cadence must be at least 1 step.")?;
     }
+    if s.output.vtu_every == Some(0) {
+        fail(Invalid, "output.vtu_every", "the VTU cadence must be at least 1 step (leave out `output.vtu` for no VTU files).")?;
+    }
+    let named = [("material", names_of(&s.material)), ("body", names_of(&s.body)), ("boundary", names_of(&s.boundary)), ("probe", names_of(&s.probe)), ("obstacle", names_of(&s.obstacle))];
+    for (section, list) in named {
+        // Names become MCAP topics and file names.
+        if let Some(bad) = list.into_iter().find(|n| n.is_empty() || !n.chars().all(|c| c.is_ascii_alphanumeric() || "_-.".contains(c))) {
+            fail(Invalid, format!("{section}.{bad}"), "names may only use letters, digits, `_`, `-` and `.` (they become MCAP topics and file names).")?;
+        }
+    }
     for (name, m) in &s.material {
         validate_material(&format!("material.{name}"), m)?;
     }
@@ -123,6 +133,10 @@ pub(super) fn validate(s: &Scene) -> Result<(), Failure> {
         finite_vec(&format!("{key}.point"), &p.point, dim)?;
     }
     Ok(())
+}
+
+fn names_of<V>(map: &std::collections::BTreeMap<String, V>) -> Vec<&String> {
+    map.keys().collect()
 }
 
 fn names<'a>(it: impl Iterator<Item = &'a String>) -> String {

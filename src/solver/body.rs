@@ -4,7 +4,7 @@
 use super::linear::{CholeskySolver, LinearError};
 use super::PhaseTimes;
 use crate::assembly::{scatter_add, DofMap, StiffnessPattern};
-use crate::element::{element_energy, element_force_tangent, element_von_mises, ElementError, ElementOutput, ReferenceGeometry};
+use crate::element::{element_cell_fields, element_energy, element_force_tangent, element_von_mises, CellFields, ElementError, ElementOutput, ReferenceGeometry};
 use crate::material::Model;
 use crate::mesh::Mesh;
 use crate::precision::Real;
@@ -419,5 +419,12 @@ impl Body {
             .map(|&e| element_von_mises(&self.model, self.geometry.element_points(e), &self.element_displacements(&self.state.u, e)))
             .sum();
         sum / elements.len().max(1) as Real
+    }
+
+    /// Stress and volume ratio of every element at the committed state.
+    pub fn cell_fields(&self) -> Vec<CellFields> {
+        (0..self.mesh.element_count())
+            .map(|e| element_cell_fields(&self.model, self.geometry.element_points(e), &self.element_displacements(&self.state.u, e)))
+            .collect()
     }
 }

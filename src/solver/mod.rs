@@ -27,6 +27,17 @@ pub struct PhaseTimes {
     pub total: f64,
 }
 
+impl std::ops::AddAssign for PhaseTimes {
+    fn add_assign(&mut self, o: Self) {
+        self.elements += o.elements;
+        self.assembly += o.assembly;
+        self.factorization += o.factorization;
+        self.solve += o.solve;
+        self.contact += o.contact;
+        self.total += o.total;
+    }
+}
+
 /// A node set with a prescribed motion (its reaction goes to `/reaction/<name>`).
 #[derive(Debug, Clone)]
 pub struct BoundarySet {

@@ -3,6 +3,7 @@
 
 use super::body::{Body, Prescribed};
 use super::{BoundarySet, Probe, Simulation};
+use crate::contact::obstacle::Shape;
 use crate::contact::{ContactModel, Motion, Obstacle, Settings, Surface};
 use crate::element::ReferenceGeometry;
 use crate::material::{BlatzKo, Lvf, Model, NeoHookean};
@@ -257,11 +258,18 @@ fn build_contact(loaded: &LoadedScene, bodies: &[Body], dim: usize) -> Result<Op
         if dim == 3 && o.points.is_some() {
             return Err(loaded.error(Invalid, &format!("{key}.shape"), "polygons and polylines are 2D obstacles; use planes or boxes in 3D."));
         }
-        let (faces, mode) = match o.shape {
-            ObstacleShape::Plane => Obstacle::plane(vec3(o.point.as_deref().expect("validated")), vec3(o.normal.as_deref().expect("validated"))),
-            ObstacleShape::Box => Obstacle::cuboid(vec3(o.min.as_deref().expect("validated")), vec3(o.max.as_deref().expect("validated")), dim, o.inside.unwrap_or(false)),
-            ObstacleShape::Polygon => Obstacle::polygon(&o.points.as_ref().expect("validated").iter().map(|p| vec3(p)).collect::<Vec<_>>()),
-            ObstacleShape::Polyline => Obstacle::polyline(&o.points.as_ref().expect("validated").iter().map(|p| vec3(p)).collect::<Vec<_>>()),
+        let points = || o.points.as_ref().expect("validated").iter().map(|p| vec3(p)).collect::<Vec<_>>();
+        let (shape, (faces, mode)) = match o.shape {
+            ObstacleShape::Plane => {
+                let (point, normal) = (vec3(o.point.as_deref().expect("validated")), vec3(o.normal.as_deref().expect("validated")));
+                (Shape::Plane { point, normal }, Obstacle::plane(point, normal))
+            }
+            ObstacleShape::Box => {
+                let (min, max) = (vec3(o.min.as_deref().expect("validated")), vec3(o.max.as_deref().expect("validated")));
+                (Shape::Box { min, max }, Obstacle::cuboid(min, max, dim, o.inside.unwrap_or(false)))
+            }
+            ObstacleShape::Polygon => (Shape::Polygon(points()), Obstacle::polygon(&points())),
+            ObstacleShape::Polyline => (Shape::Polyline(points()), Obstacle::polyline(&points())),
         };
         let motion = match (&o.velocity, &o.motion) {
             (Some(v), _) => Motion { rows: vec![(0.0, vec3(v))], linear: false },
@@ -277,7 +285,7 @@ fn build_contact(loaded: &LoadedScene, bodies: &[Body], dim: usize) -> Result<Op
             Some(list) => (0..n).map(|b| list.iter().any(|name| index[name.as_str()] == b)).collect(),
             None => vec![true; n],
         };
-        obstacles.push(Obstacle { name: name.clone(), faces, mode, friction: o.friction.unwrap_or(spec.friction), motion, bodies: touches });
+        obstacles.push(Obstacle { name: name.clone(), shape, faces, mode, friction: o.friction.unwrap_or(spec.friction), motion, bodies: touches });
     }
     let any_pair = friction.iter().flatten().any(Option::is_some);
     if obstacles.is_empty() && !any_pair {

@@ -22,6 +22,7 @@ pub struct Log {
     pub schemas: BTreeMap<String, (String, Value)>,
     pub attachments: Vec<String>,
     pub metadata: Vec<String>,
+    pub record: bifirst::output::RunRecord,
 }
 
 impl Log {
@@ -34,22 +35,16 @@ impl Log {
 }
 
 pub fn read_log(path: &Path) -> Log {
-    let bytes = std::fs::read(path).expect("log exists");
-    let mut topics: BTreeMap<String, Vec<Value>> = BTreeMap::new();
+    let record = bifirst::output::read_run(path).expect("the log reads back");
+    assert!(record.has_summary, "the file has a summary");
     let mut schemas = BTreeMap::new();
-    for message in mcap::MessageStream::new(&bytes).expect("valid mcap") {
-        let message = message.expect("valid message");
-        let topic = message.channel.topic.clone();
-        let schema = message.channel.schema.as_ref().expect("every channel has a schema");
+    for (topic, schema) in &record.schemas {
         assert_eq!(schema.encoding, "jsonschema");
-        assert_eq!(message.channel.message_encoding, "json");
-        schemas.entry(topic.clone()).or_insert_with(|| (schema.name.clone(), serde_json::from_slice(&schema.data).expect("schema is JSON")));
-        topics.entry(topic).or_default().push(serde_json::from_slice(&message.data).expect("message is JSON"));
+        assert_eq!(schema.message_encoding, "json");
+        schemas.insert(topic.clone(), (schema.name.clone(), schema.data.clone()));
     }
-    let summary = mcap::Summary::read(&bytes).expect("summary readable").expect("the file has a summary");
-    let attachments = summary.attachment_indexes.iter().map(|a| a.name.clone()).collect();
-    let metadata = summary.metadata_indexes.iter().map(|m| m.name.clone()).collect();
-    Log { topics, schemas, attachments, metadata }
+    let metadata = record.metadata.keys().cloned().collect();
+    Log { topics: record.topics.clone(), schemas, attachments: record.attachments.clone(), metadata, record }
 }
 
 /// Runs `scene` with overrides into `<tag>.mcap` and reads the log back.
@@ -57,6 +52,6 @@ pub fn run(scene: &str, sets: &[&str], tag: &str) -> Log {
     let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
     let loaded = load_scene(&scene_path(scene), &sets).expect("scene loads");
     let out = temp_path(&format!("{tag}.mcap"));
-    run_scene(&loaded, &out, &mut Silent).expect("run succeeds");
+    run_scene(&loaded, &out, &Default::default(), &mut Silent).expect("run succeeds");
     read_log(&out)
 }

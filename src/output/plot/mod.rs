@@ -1,0 +1,203 @@
+//! `bifirst plot`: PNG figures from one or more run logs, one line per run in every panel (so
+//! that a sweep can be compared): energies, each probe, and the solver's effort per step.
+
+use super::read::{ReadError, RunRecord};
+use plotters::prelude::*;
+use std::path::{Path, PathBuf};
+
+/// DejaVu Sans (licence beside this file): the bitmap backend draws text with a font it is given.
+const FONT: &[u8] = include_bytes!("DejaVuSans.ttf");
+const FAMILY: &str = "sans-serif";
+
+const COLORS: [RGBColor; 10] = [
+    RGBColor(31, 119, 180),
+    RGBColor(255, 127, 14),
+    RGBColor(44, 160, 44),
+    RGBColor(214, 39, 40),
+    RGBColor(148, 103, 189),
+    RGBColor(140, 86, 75),
+    RGBColor(227, 119, 194),
+    RGBColor(127, 127, 127),
+    RGBColor(188, 189, 34),
+    RGBColor(23, 190, 207),
+];
+
+#[derive(Debug, thiserror::Error)]
+pub enum PlotError {
+    #[error("{0}")]
+    Read(#[from] ReadError),
+    #[error("cannot create `{path}`: {source}")]
+    Create { path: PathBuf, source: std::io::Error },
+    #[error("cannot draw `{path}`: {message}")]
+    Draw { path: PathBuf, message: String },
+}
+
+/// One panel: a quantity against time, one line per run.
+struct Panel {
+    title: String,
+    y_label: String,
+    lines: Vec<Vec<(f64, f64)>>,
+}
+
+impl Panel {
+    /// `field` of `topic` against its `t`, for each run; `map` transforms each value.
+    fn of(runs: &[RunRecord], title: &str, y_label: &str, topic: &str, value: impl Fn(&serde_json::Value) -> Option<f64>) -> Self {
+        let lines = runs
+            .iter()
+            .map(|r| r.messages(topic).iter().filter_map(|m| Some((m["t"].as_f64()?, value(m)?))).filter(|(t, v)| t.is_finite() && v.is_finite()).collect())
+            .collect();
+        Self { title: title.into(), y_label: y_label.into(), lines }
+    }
+}
+
+fn register_font() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        // The bundled font is valid TrueType; a failure here would show as missing text only.
+        let _ = plotters::style::register_font(FAMILY, FontStyle::Normal, FONT);
+    });
+}
+
+/// A range that plotters can draw even for a constant or empty series (a spread below 1e-9 of
+/// the values, such as round-off in a constant time step, counts as constant).
+fn range(values: impl Iterator<Item = f64>) -> std::ops::Range<f64> {
+    let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| (lo.min(v), hi.max(v)));
+    if !lo.is_finite() {
+        return 0.0..1.0;
+    }
+    let magnitude = lo.abs().max(hi.abs());
+    if hi - lo <= 1e-9 * magnitude {
+        let pad = if magnitude > 0.0 { 0.1 * magnitude } else { 1.0 };
+        return (lo - pad)..(hi + pad);
+    }
+    let pad = 0.05 * (hi - lo);
+    (lo - pad)..(hi + pad)
+}
+
+/// Tick labels that tell the ticks of a range apart: fixed-point for moderate magnitudes,
+/// scientific otherwise.
+fn tick_format(r: &std::ops::Range<f64>) -> impl Fn(&f64) -> String {
+    let magnitude = r.start.abs().max(r.end.abs());
+    let significant = ((magnitude / (r.end - r.start)).log10().ceil().max(0.0) as i32 + 2).min(12);
+    let exponent = magnitude.log10().floor() as i32;
+    move |v: &f64| {
+        if (-2..4).contains(&exponent) {
+            format!("{v:.*}", (significant - 1 - exponent).clamp(0, 12) as usize)
+        } else {
+            format!("{v:.*e}", (significant - 1).max(0) as usize)
+        }
+    }
+}
+
+/// Draws panels in a grid of `columns` into `path`.
+fn figure(path: &Path, title: &str, names: &[String], panels: &[Panel], columns: usize) -> Result<(), PlotError> {
+    register_font();
+    let draw_err = |e: &dyn std::fmt::Display| PlotError::Draw { path: path.into(), message: e.to_string() };
+    let rows = panels.len().div_ceil(columns);
+    let root = BitMapBackend::new(path, (560 * columns as u32, 380 * rows as u32 + 50)).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| draw_err(&e))?;
+    let body = root.titled(title, (FAMILY, 26)).map_err(|e| draw_err(&e))?;
+    for (area, panel) in body.split_evenly((rows, columns)).iter().zip(panels) {
+        let x = range(panel.lines.iter().flatten().map(|p| p.0));
+        let y = range(panel.lines.iter().flatten().map(|p| p.1));
+        let (x_format, y_format) = (tick_format(&x), tick_format(&y));
+        let mut chart = ChartBuilder::on(area)
+            .caption(&panel.title, (FAMILY, 18))
+            .margin(12)
+            .x_label_area_size(40)
+            .y_label_area_size(80)
+            .build_cartesian_2d(x, y)
+            .map_err(|e| draw_err(&e))?;
+        chart
+            .configure_mesh()
+            .x_desc("t")
+            .y_desc(panel.y_label.as_str())
+            .label_style((FAMILY, 13))
+            .y_label_formatter(&y_format)
+            .x_label_formatter(&x_format)
+            .draw()
+            .map_err(|e| draw_err(&e))?;
+        for (i, (line, name)) in panel.lines.iter().zip(names).enumerate() {
+            let color = COLORS[i % COLORS.len()];
+            // One pixel wide: plotters' wide lines spike on near-vertical segments.
+            let series = chart.draw_series(LineSeries::new(line.iter().copied(), color)).map_err(|e| draw_err(&e))?;
+            series.label(name.as_str()).legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+        }
+        if names.len() > 1 {
+            chart
+                .configure_series_labels()
+                .label_font((FAMILY, 13))
+                .background_style(WHITE.mix(0.8))
+                .border_style(BLACK)
+                .draw()
+                .map_err(|e| draw_err(&e))?;
+        }
+    }
+    root.present().map_err(|e| draw_err(&e))
+}
+
+fn field(name: &'static str) -> impl Fn(&serde_json::Value) -> Option<f64> {
+    move |m| m[name].as_f64()
+}
+
+/// Labels that tell runs apart: scene names, or file stems when scene names repeat (a sweep).
+fn run_names(runs: &[RunRecord]) -> Vec<String> {
+    let names: Vec<String> = runs.iter().map(RunRecord::name).collect();
+    let unique = names.iter().collect::<std::collections::BTreeSet<_>>().len() == names.len();
+    if unique {
+        names
+    } else {
+        runs.iter().map(|r| r.path.file_stem().map_or_else(|| "run".into(), |s| s.to_string_lossy().into_owned())).collect()
+    }
+}
+
+/// Writes `energies.png`, `solver.png` and `probe_<name>.png` for the runs into `out`;
+/// returns the files written.
+pub fn plot_runs(runs: &[RunRecord], out: &Path) -> Result<Vec<PathBuf>, PlotError> {
+    std::fs::create_dir_all(out).map_err(|source| PlotError::Create { path: out.into(), source })?;
+    for r in runs {
+        r.require("/energy")?;
+    }
+    let names = run_names(runs);
+    let mut written = Vec::new();
+
+    let energy = |title: &str, key: &'static str| Panel::of(runs, title, "energy", "/energy", field(key));
+    let balance = Panel::of(runs, "energy balance error", "log10 relative error", "/energy", |m| Some(m["energy_balance_error"].as_f64()?.max(1e-17).log10()));
+    let panels = [
+        energy("kinetic", "kinetic"),
+        energy("strain", "strain"),
+        energy("total (kinetic + strain + potential)", "total"),
+        energy("friction dissipation", "friction_dissipation"),
+        energy("numerical dissipation", "numerical_dissipation"),
+        balance,
+    ];
+    let path = out.join("energies.png");
+    figure(&path, "Energies", &names, &panels, 3)?;
+    written.push(path);
+
+    let solver = [
+        Panel::of(runs, "Newton iterations per step", "iterations", "/solver", field("newton_iterations")),
+        Panel::of(runs, "Uzawa sweeps per step", "sweeps", "/solver", field("uzawa_iterations")),
+        Panel::of(runs, "wall time per step", "seconds", "/solver", |m| m["wall_s"]["total"].as_f64()),
+        Panel::of(runs, "time step", "dt", "/solver", field("dt")),
+    ];
+    let path = out.join("solver.png");
+    figure(&path, "Solver", &names, &solver, 2)?;
+    written.push(path);
+
+    let mut probes: Vec<String> = runs.iter().flat_map(|r| r.names_under("/probe/")).collect();
+    probes.sort();
+    probes.dedup();
+    for probe in probes {
+        let topic = format!("/probe/{probe}");
+        let dim = runs.iter().find_map(|r| r.messages(&topic).first()).and_then(|m| m["position"].as_array()).map_or(2, Vec::len);
+        let mut panels = vec![Panel::of(runs, "von Mises stress", "stress", &topic, field("von_mises"))];
+        for (i, axis) in ["x", "y", "z"].iter().enumerate().take(dim) {
+            panels.push(Panel::of(runs, &format!("position {axis}"), axis, &topic, move |m| m["position"][i].as_f64()));
+        }
+        let path = out.join(format!("probe_{probe}.png"));
+        figure(&path, &format!("Probe {probe}"), &names, &panels, 2)?;
+        written.push(path);
+    }
+    Ok(written)
+}

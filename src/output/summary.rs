@@ -1,0 +1,129 @@
+//! `bifirst summary`: the totals of one or more run logs as a table (or JSON).
+
+use super::read::{ReadError, RunRecord};
+use serde_json::Value;
+
+const PHASES: [&str; 5] = ["elements", "assembly", "factorization", "solve", "contact"];
+
+/// The totals of one run log.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct LogSummary {
+    pub name: String,
+    /// `finished`, `failed`, `interrupted`, or `incomplete` (no `/summary`: the process died).
+    pub status: String,
+    pub message: Option<String>,
+    pub steps: u64,
+    pub t_end: f64,
+    pub cutbacks: u64,
+    pub newton_iterations: u64,
+    pub uzawa_iterations: u64,
+    /// Total energy at the end minus at the start.
+    pub energy_drift: f64,
+    /// `energy_drift` relative to the largest of the initial and final total energies.
+    pub relative_energy_drift: f64,
+    pub energy_balance_error: f64,
+    pub max_penetration: f64,
+    /// Wall seconds per phase (`elements`, ..., `contact`, then `total`).
+    pub wall_by_phase: Vec<(String, f64)>,
+}
+
+fn number(v: &Value) -> f64 {
+    v.as_f64().unwrap_or(f64::NAN)
+}
+
+fn count(v: &Value) -> u64 {
+    v.as_u64().unwrap_or(0)
+}
+
+/// Sums the logged steps when the run has no `/summary` (a killed process).
+fn from_steps(record: &RunRecord) -> (Value, &'static str) {
+    let solver = record.messages("/solver");
+    let sum = |field: &str| solver.iter().map(|m| count(&m[field])).sum::<u64>();
+    let phase = |p: &str| solver.iter().map(|m| number(&m["wall_s"][p])).sum::<f64>();
+    let mut wall = serde_json::Map::new();
+    for p in PHASES.iter().chain(&["total"]) {
+        wall.insert(p.to_string(), phase(p).into());
+    }
+    let last = solver.last();
+    let summary = serde_json::json!({
+        "steps": last.map_or(0, |m| count(&m["step"])),
+        "t_end": last.map_or(0.0, |m| number(&m["t"])),
+        "cutbacks": sum("cutbacks"),
+        "newton_iterations": sum("newton_iterations"),
+        "uzawa_iterations": sum("uzawa_iterations"),
+        "max_penetration": record.series("/contact", "max_penetration").into_iter().fold(0.0, f64::max),
+        "wall_by_phase": wall,
+        "message": Value::Null,
+    });
+    (summary, "incomplete")
+}
+
+/// The totals of a run log: its `/summary` message, else the sums of its logged steps.
+pub fn summarize(record: &RunRecord) -> Result<LogSummary, ReadError> {
+    let energy = record.require("/energy")?;
+    let (s, status) = match record.messages("/summary").last() {
+        Some(s) => (s.clone(), s["status"].as_str().unwrap_or("unknown")),
+        None => from_steps(record),
+    };
+    let (first, last) = (&energy[0], &energy[energy.len() - 1]);
+    let (e0, e1) = (number(&first["total"]), number(&last["total"]));
+    let drift = e1 - e0;
+    let wall = &s["wall_by_phase"];
+    Ok(LogSummary {
+        name: record.name(),
+        status: status.to_string(),
+        message: s["message"].as_str().map(String::from),
+        steps: count(&s["steps"]),
+        t_end: number(&s["t_end"]),
+        cutbacks: count(&s["cutbacks"]),
+        newton_iterations: count(&s["newton_iterations"]),
+        uzawa_iterations: count(&s["uzawa_iterations"]),
+        energy_drift: drift,
+        relative_energy_drift: drift / e0.abs().max(e1.abs()).max(f64::MIN_POSITIVE),
+        energy_balance_error: number(&last["energy_balance_error"]),
+        max_penetration: number(&s["max_penetration"]),
+        wall_by_phase: PHASES.iter().chain(&["total"]).map(|p| (p.to_string(), number(&wall[*p]))).collect(),
+    })
+}
+
+/// A table with one column per run.
+pub fn table(runs: &[LogSummary]) -> String {
+    let per_step = |r: &LogSummary, n: u64| if r.steps > 0 { format!("{n} ({:.2}/step)", n as f64 / r.steps as f64) } else { n.to_string() };
+    let mut rows: Vec<(String, Vec<String>)> = vec![
+        ("run".into(), runs.iter().map(|r| r.name.clone()).collect()),
+        ("status".into(), runs.iter().map(|r| r.status.clone()).collect()),
+        ("steps".into(), runs.iter().map(|r| r.steps.to_string()).collect()),
+        ("t end".into(), runs.iter().map(|r| format!("{:.6e}", r.t_end)).collect()),
+        ("cut-backs".into(), runs.iter().map(|r| r.cutbacks.to_string()).collect()),
+        ("Newton iterations".into(), runs.iter().map(|r| per_step(r, r.newton_iterations)).collect()),
+        ("Uzawa sweeps".into(), runs.iter().map(|r| per_step(r, r.uzawa_iterations)).collect()),
+        ("energy drift".into(), runs.iter().map(|r| format!("{:.4e} ({:+.2e} rel.)", r.energy_drift, r.relative_energy_drift)).collect()),
+        ("energy balance error".into(), runs.iter().map(|r| format!("{:.2e}", r.energy_balance_error)).collect()),
+        ("max penetration".into(), runs.iter().map(|r| format!("{:.3e}", r.max_penetration)).collect()),
+    ];
+    for (i, phase) in PHASES.iter().chain(&["total"]).enumerate() {
+        let label = if *phase == "total" { "wall s, steps total".to_string() } else { format!("wall s, {phase}") };
+        let cells = runs
+            .iter()
+            .map(|r| {
+                let (value, total) = (r.wall_by_phase[i].1, r.wall_by_phase[PHASES.len()].1);
+                if *phase == "total" || total <= 0.0 { format!("{value:.3}") } else { format!("{value:.3} ({:.0}%)", 100.0 * value / total) }
+            })
+            .collect();
+        rows.push((label, cells));
+    }
+    let label_width = rows.iter().map(|(l, _)| l.len()).max().unwrap_or(0);
+    let widths: Vec<usize> = (0..runs.len()).map(|c| rows.iter().map(|(_, cells)| cells[c].len()).max().unwrap_or(0)).collect();
+    let mut out = String::new();
+    for (label, cells) in &rows {
+        out.push_str(&format!("{label:<label_width$}"));
+        for (cell, w) in cells.iter().zip(&widths) {
+            out.push_str(&format!("  {cell:>w$}"));
+        }
+        out.push('\n');
+    }
+    for r in runs.iter().filter(|r| r.message.is_some()) {
+        out.push_str(&format!("{}: {}\n", r.name, r.message.as_deref().unwrap_or_default()));
+    }
+    out
+}
