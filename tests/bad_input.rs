@@ -209,3 +209,14 @@ fn motion_table_with_times_going_back() {
     let scene = format!("{GOOD}{WALL}motion = [[0.0, 0.0, 1.0], [0.5, 0.0, 0.0], [0.2, 0.0, -1.0]]\n");
     assert_error("motion_backwards", &scene, &[], "obstacle.wall.motion.2", Some(23), "must increase");
 }
+
+#[test]
+fn names_that_cannot_be_topics_or_file_names() {
+    let probe = "\n[probe.\"tip/top\"]\nbody = \"block\"\npoint = [0.5, 1.0]\n";
+    assert_error("name_with_slash", &format!("{GOOD}{probe}"), &[], "probe.tip/top", Some(19), "letters, digits");
+}
+
+#[test]
+fn zero_vtu_cadence() {
+    assert_error("zero_vtu_cadence", GOOD, &["output.vtu_every=0"], "output.vtu_every", None, "at least 1 step");
+}

@@ -81,6 +81,8 @@ fn tick_format(r: &std::ops::Range<f64>) -> impl Fn(&f64) -> String {
     let significant = ((magnitude / (r.end - r.start)).log10().ceil().max(0.0) as i32 + 2).min(12);
     let exponent = magnitude.log10().floor() as i32;
     move |v: &f64| {
+        // A tick at zero computed as round-off (1e-20) reads as zero.
+        let v = if v.abs() < 1e-9 * magnitude { &0.0 } else { v };
         if (-2..4).contains(&exponent) {
             format!("{v:.*}", (significant - 1 - exponent).clamp(0, 12) as usize)
         } else {
