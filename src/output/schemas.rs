@@ -40,8 +40,13 @@ pub fn energy() -> Value {
     object("bifirst.Energy", &f.map(|k| (k, number())))
 }
 
-pub fn solver() -> Value {
+/// Wall seconds by phase (`/solver.wall_s`, `/summary.wall_by_phase`).
+fn wall_times() -> Value {
     let phases = ["elements", "assembly", "factorization", "solve", "contact", "total"];
+    object("bifirst.WallTimes", &phases.map(|k| (k, number())))
+}
+
+pub fn solver() -> Value {
     object(
         "bifirst.Solver",
         &[
@@ -52,7 +57,7 @@ pub fn solver() -> Value {
             ("uzawa_iterations", integer()),
             ("residual_norm", number()),
             ("cutbacks", integer()),
-            ("wall_s", object("bifirst.WallTimes", &phases.map(|k| (k, number())))),
+            ("wall_s", wall_times()),
             ("status", json!({"type": "string", "enum": ["converged", "failed", "interrupted"]})),
             ("message", json!({"type": ["string", "null"]})),
         ],
@@ -103,7 +108,6 @@ pub fn contact() -> Value {
 
 /// The run's totals, written once when it ends (however it ends).
 pub fn summary() -> Value {
-    let phases = ["elements", "assembly", "factorization", "solve", "contact", "total"];
     let energies = ["kinetic", "strain", "potential", "external_work", "friction_dissipation", "numerical_dissipation", "total", "energy_balance_error"];
     object(
         "bifirst.Summary",
@@ -120,7 +124,7 @@ pub fn summary() -> Value {
             ("uzawa_iterations", integer()),
             ("max_penetration", number()),
             ("wall_s", number()),
-            ("wall_by_phase", object("bifirst.WallTimes", &phases.map(|k| (k, number())))),
+            ("wall_by_phase", wall_times()),
             ("energy", object("bifirst.Energies", &energies.map(|k| (k, number())))),
             ("output", json!({"type": "string"})),
         ],

@@ -111,6 +111,8 @@ fn rotation_from_x(d: Vec3) -> [Real; 4] {
 /// frames can be compared.
 pub struct View {
     dim: usize,
+    /// Each body's boundary (the contact surfaces when the scene has contact).
+    surfaces: Vec<Surface>,
     /// Diagonal of the bodies' initial bounding box: the size of planes and arrows.
     extent: Real,
     centre: Vec3,
@@ -131,7 +133,11 @@ impl View {
         }
         let extent = norm(sub(hi, lo)).max(Real::EPSILON);
         let centre = [0, 1, 2].map(|i| 0.5 * (lo[i] + hi[i]));
-        Self { dim: sim.dim, extent, centre, von_mises_max: 0.0, force_max: 0.0 }
+        let surfaces = match &sim.contact {
+            Some(c) => c.surfaces.clone(),
+            None => sim.bodies.iter().map(|b| Surface::of(&b.mesh)).collect(),
+        };
+        Self { dim: sim.dim, surfaces, extent, centre, von_mises_max: 0.0, force_max: 0.0 }
     }
 
     /// The scene at the committed state; `fields` are each body's [`CellFields`].
@@ -139,19 +145,10 @@ impl View {
         let t = sim.t;
         let frame_max = fields.iter().flatten().map(|f| f.von_mises).fold(0.0, Real::max);
         self.von_mises_max = self.von_mises_max.max(frame_max);
-        let mut entities = Vec::new();
+        let mut entities: Vec<Value> = sim.bodies.iter().enumerate().map(|(b, body)| self.body(t, body, &self.surfaces[b], &fields[b])).collect();
         if let Some(contact) = &sim.contact {
-            for (b, body) in sim.bodies.iter().enumerate() {
-                entities.push(self.body(t, body, &contact.surfaces[b], &fields[b]));
-            }
-            for o in &contact.obstacles {
-                entities.push(self.obstacle(t, o));
-            }
+            entities.extend(contact.obstacles.iter().map(|o| self.obstacle(t, o)));
             entities.push(self.contact_forces(sim));
-        } else {
-            for (body, f) in sim.bodies.iter().zip(fields) {
-                entities.push(self.body(t, body, &Surface::of(&body.mesh), f));
-            }
         }
         json!({"deletions": [], "entities": entities})
     }
