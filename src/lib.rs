@@ -7,6 +7,7 @@
 pub mod assembly;
 pub mod contact;
 pub mod element;
+pub mod gpu;
 pub mod material;
 pub mod mesh;
 pub mod precision;

@@ -224,7 +224,16 @@ fn main() -> ExitCode {
             println!("bifirst {} (git {})", env!("CARGO_PKG_VERSION"), bifirst::run::GIT_REVISION.unwrap_or("unknown"));
             println!("build: {} profile, rustc target {}-{}", if cfg!(debug_assertions) { "debug" } else { "release" }, std::env::consts::ARCH, std::env::consts::OS);
             println!("precision: {}", bifirst::precision::PRECISION_NAME);
-            println!("backends: cpu (GPU backend not built yet)");
+            println!("backends: cpu (the solver runs here); GPU kernels: {}", bifirst::gpu::shaders::SHADERS.iter().map(|(name, _)| *name).collect::<Vec<_>>().join(", "));
+            let adapters = bifirst::gpu::describe_adapters();
+            if adapters.is_empty() {
+                println!("GPU adapters: none (install mesa-vulkan-drivers for the lavapipe software adapter)");
+            } else {
+                println!("GPU adapters, best first:");
+                for a in adapters {
+                    println!("  {}  driver: {}", a.line(), a.driver);
+                }
+            }
             Ok(ExitCode::SUCCESS)
         }
     };

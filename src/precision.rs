@@ -1,10 +1,41 @@
-//! The one place that chooses the engine's floating-point precision.
+//! The one place that chooses floating-point precision.
 //!
-//! The CPU engine runs in f64; the GPU backend (later) picks f32 or f64 per adapter, but
-//! everything on the CPU side, the factorisation included, uses [`Real`].
+//! The CPU engine runs in f64 ([`Real`]), the factorisation included. GPU kernels run in the
+//! [`Precision`] of their pipeline: the WGSL sources in `shaders/` are written against an alias
+//! `real`, which [`Precision::wgsl_prelude`] defines as `f32` or `f64` when a pipeline is made.
 
 /// The floating-point type of the CPU engine.
 pub type Real = f64;
 
 /// Name of [`Real`] as written to logs (`/run.precision`).
 pub const PRECISION_NAME: &str = "f64";
+
+/// Precision of a GPU pipeline.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Precision {
+    F32,
+    F64,
+}
+
+impl Precision {
+    pub fn name(self) -> &'static str {
+        match self {
+            Precision::F32 => "f32",
+            Precision::F64 => "f64",
+        }
+    }
+
+    /// Bytes of one `real`.
+    pub fn size(self) -> usize {
+        match self {
+            Precision::F32 => 4,
+            Precision::F64 => 8,
+        }
+    }
+
+    /// Prepended to every shader source: the `real` alias.
+    pub fn wgsl_prelude(self) -> String {
+        format!("alias real = {};\n", self.name())
+    }
+}

@@ -16,6 +16,17 @@ pub enum Status {
     Sliding,
 }
 
+impl Status {
+    /// The code kernels and VTU files use: 0 separated, 1 sticking, 2 sliding.
+    pub fn code(self) -> u32 {
+        match self {
+            Status::Separated => 0,
+            Status::Sticking => 1,
+            Status::Sliding => 2,
+        }
+    }
+}
+
 fn tangential_norm(x: &[Real; 3]) -> Real {
     (x[1] * x[1] + x[2] * x[2]).sqrt()
 }

@@ -7,7 +7,6 @@
 //! `tangential_reaction` (vector) and `status` (0 open, 1 stick, 2 slip).
 
 use super::OutputError;
-use crate::contact::Status;
 use crate::element::CellFields;
 use crate::mesh::ElementKind;
 use crate::precision::Real;
@@ -34,15 +33,6 @@ fn cell_type(kind: ElementKind) -> CellType {
         ElementKind::Quad4 => CellType::Quad,
         ElementKind::Tet4 => CellType::Tetra,
         ElementKind::Hex8 => CellType::Hexahedron,
-    }
-}
-
-/// Status code written for a contact point.
-pub fn status_code(s: Status) -> i32 {
-    match s {
-        Status::Separated => 0,
-        Status::Sticking => 1,
-        Status::Sliding => 2,
     }
 }
 
@@ -136,7 +126,7 @@ impl VtuSeries {
                     array("normal", ElementType::Vectors, c.iter().flat_map(|p| p.frame[0]).collect()),
                     scalars("normal_reaction", c.iter().map(|p| p.r[0]).collect()),
                     array("tangential_reaction", ElementType::Vectors, c.iter().flat_map(|p| p.to_global(&[0.0, p.r[1], p.r[2]])).collect()),
-                    array("status", ElementType::Scalars { num_comp: 1, lookup_table: None }, c.iter().map(|p| status_code(p.status)).collect()),
+                    array("status", ElementType::Scalars { num_comp: 1, lookup_table: None }, c.iter().map(|p| p.status.code() as i32).collect::<Vec<i32>>()),
                 ],
                 cell: vec![],
             };

@@ -1,0 +1,139 @@
+//! Finding an adapter and opening a device: a hardware GPU when there is one, else a software
+//! adapter (lavapipe on Vulkan, llvmpipe on GL); f64 when the adapter has `SHADER_F64`.
+
+use crate::precision::Precision;
+use wgpu::{Adapter, Backends, DeviceType};
+
+#[derive(Debug, thiserror::Error)]
+pub enum GpuError {
+    #[error("no GPU adapter{}; available: {}", .wanted.as_ref().map(|w| format!(" named like `{w}`")).unwrap_or_default(), if .available.is_empty() { "none (install mesa-vulkan-drivers for the lavapipe software adapter)".to_string() } else { .available.join(", ") })]
+    NoAdapter { wanted: Option<String>, available: Vec<String> },
+    #[error("adapter `{adapter}` has no f64 support in shaders (SHADER_F64); use --precision f32")]
+    NoF64 { adapter: String },
+    #[error("cannot open a device on `{adapter}`: {message}")]
+    Device { adapter: String, message: String },
+    #[error("kernel `{kernel}`: {message}")]
+    Kernel { kernel: String, message: String },
+}
+
+/// What `bifirst info` prints about an adapter.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct AdapterReport {
+    pub name: String,
+    pub backend: String,
+    pub device_type: String,
+    pub driver: String,
+    pub f64: bool,
+}
+
+impl AdapterReport {
+    fn of(adapter: &Adapter) -> Self {
+        let info = adapter.get_info();
+        Self {
+            name: info.name,
+            backend: format!("{:?}", info.backend),
+            device_type: format!("{:?}", info.device_type),
+            driver: format!("{} {}", info.driver, info.driver_info).trim().to_string(),
+            f64: adapter.features().contains(wgpu::Features::SHADER_F64),
+        }
+    }
+
+    /// One line for listings and logs.
+    pub fn line(&self) -> String {
+        format!("{} ({}, {}, f64 {})", self.name, self.backend, self.device_type, if self.f64 { "yes" } else { "no" })
+    }
+}
+
+/// An open device with the precision its pipelines use.
+pub struct Gpu {
+    pub device: wgpu::Device,
+    pub queue: wgpu::Queue,
+    pub adapter: AdapterReport,
+    pub precision: Precision,
+}
+
+fn adapters() -> Vec<Adapter> {
+    let backends = Backends::VULKAN | Backends::GL;
+    let instance = wgpu::Instance::new(wgpu::InstanceDescriptor { backends, ..wgpu::InstanceDescriptor::new_without_display_handle() });
+    pollster::block_on(instance.enumerate_adapters(backends))
+}
+
+/// Every adapter this machine offers, best first (the order `auto` picks in).
+pub fn describe_adapters() -> Vec<AdapterReport> {
+    ranked(adapters()).iter().map(AdapterReport::of).collect()
+}
+
+/// Hardware before software, Vulkan before GL, f64 before none.
+fn ranked(mut list: Vec<Adapter>) -> Vec<Adapter> {
+    list.sort_by_key(|a| {
+        let info = a.get_info();
+        let kind = match info.device_type {
+            DeviceType::DiscreteGpu => 0,
+            DeviceType::IntegratedGpu => 1,
+            DeviceType::VirtualGpu | DeviceType::Other => 2,
+            DeviceType::Cpu => 3,
+        };
+        (kind, info.backend != wgpu::Backend::Vulkan, !a.features().contains(wgpu::Features::SHADER_F64))
+    });
+    list
+}
+
+/// Opens the best adapter, or the first whose name contains `name` (case-insensitive), in
+/// `precision` (default: f64 when the adapter has it, else f32).
+pub fn open(name: Option<&str>, precision: Option<Precision>) -> Result<Gpu, GpuError> {
+    let list = ranked(adapters());
+    let available: Vec<String> = list.iter().map(|a| AdapterReport::of(a).line()).collect();
+    let wanted = name.map(str::to_lowercase);
+    let adapter = list
+        .into_iter()
+        .find(|a| wanted.as_ref().is_none_or(|w| a.get_info().name.to_lowercase().contains(w)))
+        .ok_or_else(|| GpuError::NoAdapter { wanted: name.map(String::from), available })?;
+    let report = AdapterReport::of(&adapter);
+    let precision = match precision {
+        Some(Precision::F64) if !report.f64 => return Err(GpuError::NoF64 { adapter: report.name }),
+        Some(p) => p,
+        None if report.f64 => Precision::F64,
+        None => Precision::F32,
+    };
+    let required_features = if precision == Precision::F64 { wgpu::Features::SHADER_F64 } else { wgpu::Features::empty() };
+    let descriptor = wgpu::DeviceDescriptor { label: Some("bifirst"), required_features, required_limits: adapter.limits(), ..Default::default() };
+    let (device, queue) =
+        pollster::block_on(adapter.request_device(&descriptor)).map_err(|e| GpuError::Device { adapter: report.name.clone(), message: e.to_string() })?;
+    Ok(Gpu { device, queue, adapter: report, precision })
+}
+
+impl Gpu {
+    /// A compute pipeline for a shader of `shaders/` at this device's precision; shader errors
+    /// come back as [`GpuError::Kernel`] instead of wgpu's default panic.
+    pub fn pipeline(&self, kernel: &str) -> Result<wgpu::ComputePipeline, GpuError> {
+        let source = super::shaders::source(kernel, self.precision).ok_or_else(|| GpuError::Kernel { kernel: kernel.into(), message: "no such shader".into() })?;
+        let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+        let module = self.device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some(kernel), source: wgpu::ShaderSource::Wgsl(source.into()) });
+        let pipeline = self.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+            label: Some(kernel),
+            layout: None,
+            module: &module,
+            entry_point: Some("main"),
+            compilation_options: Default::default(),
+            cache: None,
+        });
+        match pollster::block_on(scope.pop()) {
+            Some(e) => Err(GpuError::Kernel { kernel: kernel.into(), message: e.to_string() }),
+            None => Ok(pipeline),
+        }
+    }
+
+    /// Waits for submitted work and maps `buffer` for reading.
+    pub fn read(&self, kernel: &str, buffer: &wgpu::Buffer) -> Result<Vec<u8>, GpuError> {
+        let err = |message: String| GpuError::Kernel { kernel: kernel.into(), message };
+        let (sender, receiver) = std::sync::mpsc::channel();
+        buffer.map_async(wgpu::MapMode::Read, .., move |result| {
+            let _ = sender.send(result);
+        });
+        self.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| err(e.to_string()))?;
+        receiver.recv().map_err(|e| err(e.to_string()))?.map_err(|e| err(e.to_string()))?;
+        let bytes = buffer.get_mapped_range(..).map_err(|e| err(e.to_string()))?.to_vec();
+        buffer.unmap();
+        Ok(bytes)
+    }
+}
