@@ -268,6 +268,15 @@ impl Logger {
         self.log.write("/summary", t, &serde_json::to_value(summary).expect("serializes"))
     }
 
+    /// A step's events (cut-backs) to the monitor and, as warnings, to `/log`.
+    fn events(&mut self, monitor: &mut dyn Monitor, t: Real, events: &[String]) -> Result<(), OutputError> {
+        for ev in events {
+            monitor.warning(ev);
+            self.line(t, Level::Warning, ev)?;
+        }
+        Ok(())
+    }
+
     fn line(&mut self, t: Real, level: Level, message: &str) -> Result<(), OutputError> {
         self.log.write("/log", t, &foxglove::log(t, level, message))
     }
@@ -333,20 +342,14 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
             Ok(Ok(report)) => report,
             Ok(Err(failure)) => {
                 totals.cutbacks += failure.cutbacks;
-                for ev in &failure.report.events {
-                    monitor.warning(ev);
-                    logger.line(failure.t, Level::Warning, ev)?;
-                }
+                logger.events(monitor, failure.t, &failure.report.events)?;
                 let mut report = failure.report.clone();
                 report.t = failure.t;
                 break Some((Stop::Failed(Box::new(failure)), report));
             }
             Err(payload) => break Some((Stop::Panicked(panic_message(payload.as_ref())), StepReport { step: sim.step + 1, t: sim.t, ..Default::default() })),
         };
-        for ev in &report.events {
-            monitor.warning(ev);
-            logger.line(sim.t, Level::Warning, ev)?;
-        }
+        logger.events(monitor, sim.t, &report.events)?;
         totals.cutbacks += report.cutbacks;
         totals.newton += report.newton_iterations;
         totals.uzawa += report.uzawa_iterations;

@@ -5,7 +5,8 @@
 mod random;
 
 use bifirst::gpu::shaders::{validate, SHADERS};
-use bifirst::gpu::uzawa_step::{status_of, UzawaPoint, UzawaStepKernel};
+use bifirst::contact::Status;
+use bifirst::gpu::uzawa_step::{UzawaPoint, UzawaStepKernel};
 use bifirst::precision::Precision;
 use rand::Rng;
 
@@ -123,7 +124,7 @@ fn uzawa_step_kernel_matches_its_cpu_twin() {
             let cpu = input.stepped_on_cpu();
             let scale = cpu.r.iter().chain(&input.r).fold(1e-300, |m: f64, x| m.max(x.abs()));
             let error = (0..3).map(|k| (gpu_point.r[k] - cpu.r[k]).abs()).fold(0.0, f64::max) / scale;
-            if status_of(gpu_point.status) != status_of(cpu.status) {
+            if Status::from_code(gpu_point.status as u32) != Status::from_code(cpu.status as u32) {
                 // Only allowed on a case boundary, where both answers agree to the tolerance.
                 assert!(precision == Precision::F32 && boundary_distance(input) < 1e-5, "{input:?}: GPU {gpu_point:?} CPU {cpu:?}");
                 status_flips += 1;

@@ -25,6 +25,15 @@ impl Status {
             Status::Sliding => 2,
         }
     }
+
+    /// The status of a [`Status::code`] (kernels write it as a `real`).
+    pub fn from_code(code: u32) -> Self {
+        match code {
+            1 => Status::Sticking,
+            2 => Status::Sliding,
+            _ => Status::Separated,
+        }
+    }
 }
 
 fn tangential_norm(x: &[Real; 3]) -> Real {

@@ -2,7 +2,7 @@
 //! contact point. CPU twin: [`crate::contact::law::uzawa_step`].
 
 use super::{Gpu, GpuError};
-use crate::contact::law::{uzawa_step, Status};
+use crate::contact::law::uzawa_step;
 use crate::precision::{Precision, Real};
 use bytemuck::{Pod, Zeroable};
 use wgpu::util::DeviceExt;
@@ -45,15 +45,6 @@ impl UzawaPoint<f32> {
     fn to_f64(self) -> UzawaPoint<Real> {
         let f = |x: [f32; 3]| x.map(Real::from);
         UzawaPoint { r: f(self.r), v: f(self.v), mu: self.mu.into(), rho: self.rho.into(), status: self.status.into() }
-    }
-}
-
-/// The status a kernel wrote.
-pub fn status_of(code: Real) -> Status {
-    match code as u32 {
-        1 => Status::Sticking,
-        2 => Status::Sliding,
-        _ => Status::Separated,
     }
 }
 
