@@ -5,7 +5,9 @@
 //! [`assembly`] -> [`solver`] -> [`output`].
 
 pub mod assembly;
+pub mod backend;
 pub mod contact;
+pub mod cpu;
 pub mod element;
 pub mod gpu;
 pub mod material;

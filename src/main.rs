@@ -1,7 +1,9 @@
 //! The `bifirst` command line: run, check, plot, summary and info.
 
 use anyhow::Result;
+use bifirst::backend::{BackendChoice, BackendRequest};
 use bifirst::output::{plot, read_run, summary};
+use bifirst::precision::Precision;
 use bifirst::run::{run_scene, Monitor, RunError, RunOptions, RunSummary, Stop};
 use bifirst::scene::load_scene;
 use bifirst::solver::StepReport;
@@ -41,6 +43,16 @@ enum Command {
         /// Print the final summary as JSON on stdout.
         #[arg(long)]
         json: bool,
+        /// Where the element and assembly kernels run: `auto` takes a hardware GPU, else a
+        /// software adapter (lavapipe), else the CPU.
+        #[arg(long, default_value = "auto", value_parser = parse_backend)]
+        backend: BackendChoice,
+        /// A GPU adapter by name (case-insensitive substring; `bifirst info` lists them).
+        #[arg(long, value_name = "NAME")]
+        adapter: Option<String>,
+        /// GPU kernel precision, f32 or f64 (default: f64 when the adapter has it).
+        #[arg(long, value_parser = parse_precision)]
+        precision: Option<Precision>,
     },
     /// Plot run logs into PNGs (energies, solver, probes); several logs are overlaid.
     Plot {
@@ -78,6 +90,11 @@ struct Progress {
 }
 
 impl Monitor for Progress {
+    fn backend(&mut self, description: &str) {
+        if !self.quiet {
+            eprintln!("backend: {description}");
+        }
+    }
     fn started(&mut self, total: usize) {
         if !self.quiet && std::io::stderr().is_terminal() {
             let bar = ProgressBar::with_draw_target(Some(total as u64), ProgressDrawTarget::stderr());
@@ -144,7 +161,16 @@ fn interrupt_flag() -> Result<Arc<AtomicBool>> {
     Ok(flag)
 }
 
+fn parse_backend(s: &str) -> Result<BackendChoice, String> {
+    s.parse()
+}
+
+fn parse_precision(s: &str) -> Result<Precision, String> {
+    s.parse()
+}
+
 struct RunArgs {
+    backend: BackendRequest,
     scene: PathBuf,
     out: Option<PathBuf>,
     sets: Vec<String>,
@@ -157,9 +183,9 @@ fn run(args: RunArgs) -> Result<ExitCode> {
     let loaded = load_scene(&args.scene, &args.sets)?;
     let out = args.out.or_else(|| loaded.scene.output.mcap.clone()).unwrap_or_else(|| PathBuf::from(format!("{}.mcap", loaded.name)));
     if !args.quiet {
-        eprintln!("bifirst {}: scene `{}`, backend cpu, precision {}", env!("CARGO_PKG_VERSION"), loaded.name, bifirst::precision::PRECISION_NAME);
+        eprintln!("bifirst {}: scene `{}`", env!("CARGO_PKG_VERSION"), loaded.name);
     }
-    let options = RunOptions { vtu: args.vtu, interrupt: Some(interrupt_flag()?) };
+    let options = RunOptions { vtu: args.vtu, interrupt: Some(interrupt_flag()?), backend: args.backend };
     let mut progress = Progress { quiet: args.quiet, bar: None, last_line: Instant::now(), last_fraction: 0.0 };
     let result = run_scene(&loaded, &out, &options, &mut progress);
     if let Some(bar) = &progress.bar {
@@ -208,9 +234,16 @@ fn summary_command(runs: Vec<PathBuf>, json: bool) -> Result<ExitCode> {
 }
 
 fn main() -> ExitCode {
+    // Mesa's Vulkan device-select layer connects to the display server to order GPUs, and
+    // complains on headless machines; bifirst ranks adapters itself. Set before any thread starts.
+    if std::env::var_os("NODEVICE_SELECT").is_none() {
+        std::env::set_var("NODEVICE_SELECT", "1");
+    }
     let cli = Cli::parse();
     let result = match cli.command {
-        Command::Run { scene, out, sets, vtu, quiet, json } => run(RunArgs { scene, out, sets, vtu, quiet, json }),
+        Command::Run { scene, out, sets, vtu, quiet, json, backend, adapter, precision } => {
+            run(RunArgs { backend: BackendRequest { choice: backend, adapter, precision }, scene, out, sets, vtu, quiet, json })
+        }
         Command::Plot { runs, out } => plot_command(runs, out),
         Command::Summary { runs, json } => summary_command(runs, json),
         Command::Check { scene, sets } => load_scene(&scene, &sets).map_err(anyhow::Error::from).and_then(|loaded| {
@@ -223,8 +256,9 @@ fn main() -> ExitCode {
         Command::Info => {
             println!("bifirst {} (git {})", env!("CARGO_PKG_VERSION"), bifirst::run::GIT_REVISION.unwrap_or("unknown"));
             println!("build: {} profile, rustc target {}-{}", if cfg!(debug_assertions) { "debug" } else { "release" }, std::env::consts::ARCH, std::env::consts::OS);
-            println!("precision: {}", bifirst::precision::PRECISION_NAME);
-            println!("backends: cpu (the solver runs here); GPU kernels: {}", bifirst::gpu::shaders::SHADERS.iter().map(|(name, _)| *name).collect::<Vec<_>>().join(", "));
+            println!("solver precision: {} (factorisation, time stepping, contact)", bifirst::precision::PRECISION_NAME);
+            println!("WGSL kernels: {}", bifirst::gpu::shaders::SHADERS.iter().map(|(name, _)| *name).collect::<Vec<_>>().join(", "));
+            println!("  `run --backend gpu|auto` runs the element, assembly and energy kernels on the adapter; the contact loop stays on the CPU");
             let adapters = bifirst::gpu::describe_adapters();
             if adapters.is_empty() {
                 println!("GPU adapters: none (install mesa-vulkan-drivers for the lavapipe software adapter)");

@@ -34,8 +34,23 @@ impl Precision {
         }
     }
 
-    /// Prepended to every shader source: the `real` alias.
+    /// Prepended to every shader source: the `real` alias and its largest finite value.
     pub fn wgsl_prelude(self) -> String {
-        format!("alias real = {};\n", self.name())
+        let max = match self {
+            Precision::F32 => "3.4028234663852886e38",
+            Precision::F64 => "1.7976931348623157e308",
+        };
+        format!("alias real = {};\nconst REAL_MAX = real({max});\n", self.name())
+    }
+}
+
+impl std::str::FromStr for Precision {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "f32" => Ok(Self::F32),
+            "f64" => Ok(Self::F64),
+            _ => Err(format!("unknown precision `{s}` (f32 or f64)")),
+        }
     }
 }

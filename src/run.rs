@@ -5,7 +5,8 @@
 use crate::element::CellFields;
 use crate::output::foxglove::{self, Level, View};
 use crate::output::{schemas, OutputError, RunLog, VtuSeries};
-use crate::precision::{Real, PRECISION_NAME};
+use crate::backend::{Backend, BackendError, BackendRequest};
+use crate::precision::Real;
 use crate::scene::{LoadedScene, OutputSpec, SceneError};
 use crate::solver::{build_simulation, PhaseTimes, RunFailure, Simulation, StepReport};
 use serde_json::{json, Value};
@@ -14,15 +15,14 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
-/// Name of the CPU backend as logged in `/run`.
-pub const BACKEND: &str = "cpu";
-
 #[derive(Debug, thiserror::Error)]
 pub enum RunError {
     #[error("{0}")]
     Scene(#[from] SceneError),
     #[error("{0}")]
     Output(#[from] OutputError),
+    #[error("{0}")]
+    Backend(#[from] BackendError),
     /// The run stopped early; the log holds everything up to the last finished step.
     #[error("the run stopped: {reason}. The log `{}` holds everything up to t = {:.6e}.", .summary.output.display(), .summary.t_end)]
     Stopped { reason: Stop, summary: RunSummary },
@@ -58,6 +58,8 @@ pub struct RunOptions {
     pub vtu: Option<PathBuf>,
     /// When set (by a signal handler), the run stops after the current step.
     pub interrupt: Option<Arc<AtomicBool>>,
+    /// Where the kernels run (default: the CPU).
+    pub backend: BackendRequest,
 }
 
 /// What a run did, printed at its end.
@@ -70,6 +72,8 @@ pub struct RunSummary {
     pub message: Option<String>,
     pub backend: String,
     pub precision: String,
+    /// The GPU adapter, when the kernels ran on one.
+    pub adapter: Option<String>,
     pub steps: usize,
     pub t_end: Real,
     pub cutbacks: usize,
@@ -80,6 +84,8 @@ pub struct RunSummary {
     pub wall_s: f64,
     /// Wall time of the steps by phase, summed over the run.
     pub wall_by_phase: PhaseTimes,
+    /// Bytes moved between host and GPU over the run.
+    pub bytes_moved: u64,
     /// Energies at the end, with the dissipation and the energy balance error.
     pub energy: crate::solver::Energies,
     pub output: PathBuf,
@@ -87,6 +93,8 @@ pub struct RunSummary {
 
 /// Told about each step as it finishes (progress display).
 pub trait Monitor {
+    /// Where the kernels run, once the backend is chosen.
+    fn backend(&mut self, _description: &str) {}
     fn started(&mut self, _total_steps: usize) {}
     fn step(&mut self, _report: &StepReport, _total_steps: usize) {}
     fn warning(&mut self, _message: &str) {}
@@ -116,7 +124,7 @@ struct Logger {
 }
 
 impl Logger {
-    fn new(path: &Path, loaded: &LoadedScene, sim: &Simulation, options: &RunOptions) -> Result<Self, OutputError> {
+    fn new(path: &Path, loaded: &LoadedScene, sim: &Simulation, options: &RunOptions, backend: &Backend) -> Result<Self, OutputError> {
         let mut log = RunLog::create(path)?;
         let dim = sim.dim;
         let output = &loaded.scene.output;
@@ -152,9 +160,9 @@ impl Logger {
             "git_revision": GIT_REVISION,
             "scene_name": loaded.name,
             "scene": loaded.resolved_toml,
-            "backend": BACKEND,
-            "precision": PRECISION_NAME,
-            "adapter": Value::Null,
+            "backend": backend.name(),
+            "precision": backend.precision(),
+            "adapter": backend.adapter(),
         });
         log.write("/run", 0.0, &run)?;
         log.attach("scene.toml", "application/toml", loaded.resolved_toml.as_bytes())?;
@@ -165,9 +173,9 @@ impl Logger {
             ("scene_name", loaded.name.clone()),
             ("scene_file", loaded.path.display().to_string()),
             ("scene", loaded.resolved_toml.clone()),
-            ("backend", BACKEND.to_string()),
-            ("adapter", "none (CPU backend)".to_string()),
-            ("precision", PRECISION_NAME.to_string()),
+            ("backend", backend.name().to_string()),
+            ("adapter", backend.adapter().unwrap_or_else(|| "none (CPU backend)".to_string())),
+            ("precision", backend.precision().to_string()),
             ("cores", cores.to_string()),
         ]
         .into_iter()
@@ -257,7 +265,7 @@ impl Logger {
     fn solver(&mut self, r: &StepReport, t: Real, status: &str, message: Option<String>) -> Result<(), OutputError> {
         let msg = json!({
             "t": t, "step": r.step, "dt": r.dt, "newton_iterations": r.newton_iterations, "uzawa_iterations": r.uzawa_iterations,
-            "residual_norm": r.residual_norm, "cutbacks": r.cutbacks, "wall_s": r.wall,
+            "residual_norm": r.residual_norm, "cutbacks": r.cutbacks, "wall_s": r.wall, "bytes_moved": r.bytes_moved,
             "status": status, "message": message,
         });
         self.log.write("/solver", t, &msg)
@@ -298,14 +306,25 @@ struct Totals {
     uzawa: usize,
     max_penetration: Real,
     wall: PhaseTimes,
+    bytes_moved: u64,
 }
 
 /// Runs a loaded scene to its end time, logging to `out`.
 pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor: &mut dyn Monitor) -> Result<RunSummary, RunError> {
     let started = std::time::Instant::now();
     let mut sim = build_simulation(loaded)?;
+    let resolved = Backend::resolve(&options.backend)?;
+    if let Some(reason) = &resolved.fallback {
+        monitor.warning(&format!("backend auto: {reason}, running on the CPU"));
+    }
+    let backend = resolved.backend;
+    monitor.backend(&backend.describe());
+    backend.apply(&mut sim).map_err(BackendError::from)?;
     sim.start();
-    let mut logger = Logger::new(out, loaded, &sim, options)?;
+    let mut logger = Logger::new(out, loaded, &sim, options, &backend)?;
+    if let Some(reason) = &resolved.fallback {
+        logger.line(0.0, Level::Warning, &format!("backend auto: {reason}, running on the CPU"))?;
+    }
     let every = loaded.scene.output.every;
     let total = sim.step_count();
     monitor.started(total);
@@ -316,8 +335,9 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
         scene: loaded.name.clone(),
         status: stop.map_or("finished", Stop::status).to_string(),
         message: stop.map(Stop::to_string),
-        backend: BACKEND.to_string(),
-        precision: PRECISION_NAME.to_string(),
+        backend: backend.name().to_string(),
+        precision: backend.precision().to_string(),
+        adapter: backend.adapter(),
         steps: sim.step,
         t_end: sim.t,
         cutbacks: totals.cutbacks,
@@ -326,6 +346,7 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
         max_penetration: totals.max_penetration,
         wall_s: started.elapsed().as_secs_f64(),
         wall_by_phase: totals.wall,
+        bytes_moved: totals.bytes_moved,
         energy: sim.energies(),
         output: out.to_path_buf(),
     };
@@ -355,6 +376,7 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
         totals.uzawa += report.uzawa_iterations;
         totals.max_penetration = totals.max_penetration.max(report.contact.max_penetration);
         totals.wall += report.wall;
+        totals.bytes_moved += report.bytes_moved;
         if !sim.energies().total.is_finite() {
             break Some((Stop::NotFinite { step: sim.step, t: sim.t }, report));
         }

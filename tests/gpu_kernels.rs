@@ -4,11 +4,19 @@
 #[path = "common/random.rs"]
 mod random;
 
-use bifirst::gpu::shaders::{validate, SHADERS};
+use bifirst::assembly::{element_out_stride, DofMap, GatherMap, StiffnessPattern};
 use bifirst::contact::Status;
+use bifirst::cpu;
+use bifirst::element::{ElementOutput, ReferenceGeometry};
+use bifirst::gpu::shaders::{is_element_kernel, validate, ElementVariant, SHADERS};
+use bifirst::gpu::types::{Coefficients, DofOut, DofStep, MaterialParams};
 use bifirst::gpu::uzawa_step::{UzawaPoint, UzawaStepKernel};
+use bifirst::gpu::GpuBody;
+use bifirst::material::{BlatzKo, Lvf, Model, NeoHookean};
+use bifirst::mesh::{generate, ElementKind, Mesh};
 use bifirst::precision::Precision;
 use rand::Rng;
+use std::sync::Arc;
 
 const PRECISIONS: [Precision; 2] = [Precision::F32, Precision::F64];
 
@@ -21,9 +29,12 @@ fn every_shader_file_is_registered_and_validates_in_both_precisions() {
     registered.sort();
     assert_eq!(files, registered, "every file in shaders/ is compiled in, and nothing else");
     for (name, _) in SHADERS {
+        let variants: Vec<Option<ElementVariant>> = if is_element_kernel(name) { ElementVariant::all().into_iter().map(Some).collect() } else { vec![None] };
         for precision in PRECISIONS {
-            if let Err(e) = validate(name, precision) {
-                panic!("{name} ({}):\n{e}", precision.name());
+            for variant in &variants {
+                if let Err(e) = validate(name, precision, *variant) {
+                    panic!("{name} {variant:?} ({}):\n{e}", precision.name());
+                }
             }
         }
     }
@@ -39,7 +50,7 @@ fn naga_layout(module: &naga::Module, name: &str) -> (Vec<(String, u32)>, u32) {
 #[test]
 fn uzawa_point_matches_the_shader_layout() {
     for precision in PRECISIONS {
-        let module = validate("uzawa_step", precision).unwrap();
+        let module = validate("uzawa_step", precision, None).unwrap();
         let (members, span) = naga_layout(&module, "UzawaPoint");
         let (offsets, size) = match precision {
             Precision::F32 => {
@@ -63,6 +74,39 @@ fn uzawa_point_matches_the_shader_layout() {
         assert_eq!(rust, [0, 3 * real, 6 * real, 7 * real, 8 * real], "{}", precision.name());
         assert_eq!(span, size as u32, "{}: struct size", precision.name());
     }
+}
+
+/// Checks a struct whose fields are all `real`: naga's member names and offsets, and its size,
+/// against the Rust type in both precisions.
+fn check_all_real_struct(kernel: &str, variant: Option<ElementVariant>, name: &str, fields: &[&str], rust_size: [usize; 2]) {
+    for (precision, size) in PRECISIONS.into_iter().zip(rust_size) {
+        let module = validate(kernel, precision, variant).unwrap();
+        let (members, span) = naga_layout(&module, name);
+        let real = precision.size() as u32;
+        let expected: Vec<(String, u32)> = fields.iter().enumerate().map(|(i, f)| (f.to_string(), i as u32 * real)).collect();
+        assert_eq!(members, expected, "{name} in {}", precision.name());
+        assert_eq!(span as usize, size, "{name} size in {}", precision.name());
+        assert_eq!(size, fields.len() * real as usize, "{name}: the Rust struct has no padding");
+    }
+}
+
+#[test]
+fn kernel_structs_match_the_shader_layouts() {
+    use std::mem::size_of;
+    let variant = Some(ElementVariant { kind: ElementKind::Hex8, material: "lvf" });
+    let material = ["g", "k", "a1", "a2", "a3", "a4", "a5", "unused"];
+    check_all_real_struct("element_force_tangent", variant, "MaterialParams", &material, [size_of::<MaterialParams<f32>>(), size_of::<MaterialParams<f64>>()]);
+    let p = MaterialParams::<f64> { g: 1.0, k: 2.0, a1: 3.0, a2: 4.0, a3: 5.0, a4: 6.0, a5: 7.0, unused: 8.0 };
+    assert_eq!(bytemuck::cast::<_, [f64; 8]>(p), [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0], "field order");
+    for kernel in ["assemble_csr", "assemble_residual"] {
+        check_all_real_struct(kernel, None, "Coefficients", &["factor", "c1"], [size_of::<Coefficients<f32>>(), size_of::<Coefficients<f64>>()]);
+    }
+    check_all_real_struct("assemble_residual", None, "DofStep", &["mass", "u_pred", "f_int_t", "f_ext"], [size_of::<DofStep<f32>>(), size_of::<DofStep<f64>>()]);
+    let d = DofStep::<f64> { mass: 1.0, u_pred: 2.0, f_int_t: 3.0, f_ext: 4.0 };
+    assert_eq!(bytemuck::cast::<_, [f64; 4]>(d), [1.0, 2.0, 3.0, 4.0], "field order");
+    check_all_real_struct("assemble_residual", None, "DofOut", &["f_int", "g"], [size_of::<DofOut<f32>>(), size_of::<DofOut<f64>>()]);
+    let o = DofOut::<f64> { f_int: 1.0, g: 2.0 };
+    assert_eq!(bytemuck::cast::<_, [f64; 2]>(o), [1.0, 2.0], "field order");
 }
 
 /// An adapter when there is one. Without one, a GPU test fails in CI (`CI=true`) and is
@@ -135,5 +179,213 @@ fn uzawa_step_kernel_matches_its_cpu_twin() {
         eprintln!("{}: max relative error {worst:.3e}, status flips {status_flips}", precision.name());
         let statuses: std::collections::BTreeSet<u32> = on_gpu.iter().map(|p| p.status as u32).collect();
         assert_eq!(statuses.into_iter().collect::<Vec<_>>(), [0, 1, 2], "every regime is exercised");
+    }
+}
+
+fn model_of(material: &str) -> Model {
+    match material {
+        "blatz_ko" => Model::BlatzKo(BlatzKo { g: 1000.0 }),
+        "lvf" => Model::Lvf(Lvf { g: 5000.0, k: 3333.0, a1: 50.0, a2: 50.0, a3: 10.0, a4: 2000.0, a5: 100.0 }),
+        "neo_hookean" => Model::NeoHookean(NeoHookean { g: 1000.0, k: 3000.0 }),
+        other => panic!("material {other}"),
+    }
+}
+
+/// A small mesh of `kind` with a random deformation: a random homogeneous F (det in [0.5, 2])
+/// plus nodal noise, so that no two elements see the same strain.
+fn deformed_mesh(kind: ElementKind, seed: u64) -> (Mesh, Vec<f64>) {
+    let mesh = match kind {
+        ElementKind::Tri3 | ElementKind::Quad4 => generate::rectangle([0.0; 2], [1.0, 0.8], [7, 6], kind),
+        ElementKind::Tet4 | ElementKind::Hex8 => generate::cuboid([0.0; 3], [1.0, 0.8, 0.9], [4, 3, 3], kind),
+    };
+    let dim = kind.dim();
+    let mut rng = random::rng(seed);
+    let mut f = random::random_f(&mut rng);
+    if dim == 2 {
+        for k in 0..2 {
+            f[(2, k)] = 0.0;
+            f[(k, 2)] = 0.0;
+        }
+        f[(2, 2)] = 1.0;
+    }
+    let h = mesh.min_edge_length();
+    let mut u = Vec::with_capacity(mesh.nodes.len() * dim);
+    for x in &mesh.nodes {
+        let y = f * nalgebra::Vector3::new(x[0], x[1], x[2]);
+        for i in 0..dim {
+            u.push(y[i] - x[i] + rng.random_range(-0.03..0.03) * h);
+        }
+    }
+    (mesh, u)
+}
+
+/// The device data of a deformed body with the left face fixed (so the pattern skips dofs).
+struct Case {
+    mesh: Mesh,
+    model: Model,
+    geometry: ReferenceGeometry,
+    pattern: StiffnessPattern,
+    gather: GatherMap,
+    u: Vec<f64>,
+}
+
+fn case(variant: ElementVariant, seed: u64) -> Case {
+    let (mesh, u) = deformed_mesh(variant.kind, seed);
+    let dim = variant.kind.dim();
+    let mut prescribed = vec![false; mesh.nodes.len() * dim];
+    for (n, x) in mesh.nodes.iter().enumerate() {
+        if x[0] == 0.0 {
+            prescribed[n * dim..(n + 1) * dim].fill(true);
+        }
+    }
+    let dofs = DofMap::new(dim, &prescribed);
+    let pattern = StiffnessPattern::new(&mesh, &dofs);
+    let gather = GatherMap::new(&mesh, dim, &pattern);
+    let geometry = ReferenceGeometry::new(&mesh).unwrap();
+    Case { model: model_of(variant.material), mesh, geometry, pattern, gather, u }
+}
+
+impl Case {
+    fn on(&self, gpu: &Arc<bifirst::gpu::Gpu>) -> GpuBody {
+        GpuBody::new(gpu.clone(), &self.mesh, &self.geometry, &self.model, &self.pattern, &self.gather).expect("device body")
+    }
+
+    fn element_u(&self, e: usize) -> Vec<[f64; 3]> {
+        let dim = self.mesh.dim();
+        self.mesh.element(e).iter().map(|&n| {
+            let mut d = [0.0; 3];
+            d[..dim].copy_from_slice(&self.u[n as usize * dim..(n as usize + 1) * dim]);
+            d
+        }).collect()
+    }
+}
+
+/// `max |a - b| / max |b|` over a block: the relative error in the max norm.
+fn relative_error(a: &[f64], b: &[f64]) -> f64 {
+    let scale = b.iter().fold(1e-300, |m: f64, x| m.max(x.abs()));
+    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max) / scale
+}
+
+const TOLERANCES: [(Precision, f64); 2] = [(Precision::F64, 1e-12), (Precision::F32, 1e-5)];
+
+#[test]
+fn element_force_tangent_kernel_matches_its_cpu_twin() {
+    // Per element, the relative error in the max norm over its forces and tangent entries.
+    for (precision, tolerance) in TOLERANCES {
+        let Some(gpu) = gpu_or_skip("element_force_tangent_kernel_matches_its_cpu_twin", precision) else { continue };
+        let gpu = Arc::new(gpu);
+        for (k, variant) in ElementVariant::all().into_iter().enumerate() {
+            let c = case(variant, 100 + k as u64);
+            let (on_gpu, failure) = c.on(&gpu).element_results(&c.u).expect("kernel runs");
+            assert_eq!(failure, None, "{variant:?}");
+            let ndof = c.pattern.element_dofs;
+            let stride = element_out_stride(ndof);
+            let mut worst = 0.0f64;
+            let mut out = ElementOutput::default();
+            for e in 0..c.mesh.element_count() {
+                cpu::element_force_tangent(&c.model, c.geometry.element_points(e), &c.element_u(e), variant.kind.dim(), true, &mut out).unwrap();
+                let expected: Vec<f64> = out.force.iter().chain(&out.tangent).copied().collect();
+                worst = worst.max(relative_error(&on_gpu[e * stride..(e + 1) * stride], &expected));
+            }
+            eprintln!("{} {} {}: max relative error {worst:.2e}", precision.name(), variant.kind.name(), variant.material);
+            assert!(worst <= tolerance, "{variant:?} {}: {worst:.3e}", precision.name());
+        }
+    }
+}
+
+#[test]
+fn element_force_tangent_kernel_reports_the_first_inverted_element() {
+    let Some(gpu) = gpu_or_skip("element_force_tangent_kernel_reports_the_first_inverted_element", Precision::F64) else { return };
+    let variant = ElementVariant { kind: ElementKind::Quad4, material: "neo_hookean" };
+    let mut c = case(variant, 5);
+    // Turn elements 7 and 20 inside out by moving their third node through the first.
+    for e in [20, 7] {
+        let nodes = c.mesh.element(e).to_vec();
+        let (a, b) = (nodes[0] as usize, nodes[2] as usize);
+        for i in 0..2 {
+            let target = c.mesh.nodes[a][i] + c.u[a * 2 + i] - 0.5 * (c.mesh.nodes[b][i] - c.mesh.nodes[a][i]);
+            c.u[b * 2 + i] = target - c.mesh.nodes[b][i];
+        }
+    }
+    let (_, failure) = c.on(&Arc::new(gpu)).element_results(&c.u).expect("kernel runs");
+    assert!(matches!(failure, Some(bifirst::gpu::body::ElementFailure::Inverted(e)) if e <= 7), "{failure:?}");
+}
+
+#[test]
+fn assembly_kernels_match_their_cpu_twins() {
+    // The twins get the element results the GPU computed, so each kernel is checked alone:
+    // stiffness values and residuals, relative error in the max norm over the body.
+    for (precision, tolerance) in TOLERANCES {
+        let Some(gpu) = gpu_or_skip("assembly_kernels_match_their_cpu_twins", precision) else { continue };
+        let gpu = Arc::new(gpu);
+        for (k, kind) in [ElementKind::Tri3, ElementKind::Quad4, ElementKind::Tet4, ElementKind::Hex8].into_iter().enumerate() {
+            let c = case(ElementVariant { kind, material: "blatz_ko" }, 200 + k as u64);
+            let mut rng = random::rng(300 + k as u64);
+            let ndof = c.u.len();
+            let step: Vec<DofStep<f64>> = (0..ndof)
+                .map(|_| DofStep { mass: rng.random_range(0.1..1.0), u_pred: rng.random_range(-0.1..0.1), f_int_t: rng.random_range(-50.0..50.0), f_ext: rng.random_range(-5.0..5.0) })
+                .collect();
+            let coefficients = Coefficients { factor: 0.55, c1: 4e4 };
+            let mut body = c.on(&gpu);
+            body.begin_step(&step);
+            let (element_out, _) = body.element_results(&c.u).unwrap();
+            let mut values = vec![0.0; c.pattern.nnz()];
+            let mut dof_out = vec![DofOut::default(); ndof];
+            let failure = body.evaluate(&c.u, coefficients, &mut values, Some(&mut dof_out), &mut Default::default()).unwrap();
+            assert_eq!(failure, None);
+            let mut expected_values = vec![0.0; values.len()];
+            cpu::assemble_csr(&element_out, &c.gather.csr_start, &c.gather.csr, coefficients, &mut expected_values);
+            let mut expected_dofs = vec![DofOut::default(); ndof];
+            cpu::assemble_residual(&element_out, &c.gather.dof_start, &c.gather.dof, coefficients, &c.u, &step, &mut expected_dofs);
+            let csr_error = relative_error(&values, &expected_values);
+            let flat = |d: &[DofOut<f64>]| -> (Vec<f64>, Vec<f64>) { (d.iter().map(|o| o.f_int).collect(), d.iter().map(|o| o.g).collect()) };
+            let ((f, g), (fe, ge)) = (flat(&dof_out), flat(&expected_dofs));
+            let (f_error, g_error) = (relative_error(&f, &fe), relative_error(&g, &ge));
+            eprintln!("{} {}: assemble_csr {csr_error:.2e}, f_int {f_error:.2e}, residual {g_error:.2e}", precision.name(), kind.name());
+            assert!(csr_error <= tolerance && f_error <= tolerance && g_error <= tolerance, "{} {}", precision.name(), kind.name());
+            if precision == Precision::F64 {
+                // The same sums in the same order: identical, not just close.
+                assert_eq!(values, expected_values, "assemble_csr is deterministic and ordered like its twin");
+            }
+        }
+    }
+}
+
+#[test]
+fn energy_kernels_match_their_cpu_twins() {
+    // element_energy per element, and reduce_sum of the GPU's element energies over more than
+    // one level of the reduction (Tet4 mesh of 4·3·3·6 = 216 elements, Tri3 scaled up below).
+    for (precision, tolerance) in TOLERANCES {
+        let Some(gpu) = gpu_or_skip("energy_kernels_match_their_cpu_twins", precision) else { continue };
+        let gpu = Arc::new(gpu);
+        for (k, variant) in ElementVariant::all().into_iter().enumerate() {
+            let c = case(variant, 400 + k as u64);
+            let mut body = c.on(&gpu);
+            let energies = body.element_energies(&c.u).unwrap();
+            let expected: Vec<f64> = (0..c.mesh.element_count()).map(|e| cpu::element_energy(&c.model, c.geometry.element_points(e), &c.element_u(e))).collect();
+            let error = energies.iter().zip(&expected).map(|(a, b)| (a - b).abs() / b.abs().max(1e-300)).fold(0.0, f64::max);
+            assert!(error <= tolerance, "{variant:?} {}: element energy {error:.3e}", precision.name());
+            let total = body.strain_energy(&c.u).unwrap();
+            let reduced = cpu::reduce_sum(&energies);
+            let reduce_error = (total - reduced).abs() / reduced.abs();
+            assert!(reduce_error <= tolerance, "{variant:?} {}: reduce_sum {reduce_error:.3e}", precision.name());
+        }
+        // A reduction over three levels of workgroups: 72 200 elements -> 283 -> 2 -> 1.
+        let mesh = generate::rectangle([0.0; 2], [1.0; 2], [190, 190], ElementKind::Tri3);
+        let u: Vec<f64> = mesh.nodes.iter().flat_map(|x| [0.1 * x[0] * x[1], -0.05 * x[0]]).collect();
+        let dofs = DofMap::new(2, &vec![false; u.len()]);
+        let pattern = StiffnessPattern::new(&mesh, &dofs);
+        let gather = GatherMap::new(&mesh, 2, &pattern);
+        let geometry = ReferenceGeometry::new(&mesh).unwrap();
+        let mut body = GpuBody::new(gpu.clone(), &mesh, &geometry, &model_of("neo_hookean"), &pattern, &gather).unwrap();
+        let energies = body.element_energies(&u).unwrap();
+        let (total, reduced) = (body.strain_energy(&u).unwrap(), cpu::reduce_sum(&energies));
+        let plain: f64 = energies.iter().sum();
+        assert!((reduced - plain).abs() <= 1e-12 * plain, "the twin sums: {reduced} vs {plain}");
+        if precision == Precision::F64 {
+            assert_eq!(total, reduced, "reduce_sum adds in its twin's order");
+        } else {
+            assert!((total - reduced).abs() <= tolerance * reduced, "f32 reduce_sum: {total} vs {reduced}");
+        }
     }
 }

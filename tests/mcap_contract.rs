@@ -34,7 +34,7 @@ fn run_log_has_every_channel_of_the_contract() {
         (
             "/solver",
             "bifirst.Solver",
-            &["t", "step", "dt", "newton_iterations", "uzawa_iterations", "residual_norm", "cutbacks", "wall_s", "status", "message"],
+            &["t", "step", "dt", "newton_iterations", "uzawa_iterations", "residual_norm", "cutbacks", "wall_s", "bytes_moved", "status", "message"],
             steps,
         ),
         ("/body/cube", "bifirst.Body", &["t", "mass", "center_of_mass", "linear_momentum", "angular_momentum", "kinetic"], steps + 1),
@@ -45,8 +45,8 @@ fn run_log_has_every_channel_of_the_contract() {
             "/summary",
             "bifirst.Summary",
             &[
-                "scene", "status", "message", "backend", "precision", "steps", "t_end", "cutbacks", "newton_iterations", "uzawa_iterations",
-                "max_penetration", "wall_s", "wall_by_phase", "energy", "output",
+                "scene", "status", "message", "backend", "precision", "adapter", "steps", "t_end", "cutbacks", "newton_iterations", "uzawa_iterations",
+                "max_penetration", "wall_s", "wall_by_phase", "bytes_moved", "energy", "output",
             ],
             1,
         ),
@@ -84,7 +84,7 @@ fn run_log_has_every_channel_of_the_contract() {
     assert_eq!(summary["status"], "finished");
     assert_eq!(summary["steps"], steps);
     let wall = &log.topics["/solver"][0]["wall_s"];
-    assert_eq!(message_fields(wall), sorted(&["elements", "assembly", "factorization", "solve", "contact", "total"]));
+    assert_eq!(message_fields(wall), sorted(&["elements", "assembly", "transfer", "factorization", "solve", "contact", "total"]));
     // Vectors are arrays of 3 numbers in 3D; steps are numbered 1..=N with t increasing.
     assert_eq!(log.topics["/body/cube"][0]["center_of_mass"].as_array().unwrap().len(), 3);
     let step: Vec<u64> = log.topics["/solver"].iter().map(|m| m["step"].as_u64().unwrap()).collect();

@@ -18,7 +18,7 @@ fn run_with_vtu(scene: &str, sets: &[&str], tag: &str) -> (PathBuf, PathBuf) {
     let loaded = load_scene(&scene_path(scene), &sets).expect("scene loads");
     let (out, dir) = (temp_path(&format!("{tag}.mcap")), temp_path(&format!("{tag}_vtu")));
     let _ = std::fs::remove_dir_all(&dir);
-    run_scene(&loaded, &out, &RunOptions { vtu: Some(dir.clone()), interrupt: None }, &mut Silent).expect("run succeeds");
+    run_scene(&loaded, &out, &RunOptions { vtu: Some(dir.clone()), ..Default::default() }, &mut Silent).expect("run succeeds");
     (out, dir)
 }
 

@@ -1,11 +1,11 @@
 //! Assembly of a body's internal force and effective stiffness.
 //!
 //! The stiffness is stored as the lower triangle of a CSC matrix over the free degrees of
-//! freedom. Its pattern and a per-element scatter map (local entry -> value index) are built once,
-//! so each Newton iteration only adds numbers; the GPU backend will reuse the same maps.
+//! freedom. Its pattern, a per-element scatter map (local entry -> value index) and the inverse
+//! gather map (value -> local entries) are built once, so each Newton iteration only adds
+//! numbers. Both backends assemble by gathering (`assemble_csr`, `assemble_residual`).
 
 use crate::mesh::Mesh;
-use crate::precision::Real;
 
 /// Numbering of a body's degrees of freedom: `node * dim + component`.
 #[derive(Debug, Clone)]
@@ -113,11 +113,56 @@ impl StiffnessPattern {
     }
 }
 
-/// Adds `factor *` an element matrix into the CSC values through its scatter map.
-pub fn scatter_add(values: &mut [Real], scatter: &[u32], local: &[Real], factor: Real) {
-    for (&idx, &k) in scatter.iter().zip(local) {
-        if idx != SKIP {
-            values[idx as usize] += factor * k;
+/// Entries per element of the element results (`element_force_tangent`'s output): `ndof`
+/// forces, then the `ndof x ndof` tangent, row-major.
+pub fn element_out_stride(element_dofs: usize) -> usize {
+    element_dofs + element_dofs * element_dofs
+}
+
+/// For every stiffness non-zero and every dof, the element-result entries that sum into it, in
+/// element order: the kernels gather instead of scattering, so no two invocations write the same
+/// value and the sums are deterministic. Built once per body.
+#[derive(Debug, Clone)]
+pub struct GatherMap {
+    /// `csr[csr_start[k]..csr_start[k + 1]]` are the tangent entries of non-zero `k`.
+    pub csr_start: Vec<u32>,
+    pub csr: Vec<u32>,
+    /// `dof[dof_start[d]..dof_start[d + 1]]` are the force entries of dof `d`.
+    pub dof_start: Vec<u32>,
+    pub dof: Vec<u32>,
+}
+
+impl GatherMap {
+    pub fn new(mesh: &Mesh, dim: usize, pattern: &StiffnessPattern) -> Self {
+        let ndof = pattern.element_dofs;
+        let stride = element_out_stride(ndof);
+        let mut csr_lists: Vec<Vec<u32>> = vec![Vec::new(); pattern.nnz()];
+        let mut dof_lists: Vec<Vec<u32>> = vec![Vec::new(); mesh.nodes.len() * dim];
+        for e in 0..mesh.element_count() {
+            let base = e * stride;
+            for (local, &idx) in pattern.element_scatter(e).iter().enumerate() {
+                if idx != SKIP {
+                    csr_lists[idx as usize].push((base + ndof + local) as u32);
+                }
+            }
+            for (a, &node) in mesh.element(e).iter().enumerate() {
+                for i in 0..dim {
+                    dof_lists[node as usize * dim + i].push((base + a * dim + i) as u32);
+                }
+            }
         }
+        let flatten = |lists: Vec<Vec<u32>>| {
+            let mut start = Vec::with_capacity(lists.len() + 1);
+            start.push(0u32);
+            let mut flat = Vec::with_capacity(lists.iter().map(Vec::len).sum());
+            for list in lists {
+                flat.extend(list);
+                start.push(flat.len() as u32);
+            }
+            (start, flat)
+        };
+        let (csr_start, csr) = flatten(csr_lists);
+        let (dof_start, dof) = flatten(dof_lists);
+        Self { csr_start, csr, dof_start, dof }
     }
 }

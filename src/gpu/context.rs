@@ -1,6 +1,7 @@
 //! Finding an adapter and opening a device: a hardware GPU when there is one, else a software
 //! adapter (lavapipe on Vulkan, llvmpipe on GL); f64 when the adapter has `SHADER_F64`.
 
+use super::shaders::ElementVariant;
 use crate::precision::Precision;
 use wgpu::{Adapter, Backends, DeviceType};
 
@@ -52,15 +53,25 @@ pub struct Gpu {
     pub precision: Precision,
 }
 
-fn adapters() -> Vec<Adapter> {
-    let backends = Backends::VULKAN | Backends::GL;
+fn adapters_of(backends: Backends) -> Vec<Adapter> {
     let instance = wgpu::Instance::new(wgpu::InstanceDescriptor { backends, ..wgpu::InstanceDescriptor::new_without_display_handle() });
     pollster::block_on(instance.enumerate_adapters(backends))
 }
 
-/// Every adapter this machine offers, best first (the order `auto` picks in).
+/// The Vulkan adapters, or the GL ones when there is no Vulkan adapter: GL comes after Vulkan in
+/// the ranking anyway, and probing it talks to the display server (and complains without one).
+fn adapters() -> Vec<Adapter> {
+    let vulkan = adapters_of(Backends::VULKAN);
+    if vulkan.is_empty() {
+        adapters_of(Backends::GL)
+    } else {
+        vulkan
+    }
+}
+
+/// Every adapter this machine offers, Vulkan and GL, best first (the order `auto` picks in).
 pub fn describe_adapters() -> Vec<AdapterReport> {
-    ranked(adapters()).iter().map(AdapterReport::of).collect()
+    ranked(adapters_of(Backends::VULKAN | Backends::GL)).iter().map(AdapterReport::of).collect()
 }
 
 /// Hardware before software, Vulkan before GL, f64 before none.
@@ -105,8 +116,8 @@ pub fn open(name: Option<&str>, precision: Option<Precision>) -> Result<Gpu, Gpu
 impl Gpu {
     /// A compute pipeline for a shader of `shaders/` at this device's precision; shader errors
     /// come back as [`GpuError::Kernel`] instead of wgpu's default panic.
-    pub fn pipeline(&self, kernel: &str) -> Result<wgpu::ComputePipeline, GpuError> {
-        let source = super::shaders::source(kernel, self.precision).ok_or_else(|| GpuError::Kernel { kernel: kernel.into(), message: "no such shader".into() })?;
+    pub fn pipeline(&self, kernel: &str, variant: Option<ElementVariant>) -> Result<wgpu::ComputePipeline, GpuError> {
+        let source = super::shaders::source(kernel, self.precision, variant).map_err(|message| GpuError::Kernel { kernel: kernel.into(), message })?;
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let module = self.device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some(kernel), source: wgpu::ShaderSource::Wgsl(source.into()) });
         let pipeline = self.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {

@@ -1,18 +1,79 @@
-//! The WGSL sources of `shaders/`, compiled into the binary, and their precision prelude.
+//! The WGSL sources of `shaders/`, compiled into the binary, and how a kernel's module is
+//! composed: the precision prelude, then for element kernels the element constants and the
+//! shared includes of `shaders/include/`, then the kernel.
 
+use crate::mesh::ElementKind;
 use crate::precision::Precision;
 
 /// Every kernel: its name (the file stem, and the name of its CPU twin) and source.
-pub const SHADERS: &[(&str, &str)] = &[("uzawa_step", include_str!("../../shaders/uzawa_step.wgsl"))];
+pub const SHADERS: &[(&str, &str)] = &[
+    ("assemble_csr", include_str!("../../shaders/assemble_csr.wgsl")),
+    ("assemble_residual", include_str!("../../shaders/assemble_residual.wgsl")),
+    ("element_energy", include_str!("../../shaders/element_energy.wgsl")),
+    ("element_force_tangent", include_str!("../../shaders/element_force_tangent.wgsl")),
+    ("reduce_sum", include_str!("../../shaders/reduce_sum.wgsl")),
+    ("uzawa_step", include_str!("../../shaders/uzawa_step.wgsl")),
+];
 
-/// The source of a kernel with `real` defined for `precision`.
-pub fn source(kernel: &str, precision: Precision) -> Option<String> {
-    SHADERS.iter().find(|(name, _)| *name == kernel).map(|(_, text)| precision.wgsl_prelude() + text)
+/// The shared includes of `shaders/include/`.
+pub const INCLUDES: &[(&str, &str)] = &[
+    ("ln_f32", include_str!("../../shaders/include/ln_f32.wgsl")),
+    ("ln_f64", include_str!("../../shaders/include/ln_f64.wgsl")),
+    ("material_blatz_ko", include_str!("../../shaders/include/material_blatz_ko.wgsl")),
+    ("material_lvf", include_str!("../../shaders/include/material_lvf.wgsl")),
+    ("material_neo_hookean", include_str!("../../shaders/include/material_neo_hookean.wgsl")),
+    ("tensor", include_str!("../../shaders/include/tensor.wgsl")),
+];
+
+/// The materials the element kernels can be built for (`Model::name`).
+pub const MATERIALS: [&str; 3] = ["blatz_ko", "lvf", "neo_hookean"];
+
+/// The element and material an element kernel is built for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ElementVariant {
+    pub kind: ElementKind,
+    pub material: &'static str,
+}
+
+impl ElementVariant {
+    /// Every element kind with every material.
+    pub fn all() -> Vec<Self> {
+        let kinds = [ElementKind::Tri3, ElementKind::Quad4, ElementKind::Tet4, ElementKind::Hex8];
+        kinds.iter().flat_map(|&kind| MATERIALS.iter().map(move |&material| Self { kind, material })).collect()
+    }
+}
+
+/// Whether a kernel is built per element variant.
+pub fn is_element_kernel(kernel: &str) -> bool {
+    kernel.starts_with("element_")
+}
+
+fn include(name: &str) -> Result<&'static str, String> {
+    INCLUDES.iter().find(|(n, _)| *n == name).map(|(_, text)| *text).ok_or_else(|| format!("no include `{name}`"))
+}
+
+/// The module of a kernel at `precision`; element kernels need their variant.
+pub fn source(kernel: &str, precision: Precision, variant: Option<ElementVariant>) -> Result<String, String> {
+    let text = SHADERS.iter().find(|(name, _)| *name == kernel).map(|(_, text)| *text).ok_or_else(|| format!("no shader `{kernel}`"))?;
+    let mut module = precision.wgsl_prelude();
+    match (is_element_kernel(kernel), variant) {
+        (false, _) => {}
+        (true, None) => return Err(format!("kernel `{kernel}` needs an element kind and a material")),
+        (true, Some(v)) => {
+            let (nen, dim) = (v.kind.nodes(), v.kind.dim());
+            let nqp = crate::element::shape::quadrature(v.kind).len();
+            module += &format!("const NEN = {nen}u;\nconst NQP = {nqp}u;\nconst DIM = {dim}u;\nconst NDOF = {}u;\n", nen * dim);
+            module += include(&format!("ln_{}", precision.name()))?;
+            module += include("tensor")?;
+            module += include(&format!("material_{}", v.material))?;
+        }
+    }
+    Ok(module + text)
 }
 
 /// Parses and validates a kernel with naga, as the device would (no GPU needed).
-pub fn validate(kernel: &str, precision: Precision) -> Result<naga::Module, String> {
-    let text = source(kernel, precision).ok_or_else(|| format!("no shader `{kernel}`"))?;
+pub fn validate(kernel: &str, precision: Precision, variant: Option<ElementVariant>) -> Result<naga::Module, String> {
+    let text = source(kernel, precision, variant)?;
     let module = naga::front::wgsl::parse_str(&text).map_err(|e| e.emit_to_string(&text))?;
     let capabilities = match precision {
         Precision::F64 => naga::valid::Capabilities::FLOAT64,

@@ -55,7 +55,7 @@ pub struct UzawaStepKernel {
 
 impl UzawaStepKernel {
     pub fn new(gpu: &Gpu) -> Result<Self, GpuError> {
-        Ok(Self { pipeline: gpu.pipeline(KERNEL)? })
+        Ok(Self { pipeline: gpu.pipeline(KERNEL, None)? })
     }
 
     /// Steps every point on the device (in the device's precision) and writes the results back

@@ -35,6 +35,25 @@ pub enum Model {
 }
 
 impl Model {
+    /// The name scenes use, and the material include of the GPU kernels (`material_<name>.wgsl`).
+    pub fn name(&self) -> &'static str {
+        match self {
+            Model::BlatzKo(_) => "blatz_ko",
+            Model::Lvf(_) => "lvf",
+            Model::NeoHookean(_) => "neo_hookean",
+        }
+    }
+
+    /// Every parameter in the order of the kernels' `MaterialParams`: G, K, a1..a5 (zero where
+    /// the model has none).
+    pub fn parameters(&self) -> [Real; 7] {
+        match self {
+            Model::BlatzKo(m) => [m.g, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            Model::Lvf(m) => [m.g, m.k, m.a1, m.a2, m.a3, m.a4, m.a5],
+            Model::NeoHookean(m) => [m.g, m.k, 0.0, 0.0, 0.0, 0.0, 0.0],
+        }
+    }
+
     /// Small-strain (Young's modulus, Poisson ratio), used for wave speeds and time-step hints.
     pub fn small_strain_moduli(&self) -> (Real, Real) {
         let (k, g) = match self {

@@ -42,7 +42,7 @@ pub fn energy() -> Value {
 
 /// Wall seconds by phase (`/solver.wall_s`, `/summary.wall_by_phase`).
 fn wall_times() -> Value {
-    let phases = ["elements", "assembly", "factorization", "solve", "contact", "total"];
+    let phases = ["elements", "assembly", "transfer", "factorization", "solve", "contact", "total"];
     object("bifirst.WallTimes", &phases.map(|k| (k, number())))
 }
 
@@ -58,6 +58,7 @@ pub fn solver() -> Value {
             ("residual_norm", number()),
             ("cutbacks", integer()),
             ("wall_s", wall_times()),
+            ("bytes_moved", json!({"type": "integer", "description": "bytes between host and GPU in the step (0 on the CPU)"})),
             ("status", json!({"type": "string", "enum": ["converged", "failed", "interrupted"]})),
             ("message", json!({"type": ["string", "null"]})),
         ],
@@ -117,6 +118,7 @@ pub fn summary() -> Value {
             ("message", json!({"type": ["string", "null"]})),
             ("backend", json!({"type": "string"})),
             ("precision", json!({"type": "string"})),
+            ("adapter", json!({"type": ["string", "null"]})),
             ("steps", integer()),
             ("t_end", number()),
             ("cutbacks", integer()),
@@ -125,6 +127,7 @@ pub fn summary() -> Value {
             ("max_penetration", number()),
             ("wall_s", number()),
             ("wall_by_phase", wall_times()),
+            ("bytes_moved", integer()),
             ("energy", object("bifirst.Energies", &energies.map(|k| (k, number())))),
             ("output", json!({"type": "string"})),
         ],

@@ -3,11 +3,16 @@
 
 use super::linear::{CholeskySolver, LinearError};
 use super::PhaseTimes;
-use crate::assembly::{scatter_add, DofMap, StiffnessPattern};
-use crate::element::{element_cell_fields, element_energy, element_force_tangent, element_von_mises, CellFields, ElementError, ElementOutput, ReferenceGeometry};
+use crate::assembly::{element_out_stride, DofMap, GatherMap, StiffnessPattern};
+use crate::cpu::{assemble_csr, assemble_residual, element_energy, element_force_tangent, gather_sum, reduce_sum};
+use crate::element::{element_cell_fields, element_von_mises, CellFields, ElementError, ElementOutput, ReferenceGeometry};
+use crate::gpu::body::{ElementFailure, Traffic};
+use crate::gpu::types::{Coefficients, DofOut, DofStep};
+use crate::gpu::{Gpu, GpuBody, GpuError};
 use crate::material::Model;
 use crate::mesh::Mesh;
-use crate::precision::Real;
+use crate::precision::{Precision, Real};
+use std::sync::Arc;
 use std::time::Instant;
 
 /// Displacement, velocity and internal force of every dof.
@@ -50,6 +55,8 @@ pub enum StepFailure {
     NotConverged { body: String, iterations: usize, residual: Real, tolerance: Real },
     #[error("body `{body}`: the residual is not finite")]
     NotFinite { body: String },
+    #[error("body `{body}`: {error}")]
+    Device { body: String, error: String },
 }
 
 /// Energy terms of one body over a step (see doc/ARCHITECTURE.md, "Energy balance").
@@ -86,6 +93,15 @@ pub struct Body {
     solver: CholeskySolver,
     values: Vec<Real>,
     element_out: ElementOutput,
+    /// Which element results sum into each stiffness value and each dof.
+    gather: GatherMap,
+    /// Every element's force and tangent (`element_out_stride` entries per element).
+    element_results: Vec<Real>,
+    /// The step's start values of every dof, for `assemble_residual`.
+    step_inputs: Vec<DofStep<Real>>,
+    dof_out: Vec<DofOut<Real>>,
+    /// The body's kernels on a GPU; `None` runs their CPU twins.
+    device: Option<GpuBody>,
     f_ext: Vec<Real>,
     /// Contact-free residual of the last evaluation, every dof.
     pub g: Vec<Real>,
@@ -128,6 +144,8 @@ impl Body {
         }
         let state = State { u: vec![0.0; ndof], v, f_int: vec![0.0; ndof], strain: 0.0 };
         let values = vec![0.0; pattern.nnz()];
+        let gather = GatherMap::new(&mesh, dim, &pattern);
+        let element_results = vec![0.0; mesh.element_count() * element_out_stride(pattern.element_dofs)];
         let reactions = vec![0.0; prescribed.len()];
         let length_scale = mesh.min_edge_length();
         let max_mass = mass.iter().cloned().fold(0.0, Real::max);
@@ -149,6 +167,11 @@ impl Body {
             solver,
             values,
             element_out: ElementOutput::default(),
+            gather,
+            element_results,
+            step_inputs: vec![DofStep::default(); ndof],
+            dof_out: vec![DofOut::default(); ndof],
+            device: None,
             f_ext: vec![0.0; ndof],
             g: vec![0.0; ndof],
             contact_force: vec![0.0; ndof],
@@ -173,43 +196,63 @@ impl Body {
         out
     }
 
-    /// Internal force at `u` into `f_int`; with `stiffness_factor`, also that multiple of the
-    /// tangent into the CSC values (which are zeroed first).
-    pub fn assemble(&mut self, u: &[Real], f_int: &mut [Real], stiffness_factor: Option<Real>, times: &mut PhaseTimes) -> Result<(), StepFailure> {
-        f_int.iter_mut().for_each(|f| *f = 0.0);
-        if stiffness_factor.is_some() {
-            self.values.iter_mut().for_each(|v| *v = 0.0);
-        }
+    /// Moves the body's element and assembly kernels to `gpu` (its data is uploaded now).
+    pub fn use_gpu(&mut self, gpu: Arc<Gpu>) -> Result<(), GpuError> {
+        self.device = Some(GpuBody::new(gpu, &self.mesh, &self.geometry, &self.model, &self.pattern, &self.gather)?);
+        Ok(())
+    }
+
+    /// Bytes moved to and from the GPU since the last call (zero on the CPU).
+    pub fn take_traffic(&mut self) -> Traffic {
+        self.device.as_mut().map(GpuBody::take_traffic).unwrap_or_default()
+    }
+
+    fn device_failure(&self, error: GpuError) -> StepFailure {
+        StepFailure::Device { body: self.name.clone(), error: error.to_string() }
+    }
+
+    /// `element_force_tangent` of every element at `u` on the CPU, into the element results
+    /// (forces only without the tangent).
+    fn cpu_elements(&mut self, u: &[Real], with_tangent: bool, times: &mut PhaseTimes) -> Result<(), StepFailure> {
+        let t0 = Instant::now();
         let dim = self.dim;
+        let ndof = self.pattern.element_dofs;
+        let stride = element_out_stride(ndof);
         let mut ue = Vec::with_capacity(self.mesh.kind.nodes());
         for e in 0..self.mesh.element_count() {
             Self::gather_displacements(&self.mesh, dim, u, e, &mut ue);
-            let t0 = Instant::now();
-            element_force_tangent(&self.model, self.geometry.element_points(e), &ue, dim, stiffness_factor.is_some(), &mut self.element_out)
+            element_force_tangent(&self.model, self.geometry.element_points(e), &ue, dim, with_tangent, &mut self.element_out)
                 .map_err(|error| StepFailure::Element { body: self.name.clone(), element: e, error })?;
-            let t1 = Instant::now();
-            for (a, &n) in self.mesh.element(e).iter().enumerate() {
-                for i in 0..dim {
-                    f_int[n as usize * dim + i] += self.element_out.force[a * dim + i];
-                }
+            let out = &mut self.element_results[e * stride..(e + 1) * stride];
+            out[..ndof].copy_from_slice(&self.element_out.force);
+            if with_tangent {
+                out[ndof..].copy_from_slice(&self.element_out.tangent);
             }
-            if let Some(factor) = stiffness_factor {
-                scatter_add(&mut self.values, self.pattern.element_scatter(e), &self.element_out.tangent, factor);
-            }
-            times.elements += (t1 - t0).as_secs_f64();
-            times.assembly += t1.elapsed().as_secs_f64();
         }
+        times.elements += t0.elapsed().as_secs_f64();
         Ok(())
+    }
+
+    /// The failure of an element the GPU rejected, as its CPU twin words it.
+    fn element_failure(&self, u: &[Real], failure: ElementFailure) -> StepFailure {
+        let (element, fallback) = match failure {
+            ElementFailure::Inverted(e) => (e, ElementError::Inverted(Real::NAN)),
+            ElementFailure::NonFinite(e) => (e, ElementError::NonFinite),
+        };
+        let ue = self.element_displacements(u, element);
+        let error = element_force_tangent(&self.model, self.geometry.element_points(element), &ue, self.dim, true, &mut ElementOutput::default()).err().unwrap_or(fallback);
+        StepFailure::Element { body: self.name.clone(), element, error }
     }
 
     /// Internal force of the current state (at set-up, and after the state is changed by hand).
     pub fn refresh_internal_force(&mut self) -> Result<(), StepFailure> {
         let u = std::mem::take(&mut self.state.u);
-        let mut f = std::mem::take(&mut self.state.f_int);
-        let result = self.assemble(&u, &mut f, None, &mut PhaseTimes::default());
-        self.state.strain = self.energy_of(&u);
+        let result = self.cpu_elements(&u, false, &mut PhaseTimes::default());
+        for d in 0..self.state.f_int.len() {
+            self.state.f_int[d] = gather_sum(&self.element_results, &self.gather.dof_start, &self.gather.dof, d);
+        }
         self.state.u = u;
-        self.state.f_int = f;
+        self.state.strain = self.energy_of(&self.state.u.clone())?;
         result
     }
 
@@ -225,31 +268,68 @@ impl Body {
         for pr in &self.prescribed {
             self.trial.u[pr.dof] = self.state.u[pr.dof] + p.dt * pr.velocity;
         }
+        for (d, s) in self.step_inputs.iter_mut().enumerate() {
+            *s = DofStep { mass: self.mass[d], u_pred: self.state.u[d] + p.dt * self.state.v[d], f_int_t: self.state.f_int[d], f_ext: self.f_ext[d] };
+        }
+        if let Some(device) = &mut self.device {
+            device.begin_step(&self.step_inputs);
+        }
         self.last_increment = None;
     }
 
     /// Assembles force and `ξ K` at the trial displacement and the contact-free residual
     /// `g(u) = M (u - u_t - dt v_t) / (θ dt²) - (1-ξ) F_t - ξ F(u)` at every dof.
+    ///
+    /// On a GPU in f64 every kernel runs there. In f32 only the stiffness comes from the GPU:
+    /// the internal force and residual are evaluated in f64 by the CPU twins, so Newton converges
+    /// to the same answer and the f32 tangent only changes how fast (doc/ARCHITECTURE.md).
     pub fn evaluate(&mut self, p: &StepParams, times: &mut PhaseTimes) -> Result<(), StepFailure> {
         let (dt, xi) = (p.dt, p.xi);
-        let c1 = 1.0 / (p.theta * dt * dt);
+        let coefficients = Coefficients { factor: xi, c1: 1.0 / (p.theta * dt * dt) };
         let u = std::mem::take(&mut self.trial.u);
-        let mut f_int = std::mem::take(&mut self.trial.f_int);
-        let result = self.assemble(&u, &mut f_int, Some(xi), times);
+        let result = self.assemble(&u, coefficients, times);
         let mut scale2 = 0.0;
-        for d in 0..self.mass.len() {
-            let inertia = c1 * self.mass[d] * (u[d] - self.state.u[d] - dt * self.state.v[d]);
-            let f_t = self.f_ext[d] - self.state.f_int[d];
-            let f_new = self.f_ext[d] - f_int[d];
-            self.g[d] = inertia - (1.0 - xi) * f_t - xi * f_new;
+        for (d, out) in self.dof_out.iter().enumerate() {
+            self.trial.f_int[d] = out.f_int;
+            self.g[d] = out.g;
+            let inertia = out.g + (1.0 - xi) * (self.f_ext[d] - self.state.f_int[d]) + xi * (self.f_ext[d] - out.f_int);
             // The force scale spans all dofs: at equilibrium the free-dof forces nearly cancel,
             // while round-off follows the element forces, which the reactions reflect.
-            scale2 += inertia * inertia + (xi * f_int[d]).powi(2) + ((1.0 - xi) * self.state.f_int[d]).powi(2) + self.f_ext[d].powi(2);
+            scale2 += inertia * inertia + (xi * out.f_int).powi(2) + ((1.0 - xi) * self.state.f_int[d]).powi(2) + self.f_ext[d].powi(2);
         }
         self.force_scale = scale2.sqrt();
         self.trial.u = u;
-        self.trial.f_int = f_int;
         result
+    }
+
+    /// The kernels of one Newton evaluation: element results, stiffness values and residual.
+    fn assemble(&mut self, u: &[Real], coefficients: Coefficients<Real>, times: &mut PhaseTimes) -> Result<(), StepFailure> {
+        let gathered_on_cpu = match &mut self.device {
+            Some(device) => {
+                let f64_residual = device.precision() == Precision::F64;
+                let dof_out = f64_residual.then_some(&mut self.dof_out[..]);
+                match device.evaluate(u, coefficients, &mut self.values, dof_out, times) {
+                    Err(e) => return Err(self.device_failure(e)),
+                    Ok(Some(failure)) => return Err(self.element_failure(u, failure)),
+                    Ok(None) if f64_residual => return Ok(()),
+                    Ok(None) => {
+                        self.cpu_elements(u, false, times)?;
+                        false
+                    }
+                }
+            }
+            None => {
+                self.cpu_elements(u, true, times)?;
+                true
+            }
+        };
+        let t0 = Instant::now();
+        if gathered_on_cpu {
+            assemble_csr(&self.element_results, &self.gather.csr_start, &self.gather.csr, coefficients, &mut self.values);
+        }
+        assemble_residual(&self.element_results, &self.gather.dof_start, &self.gather.dof, coefficients, u, &self.step_inputs, &mut self.dof_out);
+        times.assembly += t0.elapsed().as_secs_f64();
+        Ok(())
     }
 
     /// Size of the forces of the last evaluation (the residual's scale).
@@ -333,7 +413,7 @@ impl Body {
 
     /// Ends a converged step: end velocities, support reactions `g - f_c` at the prescribed dofs,
     /// and the step's energy terms.
-    pub fn finish_step(&mut self, p: &StepParams) -> StepEnergy {
+    pub fn finish_step(&mut self, p: &StepParams) -> Result<StepEnergy, StepFailure> {
         let ndof = self.mass.len();
         let v: Vec<Real> = (0..ndof).map(|d| self.trial_velocity(p, d)).collect();
         self.trial.v = v;
@@ -341,7 +421,7 @@ impl Body {
             self.trial.v[pr.dof] = pr.velocity;
             self.reactions[k] = self.g[pr.dof] - self.contact_force[pr.dof];
         }
-        self.trial.strain = self.energy_of(&self.trial.u);
+        self.trial.strain = self.energy_of(&self.trial.u.clone())?;
         let (mut theta_term, mut force_work, mut support_work) = (0.0, 0.0, 0.0);
         for d in 0..ndof {
             let du = self.trial.u[d] - self.state.u[d];
@@ -351,11 +431,11 @@ impl Body {
         for (pr, r) in self.prescribed.iter().zip(&self.reactions) {
             support_work += r * (self.trial.u[pr.dof] - self.state.u[pr.dof]);
         }
-        StepEnergy {
+        Ok(StepEnergy {
             theta_dissipation: (p.theta - 0.5) * theta_term,
             force_dissipation: force_work - (self.trial.strain - self.state.strain),
             support_work,
-        }
+        })
     }
 
     /// Adds `c1 M` to the assembled `ξ K` and factorises `K̄ = ξ K + c1 M` (eq. 17).
@@ -389,8 +469,14 @@ impl Body {
         self.state.strain
     }
 
-    fn energy_of(&self, u: &[Real]) -> Real {
-        (0..self.mesh.element_count()).map(|e| element_energy(&self.model, self.geometry.element_points(e), &self.element_displacements(u, e))).sum()
+    /// Strain energy at `u`: `element_energy` and `reduce_sum`, on the GPU in f64 (in f32, on
+    /// the CPU, like the residual).
+    fn energy_of(&mut self, u: &[Real]) -> Result<Real, StepFailure> {
+        if let Some(device) = self.device.as_mut().filter(|d| d.precision() == Precision::F64) {
+            return device.strain_energy(u).map_err(|e| self.device_failure(e));
+        }
+        let energies: Vec<Real> = (0..self.mesh.element_count()).map(|e| element_energy(&self.model, self.geometry.element_points(e), &self.element_displacements(u, e))).collect();
+        Ok(reduce_sum(&energies))
     }
 
     /// Current position of a node.

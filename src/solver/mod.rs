@@ -19,8 +19,11 @@ use std::collections::HashMap;
 /// Wall-clock seconds spent per phase.
 #[derive(Debug, Clone, Copy, Default, serde::Serialize)]
 pub struct PhaseTimes {
+    /// Element kernels (on a GPU: with the upload of the displacements before them).
     pub elements: f64,
     pub assembly: f64,
+    /// Reading results back from a GPU (zero on the CPU backend).
+    pub transfer: f64,
     pub factorization: f64,
     pub solve: f64,
     pub contact: f64,
@@ -31,6 +34,7 @@ impl std::ops::AddAssign for PhaseTimes {
     fn add_assign(&mut self, o: Self) {
         self.elements += o.elements;
         self.assembly += o.assembly;
+        self.transfer += o.transfer;
         self.factorization += o.factorization;
         self.solve += o.solve;
         self.contact += o.contact;
@@ -68,6 +72,8 @@ pub struct StepReport {
     /// Contact totals over the step (sub-steps added up; penetration the largest).
     pub contact: ContactStats,
     pub wall: PhaseTimes,
+    /// Bytes moved between host and GPU (zero on the CPU backend).
+    pub bytes_moved: u64,
     /// One line per cut-back: why the step failed and the new time step.
     pub events: Vec<String>,
 }
@@ -148,6 +154,7 @@ impl Simulation {
         let mut report = StepReport { step: self.step + 1, dt, ..Default::default() };
         let result = self.advance_by(dt, 0, &mut report);
         report.wall.total = started.elapsed().as_secs_f64();
+        report.bytes_moved = self.bodies.iter_mut().map(|b| b.take_traffic().total()).sum();
         match result {
             Ok(()) => {
                 self.step += 1;
@@ -233,7 +240,7 @@ impl Simulation {
         report.residual_norm = report.residual_norm.max(self.bodies.iter().map(Body::residual_norm).fold(0.0, Real::max));
         contact.finish(&self.bodies, &p);
         let stats = ContactStats::of(&contact.points, dt);
-        self.book_step(&p, &contact.points, stats.friction_dissipation_step);
+        self.book_step(&p, &contact.points, stats.friction_dissipation_step)?;
         let r = &mut report.contact;
         r.active = r.active.max(stats.active);
         r.sticking = r.sticking.max(stats.sticking);
@@ -276,9 +283,9 @@ impl Simulation {
 
     /// Energy bookkeeping of a converged step (before commit): external work, friction (as
     /// [`ContactStats`] counts it) and numerical dissipation, and the obstacles' reactions.
-    fn book_step(&mut self, p: &StepParams, points: &[ContactPoint], friction: Real) {
+    fn book_step(&mut self, p: &StepParams, points: &[ContactPoint], friction: Real) -> Result<(), StepFailure> {
         for body in &mut self.bodies {
-            let e = body.finish_step(p);
+            let e = body.finish_step(p)?;
             self.external_work += e.support_work;
             self.numerical_dissipation += e.theta_dissipation + e.force_dissipation;
         }
@@ -307,6 +314,7 @@ impl Simulation {
         self.friction_dissipation += friction;
         self.numerical_dissipation += -relative_work - friction;
         self.obstacle_reactions = reactions;
+        Ok(())
     }
 
     /// Records the initial energy, the reference of the energy balance.

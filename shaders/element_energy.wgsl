@@ -1,0 +1,37 @@
+// Strain energy of one element per invocation, `Σ_q dV W(E)`. CPU twin: `element::element_energy`.
+// Same inputs and prelude as `element_force_tangent`.
+
+const POINT_STRIDE = NEN * 3u + 1u;
+const WORKGROUP = 64u;
+
+@group(0) @binding(0) var<storage, read> material: MaterialParams;
+@group(0) @binding(1) var<storage, read> geometry: array<real>;
+@group(0) @binding(2) var<storage, read> connectivity: array<u32>;
+@group(0) @binding(3) var<storage, read> u: array<real>;
+@group(0) @binding(4) var<storage, read_write> energy: array<real>;
+
+@compute @workgroup_size(WORKGROUP)
+fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let e = id.x + id.y * groups.x * WORKGROUP;
+    if e >= arrayLength(&energy) {
+        return;
+    }
+    var w = real(0.0);
+    for (var q = 0u; q < NQP; q++) {
+        let point = (e * NQP + q) * POINT_STRIDE;
+        var f = identity3();
+        for (var a = 0u; a < NEN; a++) {
+            let n = connectivity[e * NEN + a];
+            var ua = vec3<real>(real(0.0));
+            for (var i = 0u; i < DIM; i++) {
+                ua[i] = u[n * DIM + i];
+            }
+            let g = vec3<real>(geometry[point + a * 3u], geometry[point + a * 3u + 1u], geometry[point + a * 3u + 2u]);
+            f[0] += ua * g.x;
+            f[1] += ua * g.y;
+            f[2] += ua * g.z;
+        }
+        w += geometry[point + NEN * 3u] * material_energy(green_lagrange(f));
+    }
+    energy[e] = w;
+}

@@ -1,0 +1,57 @@
+// The LVF model, paper eqs. (4)-(5), in the invariants s2 = tr(Ed²), s3 = tr(Ed³), z = tr(E)/√3:
+//   W = (G + a3 z²/4) s2 + 3K/2 z² + a1 √6/3 s3 + a2/3 z³ + a4/4 z⁴ + a5/4 s2²
+// CPU twin: `material::Lvf` (which explains why eq. (5), not eq. (6), defines the stress).
+
+const SQRT3 = 1.7320508075688772;
+const SQRT6 = 2.449489742783178;
+
+fn material_energy(e: Mat3) -> real {
+    let ed = dev(e);
+    let ed2 = ed * ed;
+    let s2 = trace3(ed2);
+    let s3 = trace3(ed2 * ed);
+    let z = trace3(e) / real(SQRT3);
+    let m = material;
+    return (m.g + real(0.25) * m.a3 * z * z) * s2 + real(1.5) * m.k * z * z + m.a1 * real(SQRT6) / real(3.0) * s3
+        + m.a2 / real(3.0) * z * z * z + real(0.25) * m.a4 * z * z * z * z + real(0.25) * m.a5 * s2 * s2;
+}
+
+fn material_stress(e: Mat3) -> Mat3 {
+    let ed = dev(e);
+    let ed2 = ed * ed;
+    let s2 = trace3(ed2);
+    let z = trace3(e) / real(SQRT3);
+    let m = material;
+    let dw_dz = real(0.5) * m.a3 * z * s2 + real(3.0) * m.k * z + m.a2 * z * z + m.a4 * z * z * z;
+    let dw_ds2 = m.g + real(0.25) * m.a3 * z * z + real(0.5) * m.a5 * s2;
+    return ed * (real(2.0) * dw_ds2) + identity3() * (dw_dz / real(SQRT3)) + dev(ed2) * (m.a1 * real(SQRT6));
+}
+
+fn material_tangent(e: Mat3) -> Tangent {
+    let i = identity3();
+    let ed = dev(e);
+    let ed2 = ed * ed;
+    let s2 = trace3(ed2);
+    let z = trace3(e) / real(SQRT3);
+    let m = material;
+    let iz = i * (real(1.0) / real(SQRT3));
+    let dw_ds2 = m.g + real(0.25) * m.a3 * z * z + real(0.5) * m.a5 * s2;
+    let d2w_dz2 = real(0.5) * m.a3 * s2 + real(3.0) * m.k + real(2.0) * m.a2 * z + real(3.0) * m.a4 * z * z;
+    let d2w_dzds2 = real(0.5) * m.a3 * z;
+    let d2w_ds2ds2 = real(0.5) * m.a5;
+    let ded = ed * real(2.0);
+    var d: Tangent;
+    // Deviatoric projector P = I⊙I - I⊗I/3.
+    add_scaled(&d, odot(i, i), real(2.0) * dw_ds2);
+    add_scaled(&d, outer(i, i), -real(2.0) * dw_ds2 / real(3.0));
+    add_scaled(&d, outer(ded, ded), d2w_ds2ds2);
+    add_scaled(&d, outer(ded, iz), d2w_dzds2);
+    add_scaled(&d, outer(iz, ded), d2w_dzds2);
+    add_scaled(&d, outer(iz, iz), d2w_dz2);
+    // d dev(Ed²)/dE = I⊙Ed + Ed⊙I - 2/3 (Ed⊗I + I⊗Ed)
+    let a = m.a1 * real(SQRT6);
+    add_scaled(&d, odot(i, ed), real(2.0) * a);
+    add_scaled(&d, outer(ed, i), -real(2.0) / real(3.0) * a);
+    add_scaled(&d, outer(i, ed), -real(2.0) / real(3.0) * a);
+    return d;
+}

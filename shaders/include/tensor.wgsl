@@ -1,0 +1,97 @@
+// Symmetric-tensor helpers shared by the material includes. CPU twin: `material::tensor`.
+// WGSL matrices are column-major: `m[k][i]` is the entry m_ik. Fourth-order tensors are 6x6
+// Voigt matrices in the order (11, 22, 33, 12, 23, 13), row-major in an array of 36.
+
+alias Mat3 = mat3x3<real>;
+alias Tangent = array<real, 36>;
+
+// The material's parameters; unused ones are zero (`gpu::MaterialParams`).
+struct MaterialParams {
+    g: real,
+    k: real,
+    a1: real,
+    a2: real,
+    a3: real,
+    a4: real,
+    a5: real,
+    unused: real,
+}
+
+var<private> VOIGT_I: array<u32, 6> = array<u32, 6>(0u, 1u, 2u, 0u, 1u, 0u);
+var<private> VOIGT_J: array<u32, 6> = array<u32, 6>(0u, 1u, 2u, 1u, 2u, 2u);
+
+fn at(m: Mat3, i: u32, k: u32) -> real {
+    return m[k][i];
+}
+
+fn identity3() -> Mat3 {
+    let o = real(1.0);
+    let z = real(0.0);
+    return Mat3(o, z, z, z, o, z, z, z, o);
+}
+
+fn trace3(a: Mat3) -> real {
+    return a[0][0] + a[1][1] + a[2][2];
+}
+
+fn dev(a: Mat3) -> Mat3 {
+    return a - identity3() * (trace3(a) / real(3.0));
+}
+
+// `E = (FᵀF - I)/2`.
+fn green_lagrange(f: Mat3) -> Mat3 {
+    return (transpose(f) * f - identity3()) * real(0.5);
+}
+
+// Inverse by cofactors (WGSL has no `inverse`); NaN for a singular matrix, as on the CPU.
+fn inverse3(m: Mat3) -> Mat3 {
+    let c0 = cross(m[1], m[2]);
+    let c1 = cross(m[2], m[0]);
+    let c2 = cross(m[0], m[1]);
+    let det = dot(m[0], c0);
+    return transpose(Mat3(c0, c1, c2)) * (real(1.0) / det);
+}
+
+// `(A ⊗ B)_ijkl = A_ij B_kl`.
+fn outer(a: Mat3, b: Mat3) -> Tangent {
+    var t: Tangent;
+    for (var r = 0u; r < 6u; r++) {
+        for (var c = 0u; c < 6u; c++) {
+            t[r * 6u + c] = at(a, VOIGT_I[r], VOIGT_J[r]) * at(b, VOIGT_I[c], VOIGT_J[c]);
+        }
+    }
+    return t;
+}
+
+// `¼(A_ik B_jl + A_il B_jk + A_jk B_il + A_jl B_ik)`.
+fn odot(a: Mat3, b: Mat3) -> Tangent {
+    var t: Tangent;
+    for (var r = 0u; r < 6u; r++) {
+        let i = VOIGT_I[r];
+        let j = VOIGT_J[r];
+        for (var c = 0u; c < 6u; c++) {
+            let k = VOIGT_I[c];
+            let l = VOIGT_J[c];
+            t[r * 6u + c] = real(0.25) * (at(a, i, k) * at(b, j, l) + at(a, i, l) * at(b, j, k) + at(a, j, k) * at(b, i, l) + at(a, j, l) * at(b, i, k));
+        }
+    }
+    return t;
+}
+
+// `t += s a`.
+fn add_scaled(t: ptr<function, Tangent>, a: Tangent, s: real) {
+    for (var r = 0u; r < 36u; r++) {
+        (*t)[r] += s * a[r];
+    }
+}
+
+// The Cauchy stress `σ = F S Fᵀ / J` and its von Mises equivalent.
+fn von_mises(f: Mat3, s: Mat3) -> real {
+    let sigma = f * s * transpose(f) * (real(1.0) / determinant(f));
+    let d = dev(sigma);
+    var sum = real(0.0);
+    for (var k = 0u; k < 3u; k++) {
+        sum += dot(d[k], d[k]);
+    }
+    return sqrt(real(1.5) * sum);
+}
