@@ -49,9 +49,14 @@ pub fn read_log(path: &Path) -> Log {
 
 /// Runs `scene` with overrides into `<tag>.mcap` and reads the log back.
 pub fn run(scene: &str, sets: &[&str], tag: &str) -> Log {
+    run_with(&scene_path(scene), sets, tag, &Default::default())
+}
+
+/// Runs the scene file at `path` with overrides and run options into `<tag>.mcap`.
+pub fn run_with(path: &Path, sets: &[&str], tag: &str, options: &bifirst::run::RunOptions) -> Log {
     let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
-    let loaded = load_scene(&scene_path(scene), &sets).expect("scene loads");
+    let loaded = load_scene(path, &sets).expect("scene loads");
     let out = temp_path(&format!("{tag}.mcap"));
-    run_scene(&loaded, &out, &Default::default(), &mut Silent).expect("run succeeds");
+    run_scene(&loaded, &out, options, &mut Silent).expect("run succeeds");
     read_log(&out)
 }
