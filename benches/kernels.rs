@@ -1,24 +1,22 @@
 //! Criterion benchmarks of the CPU engine:
 //! - `element/<model>/<element>`: internal force + tangent of 1000 elements (elements/s);
 //! - `newton_hex8_50k/{assembly,factorization,solve}`: the three phases of one Newton iteration
-//!   of a 3D Hex8 block with about 50k unknowns.
+//!   of a 3D Hex8 block with about 50k unknowns, and `assembly_gpu_<precision>` on a GPU adapter;
+//! - `gpu_element/<precision>/<model>/<element>` and `gpu_assembly/<precision>/<element>`: the
+//!   element and assembly kernels on a GPU adapter (skipped, with the reason, without one).
 //! Results are recorded in doc/benchmarks.md.
 
+use bifirst::bench::{bench_devices, bench_models, BenchCase, KINDS};
 use bifirst::element::{element_force_tangent, ElementOutput, ReferenceGeometry};
-use bifirst::material::{BlatzKo, Lvf, Model, NeoHookean};
+use bifirst::gpu::types::{Coefficients, DofOut};
+use bifirst::gpu::Gpu;
+use std::sync::Arc;
+use bifirst::material::{Model, NeoHookean};
 use bifirst::mesh::{generate, ElementKind, Mesh};
 use bifirst::solver::body::{Body, Prescribed};
 use bifirst::solver::PhaseTimes;
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use std::hint::black_box;
-
-fn models() -> [(&'static str, Model); 3] {
-    [
-        ("blatz_ko", Model::BlatzKo(BlatzKo { g: 1000.0 })),
-        ("lvf", Model::Lvf(Lvf { g: 5000.0, k: 3333.0, a1: 50.0, a2: 50.0, a3: 0.0, a4: 2000.0, a5: 100.0 })),
-        ("neo_hookean", Model::NeoHookean(NeoHookean { g: 1000.0, k: 3000.0 })),
-    ]
-}
 
 /// About 1000 elements of a kind.
 fn mesh_of(kind: ElementKind) -> Mesh {
@@ -50,8 +48,8 @@ fn element_kernels(c: &mut Criterion) {
             }).collect())
             .collect();
         group.throughput(Throughput::Elements(mesh.element_count() as u64));
-        for (name, model) in models() {
-            group.bench_with_input(BenchmarkId::new(name, kind.name()), &model, |b, model| {
+        for model in bench_models() {
+            group.bench_with_input(BenchmarkId::new(model.name(), kind.name()), &model, |b, model| {
                 let mut out = ElementOutput::default();
                 b.iter(|| {
                     for (e, ue) in u.iter().enumerate() {
@@ -73,17 +71,17 @@ fn newton_iteration(c: &mut Criterion) {
     let model = Model::NeoHookean(NeoHookean { g: 1000.0, k: 3000.0 });
     let mut body = Body::new("block".into(), mesh.clone(), geometry, model, 1.0, prescribed, |_| [0.0; 3]).unwrap();
     let u: Vec<f64> = mesh.nodes.iter().flat_map(|&x| deform(x)).collect();
-    let mut f_int = vec![0.0; u.len()];
     let (dt, theta, xi) = (1e-3, 0.5, 0.5);
     let c1 = 1.0 / (theta * dt * dt);
+    let coefficients = Coefficients { factor: xi, c1 };
     let mut times = PhaseTimes::default();
     println!("newton_hex8_50k: {} free dofs, {} stored non-zeros", body.dofs.free_count, body.pattern.nnz());
     let mut group = c.benchmark_group("newton_hex8_50k");
     group.sample_size(10);
-    group.bench_function("assembly", |b| b.iter(|| body.assemble(&u, &mut f_int, Some(xi), &mut times).unwrap()));
+    group.bench_function("assembly", |b| b.iter(|| body.assemble(&u, coefficients, &mut times).unwrap()));
     group.bench_function("factorization", |b| {
         b.iter(|| {
-            body.assemble(&u, &mut f_int, Some(xi), &mut times).unwrap();
+            body.assemble(&u, coefficients, &mut times).unwrap();
             body.factorize_effective(c1, &mut times).unwrap()
         })
     });
@@ -95,8 +93,50 @@ fn newton_iteration(c: &mut Criterion) {
             black_box(rhs)
         })
     });
+    for gpu in devices() {
+        body.use_gpu(gpu.clone()).unwrap();
+        group.bench_function(format!("assembly_gpu_{}", gpu.precision.name()), |b| b.iter(|| body.assemble(&u, coefficients, &mut times).unwrap()));
+    }
     group.finish();
 }
 
-criterion_group!(benches, element_kernels, newton_iteration);
+/// The GPU devices (f64 and f32 on the best adapter), or none, saying why.
+fn devices() -> Vec<Arc<Gpu>> {
+    bench_devices(None).unwrap_or_else(|e| {
+        println!("GPU benchmarks SKIPPED: {e}");
+        Vec::new()
+    })
+}
+
+fn gpu_kernels(c: &mut Criterion) {
+    for gpu in devices() {
+        let precision = gpu.precision.name();
+        let mut group = c.benchmark_group("gpu_element");
+        for kind in KINDS {
+            for model in bench_models() {
+                let case = BenchCase::new(kind, model, 1000);
+                let mut body = case.on(&gpu).unwrap();
+                group.throughput(Throughput::Elements(case.elements() as u64));
+                group.bench_function(format!("{precision}/{}/{}", case.model.name(), kind.name()), |b| {
+                    b.iter(|| body.run_elements(&case.u, &mut PhaseTimes::default()).unwrap())
+                });
+            }
+        }
+        group.finish();
+        let mut group = c.benchmark_group("gpu_assembly");
+        for kind in KINDS {
+            let case = BenchCase::new(kind, bench_models()[0].clone(), 1000);
+            let mut body = case.on(&gpu).unwrap();
+            body.run_elements(&case.u, &mut PhaseTimes::default()).unwrap();
+            let (mut values, mut dof_out) = (vec![0.0; case.pattern.nnz()], vec![DofOut::default(); case.u.len()]);
+            group.throughput(Throughput::Elements(case.elements() as u64));
+            group.bench_function(format!("{precision}/{}", kind.name()), |b| {
+                b.iter(|| body.assemble(case.coefficients, &mut values, Some(&mut dof_out), &mut PhaseTimes::default()).unwrap())
+            });
+        }
+        group.finish();
+    }
+}
+
+criterion_group!(benches, element_kernels, newton_iteration, gpu_kernels);
 criterion_main!(benches);

@@ -6,6 +6,7 @@
 
 pub mod assembly;
 pub mod backend;
+pub mod bench;
 pub mod contact;
 pub mod cpu;
 pub mod element;

@@ -2,6 +2,7 @@
 
 use anyhow::Result;
 use bifirst::backend::{BackendChoice, BackendRequest};
+use bifirst::bench::{bench_devices, run_bench, BenchOptions};
 use bifirst::output::{plot, read_run, summary};
 use bifirst::precision::Precision;
 use bifirst::run::{run_scene, Monitor, RunError, RunOptions, RunSummary, Stop};
@@ -75,6 +76,28 @@ enum Command {
         scene: PathBuf,
         #[arg(long = "set", value_name = "KEY=VALUE")]
         sets: Vec<String>,
+    },
+    /// Benchmark every kernel: its CPU twin and, on a GPU adapter, the kernel in f64 and f32
+    /// (time per call, throughput, bytes moved, error against the CPU in f64).
+    Bench {
+        /// About this many elements per case (4x as many contact points for `uzawa_step`).
+        #[arg(long, default_value_t = 4096)]
+        elements: usize,
+        /// Only kernels whose name contains this.
+        #[arg(long)]
+        kernel: Option<String>,
+        /// `auto`: the GPU columns when an adapter exists; `gpu`: they are required; `cpu`: none.
+        #[arg(long, default_value = "auto", value_parser = parse_backend)]
+        backend: BackendChoice,
+        /// A GPU adapter by name (case-insensitive substring).
+        #[arg(long, value_name = "NAME")]
+        adapter: Option<String>,
+        /// Seconds of calls per measurement (at least three calls).
+        #[arg(long, default_value_t = 0.5)]
+        time: f64,
+        /// One JSON object per row instead of the table.
+        #[arg(long)]
+        json: bool,
     },
     /// Print the version, build and compute backends.
     Info,
@@ -159,6 +182,31 @@ fn interrupt_flag() -> Result<Arc<AtomicBool>> {
         signal_hook::flag::register(signal, Arc::clone(&flag))?;
     }
     Ok(flag)
+}
+
+fn bench_command(options: BenchOptions, backend: BackendChoice, adapter: Option<String>, json: bool) -> Result<ExitCode> {
+    let devices = match backend {
+        BackendChoice::Cpu => Vec::new(),
+        BackendChoice::Gpu => bench_devices(adapter.as_deref())?,
+        BackendChoice::Auto => bench_devices(adapter.as_deref()).unwrap_or_else(|e| {
+            eprintln!("no GPU columns: {e}");
+            Vec::new()
+        }),
+    };
+    if !json {
+        for d in &devices {
+            eprintln!("device: {} in {}", d.adapter.line(), d.precision.name());
+        }
+        println!("{}", bifirst::bench::table_header());
+    }
+    run_bench(&options, &devices, |row| {
+        if json {
+            println!("{}", serde_json::to_string(&row).expect("serializes"));
+        } else {
+            println!("{}", row.line());
+        }
+    })?;
+    Ok(ExitCode::SUCCESS)
 }
 
 fn parse_backend(s: &str) -> Result<BackendChoice, String> {
@@ -253,6 +301,7 @@ fn main() -> ExitCode {
             println!("{}: valid, {}D, {} bodies, {} elements, {} free dofs, {} steps", loaded.name, sim.dim, sim.bodies.len(), elements, dofs, sim.step_count());
             Ok(ExitCode::SUCCESS)
         }),
+        Command::Bench { elements, kernel, backend, adapter, time, json } => bench_command(BenchOptions { elements, kernel, min_time: time }, backend, adapter, json),
         Command::Info => {
             println!("bifirst {} (git {})", env!("CARGO_PKG_VERSION"), bifirst::run::GIT_REVISION.unwrap_or("unknown"));
             println!("build: {} profile, rustc target {}-{}", if cfg!(debug_assertions) { "debug" } else { "release" }, std::env::consts::ARCH, std::env::consts::OS);

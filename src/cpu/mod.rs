@@ -14,8 +14,45 @@
 pub use crate::contact::law::uzawa_step;
 pub use crate::element::{element_energy, element_force_tangent};
 
+use crate::assembly::element_out_stride;
+use crate::element::{ElementError, ElementOutput, ReferenceGeometry};
 use crate::gpu::types::{Coefficients, DofOut, DofStep};
+use crate::material::Hyperelastic;
+use crate::mesh::Mesh;
 use crate::precision::Real;
+
+/// The grid of `element_force_tangent`: one call per element at displacement `u` (every dof),
+/// into `results` (`element_out_stride` entries per element; forces only without the tangent).
+/// The error names the first element that failed.
+pub fn dispatch_element_force_tangent<M: Hyperelastic>(
+    model: &M,
+    mesh: &Mesh,
+    geometry: &ReferenceGeometry,
+    u: &[Real],
+    with_tangent: bool,
+    scratch: &mut ElementOutput,
+    results: &mut [Real],
+) -> Result<(), (usize, ElementError)> {
+    let dim = mesh.dim();
+    let ndof = mesh.kind.nodes() * dim;
+    let stride = element_out_stride(ndof);
+    let mut ue = Vec::with_capacity(mesh.kind.nodes());
+    for e in 0..mesh.element_count() {
+        ue.clear();
+        ue.extend(mesh.element(e).iter().map(|&n| {
+            let mut d = [0.0; 3];
+            d[..dim].copy_from_slice(&u[n as usize * dim..(n as usize + 1) * dim]);
+            d
+        }));
+        element_force_tangent(model, geometry.element_points(e), &ue, dim, with_tangent, scratch).map_err(|error| (e, error))?;
+        let out = &mut results[e * stride..(e + 1) * stride];
+        out[..ndof].copy_from_slice(&scratch.force);
+        if with_tangent {
+            out[ndof..].copy_from_slice(&scratch.tangent);
+        }
+    }
+    Ok(())
+}
 
 /// Stiffness values of the sparse pattern: for every non-zero `k`, the sum of `factor *` the
 /// element tangent entries that the gather map lists for it (`gather[gather_start[k]..]`).

@@ -228,8 +228,9 @@ impl GpuBody {
         Ok(from_device(self.gpu.precision, &bytes))
     }
 
-    /// Runs `element_force_tangent` at displacement `u` (every dof of the body).
-    fn run_elements(&mut self, u: &[Real], times: &mut PhaseTimes) -> Result<Option<ElementFailure>, GpuError> {
+    /// Runs `element_force_tangent` at displacement `u` (every dof of the body); the results stay
+    /// on the device.
+    pub fn run_elements(&mut self, u: &[Real], times: &mut PhaseTimes) -> Result<Option<ElementFailure>, GpuError> {
         let t0 = Instant::now();
         let u_buffer = self.u.clone();
         self.upload(&u_buffer, u);
@@ -265,8 +266,7 @@ impl GpuBody {
         Ok((self.download("element_force_tangent", &element_out, size)?, failure))
     }
 
-    /// One Newton evaluation at `u`: element kernel, then `assemble_csr` into `values`, and with
-    /// `dof_out` also `assemble_residual` (after [`GpuBody::begin_step`]).
+    /// One Newton evaluation at `u`: element kernel, then [`GpuBody::assemble`].
     pub fn evaluate(
         &mut self,
         u: &[Real],
@@ -275,12 +275,19 @@ impl GpuBody {
         dof_out: Option<&mut [DofOut<Real>]>,
         times: &mut PhaseTimes,
     ) -> Result<Option<ElementFailure>, GpuError> {
-        let coefficient_buffer = self.coefficients.clone();
-        self.upload(&coefficient_buffer, &[coefficients.factor, coefficients.c1]);
         if let Some(failure) = self.run_elements(u, times)? {
             return Ok(Some(failure));
         }
+        self.assemble(coefficients, values, dof_out, times)?;
+        Ok(None)
+    }
+
+    /// `assemble_csr` into `values` from the element results on the device, and with `dof_out`
+    /// also `assemble_residual` (after [`GpuBody::begin_step`], at the last uploaded `u`).
+    pub fn assemble(&mut self, coefficients: Coefficients<Real>, values: &mut [Real], dof_out: Option<&mut [DofOut<Real>]>, times: &mut PhaseTimes) -> Result<(), GpuError> {
         let t0 = Instant::now();
+        let coefficient_buffer = self.coefficients.clone();
+        self.upload(&coefficient_buffer, &[coefficients.factor, coefficients.c1]);
         let mut encoder = self.encoder();
         self.csr_pass.record(&mut encoder);
         if dof_out.is_some() {
@@ -299,7 +306,7 @@ impl GpuBody {
             out.copy_from_slice(bytemuck::cast_slice(&reals));
         }
         times.transfer += t1.elapsed().as_secs_f64();
-        Ok(None)
+        Ok(())
     }
 
     /// The strain energy of each element at `u` (`element_energy`).

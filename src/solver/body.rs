@@ -4,7 +4,7 @@
 use super::linear::{CholeskySolver, LinearError};
 use super::PhaseTimes;
 use crate::assembly::{element_out_stride, DofMap, GatherMap, StiffnessPattern};
-use crate::cpu::{assemble_csr, assemble_residual, element_energy, element_force_tangent, gather_sum, reduce_sum};
+use crate::cpu::{assemble_csr, assemble_residual, dispatch_element_force_tangent, element_energy, element_force_tangent, gather_sum, reduce_sum};
 use crate::element::{element_cell_fields, element_von_mises, CellFields, ElementError, ElementOutput, ReferenceGeometry};
 use crate::gpu::body::{ElementFailure, Traffic};
 use crate::gpu::types::{Coefficients, DofOut, DofStep};
@@ -215,22 +215,10 @@ impl Body {
     /// (forces only without the tangent).
     fn cpu_elements(&mut self, u: &[Real], with_tangent: bool, times: &mut PhaseTimes) -> Result<(), StepFailure> {
         let t0 = Instant::now();
-        let dim = self.dim;
-        let ndof = self.pattern.element_dofs;
-        let stride = element_out_stride(ndof);
-        let mut ue = Vec::with_capacity(self.mesh.kind.nodes());
-        for e in 0..self.mesh.element_count() {
-            Self::gather_displacements(&self.mesh, dim, u, e, &mut ue);
-            element_force_tangent(&self.model, self.geometry.element_points(e), &ue, dim, with_tangent, &mut self.element_out)
-                .map_err(|error| StepFailure::Element { body: self.name.clone(), element: e, error })?;
-            let out = &mut self.element_results[e * stride..(e + 1) * stride];
-            out[..ndof].copy_from_slice(&self.element_out.force);
-            if with_tangent {
-                out[ndof..].copy_from_slice(&self.element_out.tangent);
-            }
-        }
+        let result = dispatch_element_force_tangent(&self.model, &self.mesh, &self.geometry, u, with_tangent, &mut self.element_out, &mut self.element_results)
+            .map_err(|(element, error)| StepFailure::Element { body: self.name.clone(), element, error });
         times.elements += t0.elapsed().as_secs_f64();
-        Ok(())
+        result
     }
 
     /// The failure of an element the GPU rejected, as its CPU twin words it.
@@ -302,8 +290,9 @@ impl Body {
         result
     }
 
-    /// The kernels of one Newton evaluation: element results, stiffness values and residual.
-    fn assemble(&mut self, u: &[Real], coefficients: Coefficients<Real>, times: &mut PhaseTimes) -> Result<(), StepFailure> {
+    /// The kernels of one Newton evaluation at `u`: element results, stiffness values (`ξ K`)
+    /// and, with the step's inputs from [`Body::begin_step`], internal force and residual.
+    pub fn assemble(&mut self, u: &[Real], coefficients: Coefficients<Real>, times: &mut PhaseTimes) -> Result<(), StepFailure> {
         let gathered_on_cpu = match &mut self.device {
             Some(device) => {
                 let f64_residual = device.precision() == Precision::F64;

@@ -1,0 +1,350 @@
+//! `bifirst bench`: every kernel on a deformed mesh, on the CPU (its twin, the reference) and on
+//! a GPU adapter in f64 and f32: time per call, throughput, bytes moved per call and the largest
+//! relative error against the CPU in f64. The criterion benches use the same cases.
+
+use crate::assembly::{element_out_stride, DofMap, GatherMap, StiffnessPattern};
+use crate::cpu;
+use crate::element::{ElementOutput, ReferenceGeometry};
+use crate::gpu::types::{Coefficients, DofOut, DofStep};
+use crate::gpu::uzawa_step::{UzawaPoint, UzawaStepKernel};
+use crate::gpu::{Gpu, GpuBody, GpuError};
+use crate::material::{BlatzKo, Lvf, Model, NeoHookean};
+use crate::mesh::{generate, ElementKind, Mesh};
+use crate::precision::{Precision, Real};
+use crate::solver::PhaseTimes;
+use std::sync::Arc;
+use std::time::Instant;
+
+/// The element kinds and materials the kernels are built for, with the parameters benchmarks use.
+pub fn bench_models() -> [Model; 3] {
+    [
+        Model::BlatzKo(BlatzKo { g: 1000.0 }),
+        Model::Lvf(Lvf { g: 5000.0, k: 3333.0, a1: 50.0, a2: 50.0, a3: 0.0, a4: 2000.0, a5: 100.0 }),
+        Model::NeoHookean(NeoHookean { g: 1000.0, k: 3000.0 }),
+    ]
+}
+
+pub const KINDS: [ElementKind; 4] = [ElementKind::Tri3, ElementKind::Quad4, ElementKind::Tet4, ElementKind::Hex8];
+
+/// A body's data for the kernels: a mesh of about `elements` elements of `kind` in a smooth,
+/// moderate deformation (a twist and a stretch), with the step inputs of `assemble_residual`.
+pub struct BenchCase {
+    pub mesh: Mesh,
+    pub model: Model,
+    pub geometry: ReferenceGeometry,
+    pub pattern: StiffnessPattern,
+    pub gather: GatherMap,
+    pub u: Vec<Real>,
+    pub step: Vec<DofStep<Real>>,
+    pub coefficients: Coefficients<Real>,
+}
+
+impl BenchCase {
+    pub fn new(kind: ElementKind, model: Model, elements: usize) -> Self {
+        let n = elements as f64;
+        let mesh = match kind {
+            ElementKind::Tri3 => generate::rectangle([0.0; 2], [1.0; 2], [side(n / 2.0, 2), side(n / 2.0, 2)], kind),
+            ElementKind::Quad4 => generate::rectangle([0.0; 2], [1.0; 2], [side(n, 2); 2], kind),
+            ElementKind::Tet4 => generate::cuboid([0.0; 3], [1.0; 3], [side(n / 6.0, 3); 3], kind),
+            ElementKind::Hex8 => generate::cuboid([0.0; 3], [1.0; 3], [side(n, 3); 3], kind),
+        };
+        let dim = kind.dim();
+        let u: Vec<Real> = mesh
+            .nodes
+            .iter()
+            .flat_map(|x| {
+                let d = [0.1 * x[0] + 0.05 * x[1] * x[2], -0.03 * x[1] + 0.04 * x[0] * x[2], 0.02 * x[2] - 0.05 * x[0] * x[1]];
+                d.into_iter().take(dim)
+            })
+            .collect();
+        let dofs = DofMap::new(dim, &vec![false; u.len()]);
+        let pattern = StiffnessPattern::new(&mesh, &dofs);
+        let gather = GatherMap::new(&mesh, dim, &pattern);
+        let geometry = ReferenceGeometry::new(&mesh).expect("generated meshes are valid");
+        let step = u.iter().enumerate().map(|(d, &x)| DofStep { mass: 1.0 + (d % 7) as Real * 0.1, u_pred: 0.9 * x, f_int_t: 0.0, f_ext: 0.1 }).collect();
+        Self { mesh, model, geometry, pattern, gather, u, step, coefficients: Coefficients { factor: 0.5, c1: 1e4 } }
+    }
+
+    pub fn elements(&self) -> usize {
+        self.mesh.element_count()
+    }
+
+    /// `element_force_tangent` of every element on the CPU.
+    pub fn cpu_elements(&self, scratch: &mut ElementOutput, results: &mut [Real]) {
+        cpu::dispatch_element_force_tangent(&self.model, &self.mesh, &self.geometry, &self.u, true, scratch, results).expect("valid deformation");
+    }
+
+    pub fn results_len(&self) -> usize {
+        self.elements() * element_out_stride(self.pattern.element_dofs)
+    }
+
+    pub fn on(&self, gpu: &Arc<Gpu>) -> Result<GpuBody, GpuError> {
+        let mut body = GpuBody::new(gpu.clone(), &self.mesh, &self.geometry, &self.model, &self.pattern, &self.gather)?;
+        body.begin_step(&self.step);
+        body.take_traffic();
+        Ok(body)
+    }
+}
+
+fn side(n: f64, dim: i32) -> usize {
+    (n.powf(1.0 / dim as f64).round() as usize).max(1)
+}
+
+/// One line of the table.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct BenchRow {
+    pub kernel: String,
+    pub element: String,
+    pub material: String,
+    /// Elements, or contact points for `uzawa_step`.
+    pub items: usize,
+    /// `cpu f64`, `gpu f64` or `gpu f32`.
+    pub backend: String,
+    pub seconds_per_call: f64,
+    pub items_per_second: f64,
+    /// Bytes between host and device per call (0 on the CPU).
+    pub bytes_per_call: u64,
+    /// Largest relative error against the CPU in f64 (max norm, per element for element
+    /// results, over the body for assembled values).
+    pub max_relative_error: f64,
+}
+
+/// What to run.
+#[derive(Debug, Clone)]
+pub struct BenchOptions {
+    /// About this many elements (and 4x as many contact points) per case.
+    pub elements: usize,
+    /// Only kernels whose name contains this.
+    pub kernel: Option<String>,
+    /// Seconds of calls per measurement (at least three calls).
+    pub min_time: f64,
+}
+
+/// Seconds per call, and the number of calls made (the warm-up included).
+#[derive(Debug, Clone, Copy)]
+pub struct Timing {
+    pub per_call: f64,
+    pub calls: u64,
+}
+
+/// Mean seconds per call over at least three calls and `min_time`, after one warm-up call.
+pub fn time_calls(min_time: f64, mut call: impl FnMut()) -> Timing {
+    call();
+    let start = Instant::now();
+    let mut calls = 0;
+    while calls < 3 || start.elapsed().as_secs_f64() < min_time {
+        call();
+        calls += 1;
+    }
+    Timing { per_call: start.elapsed().as_secs_f64() / calls as f64, calls: calls + 1 }
+}
+
+/// `max |a - b| / max |b|` over each block of `stride` entries.
+fn blockwise_error(a: &[Real], b: &[Real], stride: usize) -> f64 {
+    a.chunks(stride)
+        .zip(b.chunks(stride))
+        .map(|(x, y)| {
+            let scale = y.iter().fold(Real::MIN_POSITIVE, |m, v| m.max(v.abs()));
+            x.iter().zip(y).map(|(p, q)| (p - q).abs()).fold(0.0, Real::max) / scale
+        })
+        .fold(0.0, Real::max)
+}
+
+fn wanted(options: &BenchOptions, kernel: &str) -> bool {
+    options.kernel.as_ref().is_none_or(|k| kernel.contains(k.as_str()))
+}
+
+/// The CPU reference of a case: element results, stiffness values, residual and energy.
+struct Reference {
+    results: Vec<Real>,
+    values: Vec<Real>,
+    dof_out: Vec<DofOut<Real>>,
+    energy: Real,
+}
+
+fn element_energies(case: &BenchCase) -> Vec<Real> {
+    let dim = case.mesh.dim();
+    (0..case.elements())
+        .map(|e| {
+            let ue: Vec<[Real; 3]> = case.mesh.element(e).iter().map(|&n| std::array::from_fn(|i| if i < dim { case.u[n as usize * dim + i] } else { 0.0 })).collect();
+            cpu::element_energy(&case.model, case.geometry.element_points(e), &ue)
+        })
+        .collect()
+}
+
+/// Runs the benchmark; `gpus` are the devices to compare with the CPU (f64 and/or f32).
+pub fn run_bench(options: &BenchOptions, gpus: &[Arc<Gpu>], mut row: impl FnMut(BenchRow)) -> Result<(), GpuError> {
+    for kind in KINDS {
+        for model in bench_models() {
+            let case = BenchCase::new(kind, model, options.elements);
+            let n = case.elements();
+            let make = |kernel: &str, backend: String, timing: Timing, traffic: u64, error: f64| BenchRow {
+                kernel: kernel.into(),
+                element: kind.name().into(),
+                material: case.model.name().into(),
+                items: n,
+                backend,
+                seconds_per_call: timing.per_call,
+                items_per_second: n as f64 / timing.per_call,
+                bytes_per_call: traffic / timing.calls,
+                max_relative_error: error,
+            };
+            // The CPU twins, and the reference.
+            let mut scratch = ElementOutput::default();
+            let mut reference = Reference { results: vec![0.0; case.results_len()], values: vec![0.0; case.pattern.nnz()], dof_out: vec![DofOut::default(); case.u.len()], energy: 0.0 };
+            let t = time_calls(options.min_time, || case.cpu_elements(&mut scratch, &mut reference.results));
+            if wanted(options, "element_force_tangent") {
+                row(make("element_force_tangent", "cpu f64".into(), t, 0, 0.0));
+            }
+            let g = &case.gather;
+            let t = time_calls(options.min_time, || {
+                cpu::assemble_csr(&reference.results, &g.csr_start, &g.csr, case.coefficients, &mut reference.values);
+                cpu::assemble_residual(&reference.results, &g.dof_start, &g.dof, case.coefficients, &case.u, &case.step, &mut reference.dof_out);
+            });
+            if wanted(options, "assemble") {
+                row(make("assemble_csr+assemble_residual", "cpu f64".into(), t, 0, 0.0));
+            }
+            let t = time_calls(options.min_time, || reference.energy = cpu::reduce_sum(&element_energies(&case)));
+            if wanted(options, "energy") {
+                row(make("element_energy+reduce_sum", "cpu f64".into(), t, 0, 0.0));
+            }
+            for gpu in gpus {
+                let backend = format!("gpu {}", gpu.precision.name());
+                let mut body = case.on(gpu)?;
+                let stride = element_out_stride(case.pattern.element_dofs);
+                if wanted(options, "element_force_tangent") {
+                    let mut result = Ok(None);
+                    let t = time_calls(options.min_time, || result = body.run_elements(&case.u, &mut PhaseTimes::default()));
+                    result?;
+                    let traffic = body.take_traffic().total();
+                    let (results, _) = body.element_results(&case.u)?;
+                    body.take_traffic();
+                    let error = blockwise_error(&results, &reference.results, stride);
+                    row(make("element_force_tangent", backend.clone(), t, traffic, error));
+                }
+                if wanted(options, "assemble") {
+                    body.run_elements(&case.u, &mut PhaseTimes::default())?;
+                    body.take_traffic();
+                    let mut values = vec![0.0; case.pattern.nnz()];
+                    let mut dof_out = vec![DofOut::default(); case.u.len()];
+                    let mut result = Ok(());
+                    let t = time_calls(options.min_time, || result = body.assemble(case.coefficients, &mut values, Some(&mut dof_out), &mut PhaseTimes::default()));
+                    result?;
+                    let traffic = body.take_traffic().total();
+                    let residual: Vec<Real> = dof_out.iter().map(|d| d.g).collect();
+                    let expected: Vec<Real> = reference.dof_out.iter().map(|d| d.g).collect();
+                    let error = blockwise_error(&values, &reference.values, values.len().max(1)).max(blockwise_error(&residual, &expected, residual.len().max(1)));
+                    row(make("assemble_csr+assemble_residual", backend.clone(), t, traffic, error));
+                }
+                if wanted(options, "energy") {
+                    let mut result = Ok(0.0);
+                    let t = time_calls(options.min_time, || result = body.strain_energy(&case.u));
+                    let energy = result?;
+                    let traffic = body.take_traffic().total();
+                    row(make("element_energy+reduce_sum", backend.clone(), t, traffic, (energy - reference.energy).abs() / reference.energy.abs()));
+                }
+            }
+        }
+    }
+    if wanted(options, "uzawa_step") {
+        uzawa_rows(options, gpus, &mut row)?;
+    }
+    Ok(())
+}
+
+/// Contact points over every regime of the law (separated, sticking, sliding, frictionless),
+/// from a fixed linear congruential sequence.
+pub fn bench_contact_points(n: usize) -> Vec<UzawaPoint<Real>> {
+    let mut state: u64 = 0x2545_f491_4f6c_dd1d;
+    let mut next = move || {
+        state = state.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
+        (state >> 11) as Real / (1u64 << 53) as Real * 2.0 - 1.0
+    };
+    (0..n)
+        .map(|i| {
+            let mu = if i % 4 == 0 { 0.0 } else { (next() + 1.0) * 0.6 };
+            UzawaPoint { r: [next().abs() * 10.0, next() * 3.0, next() * 3.0], v: [next(), next(), next()], mu, rho: (next() + 1.5) * 4.0, status: 0.0 }
+        })
+        .collect()
+}
+
+fn uzawa_rows(options: &BenchOptions, gpus: &[Arc<Gpu>], row: &mut impl FnMut(BenchRow)) -> Result<(), GpuError> {
+    let n = 4 * options.elements;
+    let inputs = bench_contact_points(n);
+    let mut reference = inputs.clone();
+    let make = |backend: String, timing: Timing, traffic: u64, error: f64| BenchRow {
+        kernel: "uzawa_step".into(),
+        element: "-".into(),
+        material: "-".into(),
+        items: n,
+        backend,
+        seconds_per_call: timing.per_call,
+        items_per_second: n as f64 / timing.per_call,
+        bytes_per_call: traffic / timing.calls,
+        max_relative_error: error,
+    };
+    let t = time_calls(options.min_time, || {
+        for (out, p) in reference.iter_mut().zip(&inputs) {
+            *out = p.stepped_on_cpu();
+        }
+    });
+    row(make("cpu f64".into(), t, 0, 0.0));
+    for gpu in gpus {
+        let kernel = UzawaStepKernel::new(gpu)?;
+        let mut points = inputs.clone();
+        let (mut traffic, mut result) = (0, Ok(()));
+        let t = time_calls(options.min_time, || {
+            points.copy_from_slice(&inputs);
+            match kernel.run(gpu, &mut points) {
+                Ok(bytes) => traffic += 2 * bytes as u64,
+                Err(e) => result = Err(e),
+            }
+        });
+        result?;
+        let error = points
+            .iter()
+            .zip(&reference)
+            .map(|(g, c)| {
+                let scale = c.r.iter().fold(Real::MIN_POSITIVE, |m, x| m.max(x.abs()));
+                (0..3).map(|k| (g.r[k] - c.r[k]).abs()).fold(0.0, Real::max) / scale.max(1e-12)
+            })
+            .fold(0.0, Real::max);
+        row(make(format!("gpu {}", gpu.precision.name()), t, traffic, error));
+    }
+    Ok(())
+}
+
+/// The table `bifirst bench` prints.
+pub fn table_header() -> String {
+    format!("{:<32} {:<6} {:<12} {:>8} {:<8} {:>12} {:>12} {:>12} {:>10}", "kernel", "elem", "material", "items", "backend", "time/call", "items/s", "bytes/call", "max rel err")
+}
+
+impl BenchRow {
+    pub fn line(&self) -> String {
+        format!(
+            "{:<32} {:<6} {:<12} {:>8} {:<8} {:>10.3}ms {:>12.3e} {:>12} {:>10.1e}",
+            self.kernel,
+            self.element,
+            self.material,
+            self.items,
+            self.backend,
+            self.seconds_per_call * 1e3,
+            self.items_per_second,
+            self.bytes_per_call,
+            self.max_relative_error
+        )
+    }
+}
+
+/// Devices for the GPU columns: the adapter (best, or named) in f64 when it has it, and in f32.
+pub fn bench_devices(adapter: Option<&str>) -> Result<Vec<Arc<Gpu>>, GpuError> {
+    let first = crate::gpu::open(adapter, None)?;
+    let mut devices = Vec::new();
+    if first.precision == Precision::F64 {
+        devices.push(Arc::new(first));
+        devices.push(Arc::new(crate::gpu::open(adapter, Some(Precision::F32))?));
+    } else {
+        devices.push(Arc::new(first));
+    }
+    Ok(devices)
+}
