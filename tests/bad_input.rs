@@ -220,3 +220,31 @@ fn names_that_cannot_be_topics_or_file_names() {
 fn zero_vtu_cadence() {
     assert_error("zero_vtu_cadence", GOOD, &["output.vtu_every=0"], "output.vtu_every", None, "at least 1 step");
 }
+
+/// Backend requests that cannot be met are errors before the run starts, never a silent CPU run.
+#[test]
+fn backend_requests_that_cannot_be_met() {
+    let scene = common_scene_path("free_vibration_2d");
+    for (args, expect) in [
+        (&["--backend", "gpu", "--adapter", "no-such-adapter"][..], "no GPU adapter named like `no-such-adapter`"),
+        (&["--backend", "auto", "--adapter", "no-such-adapter"][..], "no GPU adapter named like `no-such-adapter`"),
+        (&["--backend", "cpu", "--precision", "f32"][..], "the CPU backend runs in f64 only"),
+        (&["--backend", "cpu", "--adapter", "llvmpipe"][..], "--adapter needs a GPU backend"),
+        (&["--backend", "tpu"][..], "unknown backend `tpu`"),
+        (&["--precision", "f16"][..], "unknown precision `f16`"),
+    ] {
+        let out = Command::new(env!("CARGO_BIN_EXE_bifirst"))
+            .args(["run", scene.to_str().unwrap(), "--quiet", "--out"])
+            .arg(dir().join("backend_request.mcap"))
+            .args(args)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
+        assert!(stderr.contains(expect), "{args:?}: {stderr}");
+    }
+}
+
+fn common_scene_path(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes").join(format!("{name}.toml"))
+}
