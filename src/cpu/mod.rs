@@ -87,7 +87,7 @@ pub fn assemble_residual(
 }
 
 /// The sum of the entries a gather map lists for output `k`, in its order.
-pub fn gather_sum(element_out: &[Real], gather_start: &[u32], gather: &[u32], k: usize) -> Real {
+fn gather_sum(element_out: &[Real], gather_start: &[u32], gather: &[u32], k: usize) -> Real {
     let mut f = 0.0;
     for j in gather_start[k]..gather_start[k + 1] {
         f += element_out[gather[j as usize] as usize];

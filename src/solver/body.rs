@@ -4,7 +4,7 @@
 use super::linear::{CholeskySolver, LinearError};
 use super::PhaseTimes;
 use crate::assembly::{element_out_stride, DofMap, GatherMap, StiffnessPattern};
-use crate::cpu::{assemble_csr, assemble_residual, dispatch_element_force_tangent, element_energy, element_force_tangent, gather_sum, reduce_sum};
+use crate::cpu::{assemble_csr, assemble_residual, dispatch_element_force_tangent, element_energy, element_force_tangent, reduce_sum};
 use crate::element::{element_cell_fields, element_von_mises, CellFields, ElementError, ElementOutput, ReferenceGeometry};
 use crate::gpu::body::{ElementFailure, Traffic};
 use crate::gpu::types::{Coefficients, DofOut, DofStep};
@@ -232,18 +232,6 @@ impl Body {
         StepFailure::Element { body: self.name.clone(), element, error }
     }
 
-    /// Internal force of the current state (at set-up, and after the state is changed by hand).
-    pub fn refresh_internal_force(&mut self) -> Result<(), StepFailure> {
-        let u = std::mem::take(&mut self.state.u);
-        let result = self.cpu_elements(&u, false, &mut PhaseTimes::default());
-        for d in 0..self.state.f_int.len() {
-            self.state.f_int[d] = gather_sum(&self.element_results, &self.gather.dof_start, &self.gather.dof, d);
-        }
-        self.state.u = u;
-        self.state.strain = self.energy_of(&self.state.u.clone())?;
-        result
-    }
-
     /// Starts a step of length `p.dt`: external forces, the predictor `u_t + dt v_t` (zero
     /// inertia residual) with the prescribed dofs at their final values, no contact force.
     pub fn begin_step(&mut self, p: &StepParams, gravity: &[Real; 3]) {
@@ -410,7 +398,10 @@ impl Body {
             self.trial.v[pr.dof] = pr.velocity;
             self.reactions[k] = self.g[pr.dof] - self.contact_force[pr.dof];
         }
-        self.trial.strain = self.energy_of(&self.trial.u.clone())?;
+        let u = std::mem::take(&mut self.trial.u);
+        let strain = self.energy_of(&u);
+        self.trial.u = u;
+        self.trial.strain = strain?;
         let (mut theta_term, mut force_work, mut support_work) = (0.0, 0.0, 0.0);
         for d in 0..ndof {
             let du = self.trial.u[d] - self.state.u[d];
