@@ -174,20 +174,13 @@ fn element_energies(case: &BenchCase) -> Vec<Real> {
 
 /// Runs the benchmark; `gpus` are the devices to compare with the CPU (f64 and/or f32).
 pub fn run_bench(options: &BenchOptions, gpus: &[Arc<Gpu>], mut row: impl FnMut(BenchRow)) -> Result<(), GpuError> {
-    for kind in KINDS {
+    let element_kernels = ["element_force_tangent", "assemble", "energy"].iter().any(|k| wanted(options, k));
+    for kind in KINDS.into_iter().filter(|_| element_kernels) {
         for model in bench_models() {
             let case = BenchCase::new(kind, model, options.elements);
             let n = case.elements();
-            let make = |kernel: &str, backend: String, timing: Timing, traffic: u64, error: f64| BenchRow {
-                kernel: kernel.into(),
-                element: kind.name().into(),
-                material: case.model.name().into(),
-                items: n,
-                backend,
-                seconds_per_call: timing.per_call,
-                items_per_second: n as f64 / timing.per_call,
-                bytes_per_call: traffic / timing.calls,
-                max_relative_error: error,
+            let make = |kernel: &str, backend: String, timing: Timing, traffic: u64, error: f64| {
+                BenchRow::new(kernel, kind.name(), case.model.name(), n, backend, timing, traffic, error)
             };
             // The CPU twins, and the reference.
             let mut scratch = ElementOutput::default();
@@ -272,17 +265,7 @@ fn uzawa_rows(options: &BenchOptions, gpus: &[Arc<Gpu>], row: &mut impl FnMut(Be
     let n = 4 * options.elements;
     let inputs = bench_contact_points(n);
     let mut reference = inputs.clone();
-    let make = |backend: String, timing: Timing, traffic: u64, error: f64| BenchRow {
-        kernel: "uzawa_step".into(),
-        element: "-".into(),
-        material: "-".into(),
-        items: n,
-        backend,
-        seconds_per_call: timing.per_call,
-        items_per_second: n as f64 / timing.per_call,
-        bytes_per_call: traffic / timing.calls,
-        max_relative_error: error,
-    };
+    let make = |backend: String, timing: Timing, traffic: u64, error: f64| BenchRow::new("uzawa_step", "-", "-", n, backend, timing, traffic, error);
     let t = time_calls(options.min_time, || {
         for (out, p) in reference.iter_mut().zip(&inputs) {
             *out = p.stepped_on_cpu();
@@ -320,6 +303,22 @@ pub fn table_header() -> String {
 }
 
 impl BenchRow {
+    /// A row from a measurement: `traffic` is the bytes moved over all `timing.calls`.
+    #[allow(clippy::too_many_arguments)]
+    fn new(kernel: &str, element: &str, material: &str, items: usize, backend: String, timing: Timing, traffic: u64, error: f64) -> Self {
+        Self {
+            kernel: kernel.into(),
+            element: element.into(),
+            material: material.into(),
+            items,
+            backend,
+            seconds_per_call: timing.per_call,
+            items_per_second: items as f64 / timing.per_call,
+            bytes_per_call: traffic / timing.calls,
+            max_relative_error: error,
+        }
+    }
+
     pub fn line(&self) -> String {
         format!(
             "{:<32} {:<6} {:<12} {:>8} {:<8} {:>10.3}ms {:>12.3e} {:>12} {:>10.1e}",

@@ -1,0 +1,43 @@
+//! `bifirst bench`: a row per kernel, element and material on each backend, with sane numbers.
+
+use serde_json::Value;
+use std::process::Command;
+
+fn rows(args: &[&str]) -> Vec<Value> {
+    let out = Command::new(env!("CARGO_BIN_EXE_bifirst")).args(["bench", "--elements", "60", "--time", "0", "--json"]).args(args).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    String::from_utf8(out.stdout).unwrap().lines().map(|l| serde_json::from_str(l).expect("a JSON row per line")).collect()
+}
+
+#[test]
+fn bench_reports_every_kernel_on_the_cpu() {
+    let rows = rows(&["--backend", "cpu"]);
+    // 4 elements x 3 materials x 3 kernel groups, and uzawa_step.
+    assert_eq!(rows.len(), 4 * 3 * 3 + 1);
+    for r in &rows {
+        assert_eq!(r["backend"], "cpu f64");
+        assert!(r["items"].as_u64().unwrap() > 0 && r["seconds_per_call"].as_f64().unwrap() > 0.0, "{r}");
+        assert_eq!(r["max_relative_error"], 0.0, "the CPU twin is the reference");
+        assert_eq!(r["bytes_per_call"], 0);
+    }
+    let only = self::rows(&["--backend", "cpu", "--kernel", "uzawa"]);
+    assert_eq!(only.len(), 1);
+    assert_eq!(only[0]["kernel"], "uzawa_step");
+}
+
+#[test]
+fn bench_on_a_gpu_reports_errors_within_the_parity_tolerances() {
+    if let Err(e) = bifirst::gpu::open(None, None) {
+        assert!(!std::env::var("CI").is_ok_and(|v| v == "true"), "no GPU in CI: {e}");
+        eprintln!("SKIPPED bench_on_a_gpu_reports_errors_within_the_parity_tolerances: {e}");
+        return;
+    }
+    let rows = rows(&["--backend", "gpu", "--kernel", "element_force_tangent"]);
+    let gpu: Vec<&Value> = rows.iter().filter(|r| r["backend"].as_str().unwrap().starts_with("gpu")).collect();
+    assert!(!gpu.is_empty());
+    for r in gpu {
+        let tolerance = if r["backend"] == "gpu f64" { 1e-12 } else { 1e-5 };
+        assert!(r["max_relative_error"].as_f64().unwrap() <= tolerance, "{r}");
+        assert!(r["bytes_per_call"].as_u64().unwrap() > 0, "{r}");
+    }
+}
