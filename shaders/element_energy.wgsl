@@ -1,7 +1,6 @@
 // Strain energy of one element per invocation, `Σ_q dV W(E)`. CPU twin: `element::element_energy`.
 // Same inputs and prelude as `element_force_tangent`.
 
-const POINT_STRIDE = NEN * 3u + 1u;
 const WORKGROUP = 64u;
 
 @group(0) @binding(0) var<storage, read> material: MaterialParams;
@@ -16,22 +15,11 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) g
     if e >= arrayLength(&energy) {
         return;
     }
+    let ue = element_displacements(e);
     var w = real(0.0);
     for (var q = 0u; q < NQP; q++) {
         let point = (e * NQP + q) * POINT_STRIDE;
-        var f = identity3();
-        for (var a = 0u; a < NEN; a++) {
-            let n = connectivity[e * NEN + a];
-            var ua = vec3<real>(real(0.0));
-            for (var i = 0u; i < DIM; i++) {
-                ua[i] = u[n * DIM + i];
-            }
-            let g = vec3<real>(geometry[point + a * 3u], geometry[point + a * 3u + 1u], geometry[point + a * 3u + 2u]);
-            f[0] += ua * g.x;
-            f[1] += ua * g.y;
-            f[2] += ua * g.z;
-        }
-        w += geometry[point + NEN * 3u] * material_energy(green_lagrange(f));
+        w += point_volume(point) * material_energy(green_lagrange(deformation_gradient(point, ue)));
     }
     energy[e] = w;
 }

@@ -2,11 +2,11 @@
 // the material's stress and tangent at each quadrature point. CPU twin:
 // `element::element_force_tangent`, which this file follows step by step.
 // The prelude defines `real`, the element constants NEN (nodes), NQP (quadrature points), DIM,
-// NDOF = NEN * DIM, and includes the material (`material_stress`, `material_tangent`).
+// NDOF = NEN * DIM, and includes `element.wgsl` and the material (`material_stress`,
+// `material_tangent`).
 
-// Per element: NQP points of [dN_a/dX (3 reals per node), dV]. Per element out: NDOF forces, then
-// the NDOF x NDOF tangent row-major, local order (node a, component i) -> a * DIM + i.
-const POINT_STRIDE = NEN * 3u + 1u;
+// Per element out: NDOF forces, then the NDOF x NDOF tangent row-major, local order
+// (node a, component i) -> a * DIM + i.
 const OUT_STRIDE = NDOF + NDOF * NDOF;
 const NONE = 0xffffffffu;
 const INVERTED = 0u;
@@ -25,45 +25,20 @@ fn is_finite(x: real) -> bool {
     return abs(x) <= REAL_MAX;
 }
 
-// `F = I + Σ_a u_a ⊗ dN_a/dX`.
-fn deformation_gradient(point: u32, ue: array<vec3<real>, NEN>) -> Mat3 {
-    var f = identity3();
-    for (var a = 0u; a < NEN; a++) {
-        let g = vec3<real>(geometry[point + a * 3u], geometry[point + a * 3u + 1u], geometry[point + a * 3u + 2u]);
-        // Column k of u_a ⊗ g is u_a g_k.
-        f[0] += ue[a] * g.x;
-        f[1] += ue[a] * g.y;
-        f[2] += ue[a] * g.z;
-    }
-    return f;
-}
-
-fn gradient(point: u32, a: u32) -> vec3<real> {
-    return vec3<real>(geometry[point + a * 3u], geometry[point + a * 3u + 1u], geometry[point + a * 3u + 2u]);
-}
-
 @compute @workgroup_size(WORKGROUP)
 fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
     let e = id.x + id.y * groups.x * WORKGROUP;
     if e >= arrayLength(&connectivity) / NEN {
         return;
     }
-    var ue: array<vec3<real>, NEN>;
-    for (var a = 0u; a < NEN; a++) {
-        let n = connectivity[e * NEN + a];
-        var d = vec3<real>(real(0.0));
-        for (var i = 0u; i < DIM; i++) {
-            d[i] = u[n * DIM + i];
-        }
-        ue[a] = d;
-    }
+    let ue = element_displacements(e);
     var force: array<real, NDOF>;
     var tangent: array<real, NDOF * NDOF>;
     var b: array<array<real, 6>, NDOF>;
     var inverted = false;
     for (var q = 0u; q < NQP; q++) {
         let point = (e * NQP + q) * POINT_STRIDE;
-        let dv = geometry[point + NEN * 3u];
+        let dv = point_volume(point);
         let f = deformation_gradient(point, ue);
         let det = determinant(f);
         if !(det > real(0.0)) {

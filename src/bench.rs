@@ -163,13 +163,7 @@ struct Reference {
 }
 
 fn element_energies(case: &BenchCase) -> Vec<Real> {
-    let dim = case.mesh.dim();
-    (0..case.elements())
-        .map(|e| {
-            let ue: Vec<[Real; 3]> = case.mesh.element(e).iter().map(|&n| std::array::from_fn(|i| if i < dim { case.u[n as usize * dim + i] } else { 0.0 })).collect();
-            cpu::element_energy(&case.model, case.geometry.element_points(e), &ue)
-        })
-        .collect()
+    (0..case.elements()).map(|e| cpu::element_energy(&case.model, case.geometry.element_points(e), &case.mesh.element_displacements(&case.u, e))).collect()
 }
 
 /// Runs the benchmark; `gpus` are the devices to compare with the CPU (f64 and/or f32).

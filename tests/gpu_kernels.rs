@@ -5,6 +5,7 @@
 mod random;
 
 use bifirst::assembly::{element_out_stride, DofMap, GatherMap, StiffnessPattern};
+use bifirst::bench::BenchCase;
 use bifirst::contact::Status;
 use bifirst::cpu;
 use bifirst::element::{ElementOutput, ReferenceGeometry};
@@ -251,12 +252,7 @@ impl Case {
     }
 
     fn element_u(&self, e: usize) -> Vec<[f64; 3]> {
-        let dim = self.mesh.dim();
-        self.mesh.element(e).iter().map(|&n| {
-            let mut d = [0.0; 3];
-            d[..dim].copy_from_slice(&self.u[n as usize * dim..(n as usize + 1) * dim]);
-            d
-        }).collect()
+        self.mesh.element_displacements(&self.u, e)
     }
 }
 
@@ -371,15 +367,11 @@ fn energy_kernels_match_their_cpu_twins() {
             assert!(reduce_error <= tolerance, "{variant:?} {}: reduce_sum {reduce_error:.3e}", precision.name());
         }
         // A reduction over three levels of workgroups: 72 200 elements -> 283 -> 2 -> 1.
-        let mesh = generate::rectangle([0.0; 2], [1.0; 2], [190, 190], ElementKind::Tri3);
-        let u: Vec<f64> = mesh.nodes.iter().flat_map(|x| [0.1 * x[0] * x[1], -0.05 * x[0]]).collect();
-        let dofs = DofMap::new(2, &vec![false; u.len()]);
-        let pattern = StiffnessPattern::new(&mesh, &dofs);
-        let gather = GatherMap::new(&mesh, 2, &pattern);
-        let geometry = ReferenceGeometry::new(&mesh).unwrap();
-        let mut body = GpuBody::new(gpu.clone(), &mesh, &geometry, &model_of("neo_hookean"), &pattern, &gather).unwrap();
-        let energies = body.element_energies(&u).unwrap();
-        let (total, reduced) = (body.strain_energy(&u).unwrap(), cpu::reduce_sum(&energies));
+        let big = BenchCase::new(ElementKind::Tri3, model_of("neo_hookean"), 72_200);
+        assert_eq!(big.elements(), 72_200);
+        let mut body = big.on(&gpu).unwrap();
+        let energies = body.element_energies(&big.u).unwrap();
+        let (total, reduced) = (body.strain_energy(&big.u).unwrap(), cpu::reduce_sum(&energies));
         let plain: f64 = energies.iter().sum();
         assert!((reduced - plain).abs() <= 1e-12 * plain, "the twin sums: {reduced} vs {plain}");
         if precision == Precision::F64 {

@@ -38,12 +38,7 @@ pub fn dispatch_element_force_tangent<M: Hyperelastic>(
     let stride = element_out_stride(ndof);
     let mut ue = Vec::with_capacity(mesh.kind.nodes());
     for e in 0..mesh.element_count() {
-        ue.clear();
-        ue.extend(mesh.element(e).iter().map(|&n| {
-            let mut d = [0.0; 3];
-            d[..dim].copy_from_slice(&u[n as usize * dim..(n as usize + 1) * dim]);
-            d
-        }));
+        mesh.element_displacements_into(u, e, &mut ue);
         element_force_tangent(model, geometry.element_points(e), &ue, dim, with_tangent, scratch).map_err(|error| (e, error))?;
         let out = &mut results[e * stride..(e + 1) * stride];
         out[..ndof].copy_from_slice(&scratch.force);

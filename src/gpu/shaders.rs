@@ -17,6 +17,7 @@ pub const SHADERS: &[(&str, &str)] = &[
 
 /// The shared includes of `shaders/include/`.
 pub const INCLUDES: &[(&str, &str)] = &[
+    ("element", include_str!("../../shaders/include/element.wgsl")),
     ("ln_f32", include_str!("../../shaders/include/ln_f32.wgsl")),
     ("ln_f64", include_str!("../../shaders/include/ln_f64.wgsl")),
     ("material_blatz_ko", include_str!("../../shaders/include/material_blatz_ko.wgsl")),
@@ -65,6 +66,7 @@ pub fn source(kernel: &str, precision: Precision, variant: Option<ElementVariant
             module += &format!("const NEN = {nen}u;\nconst NQP = {nqp}u;\nconst DIM = {dim}u;\nconst NDOF = {}u;\n", nen * dim);
             module += include(&format!("ln_{}", precision.name()))?;
             module += include("tensor")?;
+            module += include("element")?;
             module += include(&format!("material_{}", v.material))?;
         }
     }

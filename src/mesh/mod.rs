@@ -62,6 +62,24 @@ impl Mesh {
         let n = self.kind.nodes();
         &self.connectivity[e * n..(e + 1) * n]
     }
+
+    /// The nodal displacements of element `e` from `u` (`dim` per node), padded to 3 components.
+    pub fn element_displacements(&self, u: &[Real], e: usize) -> Vec<[Real; 3]> {
+        let mut out = Vec::with_capacity(self.kind.nodes());
+        self.element_displacements_into(u, e, &mut out);
+        out
+    }
+
+    /// [`Mesh::element_displacements`] into a reused buffer (the per-element hot loop).
+    pub fn element_displacements_into(&self, u: &[Real], e: usize, out: &mut Vec<[Real; 3]>) {
+        let dim = self.dim();
+        out.clear();
+        out.extend(self.element(e).iter().map(|&n| {
+            let mut d = [0.0; 3];
+            d[..dim].copy_from_slice(&u[n as usize * dim..(n as usize + 1) * dim]);
+            d
+        }));
+    }
     /// Adds the set `all` and sorts and deduplicates every set.
     pub(crate) fn finish_sets(&mut self) {
         self.node_sets.insert("all".into(), (0..self.nodes.len() as u32).collect());

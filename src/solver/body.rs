@@ -180,22 +180,6 @@ impl Body {
         })
     }
 
-    /// Nodal displacements of element `e`, padded to 3 components, into `out`.
-    fn gather_displacements(mesh: &Mesh, dim: usize, u: &[Real], e: usize, out: &mut Vec<[Real; 3]>) {
-        out.clear();
-        out.extend(mesh.element(e).iter().map(|&n| {
-            let mut d = [0.0; 3];
-            d[..dim].copy_from_slice(&u[n as usize * dim..(n as usize + 1) * dim]);
-            d
-        }));
-    }
-
-    fn element_displacements(&self, u: &[Real], e: usize) -> Vec<[Real; 3]> {
-        let mut out = Vec::new();
-        Self::gather_displacements(&self.mesh, self.dim, u, e, &mut out);
-        out
-    }
-
     /// Moves the body's element and assembly kernels to `gpu` (its data is uploaded now).
     pub fn use_gpu(&mut self, gpu: Arc<Gpu>) -> Result<(), GpuError> {
         self.device = Some(GpuBody::new(gpu, &self.mesh, &self.geometry, &self.model, &self.pattern, &self.gather)?);
@@ -227,7 +211,7 @@ impl Body {
             ElementFailure::Inverted(e) => (e, ElementError::Inverted(Real::NAN)),
             ElementFailure::NonFinite(e) => (e, ElementError::NonFinite),
         };
-        let ue = self.element_displacements(u, element);
+        let ue = self.mesh.element_displacements(u, element);
         let error = element_force_tangent(&self.model, self.geometry.element_points(element), &ue, self.dim, true, &mut ElementOutput::default()).err().unwrap_or(fallback);
         StepFailure::Element { body: self.name.clone(), element, error }
     }
@@ -455,7 +439,7 @@ impl Body {
         if let Some(device) = self.device.as_mut().filter(|d| d.precision() == Precision::F64) {
             return device.strain_energy(u).map_err(|e| self.device_failure(e));
         }
-        let energies: Vec<Real> = (0..self.mesh.element_count()).map(|e| element_energy(&self.model, self.geometry.element_points(e), &self.element_displacements(u, e))).collect();
+        let energies: Vec<Real> = (0..self.mesh.element_count()).map(|e| element_energy(&self.model, self.geometry.element_points(e), &self.mesh.element_displacements(u, e))).collect();
         Ok(reduce_sum(&energies))
     }
 
@@ -482,7 +466,7 @@ impl Body {
     pub fn von_mises(&self, elements: &[usize]) -> Real {
         let sum: Real = elements
             .iter()
-            .map(|&e| element_von_mises(&self.model, self.geometry.element_points(e), &self.element_displacements(&self.state.u, e)))
+            .map(|&e| element_von_mises(&self.model, self.geometry.element_points(e), &self.mesh.element_displacements(&self.state.u, e)))
             .sum();
         sum / elements.len().max(1) as Real
     }
@@ -490,7 +474,7 @@ impl Body {
     /// Stress and volume ratio of every element at the committed state.
     pub fn cell_fields(&self) -> Vec<CellFields> {
         (0..self.mesh.element_count())
-            .map(|e| element_cell_fields(&self.model, self.geometry.element_points(e), &self.element_displacements(&self.state.u, e)))
+            .map(|e| element_cell_fields(&self.model, self.geometry.element_points(e), &self.mesh.element_displacements(&self.state.u, e)))
             .collect()
     }
 }
