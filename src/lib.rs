@@ -18,3 +18,4 @@ pub mod scene;
 pub mod solver;
 pub mod output;
 pub mod run;
+pub mod sweep;

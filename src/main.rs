@@ -1,19 +1,21 @@
-//! The `bifirst` command line: run, check, plot, summary and info.
+//! The `bifirst` command line: run, sweep, check, plot, summary, bench and info.
 
 use anyhow::Result;
 use bifirst::backend::{BackendChoice, BackendRequest};
 use bifirst::bench::{bench_devices, run_bench, BenchOptions};
-use bifirst::output::{plot, read_run, summary};
+use bifirst::output::plot::{self, PlotOptions};
+use bifirst::output::{read_run, summary};
 use bifirst::precision::Precision;
 use bifirst::run::{run_scene, Monitor, RunError, RunOptions, RunSummary, Stop};
 use bifirst::scene::load_scene;
 use bifirst::solver::StepReport;
+use bifirst::sweep::{Sweep, SweepAxis, VariantOutcome};
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::process::ExitCode;
-use std::sync::atomic::AtomicBool;
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -55,6 +57,36 @@ enum Command {
         #[arg(long, value_parser = parse_precision)]
         precision: Option<Precision>,
     },
+    /// Run a scene over a grid of values (`--over KEY=V1,V2,...`, several make a grid), the
+    /// variants in parallel, one MCAP log each, then overlaid plots and a summary table.
+    Sweep {
+        scene: PathBuf,
+        /// A scene key and its values, as `--set` takes them; commas inside brackets belong to
+        /// a value (`--over body.b.initial_velocity=[1,0],[2,0]`).
+        #[arg(long = "over", value_name = "KEY=V1,V2,...", required = true)]
+        over: Vec<SweepAxis>,
+        /// Overrides applied to every variant before its own.
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        sets: Vec<String>,
+        /// Directory for the logs (`<stem>.mcap`) and `plots/` (default: `<scene name>_sweep`).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Variants run at the same time (default: the number of cores).
+        #[arg(long)]
+        jobs: Option<usize>,
+        /// Probes `B,C,D`: also plot B's path in the plane BCD.
+        #[arg(long, value_name = "B,C,D", value_parser = parse_trace)]
+        trace: Option<[String; 3]>,
+        #[arg(long, default_value = "auto", value_parser = parse_backend)]
+        backend: BackendChoice,
+        #[arg(long, value_name = "NAME")]
+        adapter: Option<String>,
+        #[arg(long, value_parser = parse_precision)]
+        precision: Option<Precision>,
+        /// Print the summaries as JSON instead of a table.
+        #[arg(long)]
+        json: bool,
+    },
     /// Plot run logs into PNGs (energies, solver, probes); several logs are overlaid.
     Plot {
         #[arg(required = true)]
@@ -62,6 +94,9 @@ enum Command {
         /// Directory for the PNGs (default: `<first log without .mcap>_plots`).
         #[arg(long)]
         out: Option<PathBuf>,
+        /// Probes `B,C,D`: also plot B's path in the plane BCD.
+        #[arg(long, value_name = "B,C,D", value_parser = parse_trace)]
+        trace: Option<[String; 3]>,
     },
     /// Print the totals of run logs as a table (one column per log).
     Summary {
@@ -262,10 +297,76 @@ fn run(args: RunArgs) -> Result<ExitCode> {
     }
 }
 
-fn plot_command(runs: Vec<PathBuf>, out: Option<PathBuf>) -> Result<ExitCode> {
+fn parse_trace(s: &str) -> Result<[String; 3], String> {
+    let names: Vec<String> = s.split(',').map(|n| n.trim().to_string()).collect();
+    <[String; 3]>::try_from(names).map_err(|_| "expected three probe names, `B,C,D`".to_string())
+}
+
+struct SweepArgs {
+    scene: PathBuf,
+    over: Vec<SweepAxis>,
+    sets: Vec<String>,
+    out: Option<PathBuf>,
+    jobs: Option<usize>,
+    trace: Option<[String; 3]>,
+    backend: BackendRequest,
+    json: bool,
+}
+
+fn sweep_command(args: SweepArgs) -> Result<ExitCode> {
+    let sweep = Sweep::load(&args.scene, &args.sets, &args.over)?;
+    let out = args.out.unwrap_or_else(|| PathBuf::from(format!("{}_sweep", sweep.name)));
+    let count = sweep.variants().count();
+    let jobs = args.jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())).clamp(1, count);
+    eprintln!("bifirst {}: sweep of `{}`, {count} variants, {jobs} at a time, into {}", env!("CARGO_PKG_VERSION"), sweep.name, out.display());
+    let options = RunOptions { vtu: None, interrupt: Some(interrupt_flag()?), backend: args.backend };
+    let finished = AtomicUsize::new(0);
+    let outcomes = sweep.run(&out, &options, jobs, |o| {
+        let n = finished.fetch_add(1, Ordering::Relaxed) + 1;
+        match (o.summary(), &o.result) {
+            (Some(s), _) => eprintln!(
+                "[{n}/{count}] {}: {} ({} steps, {:.1} s, backend {}{}) -> {}",
+                o.variant.label,
+                s.status,
+                s.steps,
+                s.wall_s,
+                s.backend,
+                s.adapter.as_ref().map_or(String::new(), |a| format!(" on {a}")),
+                o.log.display()
+            ),
+            (None, Err(e)) => eprintln!("[{n}/{count}] {}: error: {e}", o.variant.label),
+            (None, Ok(_)) => unreachable!("a finished run has a summary"),
+        }
+    })?;
+    let logged: Vec<&VariantOutcome> = outcomes.iter().filter(|o| o.summary().is_some()).collect();
+    let records = logged.iter().map(|o| read_run(&o.log)).collect::<Result<Vec<_>, _>>()?;
+    let mut summaries = records.iter().map(summary::summarize).collect::<Result<Vec<_>, _>>()?;
+    for (s, o) in summaries.iter_mut().zip(&logged) {
+        s.name = o.variant.label.clone();
+    }
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&summaries)?);
+    } else {
+        print!("{}", summary::table(&summaries));
+    }
+    if !records.is_empty() {
+        let labels = Some(logged.iter().map(|o| o.variant.label.clone()).collect());
+        for file in plot::plot_runs(&records, &out.join("plots"), &PlotOptions { labels, trace: args.trace })? {
+            eprintln!("plot: {}", file.display());
+        }
+    }
+    let failed = outcomes.iter().filter(|o| !matches!(o.result, Ok(_))).count();
+    if failed > 0 {
+        eprintln!("error: {failed} of {count} variants did not finish");
+        return Ok(ExitCode::FAILURE);
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+fn plot_command(runs: Vec<PathBuf>, out: Option<PathBuf>, trace: Option<[String; 3]>) -> Result<ExitCode> {
     let records = runs.iter().map(|p| read_run(p)).collect::<Result<Vec<_>, _>>()?;
     let out = out.unwrap_or_else(|| runs[0].with_file_name(format!("{}_plots", runs[0].file_stem().map_or("run".into(), |s| s.to_string_lossy()))));
-    for file in plot::plot_runs(&records, &out)? {
+    for file in plot::plot_runs(&records, &out, &PlotOptions { labels: None, trace })? {
         println!("{}", file.display());
     }
     Ok(ExitCode::SUCCESS)
@@ -292,7 +393,10 @@ fn main() -> ExitCode {
         Command::Run { scene, out, sets, vtu, quiet, json, backend, adapter, precision } => {
             run(RunArgs { backend: BackendRequest { choice: backend, adapter, precision }, scene, out, sets, vtu, quiet, json })
         }
-        Command::Plot { runs, out } => plot_command(runs, out),
+        Command::Sweep { scene, over, sets, out, jobs, trace, backend, adapter, precision, json } => {
+            sweep_command(SweepArgs { scene, over, sets, out, jobs, trace, backend: BackendRequest { choice: backend, adapter, precision }, json })
+        }
+        Command::Plot { runs, out, trace } => plot_command(runs, out, trace),
         Command::Summary { runs, json } => summary_command(runs, json),
         Command::Check { scene, sets } => load_scene(&scene, &sets).map_err(anyhow::Error::from).and_then(|loaded| {
             let sim = bifirst::solver::build_simulation(&loaded)?;

@@ -209,7 +209,7 @@ fn plots_of_a_real_run_are_non_trivial_pngs_and_overlay_several_runs() {
     let b = common_run::run("free_vibration_2d", &["time.end=0.05", "time.theta=0.6"], "plot_b");
     let dir = temp_path("plots");
     let _ = std::fs::remove_dir_all(&dir);
-    let files = plot::plot_runs(&[a.record.clone(), b.record.clone()], &dir).expect("plots");
+    let files = plot::plot_runs(&[a.record.clone(), b.record.clone()], &dir, &Default::default()).expect("plots");
     let names: Vec<String> = files.iter().map(|f| f.file_name().unwrap().to_string_lossy().into_owned()).collect();
     assert_eq!(names, ["energies.png", "solver.png", "probe_tip.png"]);
     for file in &files {

@@ -25,6 +25,29 @@ pub struct LogSummary {
     pub max_penetration: f64,
     /// Wall seconds per phase (`elements`, ..., `contact`, then `total`).
     pub wall_by_phase: Vec<(String, f64)>,
+    pub probes: Vec<ProbeSummary>,
+}
+
+/// The extremes of a probe over the run.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct ProbeSummary {
+    pub name: String,
+    pub max_von_mises: f64,
+    /// Per axis, the largest minus the smallest coordinate over the run (the motion's extent).
+    pub position_range: Vec<f64>,
+}
+
+fn probe_summary(record: &RunRecord, name: String) -> ProbeSummary {
+    let messages = record.messages(&format!("/probe/{name}"));
+    let dim = messages.first().and_then(|m| m["position"].as_array()).map_or(0, Vec::len);
+    let max_von_mises = messages.iter().map(|m| number(&m["von_mises"])).fold(0.0, f64::max);
+    let position_range = (0..dim)
+        .map(|i| {
+            let (lo, hi) = messages.iter().map(|m| number(&m["position"][i])).fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), x| (lo.min(x), hi.max(x)));
+            hi - lo
+        })
+        .collect();
+    ProbeSummary { name, max_von_mises, position_range }
 }
 
 fn number(v: &Value) -> f64 {
@@ -83,6 +106,7 @@ pub fn summarize(record: &RunRecord) -> Result<LogSummary, ReadError> {
         energy_balance_error: number(&last["energy_balance_error"]),
         max_penetration: number(&s["max_penetration"]),
         wall_by_phase: PHASES.iter().chain(&["total"]).map(|p| (p.to_string(), number(&wall[*p]))).collect(),
+        probes: record.names_under("/probe/").into_iter().map(|name| probe_summary(record, name)).collect(),
     })
 }
 
@@ -111,6 +135,16 @@ pub fn table(runs: &[LogSummary]) -> String {
             })
             .collect();
         rows.push((label, cells));
+    }
+    let mut probes: Vec<&str> = runs.iter().flat_map(|r| r.probes.iter().map(|p| p.name.as_str())).collect();
+    probes.sort_unstable();
+    probes.dedup();
+    for name in probes {
+        let of = |r: &LogSummary| r.probes.iter().find(|p| p.name == name).cloned();
+        let cell = |r: &LogSummary, f: &dyn Fn(&ProbeSummary) -> String| of(r).map_or_else(|| "-".into(), |p| f(&p));
+        rows.push((format!("probe {name}, max von Mises"), runs.iter().map(|r| cell(r, &|p| format!("{:.4e}", p.max_von_mises))).collect()));
+        let range = |p: &ProbeSummary| format!("[{}]", p.position_range.iter().map(|x| format!("{x:.3e}")).collect::<Vec<_>>().join(", "));
+        rows.push((format!("probe {name}, motion range"), runs.iter().map(|r| cell(r, &range)).collect()));
     }
     let label_width = rows.iter().map(|(l, _)| l.len()).max().unwrap_or(0);
     let widths: Vec<usize> = (0..runs.len()).map(|c| rows.iter().map(|(_, cells)| cells[c].len()).max().unwrap_or(0)).collect();

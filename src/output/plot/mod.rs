@@ -35,6 +35,7 @@ pub enum PlotError {
 /// One panel: a quantity against time, one line per run.
 struct Panel {
     title: String,
+    x_label: String,
     y_label: String,
     lines: Vec<Vec<(f64, f64)>>,
 }
@@ -46,7 +47,7 @@ impl Panel {
             .iter()
             .map(|r| r.messages(topic).iter().filter_map(|m| Some((m["t"].as_f64()?, value(m)?))).filter(|(t, v)| t.is_finite() && v.is_finite()).collect())
             .collect();
-        Self { title: title.into(), y_label: y_label.into(), lines }
+        Self { title: title.into(), x_label: "t".into(), y_label: y_label.into(), lines }
     }
 }
 
@@ -112,7 +113,7 @@ fn figure(path: &Path, title: &str, names: &[String], panels: &[Panel], columns:
             .map_err(|e| draw_err(&e))?;
         chart
             .configure_mesh()
-            .x_desc("t")
+            .x_desc(panel.x_label.as_str())
             .y_desc(panel.y_label.as_str())
             .label_style((FAMILY, 13))
             .y_label_formatter(&y_format)
@@ -153,14 +154,24 @@ fn run_names(runs: &[RunRecord]) -> Vec<String> {
     }
 }
 
-/// Writes `energies.png`, `solver.png` and `probe_<name>.png` for the runs into `out`;
-/// returns the files written.
-pub fn plot_runs(runs: &[RunRecord], out: &Path) -> Result<Vec<PathBuf>, PlotError> {
+/// What to draw besides the standard figures, and how to name the runs.
+#[derive(Debug, Clone, Default)]
+pub struct PlotOptions {
+    /// Legend entries, one per run (default: scene names, or file stems when they repeat).
+    pub labels: Option<Vec<String>>,
+    /// Probes `[B, C, D]`: draw B's path in the plane through the reference positions of B, C
+    /// and D (the paper's Figure 5).
+    pub trace: Option<[String; 3]>,
+}
+
+/// Writes `energies.png`, `solver.png`, `probe_<name>.png` (and `trace_<B>.png`) for the runs
+/// into `out`; returns the files written.
+pub fn plot_runs(runs: &[RunRecord], out: &Path, options: &PlotOptions) -> Result<Vec<PathBuf>, PlotError> {
     std::fs::create_dir_all(out).map_err(|source| PlotError::Create { path: out.into(), source })?;
     for r in runs {
         r.require("/energy")?;
     }
-    let names = run_names(runs);
+    let names = options.labels.clone().unwrap_or_else(|| run_names(runs));
     let mut written = Vec::new();
 
     let energy = |title: &str, key: &'static str| Panel::of(runs, title, "energy", "/energy", field(key));
@@ -201,5 +212,49 @@ pub fn plot_runs(runs: &[RunRecord], out: &Path) -> Result<Vec<PathBuf>, PlotErr
         figure(&path, &format!("Probe {probe}"), &names, &panels, 2)?;
         written.push(path);
     }
+    if let Some(probes) = &options.trace {
+        let path = out.join(format!("trace_{}.png", probes[0]));
+        let panel = trace_panel(runs, probes)?;
+        figure(&path, &format!("Trace of {} in the plane {}{}{}", probes[0], probes[0], probes[1], probes[2]), &names, &[panel], 1)?;
+        written.push(path);
+    }
     Ok(written)
+}
+
+/// A probe's reference position (its position minus its displacement at the first message).
+fn reference(run: &RunRecord, probe: &str) -> Result<[f64; 3], PlotError> {
+    let topic = format!("/probe/{probe}");
+    let first = run.require(&topic)?.first().ok_or_else(|| PlotError::Read(ReadError::Missing { path: run.path.clone(), topic: topic.clone() }))?;
+    let at = |field: &str, i: usize| first[field][i].as_f64().unwrap_or(0.0);
+    Ok([0, 1, 2].map(|i| at("position", i) - at("displacement", i)))
+}
+
+/// B's displacement in the plane BCD: along BC, and along the in-plane perpendicular to BC
+/// that points from D's side towards B.
+fn trace_panel(runs: &[RunRecord], [b, c, d]: &[String; 3]) -> Result<Panel, PlotError> {
+    let mut lines = Vec::new();
+    for run in runs {
+        let (b0, c0, d0) = (reference(run, b)?, reference(run, c)?, reference(run, d)?);
+        let sub = |p: [f64; 3], q: [f64; 3]| [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
+        let dot = |p: [f64; 3], q: [f64; 3]| p[0] * q[0] + p[1] * q[1] + p[2] * q[2];
+        let unit = |p: [f64; 3]| {
+            let n = dot(p, p).sqrt();
+            p.map(|x| x / n)
+        };
+        let e1 = unit(sub(c0, b0));
+        let bd = sub(b0, d0);
+        let e2 = unit(sub(bd, e1.map(|x| x * dot(bd, e1))));
+        let line = run
+            .messages(&format!("/probe/{b}"))
+            .iter()
+            .filter_map(|m| {
+                let p = [0, 1, 2].map(|i| m["position"][i].as_f64().unwrap_or(0.0));
+                let u = sub(p, b0);
+                let (s, n) = (dot(u, e1), dot(u, e2));
+                (s.is_finite() && n.is_finite()).then_some((s, n))
+            })
+            .collect();
+        lines.push(line);
+    }
+    Ok(Panel { title: format!("displacement of {b} in the plane {b}{c}{d}"), x_label: format!("along {b}{c}"), y_label: format!("across {b}{c}, towards {b}"), lines })
 }
