@@ -40,6 +40,9 @@ enum Command {
         /// Write VTU frames and `.pvd` series for ParaView into this directory.
         #[arg(long, value_name = "DIR")]
         vtu: Option<PathBuf>,
+        /// Draw the von Mises contours of the final state into this PNG (2D scenes).
+        #[arg(long, value_name = "FILE.png")]
+        contour: Option<PathBuf>,
         /// No progress and no summary line; only errors.
         #[arg(long, short)]
         quiet: bool,
@@ -258,6 +261,7 @@ struct RunArgs {
     out: Option<PathBuf>,
     sets: Vec<String>,
     vtu: Option<PathBuf>,
+    contour: Option<PathBuf>,
     quiet: bool,
     json: bool,
 }
@@ -268,7 +272,7 @@ fn run(args: RunArgs) -> Result<ExitCode> {
     if !args.quiet {
         eprintln!("bifirst {}: scene `{}`", env!("CARGO_PKG_VERSION"), loaded.name);
     }
-    let options = RunOptions { vtu: args.vtu, interrupt: Some(interrupt_flag()?), backend: args.backend };
+    let options = RunOptions { vtu: args.vtu, interrupt: Some(interrupt_flag()?), backend: args.backend, contour: args.contour };
     let mut progress = Progress { quiet: args.quiet, bar: None, last_line: Instant::now(), last_fraction: 0.0 };
     let result = run_scene(&loaded, &out, &options, &mut progress);
     if let Some(bar) = &progress.bar {
@@ -319,7 +323,7 @@ fn sweep_command(args: SweepArgs) -> Result<ExitCode> {
     let count = sweep.variants().count();
     let jobs = args.jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())).clamp(1, count);
     eprintln!("bifirst {}: sweep of `{}`, {count} variants, {jobs} at a time, into {}", env!("CARGO_PKG_VERSION"), sweep.name, out.display());
-    let options = RunOptions { vtu: None, interrupt: Some(interrupt_flag()?), backend: args.backend };
+    let options = RunOptions { vtu: None, interrupt: Some(interrupt_flag()?), backend: args.backend, contour: None };
     let finished = AtomicUsize::new(0);
     let outcomes = sweep.run(&out, &options, jobs, |o| {
         let n = finished.fetch_add(1, Ordering::Relaxed) + 1;
@@ -390,8 +394,8 @@ fn main() -> ExitCode {
     }
     let cli = Cli::parse();
     let result = match cli.command {
-        Command::Run { scene, out, sets, vtu, quiet, json, backend, adapter, precision } => {
-            run(RunArgs { backend: BackendRequest { choice: backend, adapter, precision }, scene, out, sets, vtu, quiet, json })
+        Command::Run { scene, out, sets, vtu, contour, quiet, json, backend, adapter, precision } => {
+            run(RunArgs { backend: BackendRequest { choice: backend, adapter, precision }, scene, out, sets, vtu, contour, quiet, json })
         }
         Command::Sweep { scene, over, sets, out, jobs, trace, backend, adapter, precision, json } => {
             sweep_command(SweepArgs { scene, over, sets, out, jobs, trace, backend: BackendRequest { choice: backend, adapter, precision }, json })

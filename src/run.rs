@@ -4,6 +4,7 @@
 
 use crate::element::CellFields;
 use crate::output::foxglove::{self, Level, View};
+use crate::output::plot::{contour_png, PlotError};
 use crate::output::{schemas, OutputError, RunLog, VtuSeries};
 use crate::backend::{Backend, BackendError, BackendRequest};
 use crate::precision::Real;
@@ -23,6 +24,8 @@ pub enum RunError {
     Output(#[from] OutputError),
     #[error("{0}")]
     Backend(#[from] BackendError),
+    #[error("{0}")]
+    Plot(#[from] PlotError),
     /// The run stopped early; the log holds everything up to the last finished step.
     #[error("the run stopped: {reason}. The log `{}` holds everything up to t = {:.6e}.", .summary.output.display(), .summary.t_end)]
     Stopped { reason: Stop, summary: RunSummary },
@@ -60,6 +63,8 @@ pub struct RunOptions {
     pub interrupt: Option<Arc<AtomicBool>>,
     /// Where the kernels run (default: the CPU).
     pub backend: BackendRequest,
+    /// A PNG of the von Mises contours at the end of the run (2D scenes).
+    pub contour: Option<PathBuf>,
 }
 
 /// What a run did, printed at its end.
@@ -320,6 +325,9 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
     let backend = resolved.backend;
     monitor.backend(&backend.describe());
     backend.apply(&mut sim).map_err(BackendError::from)?;
+    if let (Some(path), 3) = (&options.contour, sim.dim) {
+        return Err(PlotError::Draw { path: path.clone(), message: "contour plots are drawn for 2D scenes; use --vtu and ParaView for 3D".into() }.into());
+    }
     sim.start();
     let mut logger = Logger::new(out, loaded, &sim, options, &backend)?;
     if let Some(reason) = &resolved.fallback {
@@ -388,8 +396,13 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
         logger.frames(&sim, sim.finished())?;
         monitor.step(&report, total);
     };
+    let contour = |sim: &Simulation| match &options.contour {
+        Some(path) => contour_png(sim, &sim.bodies.iter().map(|b| b.cell_fields()).collect::<Vec<_>>(), &format!("{}: von Mises stress at t = {:.4}", loaded.name, sim.t), path),
+        None => Ok(()),
+    };
     match stop {
         None => {
+            contour(&sim)?;
             let summary = summary(&sim, &totals, None);
             logger.summary(&summary, sim.t)?;
             logger.log.finish()?;
@@ -403,6 +416,9 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
             let message = stop.to_string();
             logger.line(sim.t, level, &format!("the run stopped at t = {:.6e}: {message}", sim.t))?;
             logger.solver(&report, report.t, stop.status(), Some(message))?;
+            if let Err(e) = contour(&sim) {
+                monitor.warning(&e.to_string());
+            }
             let summary = summary(&sim, &totals, Some(&stop));
             logger.summary(&summary, sim.t)?;
             logger.log.finish()?;

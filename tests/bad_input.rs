@@ -248,3 +248,14 @@ fn backend_requests_that_cannot_be_met() {
 fn common_scene_path(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes").join(format!("{name}.toml"))
 }
+
+#[test]
+fn bad_packing_and_polygon_grains() {
+    let packing = format!("{GOOD}\n[packing]\ncount = 4\nmaterial = \"steel\"\n");
+    assert_error("packing_material", &packing, &[], "packing.material", Some(21), "unknown material `steel`");
+    assert_error("packing_radius", &packing.replace("\"steel\"", "\"rubber\""), &["packing.radius=[0.5, 0.2]"], "packing.radius", None, "0 < min <= max");
+    let concave = r#"{ generator = "polygon", element = "tri3", points = [[0.0, 0.0], [2.0, 0.0], [1.0, 0.3], [1.0, 2.0]], divisions = [3] }"#;
+    let polygon = GOOD.replace(r#"{ generator = "rectangle", element = "quad4", size = [1.0, 1.0], divisions = [2, 2] }"#, concave).replace("nodes = \"y_min\"", "nodes = \"center\"");
+    assert_error("concave_polygon", &polygon, &[], "body.block.mesh.points", Some(13), "not convex");
+    assert_error("polygon_quads", &polygon.replace("[1.0, 0.3]", "[2.0, 2.0]").replace("tri3", "quad4"), &[], "body.block.mesh.element", Some(13), "tri3");
+}

@@ -141,3 +141,32 @@ fn lumped_masses_sum_to_the_body_mass() {
     let area: f64 = ReferenceGeometry::new(&disk).unwrap().volumes.iter().sum();
     assert!((area - std::f64::consts::PI).abs() < 0.02, "disk area {area}");
 }
+
+#[test]
+fn polygon_mesh_is_conforming_positive_and_fills_the_outline() {
+    let hexagon: Vec<[f64; 2]> = (0..6).map(|i| (i as f64 * -std::f64::consts::FRAC_PI_3 + 0.2).sin_cos()).map(|(s, c)| [1.0 + c, 2.0 + s]).collect();
+    let outlines = [vec![[0.0, 0.0], [2.0, 0.0], [0.5, 1.5]], vec![[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]], hexagon];
+    for outline in outlines {
+        let m = outline.len();
+        let area: f64 = (0..m).map(|i| outline[i][0] * outline[(i + 1) % m][1] - outline[(i + 1) % m][0] * outline[i][1]).sum::<f64>().abs() / 2.0;
+        for n in [1, 3] {
+            let mesh = generate::polygon(&outline, n);
+            assert_eq!(mesh.element_count(), m * n * n);
+            let geometry = ReferenceGeometry::new(&mesh).expect("every triangle is positively oriented");
+            let meshed: f64 = geometry.volumes.iter().sum();
+            assert!((meshed - area).abs() < 1e-12 * area, "{m}-gon, n = {n}: area {meshed} vs {area}");
+            // Conforming: every edge is shared by two triangles, except the m n edges of the outline.
+            let mut edges = std::collections::BTreeMap::new();
+            for e in 0..mesh.element_count() {
+                let t = mesh.element(e);
+                for i in 0..3 {
+                    let (a, b) = (t[i].min(t[(i + 1) % 3]), t[i].max(t[(i + 1) % 3]));
+                    *edges.entry((a, b)).or_insert(0) += 1;
+                }
+            }
+            assert_eq!(edges.values().filter(|&&c| c == 1).count(), m * n, "{m}-gon, n = {n}: outline edges");
+            assert!(edges.values().all(|&c| c <= 2));
+            assert_eq!(mesh.node_sets["boundary"].len(), m * n);
+        }
+    }
+}

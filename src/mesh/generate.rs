@@ -1,7 +1,7 @@
-//! Structured mesh generators: rectangle and disk in 2D, box in 3D.
+//! Structured mesh generators: rectangle, disk and convex polygon in 2D, box in 3D.
 //!
 //! Node sets: `all` always; rectangle and box add `x_min`, `x_max`, `y_min`, `y_max`
-//! (and `z_min`, `z_max`); the disk adds `boundary` and `center`.
+//! (and `z_min`, `z_max`); the disk and the polygon add `boundary` and `center`.
 
 use super::{ElementKind, Mesh};
 use crate::precision::Real;
@@ -67,6 +67,50 @@ pub fn disk(center: [Real; 2], radius: Real, n: usize, kind: ElementKind) -> Mes
     sets.insert("boundary".into(), boundary);
     sets.insert("center".into(), vec![id(n, n)]);
     let mut mesh = Mesh { kind, nodes, connectivity, node_sets: sets };
+    mesh.finish_sets();
+    mesh
+}
+
+/// Convex polygon (vertices in either order) in Tri3: the fan of triangles from the vertex
+/// centroid to each edge, each split into `n x n` similar triangles, so that `n` rings of
+/// nodes run parallel to the outline (ring `k` has `k` nodes per edge).
+pub fn polygon(vertices: &[[Real; 2]], n: usize) -> Mesh {
+    let mut v = vertices.to_vec();
+    let area2: Real = (0..v.len()).map(|i| v[i][0] * v[(i + 1) % v.len()][1] - v[(i + 1) % v.len()][0] * v[i][1]).sum();
+    if area2 < 0.0 {
+        v.reverse();
+    }
+    let m = v.len();
+    let c = [0, 1].map(|a| v.iter().map(|p| p[a]).sum::<Real>() / m as Real);
+    // Ring k starts after the centre and the k-1 inner rings (m j nodes each, j < k).
+    let ring_start = |k: usize| 1 + m * k * (k - 1) / 2;
+    let id = |k: usize, edge: usize, j: usize| if k == 0 { 0 } else { (ring_start(k) + (edge * k + j) % (m * k)) as u32 };
+    let mut nodes = vec![[c[0], c[1], 0.0]];
+    for k in 1..=n {
+        for e in 0..m {
+            let (a, b) = (v[e], v[(e + 1) % m]);
+            for j in 0..k {
+                let s = j as Real / k as Real;
+                let r = k as Real / n as Real;
+                nodes.push([0, 1, 2].map(|i| if i == 2 { 0.0 } else { c[i] + r * (a[i] + s * (b[i] - a[i]) - c[i]) }));
+            }
+        }
+    }
+    let mut connectivity = Vec::with_capacity(3 * m * n * n);
+    for k in 1..=n {
+        for e in 0..m {
+            for j in 0..k {
+                connectivity.extend([id(k, e, j), id(k, e, j + 1), id(k - 1, e, j)]);
+                if j + 1 < k {
+                    connectivity.extend([id(k - 1, e, j), id(k, e, j + 1), id(k - 1, e, j + 1)]);
+                }
+            }
+        }
+    }
+    let mut sets = BTreeMap::new();
+    sets.insert("boundary".into(), (0..m * n).map(|i| (ring_start(n) + i) as u32).collect());
+    sets.insert("center".into(), vec![0]);
+    let mut mesh = Mesh { kind: ElementKind::Tri3, nodes, connectivity, node_sets: sets };
     mesh.finish_sets();
     mesh
 }

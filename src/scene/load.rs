@@ -1,6 +1,7 @@
 //! Reading a scene: TOML text -> `--set` overrides -> typed [`Scene`] -> validation.
 
 use super::error::{SceneError, SceneErrorKind};
+use super::packing;
 use super::types::Scene;
 use super::validate::validate;
 use std::path::{Path, PathBuf};
@@ -73,7 +74,7 @@ pub fn parse_scene(path: &Path, source: String, sets: &[String]) -> Result<Loade
         overrides.push((key, set.clone()));
     }
     let err = |kind, key: String, message: String| locate(path, &source, &overrides, kind, &key, message);
-    let scene: Scene = serde_path_to_error::deserialize(toml::Value::Table(table)).map_err(|e| {
+    let mut scene: Scene = serde_path_to_error::deserialize(toml::Value::Table(table)).map_err(|e| {
         // For an unknown field the path already ends with that field's name.
         let key = dotted(e.path());
         let inner = e.into_inner().to_string();
@@ -81,12 +82,14 @@ pub fn parse_scene(path: &Path, source: String, sets: &[String]) -> Result<Loade
         let kind = if message.starts_with("unknown field") { SceneErrorKind::UnknownKey } else { SceneErrorKind::Type };
         err(kind, key, format!("{message}."))
     })?;
+    // The packing stays a `[packing]` section in the resolved scene: the seed reproduces it.
+    let resolved_toml = toml::to_string(&scene).expect("a deserialized scene serializes");
+    packing::expand(&mut scene).map_err(|(kind, key, message)| err(kind, key, message))?;
     validate(&scene).map_err(|(kind, key, message)| err(kind, key, message))?;
     let name = scene
         .name
         .clone()
         .unwrap_or_else(|| path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "scene".into()));
-    let resolved_toml = toml::to_string(&scene).expect("a deserialized scene serializes");
     Ok(LoadedScene { scene, name, path: path.to_path_buf(), resolved_toml, source, overrides })
 }
 

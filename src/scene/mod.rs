@@ -5,9 +5,11 @@
 
 mod error;
 mod load;
+mod packing;
 mod types;
 mod validate;
 
 pub use error::{SceneError, SceneErrorKind};
 pub use load::{load_scene, parse_scene, LoadedScene};
+pub use packing::grain_name;
 pub use types::*;

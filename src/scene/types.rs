@@ -18,7 +18,10 @@ pub struct Scene {
     #[serde(default)]
     pub solver: SolverSpec,
     pub material: BTreeMap<String, MaterialSpec>,
+    #[serde(default)]
     pub body: BTreeMap<String, BodySpec>,
+    /// A generated random packing of grains in a rigid box (adds bodies and obstacles).
+    pub packing: Option<PackingSpec>,
     #[serde(default)]
     pub boundary: BTreeMap<String, BoundarySpec>,
     #[serde(default)]
@@ -113,11 +116,12 @@ pub enum AngularVelocity {
 pub enum Generator {
     Rectangle,
     Disk,
+    Polygon,
     Box,
 }
 
 /// Either a generator with its parameters or a Gmsh `.msh` 4.1 file (relative to the scene).
-#[derive(Debug, Clone, Deserialize, Serialize)]
+#[derive(Debug, Clone, Default, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct MeshSpec {
     pub generator: Option<Generator>,
@@ -132,6 +136,40 @@ pub struct MeshSpec {
     /// Disk: centre and radius.
     pub center: Option<Vec<Real>>,
     pub radius: Option<Real>,
+    /// Polygon: the vertices of a convex outline, `[[x, y], ...]`.
+    pub points: Option<Vec<Vec<Real>>>,
+}
+
+/// A random packing of `count` grains (disks and convex polygons, Tri3) in a rigid box whose
+/// left wall moves right. Generated at load time into bodies `grain_0001`... and the obstacles
+/// `left`, `right`, `bottom` and `top`; the same seed gives the same packing.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct PackingSpec {
+    pub count: usize,
+    pub seed: u64,
+    /// The grains' material (a name from `[material]`).
+    pub material: String,
+    /// Range of the grains' radii (circumradius of a polygon), `[min, max]`.
+    pub radius: Vec<Real>,
+    /// Share of the grains that are polygons (3 to 6 vertices); the rest are disks.
+    pub polygons: Real,
+    /// Cells per radius of each grain's mesh.
+    pub divisions: usize,
+    /// Grains per row of the initial lattice; 0: about as many rows as columns.
+    pub columns: usize,
+    /// Clearance between neighbouring grains' lattice cells, relative to the largest diameter.
+    pub gap: Real,
+    /// Speed of the left wall towards +x.
+    pub wall_velocity: Real,
+    /// Friction of the top and bottom walls (the side walls are frictionless).
+    pub wall_friction: Real,
+}
+
+impl Default for PackingSpec {
+    fn default() -> Self {
+        Self { count: 100, seed: 1, material: String::new(), radius: vec![0.4, 0.5], polygons: 0.5, divisions: 2, columns: 0, gap: 0.05, wall_velocity: 0.0, wall_friction: 0.0 }
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]

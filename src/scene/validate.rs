@@ -34,7 +34,7 @@ fn finite_vec(key: &str, v: &[Real], len: Option<usize>) -> Result<(), Failure> 
 /// Spatial dimension implied by a body's generator, if it has one.
 pub(super) fn generator_dim(mesh: &MeshSpec) -> Option<usize> {
     mesh.generator.map(|g| match g {
-        Generator::Rectangle | Generator::Disk => 2,
+        Generator::Rectangle | Generator::Disk | Generator::Polygon => 2,
         Generator::Box => 3,
     })
 }
@@ -174,7 +174,15 @@ fn validate_mesh(key: &str, m: &MeshSpec) -> Result<(), Failure> {
         if m.file.is_none() {
             return fail(Invalid, key, "a mesh needs either `generator` or `file`.");
         }
-        for (field, set) in [("element", m.element.is_some()), ("origin", m.origin.is_some()), ("size", m.size.is_some()), ("divisions", m.divisions.is_some()), ("center", m.center.is_some()), ("radius", m.radius.is_some())] {
+        for (field, set) in [
+            ("element", m.element.is_some()),
+            ("origin", m.origin.is_some()),
+            ("size", m.size.is_some()),
+            ("divisions", m.divisions.is_some()),
+            ("center", m.center.is_some()),
+            ("radius", m.radius.is_some()),
+            ("points", m.points.is_some()),
+        ] {
             if set {
                 fail(Invalid, format!("{key}.{field}"), "a mesh read from a file takes no generator parameters.")?;
             }
@@ -222,6 +230,36 @@ fn validate_mesh(key: &str, m: &MeshSpec) -> Result<(), Failure> {
                 Some([n]) if *n > 0 => {}
                 _ => fail(Invalid, format!("{key}.divisions"), "a disk takes one positive number of cells per radius, e.g. [4].")?,
             }
+        }
+        Generator::Polygon => {
+            if kind != crate::mesh::ElementKind::Tri3 {
+                fail(Invalid, format!("{key}.element"), "the polygon generator makes tri3 meshes.")?;
+            }
+            need("points", m.points.is_some())?;
+            outline(&format!("{key}.points"), m.points.as_deref().unwrap_or_default(), 3)?;
+            if !convex(m.points.as_deref().unwrap_or_default()) {
+                fail(Invalid, format!("{key}.points"), "the polygon is not convex.")?;
+            }
+            match m.divisions.as_deref() {
+                Some([n]) if *n > 0 => {}
+                _ => fail(Invalid, format!("{key}.divisions"), "a polygon takes one positive number of cells from its centre to its outline, e.g. [4].")?,
+            }
+        }
+    }
+    Ok(())
+}
+
+/// At least `least` finite 2D points, no two consecutive ones equal.
+fn outline(key: &str, points: &[Vec<Real>], least: usize) -> Result<(), Failure> {
+    if points.len() < least {
+        fail(Invalid, key, format!("at least {least} points are needed."))?;
+    }
+    for (i, p) in points.iter().enumerate() {
+        finite_vec(&format!("{key}.{i}"), p, Some(2))?;
+    }
+    for i in 0..points.len().saturating_sub(1) {
+        if points[i] == points[i + 1] {
+            fail(Invalid, format!("{key}.{}", i + 1), "two consecutive points coincide.")?;
         }
     }
     Ok(())
@@ -301,18 +339,7 @@ fn validate_obstacle(s: &Scene, key: &str, o: &ObstacleSpec, dim: Option<usize>)
         if dim == Some(3) {
             fail(Invalid, format!("{key}.shape"), "polygons and polylines are 2D obstacles; use planes or boxes in 3D.")?;
         }
-        let least = if o.shape == ObstacleShape::Polygon { 3 } else { 2 };
-        if points.len() < least {
-            fail(Invalid, format!("{key}.points"), format!("at least {least} points are needed."))?;
-        }
-        for (i, p) in points.iter().enumerate() {
-            finite_vec(&format!("{key}.points.{i}"), p, Some(2))?;
-        }
-        for i in 0..points.len().saturating_sub(1) {
-            if points[i] == points[i + 1] {
-                fail(Invalid, format!("{key}.points.{}", i + 1), "two consecutive points coincide.")?;
-            }
-        }
+        outline(&format!("{key}.points"), points, if o.shape == ObstacleShape::Polygon { 3 } else { 2 })?;
         if o.shape == ObstacleShape::Polygon && !convex(points) {
             fail(Invalid, format!("{key}.points"), "the polygon is not convex; build a concave outline from polylines.")?;
         }

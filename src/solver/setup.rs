@@ -45,6 +45,10 @@ fn build_mesh(loaded: &LoadedScene, key: &str, spec: &MeshSpec) -> Result<Mesh, 
             spec.divisions.as_ref().expect("validated")[0],
             kind.expect("validated"),
         ),
+        (Some(Generator::Polygon), _) => {
+            let points: Vec<[Real; 2]> = spec.points.as_ref().expect("validated").iter().map(|p| [p[0], p[1]]).collect();
+            generate::polygon(&points, spec.divisions.as_ref().expect("validated")[0])
+        }
         (Some(Generator::Box), _) => {
             let (s, d) = (spec.size.as_ref().expect("validated"), spec.divisions.as_ref().expect("validated"));
             generate::cuboid([v(&spec.origin, 0), v(&spec.origin, 1), v(&spec.origin, 2)], [s[0], s[1], s[2]], [d[0], d[1], d[2]], kind.expect("validated"))

@@ -1,13 +1,17 @@
 //! `bifirst plot`: PNG figures from one or more run logs, one line per run in every panel (so
 //! that a sweep can be compared): energies, each probe, and the solver's effort per step.
 
+mod contour;
+
+pub use contour::contour_png;
+
 use super::read::{ReadError, RunRecord};
 use plotters::prelude::*;
 use std::path::{Path, PathBuf};
 
 /// DejaVu Sans (licence beside this file): the bitmap backend draws text with a font it is given.
 const FONT: &[u8] = include_bytes!("DejaVuSans.ttf");
-const FAMILY: &str = "sans-serif";
+pub(super) const FAMILY: &str = "sans-serif";
 
 const COLORS: [RGBColor; 10] = [
     RGBColor(31, 119, 180),
@@ -51,7 +55,7 @@ impl Panel {
     }
 }
 
-fn register_font() {
+pub(super) fn register_font() {
     static ONCE: std::sync::Once = std::sync::Once::new();
     ONCE.call_once(|| {
         // The bundled font is valid TrueType; a failure here would show as missing text only.
