@@ -8,13 +8,12 @@
 //! Polygons are meshed finer than the finest disk: single-pass contact makes the finer mesh the
 //! slave, and a polygon's corners must be slave nodes, or they would sink into the disks.
 
-use super::error::SceneErrorKind::{self, Invalid, Reference};
+use super::error::SceneErrorKind::{Invalid, Reference};
 use super::types::{BodySpec, Generator, MeshSpec, ObstacleShape, ObstacleSpec, PackingSpec, Scene};
+use super::validate::{friction, names, Failure};
 use crate::mesh::{generate, ElementKind};
 use crate::precision::Real;
 use std::f64::consts::TAU;
-
-type Failure = (SceneErrorKind, String, String);
 
 /// SplitMix64: a fixed algorithm, so that a seed gives the same packing whatever the versions
 /// of the crates this one is built with.
@@ -45,8 +44,7 @@ fn check(p: &PackingSpec, s: &Scene) -> Result<(), Failure> {
         return bad("count", "at least one grain is needed.".into());
     }
     if !s.material.contains_key(&p.material) {
-        let known = s.material.keys().map(|k| format!("`{k}`")).collect::<Vec<_>>().join(", ");
-        return Err((Reference, "packing.material".into(), format!("unknown material `{}` (the scene defines: {known}).", p.material)));
+        return Err((Reference, "packing.material".into(), format!("unknown material `{}` (the scene defines: {}).", p.material, names(s.material.keys()))));
     }
     match p.radius[..] {
         [lo, hi] if lo > 0.0 && lo <= hi && hi.is_finite() => {}
@@ -64,9 +62,7 @@ fn check(p: &PackingSpec, s: &Scene) -> Result<(), Failure> {
     if !p.wall_velocity.is_finite() {
         return bad("wall_velocity", "not a finite number.".into());
     }
-    if !(p.wall_friction >= 0.0 && p.wall_friction.is_finite()) {
-        return bad("wall_friction", format!("a friction coefficient must be zero or positive and finite (got {}).", p.wall_friction));
-    }
+    friction("packing.wall_friction".into(), p.wall_friction)?;
     if s.gravity.as_ref().is_some_and(|g| g.len() != 2) {
         return Err((Invalid, "gravity".into(), "a packing is 2D: gravity needs 2 components.".into()));
     }

@@ -5,7 +5,7 @@ use super::error::SceneErrorKind::{self, Invalid, Reference};
 use super::types::*;
 use crate::precision::Real;
 
-type Failure = (SceneErrorKind, String, String);
+pub(super) type Failure = (SceneErrorKind, String, String);
 
 fn fail(kind: SceneErrorKind, key: impl Into<String>, message: impl Into<String>) -> Result<(), Failure> {
     Err((kind, key.into(), message.into()))
@@ -139,7 +139,7 @@ fn names_of<V>(map: &std::collections::BTreeMap<String, V>) -> Vec<&String> {
     map.keys().collect()
 }
 
-fn names<'a>(it: impl Iterator<Item = &'a String>) -> String {
+pub(super) fn names<'a>(it: impl Iterator<Item = &'a String>) -> String {
     let v: Vec<&str> = it.map(String::as_str).collect();
     if v.is_empty() {
         "none".into()
@@ -265,7 +265,7 @@ fn outline(key: &str, points: &[Vec<Real>], least: usize) -> Result<(), Failure>
     Ok(())
 }
 
-fn friction(key: String, mu: Real) -> Result<(), Failure> {
+pub(super) fn friction(key: String, mu: Real) -> Result<(), Failure> {
     if mu >= 0.0 && mu.is_finite() {
         Ok(())
     } else {
