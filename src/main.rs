@@ -49,16 +49,8 @@ enum Command {
         /// Print the final summary as JSON on stdout.
         #[arg(long)]
         json: bool,
-        /// Where the element and assembly kernels run: `auto` takes a hardware GPU, else a
-        /// software adapter (lavapipe), else the CPU.
-        #[arg(long, default_value = "auto", value_parser = parse_backend)]
-        backend: BackendChoice,
-        /// A GPU adapter by name (case-insensitive substring; `bifirst info` lists them).
-        #[arg(long, value_name = "NAME")]
-        adapter: Option<String>,
-        /// GPU kernel precision, f32 or f64 (default: f64 when the adapter has it).
-        #[arg(long, value_parser = parse_precision)]
-        precision: Option<Precision>,
+        #[command(flatten)]
+        backend: BackendArgs,
     },
     /// Run a scene over a grid of values (`--over KEY=V1,V2,...`, several make a grid), the
     /// variants in parallel, one MCAP log each, then overlaid plots and a summary table.
@@ -80,12 +72,8 @@ enum Command {
         /// Probes `B,C,D`: also plot B's path in the plane BCD.
         #[arg(long, value_name = "B,C,D", value_parser = parse_trace)]
         trace: Option<[String; 3]>,
-        #[arg(long, default_value = "auto", value_parser = parse_backend)]
-        backend: BackendChoice,
-        #[arg(long, value_name = "NAME")]
-        adapter: Option<String>,
-        #[arg(long, value_parser = parse_precision)]
-        precision: Option<Precision>,
+        #[command(flatten)]
+        backend: BackendArgs,
         /// Print the summaries as JSON instead of a table.
         #[arg(long)]
         json: bool,
@@ -139,6 +127,27 @@ enum Command {
     },
     /// Print the version, build and compute backends.
     Info,
+}
+
+/// Where a run's kernels go (`run` and `sweep`).
+#[derive(clap::Args)]
+struct BackendArgs {
+    /// Where the element and assembly kernels run: `auto` takes a hardware GPU, else a
+    /// software adapter (lavapipe), else the CPU.
+    #[arg(long, default_value = "auto", value_parser = parse_backend)]
+    backend: BackendChoice,
+    /// A GPU adapter by name (case-insensitive substring; `bifirst info` lists them).
+    #[arg(long, value_name = "NAME")]
+    adapter: Option<String>,
+    /// GPU kernel precision, f32 or f64 (default: f64 when the adapter has it).
+    #[arg(long, value_parser = parse_precision)]
+    precision: Option<Precision>,
+}
+
+impl From<BackendArgs> for BackendRequest {
+    fn from(a: BackendArgs) -> Self {
+        BackendRequest { choice: a.backend, adapter: a.adapter, precision: a.precision }
+    }
 }
 
 /// A progress bar on a terminal; otherwise plain lines about every 10% (at most every 2 s, at
@@ -394,12 +403,8 @@ fn main() -> ExitCode {
     }
     let cli = Cli::parse();
     let result = match cli.command {
-        Command::Run { scene, out, sets, vtu, contour, quiet, json, backend, adapter, precision } => {
-            run(RunArgs { backend: BackendRequest { choice: backend, adapter, precision }, scene, out, sets, vtu, contour, quiet, json })
-        }
-        Command::Sweep { scene, over, sets, out, jobs, trace, backend, adapter, precision, json } => {
-            sweep_command(SweepArgs { scene, over, sets, out, jobs, trace, backend: BackendRequest { choice: backend, adapter, precision }, json })
-        }
+        Command::Run { scene, out, sets, vtu, contour, quiet, json, backend } => run(RunArgs { backend: backend.into(), scene, out, sets, vtu, contour, quiet, json }),
+        Command::Sweep { scene, over, sets, out, jobs, trace, backend, json } => sweep_command(SweepArgs { scene, over, sets, out, jobs, trace, backend: backend.into(), json }),
         Command::Plot { runs, out, trace } => plot_command(runs, out, trace),
         Command::Summary { runs, json } => summary_command(runs, json),
         Command::Check { scene, sets } => load_scene(&scene, &sets).map_err(anyhow::Error::from).and_then(|loaded| {

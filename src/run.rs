@@ -18,13 +18,14 @@ use std::sync::Arc;
 
 #[derive(Debug, thiserror::Error)]
 pub enum RunError {
-    #[error("{0}")]
+    // Transparent: `{0}` with a source would print the message twice in `anyhow`'s `{:#}`.
+    #[error(transparent)]
     Scene(#[from] SceneError),
-    #[error("{0}")]
+    #[error(transparent)]
     Output(#[from] OutputError),
-    #[error("{0}")]
+    #[error(transparent)]
     Backend(#[from] BackendError),
-    #[error("{0}")]
+    #[error(transparent)]
     Plot(#[from] PlotError),
     /// The run stopped early; the log holds everything up to the last finished step.
     #[error("the run stopped: {reason}. The log `{}` holds everything up to t = {:.6e}.", .summary.output.display(), .summary.t_end)]

@@ -242,6 +242,8 @@ fn backend_requests_that_cannot_be_met() {
         let stderr = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
         assert!(stderr.contains(expect), "{args:?}: {stderr}");
+        // Caught when the error was printed with its source appended: the same sentence twice.
+        assert_eq!(stderr.matches(expect).count(), 1, "{args:?}: said once: {stderr}");
     }
 }
 
