@@ -69,7 +69,7 @@ fn newton_iteration(c: &mut Criterion) {
     let geometry = ReferenceGeometry::new(&mesh).unwrap();
     let prescribed: Vec<Prescribed> = mesh.node_sets["z_min"].iter().flat_map(|&n| (0..3).map(move |i| Prescribed { dof: n as usize * 3 + i, velocity: 0.0, set: 0 })).collect();
     let model = Model::NeoHookean(NeoHookean { g: 1000.0, k: 3000.0 });
-    let mut body = Body::new("block".into(), mesh.clone(), geometry, model, 1.0, prescribed, |_| [0.0; 3]).unwrap();
+    let mut body = Body::new("block".into(), mesh.clone(), geometry, model, 1.0, prescribed, |_| [0.0; 3], Default::default()).unwrap();
     let u: Vec<f64> = mesh.nodes.iter().flat_map(|&x| deform(x)).collect();
     let (dt, theta, xi) = (1e-3, 0.5, 0.5);
     let c1 = 1.0 / (theta * dt * dt);

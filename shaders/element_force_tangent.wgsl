@@ -70,20 +70,23 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) g
                 }
             }
         }
+        // The quadrature weight is folded into D B and S, once per point; the tangent is
+        // symmetric, so only its upper triangle (row <= col) is integrated.
+        let s_dv = s * dv;
         for (var col = 0u; col < NDOF; col++) {
-            // D B_col, then B_row · D B_col for every row.
+            // dv D B_col, then B_row · dv D B_col for every row up to col.
             var db: array<real, 6>;
             for (var r = 0u; r < 6u; r++) {
                 var sum = real(0.0);
                 for (var c = 0u; c < 6u; c++) {
                     sum += d[r * 6u + c] * b[col][c];
                 }
-                db[r] = sum;
+                db[r] = sum * dv;
             }
             let bn = col / DIM;
             let j = col % DIM;
-            let sgb = s * gradient(point, bn);
-            for (var row = 0u; row < NDOF; row++) {
+            let sgb = s_dv * gradient(point, bn);
+            for (var row = 0u; row <= col; row++) {
                 var k = real(0.0);
                 for (var r = 0u; r < 6u; r++) {
                     k += b[row][r] * db[r];
@@ -91,7 +94,7 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) g
                 if row % DIM == j {
                     k += dot(sgb, gradient(point, row / DIM));
                 }
-                tangent[row * NDOF + col] += dv * k;
+                tangent[row * NDOF + col] += k;
             }
         }
     }
@@ -101,9 +104,13 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) g
         element_out[base + r] = force[r];
         finite = finite && is_finite(force[r]);
     }
-    for (var r = 0u; r < NDOF * NDOF; r++) {
-        element_out[base + NDOF + r] = tangent[r];
-        finite = finite && is_finite(tangent[r]);
+    for (var r = 0u; r < NDOF; r++) {
+        for (var c = 0u; c < NDOF; c++) {
+            // The lower triangle mirrors the upper one.
+            let k = tangent[min(r, c) * NDOF + max(r, c)];
+            element_out[base + NDOF + r * NDOF + c] = k;
+            finite = finite && is_finite(k);
+        }
     }
     if inverted {
         atomicMin(&failure[INVERTED], e);

@@ -4,7 +4,7 @@
 
 use crate::assembly::{element_out_stride, DofMap, GatherMap, StiffnessPattern};
 use crate::cpu;
-use crate::element::{ElementOutput, ReferenceGeometry};
+use crate::element::ReferenceGeometry;
 use crate::gpu::types::{Coefficients, DofOut, DofStep};
 use crate::gpu::uzawa_step::{UzawaPoint, UzawaStepKernel};
 use crate::gpu::{Gpu, GpuBody, GpuError};
@@ -70,8 +70,8 @@ impl BenchCase {
     }
 
     /// `element_force_tangent` of every element on the CPU.
-    pub fn cpu_elements(&self, scratch: &mut ElementOutput, results: &mut [Real]) {
-        cpu::dispatch_element_force_tangent(&self.model, &self.mesh, &self.geometry, &self.u, true, scratch, results).expect("valid deformation");
+    pub fn cpu_elements(&self, results: &mut [Real]) {
+        cpu::dispatch_element_force_tangent(&self.model, &self.mesh, &self.geometry, &self.u, true, results).expect("valid deformation");
     }
 
     pub fn results_len(&self) -> usize {
@@ -177,9 +177,8 @@ pub fn run_bench(options: &BenchOptions, gpus: &[Arc<Gpu>], mut row: impl FnMut(
                 BenchRow::new(kernel, kind.name(), case.model.name(), n, backend, timing, traffic, error)
             };
             // The CPU twins, and the reference.
-            let mut scratch = ElementOutput::default();
             let mut reference = Reference { results: vec![0.0; case.results_len()], values: vec![0.0; case.pattern.nnz()], dof_out: vec![DofOut::default(); case.u.len()], energy: 0.0 };
-            let t = time_calls(options.min_time, || case.cpu_elements(&mut scratch, &mut reference.results));
+            let t = time_calls(options.min_time, || case.cpu_elements(&mut reference.results));
             if wanted(options, "element_force_tangent") {
                 row(make("element_force_tangent", "cpu f64".into(), t, 0, 0.0));
             }

@@ -24,6 +24,10 @@ use std::time::Instant;
 struct Cli {
     #[command(subcommand)]
     command: Command,
+    /// Worker threads for the kernels, factorisations and Newton solves (default: every core).
+    /// A sweep's jobs share one pool of this many threads.
+    #[arg(long, global = true, value_name = "N")]
+    threads: Option<usize>,
 }
 
 #[derive(Subcommand)]
@@ -132,8 +136,9 @@ enum Command {
 /// Where a run's kernels go (`run` and `sweep`).
 #[derive(clap::Args)]
 struct BackendArgs {
-    /// Where the element and assembly kernels run: `auto` takes a hardware GPU, else a
-    /// software adapter (lavapipe), else the CPU.
+    /// Where the element and assembly kernels run: `auto` takes a hardware GPU when the scene
+    /// is large enough to gain (a body of 50 000 dofs or more), else the CPU; `gpu` takes a
+    /// hardware GPU, else a software adapter (lavapipe, slow: CI's GPU path), with a notice.
     #[arg(long, default_value = "auto", value_parser = parse_backend)]
     backend: BackendChoice,
     /// A GPU adapter by name (case-insensitive substring; `bifirst info` lists them).
@@ -402,6 +407,12 @@ fn main() -> ExitCode {
         std::env::set_var("NODEVICE_SELECT", "1");
     }
     let cli = Cli::parse();
+    if let Some(threads) = cli.threads {
+        if let Err(e) = rayon::ThreadPoolBuilder::new().num_threads(threads.max(1)).build_global() {
+            eprintln!("error: cannot start {threads} threads: {e}");
+            return ExitCode::from(2);
+        }
+    }
     let result = match cli.command {
         Command::Run { scene, out, sets, vtu, contour, quiet, json, backend } => run(RunArgs { backend: backend.into(), scene, out, sets, vtu, contour, quiet, json }),
         Command::Sweep { scene, over, sets, out, jobs, trace, backend, json } => sweep_command(SweepArgs { scene, over, sets, out, jobs, trace, backend: backend.into(), json }),

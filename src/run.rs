@@ -85,6 +85,10 @@ pub struct RunSummary {
     pub cutbacks: usize,
     pub newton_iterations: usize,
     pub uzawa_iterations: usize,
+    /// Body evaluations over the run (see [`StepReport::bodies_iterated`]).
+    pub bodies_iterated: usize,
+    /// Numeric factorisations over the run.
+    pub factorizations: usize,
     /// Largest penetration over the run (0 without contact).
     pub max_penetration: Real,
     pub wall_s: f64,
@@ -183,6 +187,7 @@ impl Logger {
             ("adapter", backend.adapter().unwrap_or_else(|| "none (CPU backend)".to_string())),
             ("precision", backend.precision().to_string()),
             ("cores", cores.to_string()),
+            ("threads", rayon::current_num_threads().to_string()),
         ]
         .into_iter()
         .map(|(k, v)| (k.to_string(), v))
@@ -271,7 +276,7 @@ impl Logger {
     fn solver(&mut self, r: &StepReport, t: Real, status: &str, message: Option<String>) -> Result<(), OutputError> {
         let msg = json!({
             "t": t, "step": r.step, "dt": r.dt, "newton_iterations": r.newton_iterations, "uzawa_iterations": r.uzawa_iterations,
-            "residual_norm": r.residual_norm, "cutbacks": r.cutbacks, "wall_s": r.wall, "bytes_moved": r.bytes_moved,
+            "bodies_iterated": r.bodies_iterated, "factorizations": r.factorizations, "residual_norm": r.residual_norm, "cutbacks": r.cutbacks, "wall_s": r.wall, "bytes_moved": r.bytes_moved,
             "status": status, "message": message,
         });
         self.log.write("/solver", t, &msg)
@@ -310,6 +315,8 @@ struct Totals {
     cutbacks: usize,
     newton: usize,
     uzawa: usize,
+    bodies_iterated: usize,
+    factorizations: usize,
     max_penetration: Real,
     wall: PhaseTimes,
     bytes_moved: u64,
@@ -319,9 +326,10 @@ struct Totals {
 pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor: &mut dyn Monitor) -> Result<RunSummary, RunError> {
     let started = std::time::Instant::now();
     let mut sim = build_simulation(loaded)?;
-    let resolved = Backend::resolve(&options.backend)?;
-    if let Some(reason) = &resolved.fallback {
-        monitor.warning(&format!("backend auto: {reason}, running on the CPU"));
+    let largest_body_dofs = sim.bodies.iter().map(|b| b.mass.len()).max().unwrap_or(0);
+    let resolved = Backend::resolve(&options.backend, largest_body_dofs)?;
+    if let Some(notice) = &resolved.notice {
+        monitor.warning(notice);
     }
     let backend = resolved.backend;
     monitor.backend(&backend.describe());
@@ -331,8 +339,11 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
     }
     sim.start();
     let mut logger = Logger::new(out, loaded, &sim, options, &backend)?;
-    if let Some(reason) = &resolved.fallback {
-        logger.line(0.0, Level::Warning, &format!("backend auto: {reason}, running on the CPU"))?;
+    if let Some(notice) = &resolved.notice {
+        logger.line(0.0, Level::Warning, notice)?;
+    }
+    if let Some(reason) = &resolved.reason {
+        logger.line(0.0, Level::Info, reason)?;
     }
     let every = loaded.scene.output.every;
     let total = sim.step_count();
@@ -352,6 +363,8 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
         cutbacks: totals.cutbacks,
         newton_iterations: totals.newton,
         uzawa_iterations: totals.uzawa,
+        bodies_iterated: totals.bodies_iterated,
+        factorizations: totals.factorizations,
         max_penetration: totals.max_penetration,
         wall_s: started.elapsed().as_secs_f64(),
         wall_by_phase: totals.wall,
@@ -383,6 +396,8 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
         totals.cutbacks += report.cutbacks;
         totals.newton += report.newton_iterations;
         totals.uzawa += report.uzawa_iterations;
+        totals.bodies_iterated += report.bodies_iterated;
+        totals.factorizations += report.factorizations;
         totals.max_penetration = totals.max_penetration.max(report.contact.max_penetration);
         totals.wall += report.wall;
         totals.bytes_moved += report.bytes_moved;

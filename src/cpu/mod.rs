@@ -20,45 +20,57 @@ use crate::gpu::types::{Coefficients, DofOut, DofStep};
 use crate::material::Hyperelastic;
 use crate::mesh::Mesh;
 use crate::precision::Real;
+use rayon::prelude::*;
+
+/// Elements per task of [`dispatch_element_force_tangent`] on the thread pool (the CPU's
+/// workgroup): large enough that scheduling costs nothing next to the elements.
+const ELEMENTS_PER_TASK: usize = 128;
 
 /// The grid of `element_force_tangent`: one call per element at displacement `u` (every dof),
-/// into `results` (`element_out_stride` entries per element; forces only without the tangent).
-/// The error names the first element that failed.
-pub fn dispatch_element_force_tangent<M: Hyperelastic>(
+/// into `results` (`element_out_stride` entries per element; forces only without the tangent),
+/// on every thread of the pool. The error names the first element that failed.
+pub fn dispatch_element_force_tangent<M: Hyperelastic + Sync>(
     model: &M,
     mesh: &Mesh,
     geometry: &ReferenceGeometry,
     u: &[Real],
     with_tangent: bool,
-    scratch: &mut ElementOutput,
     results: &mut [Real],
 ) -> Result<(), (usize, ElementError)> {
     let dim = mesh.dim();
     let ndof = mesh.kind.nodes() * dim;
     let stride = element_out_stride(ndof);
-    let mut ue = Vec::with_capacity(mesh.kind.nodes());
-    for e in 0..mesh.element_count() {
-        mesh.element_displacements_into(u, e, &mut ue);
-        element_force_tangent(model, geometry.element_points(e), &ue, dim, with_tangent, scratch).map_err(|error| (e, error))?;
-        let out = &mut results[e * stride..(e + 1) * stride];
-        out[..ndof].copy_from_slice(&scratch.force);
-        if with_tangent {
-            out[ndof..].copy_from_slice(&scratch.tangent);
+    let failures = results.par_chunks_mut(stride * ELEMENTS_PER_TASK).enumerate().filter_map(|(task, block)| {
+        let (mut scratch, mut ue) = (ElementOutput::default(), Vec::with_capacity(mesh.kind.nodes()));
+        for (k, out) in block.chunks_mut(stride).enumerate() {
+            let e = task * ELEMENTS_PER_TASK + k;
+            mesh.element_displacements_into(u, e, &mut ue);
+            if let Err(error) = element_force_tangent(model, geometry.element_points(e), &ue, dim, with_tangent, &mut scratch) {
+                return Some((e, error));
+            }
+            out[..ndof].copy_from_slice(&scratch.force);
+            if with_tangent {
+                out[ndof..].copy_from_slice(&scratch.tangent);
+            }
         }
+        None
+    });
+    match failures.min_by_key(|(e, _)| *e) {
+        Some(failure) => Err(failure),
+        None => Ok(()),
     }
-    Ok(())
 }
 
 /// Stiffness values of the sparse pattern: for every non-zero `k`, the sum of `factor *` the
 /// element tangent entries that the gather map lists for it (`gather[gather_start[k]..]`).
 pub fn assemble_csr(element_out: &[Real], gather_start: &[u32], gather: &[u32], coefficients: Coefficients<Real>, values: &mut [Real]) {
-    for (k, value) in values.iter_mut().enumerate() {
+    values.par_iter_mut().with_min_len(PER_TASK).enumerate().for_each(|(k, value)| {
         let mut sum = 0.0;
         for j in gather_start[k]..gather_start[k + 1] {
             sum += coefficients.factor * element_out[gather[j as usize] as usize];
         }
         *value = sum;
-    }
+    });
 }
 
 /// Internal force of every dof (the element forces the gather map lists for it) and the
@@ -72,14 +84,17 @@ pub fn assemble_residual(
     step: &[DofStep<Real>],
     dof_out: &mut [DofOut<Real>],
 ) {
-    for (d, out) in dof_out.iter_mut().enumerate() {
+    dof_out.par_iter_mut().with_min_len(PER_TASK).enumerate().for_each(|(d, out)| {
         let f = gather_sum(element_out, gather_start, gather, d);
         let xi = coefficients.factor;
         let s = step[d];
         let inertia = coefficients.c1 * s.mass * (u[d] - s.u_pred);
         *out = DofOut { f_int: f, g: inertia - (1.0 - xi) * (s.f_ext - s.f_int_t) - xi * (s.f_ext - f) };
-    }
+    });
 }
+
+/// Outputs per task of the gather kernels on the thread pool.
+const PER_TASK: usize = 8192;
 
 /// The sum of the entries a gather map lists for output `k`, in its order.
 fn gather_sum(element_out: &[Real], gather_start: &[u32], gather: &[u32], k: usize) -> Real {

@@ -94,24 +94,30 @@ pub fn element_force_tangent<M: Hyperelastic>(
                 });
             }
         }
+        // The quadrature weight is folded into `D B` and `S`, once per point.
         for (db, b) in out.db.iter_mut().zip(&out.b) {
-            *db = d * b;
+            *db = d * b * gp.dv;
         }
-        for (a, ga) in gp.dn_dx.iter().enumerate() {
-            let sga = s * nalgebra::Vector3::new(ga[0], ga[1], ga[2]);
-            for (bn, gb) in gp.dn_dx.iter().enumerate() {
-                let geometric = sga[0] * gb[0] + sga[1] * gb[1] + sga[2] * gb[2];
-                for i in 0..dim {
-                    let row = a * dim + i;
-                    for j in 0..dim {
-                        let col = bn * dim + j;
-                        let mut k = out.b[row].dot(&out.db[col]);
-                        if i == j {
-                            k += geometric;
-                        }
-                        out.tangent[row * ndof + col] += gp.dv * k;
-                    }
+        let s_dv = s * gp.dv;
+        // The tangent is symmetric: only its upper triangle (row <= col) is integrated.
+        for col in 0..ndof {
+            let (bn, j) = (col / dim, col % dim);
+            let gb = &gp.dn_dx[bn];
+            let sgb = s_dv * nalgebra::Vector3::new(gb[0], gb[1], gb[2]);
+            for row in 0..=col {
+                let mut k = out.b[row].dot(&out.db[col]);
+                if row % dim == j {
+                    let ga = &gp.dn_dx[row / dim];
+                    k += sgb[0] * ga[0] + sgb[1] * ga[1] + sgb[2] * ga[2];
                 }
+                out.tangent[row * ndof + col] += k;
+            }
+        }
+    }
+    if with_tangent {
+        for col in 0..ndof {
+            for row in col + 1..ndof {
+                out.tangent[row * ndof + col] = out.tangent[col * ndof + row];
             }
         }
     }

@@ -39,6 +39,11 @@ impl AdapterReport {
         }
     }
 
+    /// Whether this is a software rasteriser on the CPU (lavapipe, llvmpipe), not a GPU.
+    pub fn software(&self) -> bool {
+        self.device_type == format!("{:?}", DeviceType::Cpu)
+    }
+
     /// One line for listings and logs.
     pub fn line(&self) -> String {
         format!("{} ({}, {}, f64 {})", self.name, self.backend, self.device_type, if self.f64 { "yes" } else { "no" })
@@ -99,6 +104,15 @@ pub fn open(name: Option<&str>, precision: Option<Precision>) -> Result<Gpu, Gpu
         .into_iter()
         .find(|a| wanted.as_ref().is_none_or(|w| a.get_info().name.to_lowercase().contains(w)))
         .ok_or_else(|| GpuError::NoAdapter { wanted: name.map(String::from), available })?;
+    open_adapter(adapter, precision)
+}
+
+/// The best hardware GPU, if the machine has one (software adapters are never taken).
+pub fn hardware_adapter() -> Option<AdapterReport> {
+    ranked(adapters()).iter().map(AdapterReport::of).find(|a| !a.software())
+}
+
+fn open_adapter(adapter: Adapter, precision: Option<Precision>) -> Result<Gpu, GpuError> {
     let report = AdapterReport::of(&adapter);
     let precision = match precision {
         Some(Precision::F64) if !report.f64 => return Err(GpuError::NoF64 { adapter: report.name }),

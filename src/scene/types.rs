@@ -61,11 +61,27 @@ pub struct SolverSpec {
     pub max_iterations: usize,
     /// How many times a failed step may be halved (recursively) before the run stops.
     pub max_cutbacks: usize,
+    /// Keep a body's factorisation across Newton iterations and steps while it reduces the
+    /// residual at least tenfold per iteration; `false` refactorises every iteration.
+    pub reuse_factorization: bool,
+    /// Fill-reducing ordering of each body's factorisation.
+    pub ordering: OrderingChoice,
+}
+
+/// `solver.ordering`: `auto` tries nested dissection on bodies of 3000 free dofs or more and
+/// keeps whichever ordering gives the smaller factor; the others force one.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum OrderingChoice {
+    #[default]
+    Auto,
+    Amd,
+    NestedDissection,
 }
 
 impl Default for SolverSpec {
     fn default() -> Self {
-        Self { residual_tolerance: 1e-9, increment_tolerance: 1e-9, max_iterations: 25, max_cutbacks: 6 }
+        Self { residual_tolerance: 1e-9, increment_tolerance: 1e-9, max_iterations: 25, max_cutbacks: 6, reuse_factorization: true, ordering: OrderingChoice::Auto }
     }
 }
 

@@ -12,6 +12,7 @@ use crate::gpu::{Gpu, GpuBody, GpuError};
 use crate::material::Model;
 use crate::mesh::Mesh;
 use crate::precision::{Precision, Real};
+use crate::scene::OrderingChoice;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -31,6 +32,11 @@ pub struct Prescribed {
     pub dof: usize,
     pub velocity: Real,
     pub set: usize,
+}
+
+/// The assembly coefficients of a step: `ξ` on the stiffness, `c1 = 1/(θ dt²)` on the mass.
+fn coefficients(p: &StepParams) -> Coefficients<Real> {
+    Coefficients { factor: p.xi, c1: 1.0 / (p.theta * p.dt * p.dt) }
 }
 
 /// Theta-method and Newton parameters of a step.
@@ -92,7 +98,6 @@ pub struct Body {
     max_mass: Real,
     solver: CholeskySolver,
     values: Vec<Real>,
-    element_out: ElementOutput,
     /// Which element results sum into each stiffness value and each dof.
     gather: GatherMap,
     /// Every element's force and tangent (`element_out_stride` entries per element).
@@ -109,7 +114,22 @@ pub struct Body {
     pub contact_force: Vec<Real>,
     force_scale: Real,
     last_increment: Option<Real>,
+    /// Keep a factorisation across Newton iterations and steps while it contracts the residual
+    /// fast enough ([`REFACTOR_CONTRACTION`]); `false` refactorises every iteration.
+    pub reuse_factorization: bool,
+    /// `c1 = 1/(θ dt²)` of the current factorisation; `None` when there is none.
+    factor_c1: Option<Real>,
+    /// Whether `values` hold `ξ K` at the current trial displacement.
+    tangent_current: bool,
+    /// Residual norm of the previous evaluation in this step, and the ratio of the last one to it.
+    previous_residual: Option<Real>,
+    contraction: Option<Real>,
 }
+
+/// A reused factorisation is kept while each Newton iteration reduces the residual at least
+/// tenfold: at the default tolerances (1e-9) a slower contraction would need more iterations
+/// than `solver.max_iterations` allows, and refactorising costs less than a few extra ones.
+pub const REFACTOR_CONTRACTION: Real = 0.1;
 
 impl Body {
     /// `initial_velocity(node) -> velocity` gives the free motion at t = 0; prescribed dofs start
@@ -122,6 +142,7 @@ impl Body {
         density: Real,
         prescribed: Vec<Prescribed>,
         initial_velocity: impl Fn([Real; 3]) -> [Real; 3],
+        ordering: OrderingChoice,
     ) -> Result<Self, LinearError> {
         let dim = mesh.dim();
         let ndof = mesh.nodes.len() * dim;
@@ -133,7 +154,8 @@ impl Body {
         }
         let dofs = DofMap::new(dim, &is_prescribed);
         let pattern = StiffnessPattern::new(&mesh, &dofs);
-        let solver = CholeskySolver::new(&pattern)?;
+        let coordinates: Vec<[Real; 3]> = dofs.free_pairs().map(|(d, _)| mesh.nodes[d / dim]).collect();
+        let solver = CholeskySolver::new(&pattern, &coordinates, ordering)?;
         let mut v = vec![0.0; ndof];
         for (n, x) in mesh.nodes.iter().enumerate() {
             let w = initial_velocity(*x);
@@ -166,7 +188,6 @@ impl Body {
             max_mass,
             solver,
             values,
-            element_out: ElementOutput::default(),
             gather,
             element_results,
             step_inputs: vec![DofStep::default(); ndof],
@@ -177,6 +198,11 @@ impl Body {
             contact_force: vec![0.0; ndof],
             force_scale: 0.0,
             last_increment: None,
+            reuse_factorization: true,
+            factor_c1: None,
+            tangent_current: false,
+            previous_residual: None,
+            contraction: None,
         })
     }
 
@@ -199,7 +225,7 @@ impl Body {
     /// (forces only without the tangent).
     fn cpu_elements(&mut self, u: &[Real], with_tangent: bool, times: &mut PhaseTimes) -> Result<(), StepFailure> {
         let t0 = Instant::now();
-        let result = dispatch_element_force_tangent(&self.model, &self.mesh, &self.geometry, u, with_tangent, &mut self.element_out, &mut self.element_results)
+        let result = dispatch_element_force_tangent(&self.model, &self.mesh, &self.geometry, u, with_tangent, &mut self.element_results)
             .map_err(|(element, error)| StepFailure::Element { body: self.name.clone(), element, error });
         times.elements += t0.elapsed().as_secs_f64();
         result
@@ -235,6 +261,8 @@ impl Body {
             device.begin_step(&self.step_inputs);
         }
         self.last_increment = None;
+        self.previous_residual = None;
+        self.contraction = None;
     }
 
     /// Assembles force and `ξ K` at the trial displacement and the contact-free residual
@@ -243,11 +271,13 @@ impl Body {
     /// On a GPU in f64 every kernel runs there. In f32 only the stiffness comes from the GPU:
     /// the internal force and residual are evaluated in f64 by the CPU twins, so Newton converges
     /// to the same answer and the f32 tangent only changes how fast (doc/ARCHITECTURE.md).
+    ///
+    /// With factorisation reuse the CPU computes forces only; [`Body::refresh_factor`] adds
+    /// the tangent when it refactorises.
     pub fn evaluate(&mut self, p: &StepParams, times: &mut PhaseTimes) -> Result<(), StepFailure> {
-        let (dt, xi) = (p.dt, p.xi);
-        let coefficients = Coefficients { factor: xi, c1: 1.0 / (p.theta * dt * dt) };
+        let xi = p.xi;
         let u = std::mem::take(&mut self.trial.u);
-        let result = self.assemble(&u, coefficients, times);
+        let result = self.assemble_with(&u, coefficients(p), !self.reuse_factorization, times);
         let mut scale2 = 0.0;
         for (d, out) in self.dof_out.iter().enumerate() {
             self.trial.f_int[d] = out.f_int;
@@ -265,6 +295,13 @@ impl Body {
     /// The kernels of one Newton evaluation at `u`: element results, stiffness values (`ξ K`)
     /// and, with the step's inputs from [`Body::begin_step`], internal force and residual.
     pub fn assemble(&mut self, u: &[Real], coefficients: Coefficients<Real>, times: &mut PhaseTimes) -> Result<(), StepFailure> {
+        self.assemble_with(u, coefficients, true, times)
+    }
+
+    /// [`Body::assemble`], with the stiffness values only if `with_tangent` (a GPU computes
+    /// them anyway).
+    fn assemble_with(&mut self, u: &[Real], coefficients: Coefficients<Real>, with_tangent: bool, times: &mut PhaseTimes) -> Result<(), StepFailure> {
+        self.tangent_current = false;
         let gathered_on_cpu = match &mut self.device {
             Some(device) => {
                 let f64_residual = device.precision() == Precision::F64;
@@ -280,14 +317,15 @@ impl Body {
                 }
             }
             None => {
-                self.cpu_elements(u, true, times)?;
-                true
+                self.cpu_elements(u, with_tangent, times)?;
+                with_tangent
             }
         };
         let t0 = Instant::now();
         if gathered_on_cpu {
             assemble_csr(&self.element_results, &self.gather.csr_start, &self.gather.csr, coefficients, &mut self.values);
         }
+        self.tangent_current = gathered_on_cpu || self.device.is_some();
         assemble_residual(&self.element_results, &self.gather.dof_start, &self.gather.dof, coefficients, u, &self.step_inputs, &mut self.dof_out);
         times.assembly += t0.elapsed().as_secs_f64();
         Ok(())
@@ -313,11 +351,16 @@ impl Body {
     /// below `increment_tolerance` times the larger of the displacement over the step and
     /// `motion_scale` (how far the scene's fastest motion goes in a step: a body at rest has no
     /// displacement of its own to compare with).
-    pub fn converged(&self, p: &StepParams, motion_scale: Real) -> Result<bool, StepFailure> {
+    ///
+    /// Also records how much the residual fell since the previous evaluation, which decides
+    /// whether the factorisation is kept ([`Body::refresh_factor`]).
+    pub fn converged(&mut self, p: &StepParams, motion_scale: Real) -> Result<bool, StepFailure> {
         let residual = self.residual_norm();
         if !residual.is_finite() {
             return Err(StepFailure::NotFinite { body: self.name.clone() });
         }
+        self.contraction = self.previous_residual.map(|r0| residual / r0.max(Real::MIN_POSITIVE));
+        self.previous_residual = Some(residual);
         let tolerance = self.residual_tolerance(p);
         let (mut step2, mut size2) = (0.0, 0.0);
         for (d, _) in self.dofs.free_pairs() {
@@ -363,6 +406,7 @@ impl Body {
 
     /// Adds a free-dof increment to the trial displacement and records its size.
     fn apply_increment(&mut self, du: &[Real]) {
+        self.tangent_current = false;
         let mut du2 = 0.0;
         for (d, f) in self.dofs.free_pairs() {
             self.trial.u[d] += du[f];
@@ -406,15 +450,44 @@ impl Body {
         })
     }
 
+    /// Makes sure a factorisation fit for the next Newton increment is there: refactorises
+    /// when there is none for this time step (`c1` changes with `dt`), when reuse is off, or
+    /// when the last iteration reduced the residual less than [`REFACTOR_CONTRACTION`]; else the
+    /// last one is kept, across iterations and steps. Returns whether it refactorised.
+    pub fn refresh_factor(&mut self, p: &StepParams, times: &mut PhaseTimes) -> Result<bool, StepFailure> {
+        let c1 = coefficients(p).c1;
+        let fresh = self.reuse_factorization && self.factor_c1 == Some(c1) && self.contraction.is_none_or(|r| r <= REFACTOR_CONTRACTION);
+        if fresh && self.solver.is_factored() {
+            return Ok(false);
+        }
+        if !self.tangent_current {
+            let u = std::mem::take(&mut self.trial.u);
+            let result = self.assemble_with(&u, coefficients(p), true, times);
+            self.trial.u = u;
+            result?;
+        }
+        self.factorize_effective(c1, times)?;
+        Ok(true)
+    }
+
     /// Adds `c1 M` to the assembled `ξ K` and factorises `K̄ = ξ K + c1 M` (eq. 17).
     pub fn factorize_effective(&mut self, c1: Real, times: &mut PhaseTimes) -> Result<(), StepFailure> {
         for (d, f) in self.dofs.free_pairs() {
             self.values[self.pattern.diagonal[f] as usize] += c1 * self.mass[d];
         }
+        // The values now hold K̄, not ξ K.
+        self.tangent_current = false;
+        self.factor_c1 = None;
         let t0 = Instant::now();
         let result = self.solver.factorize(&self.values).map_err(|e| StepFailure::Linear { body: self.name.clone(), error: e.to_string() });
         times.factorization += t0.elapsed().as_secs_f64();
+        self.factor_c1 = result.is_ok().then_some(c1);
         result
+    }
+
+    /// The fill-reducing ordering of the factorisation and the entries of its factor.
+    pub fn factor_report(&self) -> (super::ordering::Ordering, usize) {
+        (self.solver.ordering(), self.solver.factor_entries())
     }
 
     /// Solves `K̄ x = rhs` in place (free dofs) with the last factorisation, for one or more

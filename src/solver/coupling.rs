@@ -39,6 +39,9 @@ pub struct ContactStep {
     /// vanishing reaction is not mistaken for a change.
     velocity_scale: Real,
     floor: Real,
+    /// Whether `delassus` (and each point's rho) was built with the bodies' current
+    /// factorisations: while no body refactorises, `W` does not change within a step.
+    delassus_current: bool,
 }
 
 impl ContactStep {
@@ -105,7 +108,7 @@ impl ContactStep {
         let r = previous.iter().map(|p| p.0).collect();
         let local: Vec<Local> = points.iter().zip(&previous).map(|(c, p)| Local { v_free: [0.0; 3], shift: c.shift, mu: c.friction, rho: p.1 }).collect();
         let floor = velocity_scale * local.iter().map(|l| l.rho).fold(0.0, Real::max);
-        Self { points, delassus, per_body, h, r, local, dim, velocity_scale, floor }
+        Self { points, delassus, per_body, h, r, local, dim, velocity_scale, floor, delassus_current: false }
     }
 
     pub fn is_empty(&self) -> bool {
@@ -156,8 +159,10 @@ impl ContactStep {
     }
 
     /// One Newton increment of every body with the reactions solved on the linearised contact
-    /// problem. Returns the Uzawa outcome and the relative change of the contact forces.
-    pub fn newton_increment(&mut self, bodies: &mut [Body], p: &StepParams, settings: &Settings, times: &mut PhaseTimes) -> (Outcome, Real) {
+    /// problem. `refactorized`: some body has a new factorisation since the last increment, so
+    /// the Delassus blocks are rebuilt (they are kept otherwise). Returns the Uzawa outcome and
+    /// the relative change of the contact forces.
+    pub fn newton_increment(&mut self, bodies: &mut [Body], p: &StepParams, settings: &Settings, refactorized: bool, times: &mut PhaseTimes) -> (Outcome, Real) {
         let dim = self.dim;
         let theta_dt = p.theta * p.dt;
         let started = std::time::Instant::now();
@@ -182,7 +187,34 @@ impl ContactStep {
             }, 1);
             self.local[i].v_free = v;
         }
-        // Delassus blocks by back-substitution, a batch of columns at a time.
+        if refactorized || !self.delassus_current {
+            self.build_delassus(bodies, theta_dt, settings, times);
+        }
+        let floor = self.floor;
+        let outcome = uzawa::solve(&self.delassus, &self.local, &mut self.r, settings.sweep, INNER_TOLERANCE * settings.tolerance, floor, settings.max_iterations);
+        // The change is judged on the nodal forces H^T r: with redundant constraints (two passes
+        // over matching nodes) r itself is not unique, but H^T r is.
+        let before: Vec<Vec<Real>> = bodies.iter().map(|b| b.contact_force.clone()).collect();
+        self.apply_forces(bodies);
+        let (mut change, mut size): (Real, Real) = (0.0, 0.0);
+        for (body, old) in bodies.iter().zip(&before) {
+            for (a, b) in body.contact_force.iter().zip(old) {
+                change = change.max((a - b).abs());
+                size = size.max(a.abs());
+            }
+        }
+        for body in bodies.iter_mut() {
+            body.newton_step(times);
+        }
+        // The back-substitutions are counted as solves, the rest as contact.
+        times.contact += started.elapsed().as_secs_f64() - (times.solve - solve_before);
+        (outcome, change / size.max(floor).max(Real::MIN_POSITIVE))
+    }
+
+    /// The Delassus blocks `W = H K̄⁻¹ Hᵀ / (θ dt)` by back-substitution with each body's
+    /// factorisation, a batch of columns at a time, and each point's Uzawa step length.
+    fn build_delassus(&mut self, bodies: &[Body], theta_dt: Real, settings: &Settings, times: &mut PhaseTimes) {
+        let dim = self.dim;
         self.delassus.blocks.iter_mut().for_each(|b| *b = [0.0; 9]);
         for (b, body) in bodies.iter().enumerate() {
             let (list, blocks) = &self.per_body[b];
@@ -218,25 +250,7 @@ impl ContactStep {
             self.local[i].rho = self.delassus.rho(i, dim, settings.sweep);
         }
         self.floor = self.velocity_scale * self.local.iter().map(|l| l.rho).fold(0.0, Real::max);
-        let floor = self.floor;
-        let outcome = uzawa::solve(&self.delassus, &self.local, &mut self.r, settings.sweep, INNER_TOLERANCE * settings.tolerance, floor, settings.max_iterations);
-        // The change is judged on the nodal forces H^T r: with redundant constraints (two passes
-        // over matching nodes) r itself is not unique, but H^T r is.
-        let before: Vec<Vec<Real>> = bodies.iter().map(|b| b.contact_force.clone()).collect();
-        self.apply_forces(bodies);
-        let (mut change, mut size): (Real, Real) = (0.0, 0.0);
-        for (body, old) in bodies.iter().zip(&before) {
-            for (a, b) in body.contact_force.iter().zip(old) {
-                change = change.max((a - b).abs());
-                size = size.max(a.abs());
-            }
-        }
-        for body in bodies.iter_mut() {
-            body.newton_step(times);
-        }
-        // The back-substitutions are counted as solves, the rest as contact.
-        times.contact += started.elapsed().as_secs_f64() - (times.solve - solve_before);
-        (outcome, change / size.max(floor).max(Real::MIN_POSITIVE))
+        self.delassus_current = true;
     }
 
     /// Records the end-of-step velocity, status and linearised end gap of every point.

@@ -3,7 +3,9 @@
 
 pub mod body;
 pub mod coupling;
+pub mod group;
 pub mod linear;
+pub mod ordering;
 mod setup;
 
 pub use body::{Body, StepFailure};
@@ -13,7 +15,8 @@ use crate::contact::detect::detect;
 use crate::contact::{ContactModel, ContactPoint, ContactStats, Master};
 use crate::precision::Real;
 use body::StepParams;
-use coupling::ContactStep;
+use group::solve_groups;
+use rayon::prelude::*;
 use std::collections::HashMap;
 
 /// Wall-clock seconds spent per phase.
@@ -69,6 +72,11 @@ pub struct StepReport {
     pub uzawa_iterations: usize,
     pub residual_norm: Real,
     pub cutbacks: usize,
+    /// Body evaluations, summed over the Newton iterations (a group of bodies coupled by
+    /// contact counts each of its bodies per iteration) and sub-steps.
+    pub bodies_iterated: usize,
+    /// Numeric factorisations, summed over bodies, iterations and sub-steps.
+    pub factorizations: usize,
     /// Contact totals over the step (sub-steps added up; penetration the largest).
     pub contact: ContactStats,
     pub wall: PhaseTimes,
@@ -190,57 +198,34 @@ impl Simulation {
         let started = std::time::Instant::now();
         let (points, velocity_scale) = self.detect(dt);
         let warm: HashMap<(u32, u32, Master), ([Real; 3], Real)> = self.contact_points.iter().map(|c| (c.key(), (c.r, c.rho))).collect();
-        let mut contact = ContactStep::new(points, &self.bodies, &p, &warm, velocity_scale);
         report.wall.contact += started.elapsed().as_secs_f64();
         let settings = self.contact.as_ref().map(|c| c.settings.clone());
-        for body in &mut self.bodies {
-            body.begin_step(&p, &self.gravity);
-        }
-        let mut iterations = 0;
-        let mut last_change: Option<Real> = None;
-        let mut uzawa_converged = true;
-        loop {
-            for body in &mut self.bodies {
-                body.evaluate(&p, &mut report.wall)?;
-            }
-            contact.apply_forces(&mut self.bodies);
-            let mut converged = true;
-            for body in &self.bodies {
-                converged &= body.converged(&p, velocity_scale * dt)?;
-            }
-            if !contact.is_empty() {
-                let tolerance = settings.as_ref().expect("contact points need contact settings").tolerance;
-                // A step that starts from last step's solution may already satisfy everything.
-                let settled = last_change.map_or(contact.all_warm(), |c| c <= tolerance) && uzawa_converged;
-                converged &= settled && contact.complementarity(&self.bodies, &p) <= tolerance;
-            }
-            if converged {
-                break;
-            }
-            if iterations == p.max_iterations {
-                let worst = self.bodies.iter().max_by(|a, b| a.residual_norm().total_cmp(&b.residual_norm())).expect("a body");
-                return Err(worst.not_converged(&p, iterations));
-            }
-            for body in &mut self.bodies {
-                body.factorize_effective(1.0 / (p.theta * dt * dt), &mut report.wall)?;
-            }
-            if contact.is_empty() {
-                for body in &mut self.bodies {
-                    body.newton_step(&mut report.wall);
+        let gravity = self.gravity;
+        self.bodies.par_iter_mut().for_each(|body| body.begin_step(&p, &gravity));
+        let (points, groups) = solve_groups(&mut self.bodies, points, &p, settings.as_ref(), &warm, velocity_scale);
+        let (mut failure, mut iterations) = (None, 0);
+        for group in groups {
+            match group {
+                Ok(g) => {
+                    iterations = iterations.max(g.iterations);
+                    report.uzawa_iterations += g.uzawa_iterations;
+                    report.bodies_iterated += g.bodies_iterated;
+                    report.factorizations += g.factorizations;
+                    report.residual_norm = report.residual_norm.max(g.residual_norm);
+                    report.wall += g.wall;
                 }
-            } else {
-                let (outcome, change) = contact.newton_increment(&mut self.bodies, &p, settings.as_ref().expect("contact settings"), &mut report.wall);
-                report.uzawa_iterations += outcome.iterations;
-                uzawa_converged = outcome.converged;
-                last_change = Some(change);
+                Err(e) => {
+                    failure.get_or_insert(e);
+                }
             }
-            iterations += 1;
         }
+        if let Some(e) = failure {
+            return Err(e);
+        }
+        // The step took as many Newton iterations as its slowest group.
         report.newton_iterations += iterations;
-        report.residual_norm = report.residual_norm.max(self.bodies.iter().map(Body::residual_norm).fold(0.0, Real::max));
-        contact.finish(&self.bodies, &p);
-        let stats = ContactStats::of(&contact.points, dt);
-        self.book_step(&p, &contact.points, stats.friction_dissipation_step)?;
+        let stats = ContactStats::of(&points, dt);
+        self.book_step(&p, &points, stats.friction_dissipation_step)?;
         let r = &mut report.contact;
         r.active = r.active.max(stats.active);
         r.sticking = r.sticking.max(stats.sticking);
@@ -248,7 +233,7 @@ impl Simulation {
         r.max_penetration = r.max_penetration.max(stats.max_penetration);
         r.normal_impulse += stats.normal_impulse;
         r.friction_dissipation_step += stats.friction_dissipation_step;
-        self.contact_points = contact.points;
+        self.contact_points = points;
         for body in &mut self.bodies {
             body.commit();
         }
@@ -284,8 +269,8 @@ impl Simulation {
     /// Energy bookkeeping of a converged step (before commit): external work, friction (as
     /// [`ContactStats`] counts it) and numerical dissipation, and the obstacles' reactions.
     fn book_step(&mut self, p: &StepParams, points: &[ContactPoint], friction: Real) -> Result<(), StepFailure> {
-        for body in &mut self.bodies {
-            let e = body.finish_step(p)?;
+        let energies: Result<Vec<_>, StepFailure> = self.bodies.par_iter_mut().map(|body| body.finish_step(p)).collect();
+        for e in energies? {
             self.external_work += e.support_work;
             self.numerical_dissipation += e.theta_dissipation + e.force_dissipation;
         }

@@ -162,8 +162,9 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
             let r = [x[0] - c[0], x[1] - c[1], x[2] - c[2]];
             [v[0] + omega[1] * r[2] - omega[2] * r[1], v[1] + omega[2] * r[0] - omega[0] * r[2], v[2] + omega[0] * r[1] - omega[1] * r[0]]
         };
-        let body = Body::new(name.clone(), mesh, geometry, model_of(material), material.density, std::mem::take(&mut prescribed[b]), initial)
+        let mut body = Body::new(name.clone(), mesh, geometry, model_of(material), material.density, std::mem::take(&mut prescribed[b]), initial, scene.solver.ordering)
             .map_err(|e| loaded.error(MeshError, &format!("{key}.mesh"), e.to_string()))?;
+        body.reuse_factorization = scene.solver.reuse_factorization;
         bodies.push(body);
     }
 

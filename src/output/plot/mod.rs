@@ -6,6 +6,7 @@ mod contour;
 pub use contour::contour_png;
 
 use super::read::{ReadError, RunRecord};
+use crate::contact::geometry::{dot, normalize, scale, sub};
 use plotters::prelude::*;
 use std::path::{Path, PathBuf};
 
@@ -239,15 +240,9 @@ fn trace_panel(runs: &[RunRecord], [b, c, d]: &[String; 3]) -> Result<Panel, Plo
     let mut lines = Vec::new();
     for run in runs {
         let (b0, c0, d0) = (reference(run, b)?, reference(run, c)?, reference(run, d)?);
-        let sub = |p: [f64; 3], q: [f64; 3]| [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
-        let dot = |p: [f64; 3], q: [f64; 3]| p[0] * q[0] + p[1] * q[1] + p[2] * q[2];
-        let unit = |p: [f64; 3]| {
-            let n = dot(p, p).sqrt();
-            p.map(|x| x / n)
-        };
-        let e1 = unit(sub(c0, b0));
+        let e1 = normalize(sub(c0, b0));
         let bd = sub(b0, d0);
-        let e2 = unit(sub(bd, e1.map(|x| x * dot(bd, e1))));
+        let e2 = normalize(sub(bd, scale(e1, dot(bd, e1))));
         let line = run
             .messages(&format!("/probe/{b}"))
             .iter()
