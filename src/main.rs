@@ -423,6 +423,13 @@ fn main() -> ExitCode {
             let elements: usize = sim.bodies.iter().map(|b| b.mesh.element_count()).sum();
             let dofs: usize = sim.bodies.iter().map(|b| b.dofs.free_count).sum();
             println!("{}: valid, {}D, {} bodies, {} elements, {} free dofs, {} steps", loaded.name, sim.dim, sim.bodies.len(), elements, dofs, sim.step_count());
+            // The largest bodies' factorisations: the fill decides the cost of a Newton iteration.
+            let mut bodies: Vec<_> = sim.bodies.iter().collect();
+            bodies.sort_by_key(|b| std::cmp::Reverse(b.dofs.free_count));
+            for b in bodies.iter().take(3) {
+                let (ordering, entries) = b.factor_report();
+                println!("  body `{}`: {} free dofs, factor with {} ordering: {} entries", b.name, b.dofs.free_count, ordering.name(), entries);
+            }
             Ok(ExitCode::SUCCESS)
         }),
         Command::Bench { elements, kernel, backend, adapter, time, json } => bench_command(BenchOptions { elements, kernel, min_time: time }, backend, adapter, json),

@@ -92,8 +92,13 @@ fn dissect(ids: &mut [u32], x: &[[Real; 3]], start: &[u32], adjacency: &[u32], r
         }
     }
     let axis = (0..3).max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b]))).expect("three axes");
-    let mid = ids.len() / 2;
-    ids.select_nth_unstable_by(mid, |&a, &b| x[a as usize][axis].total_cmp(&x[b as usize][axis]).then(a.cmp(&b)));
+    let coordinate = |v: u32| x[v as usize][axis];
+    ids.sort_unstable_by(|&a, &b| coordinate(a).total_cmp(&coordinate(b)).then(a.cmp(&b)));
+    // Split between two distinct coordinates nearest the median, so that a plane of nodes (and
+    // the dofs of one node) stays on one side: the separator is then one layer, not one and a half.
+    let n = ids.len();
+    let boundary = |i: usize| coordinate(ids[i - 1]) != coordinate(ids[i]);
+    let mid = (0..n / 2).flat_map(|k| [n / 2 - k, n / 2 + k]).find(|&i| i > 0 && i < n && boundary(i)).unwrap_or(n / 2);
     let (left_id, right_id, separator_id) = (*next_region, *next_region + 1, *next_region + 2);
     *next_region += 3;
     let (left, right) = ids.split_at_mut(mid);
