@@ -438,7 +438,9 @@ fn main() -> ExitCode {
             println!("build: {} profile, rustc target {}-{}", if cfg!(debug_assertions) { "debug" } else { "release" }, std::env::consts::ARCH, std::env::consts::OS);
             println!("solver precision: {} (factorisation, time stepping, contact)", bifirst::precision::PRECISION_NAME);
             println!("WGSL kernels: {}", bifirst::gpu::shaders::SHADERS.iter().map(|(name, _)| *name).collect::<Vec<_>>().join(", "));
-            println!("  `run --backend gpu|auto` runs the element, assembly and energy kernels on the adapter; the contact loop stays on the CPU");
+            println!("  `run --backend gpu` runs the element, assembly and energy kernels on the adapter; the contact loop stays on the CPU");
+            println!("  `run --backend auto` takes a hardware GPU for bodies of {} dofs or more, else the CPU", bifirst::backend::GPU_MIN_BODY_DOFS);
+            println!("worker threads: {} (--threads)", rayon::current_num_threads());
             let adapters = bifirst::gpu::describe_adapters();
             if adapters.is_empty() {
                 println!("GPU adapters: none (install mesa-vulkan-drivers for the lavapipe software adapter)");
