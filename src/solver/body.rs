@@ -492,7 +492,7 @@ impl Body {
 
     /// Solves `K̄ x = rhs` in place (free dofs) with the last factorisation, for one or more
     /// column-major right-hand sides.
-    pub fn solve_effective(&self, rhs: &mut [Real], times: &mut PhaseTimes) {
+    pub fn solve_effective(&mut self, rhs: &mut [Real], times: &mut PhaseTimes) {
         let t0 = Instant::now();
         self.solver.solve_columns(rhs, self.dofs.free_count);
         times.solve += t0.elapsed().as_secs_f64();

@@ -169,7 +169,7 @@ impl ContactStep {
         let solve_before = times.solve;
         // Free velocities: the trial velocity plus the contact-free increment.
         let mut x0: Vec<Vec<Real>> = Vec::with_capacity(bodies.len());
-        for body in bodies.iter() {
+        for body in bodies.iter_mut() {
             let mut rhs = vec![0.0; body.dofs.free_count];
             for (d, f) in body.dofs.free_pairs() {
                 rhs[f] = -body.g[d];
@@ -213,10 +213,10 @@ impl ContactStep {
 
     /// The Delassus blocks `W = H K̄⁻¹ Hᵀ / (θ dt)` by back-substitution with each body's
     /// factorisation, a batch of columns at a time, and each point's Uzawa step length.
-    fn build_delassus(&mut self, bodies: &[Body], theta_dt: Real, settings: &Settings, times: &mut PhaseTimes) {
+    fn build_delassus(&mut self, bodies: &mut [Body], theta_dt: Real, settings: &Settings, times: &mut PhaseTimes) {
         let dim = self.dim;
         self.delassus.blocks.iter_mut().for_each(|b| *b = [0.0; 9]);
-        for (b, body) in bodies.iter().enumerate() {
+        for (b, body) in bodies.iter_mut().enumerate() {
             let (list, blocks) = &self.per_body[b];
             let n = body.dofs.free_count;
             if list.is_empty() || n == 0 {

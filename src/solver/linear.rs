@@ -24,6 +24,9 @@ pub struct CholeskySolver {
     factored: bool,
     /// Workspace of the numeric factorisation, kept across calls.
     scratch: MemBuffer,
+    /// Workspace of the solves, for up to `solve_columns` right-hand sides (grown on demand).
+    solve_scratch: MemBuffer,
+    solve_columns: usize,
     par: Par,
 }
 
@@ -70,7 +73,8 @@ impl CholeskySolver {
         };
         let par = if p.n >= LARGE_BODY_DOFS { Par::rayon(0) } else { Par::Seq };
         let scratch = MemBuffer::new(symbolic.factorize_numeric_llt_scratch::<Real>(par, Default::default()));
-        Ok(Self { pattern, factor: vec![0.0; symbolic.len_val()], symbolic, ordering, factored: false, scratch, par })
+        let solve_scratch = MemBuffer::new(symbolic.solve_in_place_scratch::<Real>(1, par));
+        Ok(Self { pattern, factor: vec![0.0; symbolic.len_val()], symbolic, ordering, factored: false, scratch, solve_scratch, solve_columns: 1, par })
     }
 
     /// The ordering the factorisation uses.
@@ -101,16 +105,20 @@ impl CholeskySolver {
     }
 
     /// Solves in place with the last factorisation.
-    pub fn solve(&self, rhs: &mut [Real]) {
+    pub fn solve(&mut self, rhs: &mut [Real]) {
         let n = rhs.len();
         self.solve_columns(rhs, n);
     }
 
     /// Solves in place for the columns of a column-major `n x k` block (`k = rhs.len() / n`).
-    pub fn solve_columns(&self, rhs: &mut [Real], n: usize) {
+    pub fn solve_columns(&mut self, rhs: &mut [Real], n: usize) {
         assert!(self.factored, "factorize before solve");
         let k = rhs.len() / n.max(1);
-        let mut scratch = MemBuffer::new(self.symbolic.solve_in_place_scratch::<Real>(k, self.par));
-        LltRef::new(&self.symbolic, &self.factor).solve_in_place_with_conj(Conj::No, faer::MatMut::from_column_major_slice_mut(rhs, n, k), self.par, MemStack::new(&mut scratch));
+        if k > self.solve_columns {
+            self.solve_scratch = MemBuffer::new(self.symbolic.solve_in_place_scratch::<Real>(k, self.par));
+            self.solve_columns = k;
+        }
+        let stack = MemStack::new(&mut self.solve_scratch);
+        LltRef::new(&self.symbolic, &self.factor).solve_in_place_with_conj(Conj::No, faer::MatMut::from_column_major_slice_mut(rhs, n, k), self.par, stack);
     }
 }
