@@ -2,8 +2,7 @@
 // the material's stress and tangent at each quadrature point. CPU twin:
 // `element::element_force_tangent`, which this file follows step by step.
 // The prelude defines `real`, the element constants NEN (nodes), NQP (quadrature points), DIM,
-// NDOF = NEN * DIM, and includes `element.wgsl` and the material (`material_stress`,
-// `material_tangent`).
+// NDOF = NEN * DIM, and includes `element.wgsl` and the material (`material_stress_tangent`).
 
 // Per element out: NDOF forces, then the NDOF x NDOF tangent row-major, local order
 // (node a, component i) -> a * DIM + i.
@@ -46,7 +45,10 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) g
             break;
         }
         let strain = green_lagrange(f);
-        let s = material_stress(strain);
+        // Stress and tangent from one material call.
+        let st = material_stress_tangent(strain);
+        let s = st.s;
+        let d = st.d;
         let fs = f * s;
         for (var a = 0u; a < NEN; a++) {
             let g = gradient(point, a);
@@ -54,7 +56,6 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) g
                 force[a * DIM + i] += dv * (at(fs, i, 0u) * g.x + at(fs, i, 1u) * g.y + at(fs, i, 2u) * g.z);
             }
         }
-        let d = material_tangent(strain);
         // Nonlinear strain-displacement operator, engineering shear components.
         for (var a = 0u; a < NEN; a++) {
             let g = gradient(point, a);

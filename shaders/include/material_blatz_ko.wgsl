@@ -9,15 +9,8 @@ fn material_energy(e: Mat3) -> real {
     return real(0.5) * material.g * (i2 / i3 + real(2.0) * sqrt(i3) - real(5.0));
 }
 
-fn material_stress(e: Mat3) -> Mat3 {
-    let c = e * real(2.0) + identity3();
-    let j = sqrt(determinant(c));
-    let ci = inverse3(c);
-    return (ci * j - ci * ci) * material.g;
-}
-
-// dS/dE = 2G [ J/2 C⁻¹⊗C⁻¹ - J C⁻¹⊙C⁻¹ + C⁻¹⊙C⁻² + C⁻²⊙C⁻¹ ]
-fn material_tangent(e: Mat3) -> Tangent {
+// S and dS/dE = 2G [ J/2 C⁻¹⊗C⁻¹ - J C⁻¹⊙C⁻¹ + C⁻¹⊙C⁻² + C⁻²⊙C⁻¹ ], sharing J, C⁻¹ and C⁻².
+fn material_stress_tangent(e: Mat3) -> StressTangent {
     let c = e * real(2.0) + identity3();
     let j = sqrt(determinant(c));
     let ci = inverse3(c);
@@ -28,5 +21,5 @@ fn material_tangent(e: Mat3) -> Tangent {
     add_scaled(&d, odot(ci, ci), -g2 * j);
     add_scaled(&d, odot(ci, ci2), g2);
     add_scaled(&d, odot(ci2, ci), g2);
-    return d;
+    return StressTangent((ci * j - ci2) * material.g, d);
 }

@@ -16,18 +16,8 @@ fn material_energy(e: Mat3) -> real {
         + m.a2 / real(3.0) * z * z * z + real(0.25) * m.a4 * z * z * z * z + real(0.25) * m.a5 * s2 * s2;
 }
 
-fn material_stress(e: Mat3) -> Mat3 {
-    let ed = dev(e);
-    let ed2 = ed * ed;
-    let s2 = trace3(ed2);
-    let z = trace3(e) / real(SQRT3);
-    let m = material;
-    let dw_dz = real(0.5) * m.a3 * z * s2 + real(3.0) * m.k * z + m.a2 * z * z + m.a4 * z * z * z;
-    let dw_ds2 = m.g + real(0.25) * m.a3 * z * z + real(0.5) * m.a5 * s2;
-    return ed * (real(2.0) * dw_ds2) + identity3() * (dw_dz / real(SQRT3)) + dev(ed2) * (m.a1 * real(SQRT6));
-}
-
-fn material_tangent(e: Mat3) -> Tangent {
+// S and dS/dE, sharing Ed, Ed², s2 and z.
+fn material_stress_tangent(e: Mat3) -> StressTangent {
     let i = identity3();
     let ed = dev(e);
     let ed2 = ed * ed;
@@ -35,7 +25,10 @@ fn material_tangent(e: Mat3) -> Tangent {
     let z = trace3(e) / real(SQRT3);
     let m = material;
     let iz = i * (real(1.0) / real(SQRT3));
+    // dW/dz and dW/ds2; ds2/dE = 2 Ed, dz/dE = I/√3, ds3/dE = 3 dev(Ed²).
+    let dw_dz = real(0.5) * m.a3 * z * s2 + real(3.0) * m.k * z + m.a2 * z * z + m.a4 * z * z * z;
     let dw_ds2 = m.g + real(0.25) * m.a3 * z * z + real(0.5) * m.a5 * s2;
+    let s = ed * (real(2.0) * dw_ds2) + i * (dw_dz / real(SQRT3)) + dev(ed2) * (m.a1 * real(SQRT6));
     let d2w_dz2 = real(0.5) * m.a3 * s2 + real(3.0) * m.k + real(2.0) * m.a2 * z + real(3.0) * m.a4 * z * z;
     let d2w_dzds2 = real(0.5) * m.a3 * z;
     let d2w_ds2ds2 = real(0.5) * m.a5;
@@ -53,5 +46,5 @@ fn material_tangent(e: Mat3) -> Tangent {
     add_scaled(&d, odot(i, ed), real(2.0) * a);
     add_scaled(&d, outer(ed, i), -real(2.0) / real(3.0) * a);
     add_scaled(&d, outer(i, ed), -real(2.0) / real(3.0) * a);
-    return d;
+    return StressTangent(s, d);
 }

@@ -12,20 +12,13 @@ fn material_energy(e: Mat3) -> real {
     return real(0.5) * material.g * (trace3(c) - real(3.0)) - material.g * ln_j + real(0.5) * lambda() * ln_j * ln_j;
 }
 
-fn material_stress(e: Mat3) -> Mat3 {
-    let c = e * real(2.0) + identity3();
-    let ln_j = real(0.5) * ln_real(determinant(c));
-    let ci = inverse3(c);
-    return (identity3() - ci) * material.g + ci * (lambda() * ln_j);
-}
-
-// dS/dE = λ C⁻¹⊗C⁻¹ + 2(G - λ ln J) C⁻¹⊙C⁻¹
-fn material_tangent(e: Mat3) -> Tangent {
+// S and dS/dE = λ C⁻¹⊗C⁻¹ + 2(G - λ ln J) C⁻¹⊙C⁻¹, sharing ln J and C⁻¹.
+fn material_stress_tangent(e: Mat3) -> StressTangent {
     let c = e * real(2.0) + identity3();
     let ln_j = real(0.5) * ln_real(determinant(c));
     let ci = inverse3(c);
     var d: Tangent;
     add_scaled(&d, outer(ci, ci), lambda());
     add_scaled(&d, odot(ci, ci), real(2.0) * (material.g - lambda() * ln_j));
-    return d;
+    return StressTangent((identity3() - ci) * material.g + ci * (lambda() * ln_j), d);
 }

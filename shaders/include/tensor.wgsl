@@ -5,6 +5,12 @@
 alias Mat3 = mat3x3<real>;
 alias Tangent = array<real, 36>;
 
+// The stress and the tangent of one material call (`material_stress_tangent`).
+struct StressTangent {
+    s: Mat3,
+    d: Tangent,
+}
+
 // The material's parameters; unused ones are zero (`gpu::MaterialParams`).
 struct MaterialParams {
     g: real,

@@ -67,17 +67,20 @@ pub fn element_force_tangent<M: Hyperelastic>(
             return Err(ElementError::Inverted(det));
         }
         let e = green_lagrange(&f);
-        let s = material.stress(&e);
+        // Stress and tangent from one material call when the tangent is wanted.
+        let (s, d) = if with_tangent {
+            let (s, d) = material.stress_tangent(&e);
+            (s, Some(d))
+        } else {
+            (material.stress(&e), None)
+        };
         let fs = f * s;
         for (a, g) in gp.dn_dx.iter().enumerate() {
             for i in 0..dim {
                 out.force[a * dim + i] += gp.dv * (fs[(i, 0)] * g[0] + fs[(i, 1)] * g[1] + fs[(i, 2)] * g[2]);
             }
         }
-        if !with_tangent {
-            continue;
-        }
-        let d = material.tangent(&e);
+        let Some(d) = d else { continue };
         if !d.iter().all(|v| v.is_finite()) {
             return Err(ElementError::NonFinite);
         }

@@ -25,18 +25,22 @@ impl Hyperelastic for BlatzKo {
     }
 
     fn stress(&self, e: &Mat3) -> Mat3 {
-        let c = right_cauchy_green(e);
-        let j = c.determinant().sqrt();
-        let ci = c.try_inverse().unwrap_or_else(|| Mat3::from_element(Real::NAN));
-        (ci * j - ci * ci) * self.g
+        let (j, ci, ci2) = inverse_powers(e);
+        (ci * j - ci2) * self.g
     }
 
     /// `dS/dE = 2 dS/dC = 2G [ J/2 C⁻¹⊗C⁻¹ - J C⁻¹⊙C⁻¹ + C⁻¹⊙C⁻² + C⁻²⊙C⁻¹ ]`.
-    fn tangent(&self, e: &Mat3) -> Tangent {
-        let c = right_cauchy_green(e);
-        let j = c.determinant().sqrt();
-        let ci = c.try_inverse().unwrap_or_else(|| Mat3::from_element(Real::NAN));
-        let ci2 = ci * ci;
-        (outer(&ci, &ci) * (0.5 * j) - odot(&ci, &ci) * j + odot(&ci, &ci2) + odot(&ci2, &ci)) * (2.0 * self.g)
+    fn stress_tangent(&self, e: &Mat3) -> (Mat3, Tangent) {
+        let (j, ci, ci2) = inverse_powers(e);
+        let d = (outer(&ci, &ci) * (0.5 * j) - odot(&ci, &ci) * j + odot(&ci, &ci2) + odot(&ci2, &ci)) * (2.0 * self.g);
+        ((ci * j - ci2) * self.g, d)
     }
+}
+
+/// `J = √det C`, `C⁻¹` and `C⁻²`: what the stress and the tangent share.
+fn inverse_powers(e: &Mat3) -> (Real, Mat3, Mat3) {
+    let c = right_cauchy_green(e);
+    let j = c.determinant().sqrt();
+    let ci = c.try_inverse().unwrap_or_else(|| Mat3::from_element(Real::NAN));
+    (j, ci, ci * ci)
 }

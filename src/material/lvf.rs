@@ -40,21 +40,13 @@ impl Hyperelastic for Lvf {
     }
 
     fn stress(&self, e: &Mat3) -> Mat3 {
-        let i = Mat3::identity();
-        let ed = dev(e);
-        let ed2 = ed * ed;
-        let (s2, z) = (ed2.trace(), e.trace() / SQRT3);
-        // dW/dz and dW/ds2; ds2/dE = 2 Ed, dz/dE = I/√3, ds3/dE = 3 dev(Ed²).
-        let dw_dz = 0.5 * self.a3 * z * s2 + 3.0 * self.k * z + self.a2 * z * z + self.a4 * z.powi(3);
-        let dw_ds2 = self.g + 0.25 * self.a3 * z * z + 0.5 * self.a5 * s2;
-        ed * (2.0 * dw_ds2) + i * (dw_dz / SQRT3) + dev(&ed2) * (self.a1 * SQRT6)
+        self.stress_of(&Invariants::of(e))
     }
 
-    fn tangent(&self, e: &Mat3) -> Tangent {
+    fn stress_tangent(&self, e: &Mat3) -> (Mat3, Tangent) {
+        let inv = Invariants::of(e);
+        let Invariants { ed, s2, z, .. } = inv;
         let i = Mat3::identity();
-        let ed = dev(e);
-        let ed2 = ed * ed;
-        let (s2, z) = (ed2.trace(), e.trace() / SQRT3);
         let p = deviatoric_projector();
         let iz = i / SQRT3; // dz/dE
         let dw_ds2 = self.g + 0.25 * self.a3 * z * z + 0.5 * self.a5 * s2;
@@ -64,10 +56,38 @@ impl Hyperelastic for Lvf {
         let ded = ed * 2.0; // ds2/dE
         // d dev(Ed²)/dE = I⊙Ed + Ed⊙I - 2/3 (Ed⊗I + I⊗Ed)
         let d_dev_ed2 = odot(&i, &ed) * 2.0 - (outer(&ed, &i) + outer(&i, &ed)) * (2.0 / 3.0);
-        p * (2.0 * dw_ds2)
+        let d = p * (2.0 * dw_ds2)
             + outer(&ded, &ded) * d2w_ds2ds2
             + (outer(&ded, &iz) + outer(&iz, &ded)) * d2w_dzds2
             + outer(&iz, &iz) * d2w_dz2
-            + d_dev_ed2 * (self.a1 * SQRT6)
+            + d_dev_ed2 * (self.a1 * SQRT6);
+        (self.stress_of(&inv), d)
+    }
+}
+
+/// `Ed`, `Ed²`, `s2 = tr(Ed²)` and `z = tr(E)/√3`: what the stress and the tangent share.
+#[derive(Clone, Copy)]
+struct Invariants {
+    ed: Mat3,
+    ed2: Mat3,
+    s2: Real,
+    z: Real,
+}
+
+impl Invariants {
+    fn of(e: &Mat3) -> Self {
+        let ed = dev(e);
+        let ed2 = ed * ed;
+        Self { ed, ed2, s2: ed2.trace(), z: e.trace() / SQRT3 }
+    }
+}
+
+impl Lvf {
+    fn stress_of(&self, inv: &Invariants) -> Mat3 {
+        let Invariants { ed, ed2, s2, z } = *inv;
+        // dW/dz and dW/ds2; ds2/dE = 2 Ed, dz/dE = I/√3, ds3/dE = 3 dev(Ed²).
+        let dw_dz = 0.5 * self.a3 * z * s2 + 3.0 * self.k * z + self.a2 * z * z + self.a4 * z.powi(3);
+        let dw_ds2 = self.g + 0.25 * self.a3 * z * z + 0.5 * self.a5 * s2;
+        ed * (2.0 * dw_ds2) + Mat3::identity() * (dw_dz / SQRT3) + dev(&ed2) * (self.a1 * SQRT6)
     }
 }

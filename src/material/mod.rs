@@ -22,8 +22,13 @@ pub trait Hyperelastic {
     fn energy(&self, e: &Mat3) -> Real;
     /// Second Piola-Kirchhoff stress `S = dW/dE`.
     fn stress(&self, e: &Mat3) -> Mat3;
-    /// Consistent tangent `dS/dE` in Voigt form (see [`tensor`]).
-    fn tangent(&self, e: &Mat3) -> Tangent;
+    /// The stress (exactly as [`Hyperelastic::stress`] gives it) and the consistent tangent
+    /// `dS/dE` in Voigt form (see [`tensor`]), from one evaluation of what they share.
+    fn stress_tangent(&self, e: &Mat3) -> (Mat3, Tangent);
+    /// The consistent tangent alone.
+    fn tangent(&self, e: &Mat3) -> Tangent {
+        self.stress_tangent(e).1
+    }
 }
 
 /// The material models a scene can name.
@@ -82,11 +87,11 @@ impl Hyperelastic for Model {
             Model::NeoHookean(m) => m.stress(e),
         }
     }
-    fn tangent(&self, e: &Mat3) -> Tangent {
+    fn stress_tangent(&self, e: &Mat3) -> (Mat3, Tangent) {
         match self {
-            Model::BlatzKo(m) => m.tangent(e),
-            Model::Lvf(m) => m.tangent(e),
-            Model::NeoHookean(m) => m.tangent(e),
+            Model::BlatzKo(m) => m.stress_tangent(e),
+            Model::Lvf(m) => m.stress_tangent(e),
+            Model::NeoHookean(m) => m.stress_tangent(e),
         }
     }
 }

@@ -27,17 +27,21 @@ impl Hyperelastic for NeoHookean {
     }
 
     fn stress(&self, e: &Mat3) -> Mat3 {
-        let c = e * 2.0 + Mat3::identity();
-        let ln_j = 0.5 * c.determinant().ln();
-        let ci = c.try_inverse().unwrap_or_else(|| Mat3::from_element(Real::NAN));
+        let (ln_j, ci) = log_volume_and_inverse(e);
         (Mat3::identity() - ci) * self.g + ci * (self.lambda() * ln_j)
     }
 
     /// `dS/dE = λ C⁻¹⊗C⁻¹ + 2(G - λ ln J) C⁻¹⊙C⁻¹`.
-    fn tangent(&self, e: &Mat3) -> Tangent {
-        let c = e * 2.0 + Mat3::identity();
-        let ln_j = 0.5 * c.determinant().ln();
-        let ci = c.try_inverse().unwrap_or_else(|| Mat3::from_element(Real::NAN));
-        outer(&ci, &ci) * self.lambda() + odot(&ci, &ci) * (2.0 * (self.g - self.lambda() * ln_j))
+    fn stress_tangent(&self, e: &Mat3) -> (Mat3, Tangent) {
+        let (ln_j, ci) = log_volume_and_inverse(e);
+        let d = outer(&ci, &ci) * self.lambda() + odot(&ci, &ci) * (2.0 * (self.g - self.lambda() * ln_j));
+        ((Mat3::identity() - ci) * self.g + ci * (self.lambda() * ln_j), d)
     }
+}
+
+/// `ln J` and `C⁻¹`: what the stress and the tangent share.
+fn log_volume_and_inverse(e: &Mat3) -> (Real, Mat3) {
+    let c = e * 2.0 + Mat3::identity();
+    let ln_j = 0.5 * c.determinant().ln();
+    (ln_j, c.try_inverse().unwrap_or_else(|| Mat3::from_element(Real::NAN)))
 }
