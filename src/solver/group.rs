@@ -70,8 +70,7 @@ struct Group {
 
 /// Solves a step's Newton problem group by group, in parallel. The bodies go back into
 /// `bodies` and the points (global indices, with their solution) are returned in detection
-/// order, whether the step converged or not.
-#[allow(clippy::too_many_arguments)]
+/// order, whether the step converged or not. Forming the groups counts as `contact` time.
 pub fn solve_groups(
     bodies: &mut Vec<Body>,
     points: Vec<ContactPoint>,
@@ -79,7 +78,9 @@ pub fn solve_groups(
     settings: Option<&Settings>,
     warm: &HashMap<(u32, u32, Master), ([Real; 3], Real)>,
     velocity_scale: Real,
+    times: &mut PhaseTimes,
 ) -> (Vec<ContactPoint>, Vec<Result<GroupReport, StepFailure>>) {
+    let started = std::time::Instant::now();
     let plan = components(bodies.len(), &points);
     let mut local = vec![0u32; bodies.len()];
     for (ids, _) in &plan {
@@ -107,6 +108,7 @@ pub fn solve_groups(
             Group { ids, bodies: group_bodies, point_ids, contact }
         })
         .collect();
+    times.contact += started.elapsed().as_secs_f64();
     let reports: Vec<Result<GroupReport, StepFailure>> = groups.par_iter_mut().map(|g| newton(&mut g.bodies, &mut g.contact, p, settings, velocity_scale)).collect();
     for g in groups {
         for (c, i) in g.contact.points.into_iter().zip(g.point_ids) {

@@ -202,7 +202,7 @@ impl Simulation {
         let settings = self.contact.as_ref().map(|c| c.settings.clone());
         let gravity = self.gravity;
         self.bodies.par_iter_mut().for_each(|body| body.begin_step(&p, &gravity));
-        let (points, groups) = solve_groups(&mut self.bodies, points, &p, settings.as_ref(), &warm, velocity_scale);
+        let (points, groups) = solve_groups(&mut self.bodies, points, &p, settings.as_ref(), &warm, velocity_scale, &mut report.wall);
         let (mut failure, mut iterations) = (None, 0);
         for group in groups {
             match group {
