@@ -61,8 +61,8 @@ pub enum Backend {
 ///
 /// Measured on an NVIDIA H100 against the CPU backend of the same machine (doc/benchmarks.md,
 /// "Which backend `auto` picks"): the GPU backend ran 1.3x to 14x slower on every scene with
-/// bodies of up to ~10 000 dofs (grains, stack_3d, love_laursen) and 1.15x faster only on a
-/// single 52 000-dof block, where the CPU's factorisation and elements dominate.
+/// bodies of at most a thousand dofs (grains, stack_3d, love_laursen) and 1.15x faster only on a
+/// single 54 000-dof block, where the CPU's factorisation and elements dominated.
 pub const GPU_MIN_BODY_DOFS: usize = 50_000;
 
 /// The backend a request resolved to, with what the user should be told about the choice.
