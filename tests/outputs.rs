@@ -103,6 +103,19 @@ fn vtu_frames_of_a_2d_and_a_3d_scene_read_back_with_their_arrays() {
     }
 }
 
+/// Caught in bar_impact: 31 of its contact frames, those before the impact, had no
+/// `NumberOfPoints` and `NumberOfCells` (vtkio leaves out zeros), which the VTK XML format requires.
+#[test]
+fn an_empty_contact_frame_states_its_zero_counts() {
+    let (_, dir) = run_with_vtu("bar_impact", &["time.end=0.001"], "vtu_empty_contact");
+    let first = dir.join(&pvd_files(&dir.join("contact_points.pvd"))[0]);
+    let xml = std::fs::read_to_string(&first).unwrap();
+    assert!(xml.contains(r#"<Piece NumberOfPoints="0" NumberOfCells="0">"#), "{}", &xml[..xml.len().min(300)]);
+    let grid = read_vtu(&first);
+    assert_eq!((grid.points.len(), grid.cells), (0, 0));
+    assert_eq!(names(&grid.point_data), [("gap", 1), ("normal", 3), ("normal_reaction", 1), ("tangential_reaction", 3), ("status", 1)]);
+}
+
 /// Keys of a message object that its schema does not define, and schema properties the message
 /// lacks (the Foxglove schemas allow extra keys, so validation alone would miss a misspelling).
 fn strict_mismatches(message: &Value, schema: &Value, at: &str, out: &mut Vec<String>) {

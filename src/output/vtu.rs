@@ -81,7 +81,9 @@ impl VtuSeries {
         if let Some(parent) = path.parent() {
             std::fs::create_dir_all(parent).map_err(|source| OutputError::Create { path: parent.into(), source })?;
         }
-        vtk.export(path).map_err(|e| OutputError::Write { path: path.into(), message: e.to_string() })
+        let mut xml = Vec::new();
+        vtk.write_xml(&mut xml).map_err(|e| OutputError::Write { path: path.into(), message: e.to_string() })?;
+        std::fs::write(path, empty_piece_counts(xml)).map_err(|source| OutputError::Create { path: path.into(), source })
     }
 
     /// Writes the committed state of `sim` as the next frame; `fields` are each body's cell
@@ -150,5 +152,15 @@ impl VtuSeries {
         xml.push_str("  </Collection>\n</VTKFile>\n");
         let path = self.dir.join(format!("{series}.pvd"));
         std::fs::write(&path, xml).map_err(|source| OutputError::Create { path, source })
+    }
+}
+
+/// vtkio leaves out `NumberOfPoints` and `NumberOfCells` when they are zero (a contact frame
+/// with no contact point), and readers such as meshio then reject the file: write the zeros.
+fn empty_piece_counts(xml: Vec<u8>) -> Vec<u8> {
+    const EMPTY: &[u8] = b"<Piece>";
+    match xml.windows(EMPTY.len()).position(|w| w == EMPTY) {
+        Some(at) => [&xml[..at], b"<Piece NumberOfPoints=\"0\" NumberOfCells=\"0\">", &xml[at + EMPTY.len()..]].concat(),
+        None => xml,
     }
 }
