@@ -67,3 +67,29 @@ fn gmsh_square_matches_generated_square() {
     let last = a.1.last().unwrap();
     assert!(last[1] > 0.0 && last[1] < 3.0 * weight, "the clamp holds the square up: {last:?}");
 }
+
+/// Caught by a user's Gmsh 2.2 file: the parser's first line ("During parsing...") was all the
+/// message said.
+#[test]
+fn an_older_msh_version_is_named_with_the_fix() {
+    let legacy = "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n3\n1 0 0 0\n2 1 0 0\n3 0 1 0\n$EndNodes\n$Elements\n1\n1 2 2 0 1 1 2 3\n$EndElements\n";
+    let message = gmsh::read(legacy.as_bytes()).unwrap_err().to_string();
+    assert!(message.contains("MSH version 2.2 is not supported") && message.contains("-format msh41"), "{message}");
+}
+
+/// Caught by a second-order mesh: "no Tri3, Quad4, Tet4 or Hex8 elements" did not say what the file had.
+#[test]
+fn a_second_order_mesh_names_what_it_has() {
+    let tri6 = common_gmsh::unit_square_msh(false).replace("2 1 2 2\n2 1 2 3\n3 1 3 4", "2 1 9 2\n2 1 2 3 1 2 3\n3 1 3 4 1 3 4");
+    let message = gmsh::read(tri6.as_bytes()).unwrap_err().to_string();
+    assert!(message.contains("(it has Lin2, Tri6)") && message.contains("first-order"), "{message}");
+}
+
+/// The parser's chain of contexts is kept (it was cut to its first line), its hex dump left out.
+#[test]
+fn a_parse_error_says_where_the_file_is_broken() {
+    let broken = common_gmsh::unit_square_msh(false).replace("0 1 0\n$EndNodes", "0 1 x\n");
+    let message = gmsh::read(broken.as_bytes()).unwrap_err().to_string();
+    assert!(message.contains("in node coordinates") && message.contains("z coordinate"), "{message}");
+    assert!(!message.contains("Hex dump") && !message.contains('\n'), "{message}");
+}

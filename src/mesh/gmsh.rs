@@ -1,4 +1,5 @@
-//! Gmsh `.msh` 4.1 input (ASCII or binary) through the `mshio` crate.
+//! Gmsh `.msh` 4.1 input (ASCII or binary) through the `mshio` crate; other versions are named
+//! in the error, before parsing.
 //!
 //! The mesh is made of the elements of the highest dimension present (Tri3/Quad4 in 2D,
 //! Tet4/Hex8 in 3D; one kind per mesh). Node sets come from physical groups of any dimension,
@@ -14,9 +15,9 @@ pub enum GmshError {
     #[error("cannot parse it as MSH: {0}")]
     Parse(String),
     #[error("MSH version {0} is not supported (write version 4.1, e.g. `gmsh -format msh41`)")]
-    Version(f64),
-    #[error("it has no Tri3, Quad4, Tet4 or Hex8 elements")]
-    NoElements,
+    Version(String),
+    #[error("it has no Tri3, Quad4, Tet4 or Hex8 elements (it has {0}); write a first-order mesh (e.g. `gmsh -order 1`)")]
+    NoElements(String),
     #[error("it mixes {0} and {1} elements; one kind per mesh is supported")]
     Mixed(&'static str, &'static str),
     #[error("element {element} refers to node tag {tag}, which the file does not define")]
@@ -54,12 +55,29 @@ fn physical_names(bytes: &[u8]) -> HashMap<(i32, i32), String> {
     names
 }
 
+/// The version on the line after `$MeshFormat`, read before parsing: mshio rejects older
+/// formats with a parse error that does not say why.
+fn declared_version(bytes: &[u8]) -> Option<String> {
+    let text = String::from_utf8_lossy(&bytes[..bytes.len().min(256)]);
+    let mut lines = text.lines().skip_while(|l| l.trim() != "$MeshFormat");
+    lines.next()?;
+    lines.next()?.split_whitespace().next().map(String::from)
+}
+
 pub fn read(bytes: &[u8]) -> Result<Mesh, GmshError> {
-    // mshio can panic on some malformed inputs; a scene error must never be a panic.
-    let parsed = std::panic::catch_unwind(|| mshio::parse_msh_bytes(bytes).map_err(|e| GmshError::Parse(format!("{e}").lines().next().unwrap_or("").to_string())))
+    if let Some(version) = declared_version(bytes).filter(|v| v.parse::<f64>().map_or(true, |v| (v - 4.1).abs() > 1e-9)) {
+        return Err(GmshError::Version(version));
+    }
+    // mshio can panic on some malformed inputs; a scene error must never be a panic. Its
+    // messages are a chain of contexts, one per line, then a hex dump: keep the chain, on one line.
+    let parse_error = |e: String| {
+        let chain: Vec<&str> = e.lines().map(str::trim).take_while(|l| !l.starts_with("Hex dump")).map(|l| l.trim_end_matches([',', '.'])).filter(|l| !l.is_empty()).collect();
+        GmshError::Parse(chain.join(": "))
+    };
+    let parsed = std::panic::catch_unwind(|| mshio::parse_msh_bytes(bytes).map_err(|e| parse_error(e.to_string())))
         .map_err(|_| GmshError::Parse("the parser rejected the file".into()))??;
     if (parsed.header.version - 4.1).abs() > 1e-9 {
-        return Err(GmshError::Version(parsed.header.version));
+        return Err(GmshError::Version(parsed.header.version.to_string()));
     }
     let data = parsed.data;
     let mut coords: HashMap<u64, [Real; 3]> = HashMap::new();
@@ -83,7 +101,11 @@ pub fn read(bytes: &[u8]) -> Result<Mesh, GmshError> {
         .iter()
         .filter_map(|b| kind_of(b.element_type))
         .max_by_key(|k| k.dim())
-        .ok_or(GmshError::NoElements)?;
+        .ok_or_else(|| {
+            let mut found: Vec<String> = blocks.iter().map(|b| format!("{:?}", b.element_type)).collect();
+            found.dedup();
+            GmshError::NoElements(if found.is_empty() { "no elements".into() } else { found.join(", ") })
+        })?;
     let mut index: HashMap<u64, u32> = HashMap::new();
     let mut nodes = Vec::new();
     let mut connectivity = Vec::new();
