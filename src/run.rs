@@ -339,6 +339,19 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
     }
     sim.start();
     let mut logger = Logger::new(out, loaded, &sim, options, &backend)?;
+    let free_dofs: usize = sim.bodies.iter().map(|b| b.dofs.free_count).sum();
+    let start = format!(
+        "bifirst {}: scene `{}` ({}), {} bodies, {free_dofs} free dofs, {} steps of dt = {:e}, backend {}, {} threads",
+        env!("CARGO_PKG_VERSION"),
+        loaded.name,
+        loaded.path.display(),
+        sim.bodies.len(),
+        sim.step_count(),
+        sim.dt,
+        backend.describe(),
+        rayon::current_num_threads()
+    );
+    logger.line(0.0, Level::Info, &start)?;
     if let Some(notice) = &resolved.notice {
         logger.line(0.0, Level::Warning, notice)?;
     }
@@ -420,6 +433,11 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
         None => {
             contour(&sim)?;
             let summary = summary(&sim, &totals, None);
+            let end = format!(
+                "finished: {} steps to t = {:.6e}, {} Newton iterations, {} cut-backs, {:.2} s wall; energy balance error {:.1e}",
+                summary.steps, summary.t_end, summary.newton_iterations, summary.cutbacks, summary.wall_s, summary.energy.energy_balance_error
+            );
+            logger.line(sim.t, Level::Info, &end)?;
             logger.summary(&summary, sim.t)?;
             logger.log.finish()?;
             Ok(summary)

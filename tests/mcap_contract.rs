@@ -65,6 +65,12 @@ fn run_log_has_every_channel_of_the_contract() {
             assert_eq!(message_fields(m), sorted(fields), "{topic} message fields");
         }
     }
+    // Foxglove users find /log in every run: the start and, for a finished run, the totals.
+    let lines = &log.topics["/log"];
+    let (first, last) = (&lines[0], lines.last().unwrap());
+    assert_eq!((first["level"].as_u64(), last["level"].as_u64()), (Some(2), Some(2)), "{lines:?}");
+    assert!(first["message"].as_str().unwrap().starts_with("bifirst ") && first["message"].as_str().unwrap().contains("scene `uniaxial_blatz_ko`"), "{first}");
+    assert!(last["message"].as_str().unwrap().starts_with("finished: 10 steps"), "{last}");
     let run = &log.topics["/run"][0];
     assert_eq!(run["backend"], "cpu");
     assert_eq!(run["precision"], "f64");
