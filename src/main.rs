@@ -311,6 +311,12 @@ fn run(args: RunArgs) -> Result<ExitCode> {
             eprintln!("error: {}", RunError::Stopped { reason, summary });
             Ok(if interrupted { ExitCode::from(130) } else { ExitCode::FAILURE })
         }
+        // The scene was fine; writing its results failed (a full disk, say): a failed run, not
+        // bad input.
+        Err(e @ RunError::Output(_)) => {
+            eprintln!("error: {e}");
+            Ok(ExitCode::FAILURE)
+        }
         Err(e) => Err(e.into()),
     }
 }
@@ -401,6 +407,12 @@ fn summary_command(runs: Vec<PathBuf>, json: bool) -> Result<ExitCode> {
 }
 
 fn main() -> ExitCode {
+    // Like other command-line tools, end quietly when the reader of stdout goes away
+    // (`bifirst info | head -1`) instead of panicking in `println!`. Rust ignores SIGPIPE.
+    // SAFETY: called before any thread starts; SIG_DFL is a valid disposition for SIGPIPE.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     // Mesa's Vulkan device-select layer connects to the display server to order GPUs, and
     // complains on headless machines; bifirst ranks adapters itself. Set before any thread starts.
     if std::env::var_os("NODEVICE_SELECT").is_none() {

@@ -316,3 +316,30 @@ fn sigint_and_sigterm_stop_a_run_with_a_complete_log() {
         assert_eq!(log.topics["/log"].last().unwrap()["level"], 3);
     }
 }
+
+/// Caught by `--out /dev/full`: the MCAP writer panicked in its destructor after the first
+/// failed write and the process aborted (exit 134). A full disk is a failed run (exit 1) that
+/// names the file.
+#[test]
+fn a_full_disk_is_a_failed_run_not_a_panic() {
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_bifirst"))
+        .args(["run", scene_path("bar_impact").to_str().unwrap(), "--backend", "cpu", "--quiet", "--out", "/dev/full"])
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains("`/dev/full`") && !stderr.contains("panicked"), "{stderr}");
+}
+
+/// Caught by `bifirst info | head -1`: `println!` panicked on the closed pipe. Now the command
+/// ends quietly, as other tools do (SIGPIPE).
+#[test]
+fn a_closed_stdout_ends_a_command_quietly() {
+    use std::os::unix::process::ExitStatusExt;
+    let (reader, writer) = std::io::pipe().unwrap();
+    drop(reader);
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_bifirst")).arg("info").stdout(writer).stderr(std::process::Stdio::piped()).output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert_eq!(out.status.signal(), Some(13), "ended by SIGPIPE: {:?}", out.status);
+}

@@ -50,7 +50,13 @@ impl RunLog {
         &self.path
     }
 
-    fn err(&self, e: impl std::fmt::Display) -> OutputError {
+    /// The error of a failed write. The writer is abandoned: after an I/O error mcap's writer
+    /// is left inconsistent and would panic when it finishes, in its own `Drop` too (caught by
+    /// `--out /dev/full`, which aborted the process). A later call reports that the log is gone.
+    fn err(&mut self, e: impl std::fmt::Display) -> OutputError {
+        if let Some(w) = self.writer.take() {
+            std::mem::forget(w);
+        }
         OutputError::Write { path: self.path.clone(), message: e.to_string() }
     }
 
@@ -93,10 +99,18 @@ impl RunLog {
 
     /// Writes the summary and indices and closes the file.
     pub fn finish(&mut self) -> Result<(), OutputError> {
-        if let Some(mut w) = self.writer.take() {
-            w.finish().map_err(|e| self.err(e))?;
+        let Some(mut w) = self.writer.take() else { return Ok(()) };
+        match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| w.finish())) {
+            Ok(Ok(_summary)) => Ok(()),
+            Ok(Err(e)) => {
+                std::mem::forget(w);
+                Err(self.err(e))
+            }
+            Err(_) => {
+                std::mem::forget(w);
+                Err(self.err("the MCAP writer failed while closing the file"))
+            }
         }
-        Ok(())
     }
 }
 
