@@ -261,3 +261,29 @@ fn bad_packing_and_polygon_grains() {
     assert_error("concave_polygon", &polygon, &[], "body.block.mesh.points", Some(13), "not convex");
     assert_error("polygon_quads", &polygon.replace("[1.0, 0.3]", "[2.0, 2.0]").replace("tri3", "quad4"), &[], "body.block.mesh.element", Some(13), "tri3");
 }
+
+/// Caught by fuzzing: `divisions = [9223372036854775807, 2]` panicked ("capacity overflow"),
+/// `[20000, 20000]` tried to allocate far more than the machine has, `dt = 1e-20` was accepted
+/// (1e20 steps). They are errors at `check` now, and the limits can be raised.
+#[test]
+fn absurd_sizes_are_errors_that_can_be_overridden() {
+    for (tag, set) in [("divisions_overflow", "body.block.mesh.divisions=[9223372036854775807, 2]"), ("divisions_huge", "body.block.mesh.divisions=[20000, 20000]")] {
+        assert_error(tag, GOOD, &[set], "body.block.mesh.divisions", None, "limits.max_elements");
+    }
+    assert_error("dt_tiny", GOOD, &["time.dt=1e-20"], "time.dt", None, "limits.max_steps");
+    let (code, stderr, _) = check("dt_small_raised", GOOD, &["time.dt=1e-10", "limits.max_steps=1000000000"]);
+    assert_eq!(code, 0, "a raised limit admits the scene: {stderr}");
+}
+
+/// Caught by `packing.radius = [0.35, 50]`: `check` refined polygon grains by building their
+/// mesh at every level (past 20 s, 1.7 GB); now it answers at once.
+#[test]
+fn a_packing_of_huge_grains_is_rejected_at_once() {
+    let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/grains_many.toml");
+    let started = std::time::Instant::now();
+    let out = Command::new(env!("CARGO_BIN_EXE_bifirst")).args(["check", scene.to_str().unwrap(), "--set", "packing.radius=[0.35, 50]"]).output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(stderr.contains("limits.max_elements") && !stderr.contains("panicked"), "{stderr}");
+    println!("rejected in {:.2} s", started.elapsed().as_secs_f64());
+}

@@ -105,10 +105,11 @@ pub(super) fn expand(s: &mut Scene) -> Result<(), Failure> {
                     [center[0] + r * angle.cos(), center[1] + r * angle.sin()]
                 })
                 .collect();
-            let mut n = p.divisions;
-            while generate::polygon(&points, n).min_edge_length() >= finest_disk {
-                n += 1;
-            }
+            // Each fan triangle is split into n x n copies scaled by 1/n, so the finest edge at
+            // n divisions is the finest at one over n: no mesh is built per trial (with a large
+            // radius that loop built millions of elements for every n).
+            let coarsest = generate::polygon(&points, 1).min_edge_length();
+            let n = p.divisions.max((coarsest / finest_disk).floor() as usize + 1);
             let points = Some(points.iter().map(|q| q.to_vec()).collect());
             MeshSpec { generator: Some(Generator::Polygon), element: Some(ElementKind::Tri3), points, divisions: Some(vec![n]), ..Default::default() }
         } else {

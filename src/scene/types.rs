@@ -32,6 +32,27 @@ pub struct Scene {
     pub obstacle: BTreeMap<String, ObstacleSpec>,
     #[serde(default)]
     pub output: OutputSpec,
+    #[serde(default)]
+    pub limits: LimitsSpec,
+}
+
+/// `[limits]`: the most a scene may ask for before `check` and `run` reject it, so that a typo
+/// (`divisions = [20000, 2000, 2000]`, `dt = 1e-20`) is an error, not hours of work or an
+/// allocation that kills the machine. A run that really needs more raises them, e.g.
+/// `--set limits.max_elements=100000000`.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LimitsSpec {
+    /// Elements over all generated meshes.
+    pub max_elements: u64,
+    /// Time steps to `time.end`.
+    pub max_steps: u64,
+}
+
+impl Default for LimitsSpec {
+    fn default() -> Self {
+        Self { max_elements: 5_000_000, max_steps: 100_000_000 }
+    }
 }
 
 #[derive(Debug, Clone, Deserialize, Serialize)]

@@ -54,6 +54,20 @@ pub(super) fn validate(s: &Scene) -> Result<(), Failure> {
     if s.solver.max_iterations == 0 {
         fail(Invalid, "solver.max_iterations", "at least one Newton iteration is needed.")?;
     }
+    let steps = (t.end / t.dt).ceil();
+    if steps > s.limits.max_steps as Real {
+        let message = format!("{steps:.3e} steps to time.end = {}, more than limits.max_steps = {}; raise the limit (`--set limits.max_steps=N`) if you mean it.", t.end, s.limits.max_steps);
+        fail(Invalid, "time.dt", message)?;
+    }
+    let mut elements: u128 = 0;
+    for (name, b) in &s.body {
+        let count = generated_elements(&b.mesh);
+        elements = elements.saturating_add(count);
+        if elements > s.limits.max_elements as u128 {
+            let message = format!("the generated meshes have {elements} elements or more, more than limits.max_elements = {}; raise the limit (`--set limits.max_elements=N`) if you mean it.", s.limits.max_elements);
+            fail(Invalid, format!("body.{name}.mesh.divisions"), message)?;
+        }
+    }
     if s.output.every == 0 {
         fail(Invalid, "output.every", "the output cadence must be at least 1 step.")?;
     }
@@ -247,6 +261,25 @@ fn validate_mesh(key: &str, m: &MeshSpec) -> Result<(), Failure> {
         }
     }
     Ok(())
+}
+
+/// The number of elements a generator will make (0 for a mesh file, whose size is its own),
+/// without overflow for absurd divisions.
+fn generated_elements(m: &MeshSpec) -> u128 {
+    let div: Vec<u128> = m.divisions.iter().flatten().map(|&n| n as u128).collect();
+    let product = div.iter().fold(1u128, |p, &n| p.saturating_mul(n));
+    let per_cell = match m.element {
+        Some(crate::mesh::ElementKind::Tri3) => 2,
+        Some(crate::mesh::ElementKind::Tet4) => 6,
+        _ => 1,
+    };
+    match m.generator {
+        None => 0,
+        Some(Generator::Rectangle | Generator::Box) => product.saturating_mul(per_cell),
+        // A disk is a (2n) x (2n) grid mapped onto the circle; a polygon has n² triangles per edge.
+        Some(Generator::Disk) => div.first().map_or(0, |&n| (2 * n).saturating_mul(2 * n).saturating_mul(per_cell)),
+        Some(Generator::Polygon) => div.first().map_or(0, |&n| n.saturating_mul(n).saturating_mul(m.points.as_ref().map_or(0, |p| p.len()) as u128)),
+    }
 }
 
 /// At least `least` finite 2D points, no two consecutive ones equal.
