@@ -224,16 +224,18 @@ fn print_summary(s: &RunSummary) {
     );
 }
 
-/// Interrupts (SIGINT, SIGTERM) set a flag that stops the run after its current step, so the log
-/// is closed properly; a second interrupt exits at once.
-fn interrupt_flag() -> Result<Arc<AtomicBool>> {
-    use signal_hook::consts::{SIGINT, SIGTERM};
-    let flag = Arc::new(AtomicBool::new(false));
-    for signal in [SIGINT, SIGTERM] {
-        signal_hook::flag::register_conditional_shutdown(signal, 130, Arc::clone(&flag))?;
+/// Interrupts (SIGINT, SIGTERM, SIGHUP: a closed terminal or SSH session) set the first flag,
+/// which stops the run after its current step so the log is closed properly; a second interrupt
+/// exits at once. The second flag tells a hang-up apart (exit 129 instead of 130).
+fn interrupt_flags() -> Result<(Arc<AtomicBool>, Arc<AtomicBool>)> {
+    use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};
+    let (flag, hangup) = (Arc::new(AtomicBool::new(false)), Arc::new(AtomicBool::new(false)));
+    for (signal, code) in [(SIGINT, 130), (SIGTERM, 130), (SIGHUP, 129)] {
+        signal_hook::flag::register_conditional_shutdown(signal, code, Arc::clone(&flag))?;
         signal_hook::flag::register(signal, Arc::clone(&flag))?;
     }
-    Ok(flag)
+    signal_hook::flag::register(SIGHUP, Arc::clone(&hangup))?;
+    Ok((flag, hangup))
 }
 
 fn bench_command(options: BenchOptions, backend: BackendChoice, adapter: Option<String>, json: bool) -> Result<ExitCode> {
@@ -286,7 +288,8 @@ fn run(args: RunArgs) -> Result<ExitCode> {
     if !args.quiet {
         eprintln!("bifirst {}: scene `{}`", env!("CARGO_PKG_VERSION"), loaded.name);
     }
-    let options = RunOptions { vtu: args.vtu, interrupt: Some(interrupt_flag()?), backend: args.backend, contour: args.contour };
+    let (interrupt, hangup) = interrupt_flags()?;
+    let options = RunOptions { vtu: args.vtu, interrupt: Some(interrupt), backend: args.backend, contour: args.contour };
     let mut progress = Progress { quiet: args.quiet, bar: None, last_line: Instant::now(), last_fraction: 0.0 };
     let result = run_scene(&loaded, &out, &options, &mut progress);
     if let Some(bar) = &progress.bar {
@@ -309,7 +312,11 @@ fn run(args: RunArgs) -> Result<ExitCode> {
             report(&summary);
             let interrupted = matches!(reason, Stop::Interrupted);
             eprintln!("error: {}", RunError::Stopped { reason, summary });
-            Ok(if interrupted { ExitCode::from(130) } else { ExitCode::FAILURE })
+            Ok(match (interrupted, hangup.load(Ordering::SeqCst)) {
+                (true, true) => ExitCode::from(129),
+                (true, false) => ExitCode::from(130),
+                _ => ExitCode::FAILURE,
+            })
         }
         // The scene was fine; writing its results failed (a full disk, say): a failed run, not
         // bad input.
@@ -343,7 +350,7 @@ fn sweep_command(args: SweepArgs) -> Result<ExitCode> {
     let count = sweep.variants().count();
     let jobs = args.jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())).clamp(1, count);
     eprintln!("bifirst {}: sweep of `{}`, {count} variants, {jobs} at a time, into {}", env!("CARGO_PKG_VERSION"), sweep.name, out.display());
-    let options = RunOptions { vtu: None, interrupt: Some(interrupt_flag()?), backend: args.backend, contour: None };
+    let options = RunOptions { vtu: None, interrupt: Some(interrupt_flags()?.0), backend: args.backend, contour: None };
     let finished = AtomicUsize::new(0);
     let outcomes = sweep.run(&out, &options, jobs, |o| {
         let n = finished.fetch_add(1, Ordering::Relaxed) + 1;

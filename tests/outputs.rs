@@ -276,7 +276,7 @@ fn quiet_json_run_prints_only_the_machine_readable_summary() {
 }
 
 /// Starts a long run, waits until it has logged some steps, sends `signal`, and reads the log.
-fn interrupt_run(signal: &str, tag: &str) -> common_run::Log {
+fn interrupt_run(signal: &str, tag: &str, code: i32) -> common_run::Log {
     use std::io::{BufRead, BufReader};
     let out = temp_path(&format!("{tag}.mcap"));
     let mut child = bifirst()
@@ -292,15 +292,16 @@ fn interrupt_run(signal: &str, tag: &str) -> common_run::Log {
     assert!(kill.success());
     let rest: Vec<String> = lines.map_while(Result::ok).collect();
     let status = child.wait().unwrap();
-    assert_eq!(status.code(), Some(130), "{rest:?}");
+    assert_eq!(status.code(), Some(code), "{rest:?}");
     assert!(rest.iter().any(|l| l.contains("interrupted")), "{rest:?}");
     common_run::read_log(&out)
 }
 
 #[test]
-fn sigint_and_sigterm_stop_a_run_with_a_complete_log() {
-    for (signal, tag) in [("INT", "sigint"), ("TERM", "sigterm")] {
-        let log = interrupt_run(signal, tag);
+fn sigint_sigterm_and_sighup_stop_a_run_with_a_complete_log() {
+    // SIGHUP (a closed terminal) was caught by the issue: it killed the run with no summary.
+    for (signal, tag, code) in [("INT", "sigint", 130), ("TERM", "sigterm", 130), ("HUP", "sighup", 129)] {
+        let log = interrupt_run(signal, tag, code);
         let last = log.topics["/solver"].last().unwrap();
         assert_eq!(last["status"], "interrupted", "{signal}");
         let summary = &log.topics["/summary"][0];
