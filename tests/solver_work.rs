@@ -182,3 +182,25 @@ fn backend_gpu_without_a_hardware_gpu_uses_the_software_adapter_and_says_so() {
     let lines: Vec<String> = log.topics["/log"].iter().map(|m| m["message"].as_str().unwrap().to_string()).collect();
     assert!(lines.iter().any(|l| l.contains("software adapter")), "{lines:?}");
 }
+
+/// The message of a step that ran out of Newton iterations.
+fn newton_failure(scene: &str) -> String {
+    let sets: Vec<String> = ["solver.max_iterations=1", "solver.max_cutbacks=0", "output.scene_every=0"].map(String::from).to_vec();
+    let loaded = bifirst::scene::load_scene(&common_run::scene_path(scene), &sets).unwrap();
+    let out = temp_path(&format!("{scene}_newton_failure.mcap"));
+    let err = bifirst::run::run_scene(&loaded, &out, &Default::default(), &mut bifirst::run::Silent).expect_err("one iteration is not enough");
+    err.to_string()
+}
+
+/// Caught by the reliability issue: the failure printed a residual below its tolerance, did not
+/// say which criterion failed, and blamed one body for a failure of bodies coupled by contact.
+#[test]
+fn a_newton_failure_names_the_criteria_it_missed_and_every_coupled_body() {
+    let single = newton_failure("uniaxial_blatz_ko");
+    assert!(single.contains("body `cube`: Newton did not converge in 1 iterations"), "{single}");
+    assert!(single.contains("`cube`: residual") && single.contains("`cube`: last increment"), "{single}");
+    let contact = newton_failure("sliding_block");
+    assert!(contact.contains("contact forces still changing"), "{contact}");
+    let coupled = newton_failure("stack_3d");
+    assert!(coupled.contains("bodies `lower`, `upper` (coupled by contact)"), "{coupled}");
+}

@@ -57,8 +57,10 @@ pub enum StepFailure {
     Element { body: String, element: usize, error: ElementError },
     #[error("body `{body}`: {error}")]
     Linear { body: String, error: String },
-    #[error("body `{body}`: Newton did not converge in {iterations} iterations (residual {residual:.3e}, tolerance {tolerance:.3e})")]
-    NotConverged { body: String, iterations: usize, residual: Real, tolerance: Real },
+    /// `bodies` names the bodies that iterated together (coupled by contact); `unmet` says which
+    /// convergence criteria the last iteration still missed.
+    #[error("{bodies}: Newton did not converge in {iterations} iterations ({unmet})")]
+    NotConverged { bodies: String, iterations: usize, unmet: String },
     #[error("body `{body}`: the residual is not finite")]
     NotFinite { body: String },
     #[error("body `{body}`: {error}")]
@@ -114,6 +116,8 @@ pub struct Body {
     pub contact_force: Vec<Real>,
     force_scale: Real,
     last_increment: Option<Real>,
+    /// The criteria the last [`Body::converged`] found unmet, worded for a failure message.
+    unmet: Vec<String>,
     /// Keep a factorisation across Newton iterations and steps while it contracts the residual
     /// fast enough ([`REFACTOR_CONTRACTION`]); `false` refactorises every iteration.
     pub reuse_factorization: bool,
@@ -198,6 +202,7 @@ impl Body {
             contact_force: vec![0.0; ndof],
             force_scale: 0.0,
             last_increment: None,
+            unmet: Vec::new(),
             reuse_factorization: true,
             factor_c1: None,
             tangent_current: false,
@@ -372,7 +377,14 @@ impl Body {
         let round_off = 1e3 * Real::EPSILON * size2.sqrt();
         let allowed = p.increment_tolerance * step2.sqrt().max(motion_scale).max(1e-12 * self.length_scale) + round_off;
         let increment_ok = self.last_increment.is_none_or(|du| du <= allowed);
-        Ok(residual <= tolerance && increment_ok)
+        self.unmet.clear();
+        if residual > tolerance {
+            self.unmet.push(format!("`{}`: residual {residual:.3e} > {tolerance:.3e}", self.name));
+        }
+        if let Some(du) = self.last_increment.filter(|_| !increment_ok) {
+            self.unmet.push(format!("`{}`: last increment {du:.3e} > {allowed:.3e}", self.name));
+        }
+        Ok(self.unmet.is_empty())
     }
 
     /// The residual's tolerance: `residual_tolerance` times the force scale, plus a floor below
@@ -386,9 +398,9 @@ impl Body {
         p.residual_tolerance * self.force_scale + 1e-14 * c1 * self.max_mass * self.length_scale + 1e-13 * c1 * self.max_mass * travel
     }
 
-    /// The failure to report when Newton runs out of iterations.
-    pub fn not_converged(&self, p: &StepParams, iterations: usize) -> StepFailure {
-        StepFailure::NotConverged { body: self.name.clone(), iterations, residual: self.residual_norm(), tolerance: self.residual_tolerance(p) }
+    /// The criteria the last convergence test found unmet (empty when it passed).
+    pub fn unmet(&self) -> &[String] {
+        &self.unmet
     }
 
     /// One Newton increment with the current contact forces: solves `K̄ Δu = -(g - f_c)` with the

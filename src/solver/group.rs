@@ -142,18 +142,32 @@ fn newton(bodies: &mut [Body], contact: &mut ContactStep, p: &StepParams, settin
         for body in bodies.iter_mut() {
             converged &= body.converged(p, velocity_scale * p.dt)?;
         }
+        let mut contact_unmet = Vec::new();
         if !contact.is_empty() {
             let tolerance = settings.expect("contact points need contact settings").tolerance;
             // A step that starts from last step's solution may already satisfy everything.
-            let settled = last_change.map_or(contact.all_warm(), |c| c <= tolerance) && uzawa_converged;
-            converged &= settled && contact.complementarity(bodies, p) <= tolerance;
+            match last_change {
+                Some(c) if c > tolerance => contact_unmet.push(format!("contact forces still changing by {c:.3e} > {tolerance:.3e}")),
+                None if !contact.all_warm() => contact_unmet.push("contact forces not solved yet".to_string()),
+                _ => {}
+            }
+            if !uzawa_converged {
+                contact_unmet.push("Uzawa iterations not converged".to_string());
+            }
+            let complementarity = contact.complementarity(bodies, p);
+            if complementarity > tolerance {
+                contact_unmet.push(format!("complementarity {complementarity:.3e} > {tolerance:.3e}"));
+            }
+            converged &= contact_unmet.is_empty();
         }
         if converged {
             break;
         }
         if report.iterations == p.max_iterations {
-            let worst = bodies.iter().max_by(|a, b| a.residual_norm().total_cmp(&b.residual_norm())).expect("a body");
-            return Err(worst.not_converged(p, report.iterations));
+            let names: Vec<String> = bodies.iter().map(|b| format!("`{}`", b.name)).collect();
+            let bodies_named = if names.len() == 1 { format!("body {}", names[0]) } else { format!("bodies {} (coupled by contact)", names.join(", ")) };
+            let unmet: Vec<String> = bodies.iter().flat_map(|b| b.unmet().iter().cloned()).chain(contact_unmet).collect();
+            return Err(StepFailure::NotConverged { bodies: bodies_named, iterations: report.iterations, unmet: unmet.join("; ") });
         }
         let mut refactorized = false;
         for body in bodies.iter_mut() {
