@@ -94,10 +94,11 @@ impl Backend {
             BackendChoice::Auto if request.adapter.is_some() => Ok(on_gpu(gpu::open(request.adapter.as_deref(), request.precision)?)),
             BackendChoice::Auto => match gpu::hardware_adapter() {
                 None => cpu("no hardware GPU".into()),
-                Some(a) if largest_body_dofs < GPU_MIN_BODY_DOFS => {
-                    cpu(format!("the GPU {} gains only on bodies of {GPU_MIN_BODY_DOFS} dofs or more (largest here: {largest_body_dofs})", a.name))
+                Some((_, report)) if largest_body_dofs < GPU_MIN_BODY_DOFS => {
+                    cpu(format!("the GPU {} gains only on bodies of {GPU_MIN_BODY_DOFS} dofs or more (largest here: {largest_body_dofs})", report.name))
                 }
-                Some(a) => Ok(on_gpu(gpu::open(Some(&a.name), request.precision)?)),
+                // The adapter found is the one opened (by name, another could match first).
+                Some((adapter, _)) => Ok(on_gpu(gpu::open_adapter(adapter, request.precision)?)),
             },
         }
     }

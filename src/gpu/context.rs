@@ -107,12 +107,17 @@ pub fn open(name: Option<&str>, precision: Option<Precision>) -> Result<Gpu, Gpu
     open_adapter(adapter, precision)
 }
 
-/// The best hardware GPU, if the machine has one (software adapters are never taken).
-pub fn hardware_adapter() -> Option<AdapterReport> {
-    ranked(adapters()).iter().map(AdapterReport::of).find(|a| !a.software())
+/// The best hardware GPU, if the machine has one (software adapters are never taken), with
+/// what `bifirst info` says of it.
+pub fn hardware_adapter() -> Option<(Adapter, AdapterReport)> {
+    ranked(adapters()).into_iter().map(|a| {
+        let report = AdapterReport::of(&a);
+        (a, report)
+    }).find(|(_, report)| !report.software())
 }
 
-fn open_adapter(adapter: Adapter, precision: Option<Precision>) -> Result<Gpu, GpuError> {
+/// Opens a device on `adapter` in `precision` (default: f64 when the adapter has it, else f32).
+pub fn open_adapter(adapter: Adapter, precision: Option<Precision>) -> Result<Gpu, GpuError> {
     let report = AdapterReport::of(&adapter);
     let precision = match precision {
         Some(Precision::F64) if !report.f64 => return Err(GpuError::NoF64 { adapter: report.name }),

@@ -9,5 +9,5 @@ pub mod types;
 pub mod uzawa_step;
 
 pub use body::GpuBody;
-pub use context::{describe_adapters, hardware_adapter, open, AdapterReport, Gpu, GpuError};
+pub use context::{describe_adapters, hardware_adapter, open, open_adapter, AdapterReport, Gpu, GpuError};
 pub use shaders::ElementVariant;

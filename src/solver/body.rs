@@ -469,7 +469,7 @@ impl Body {
     pub fn refresh_factor(&mut self, p: &StepParams, times: &mut PhaseTimes) -> Result<bool, StepFailure> {
         let c1 = coefficients(p).c1;
         let fresh = self.reuse_factorization && self.factor_c1 == Some(c1) && self.contraction.is_none_or(|r| r <= REFACTOR_CONTRACTION);
-        if fresh && self.solver.is_factored() {
+        if fresh {
             return Ok(false);
         }
         if !self.tangent_current {

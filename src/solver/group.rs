@@ -26,7 +26,7 @@ pub struct GroupReport {
 
 /// Connected components of the bodies joined by contact points, each as its bodies (ascending)
 /// and its points (in detection order).
-pub fn components(body_count: usize, points: &[ContactPoint]) -> Vec<(Vec<usize>, Vec<usize>)> {
+fn components(body_count: usize, points: &[ContactPoint]) -> Vec<(Vec<usize>, Vec<usize>)> {
     let mut parent: Vec<usize> = (0..body_count).collect();
     fn root(parent: &mut [usize], mut b: usize) -> usize {
         while parent[b] != b {

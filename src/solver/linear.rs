@@ -99,11 +99,6 @@ impl CholeskySolver {
         Ok(())
     }
 
-    /// Whether a factorisation is there to solve with.
-    pub fn is_factored(&self) -> bool {
-        self.factored
-    }
-
     /// Solves in place with the last factorisation.
     pub fn solve(&mut self, rhs: &mut [Real]) {
         let n = rhs.len();
