@@ -9,7 +9,7 @@
 use bifirst::bench::{bench_devices, bench_models, BenchCase, KINDS};
 use bifirst::element::{element_force_tangent, ElementOutput, ReferenceGeometry};
 use bifirst::gpu::types::{Coefficients, DofOut};
-use bifirst::gpu::Gpu;
+use bifirst::gpu::{Gpu, WorldKernel};
 use std::sync::Arc;
 use bifirst::material::{Model, NeoHookean};
 use bifirst::mesh::{generate, ElementKind, Mesh};
@@ -93,10 +93,6 @@ fn newton_iteration(c: &mut Criterion) {
             black_box(rhs)
         })
     });
-    for gpu in devices() {
-        body.use_gpu(gpu.clone()).unwrap();
-        group.bench_function(format!("assembly_gpu_{}", gpu.precision.name()), |b| b.iter(|| body.assemble(&u, coefficients, &mut times).unwrap()));
-    }
     group.finish();
 }
 
@@ -115,24 +111,22 @@ fn gpu_kernels(c: &mut Criterion) {
         for kind in KINDS {
             for model in bench_models() {
                 let case = BenchCase::new(kind, model, 1000);
-                let mut body = case.on(&gpu).unwrap();
+                let mut world = case.on(&gpu).unwrap();
+                let (mut values, mut dof_out) = (vec![0.0; case.pattern.nnz()], vec![DofOut::default(); case.u.len()]);
+                case.evaluate_on(&mut world, true, &mut values, &mut dof_out).unwrap();
                 group.throughput(Throughput::Elements(case.elements() as u64));
-                group.bench_function(format!("{precision}/{}/{}", case.model.name(), kind.name()), |b| {
-                    b.iter(|| body.run_elements(&case.u, &mut PhaseTimes::default()).unwrap())
-                });
+                group.bench_function(format!("{precision}/{}/{}", case.model.name(), kind.name()), |b| b.iter(|| world.replay(WorldKernel::ForceTangent).unwrap()));
             }
         }
         group.finish();
         let mut group = c.benchmark_group("gpu_assembly");
         for kind in KINDS {
             let case = BenchCase::new(kind, bench_models()[0].clone(), 1000);
-            let mut body = case.on(&gpu).unwrap();
-            body.run_elements(&case.u, &mut PhaseTimes::default()).unwrap();
+            let mut world = case.on(&gpu).unwrap();
             let (mut values, mut dof_out) = (vec![0.0; case.pattern.nnz()], vec![DofOut::default(); case.u.len()]);
             group.throughput(Throughput::Elements(case.elements() as u64));
-            group.bench_function(format!("{precision}/{}", kind.name()), |b| {
-                b.iter(|| body.assemble(case.coefficients, &mut values, Some(&mut dof_out), &mut PhaseTimes::default()).unwrap())
-            });
+            // A whole device pass: upload, kernels, read-back of the values and residual.
+            group.bench_function(format!("{precision}/{}", kind.name()), |b| b.iter(|| case.evaluate_on(&mut world, true, &mut values, &mut dof_out).unwrap()));
         }
         group.finish();
     }

@@ -1,4 +1,5 @@
-// Internal force and contact-free residual of the theta method, one dof per invocation:
+// Internal force and contact-free residual of the theta method, one dof of a batch's active
+// members per invocation (`batch.wgsl`):
 //   f_int = Σ element forces on the dof (gather map, element order: deterministic)
 //   g     = c1 m (u - u_pred) - (1-ξ)(f_ext - f_int,t) - ξ (f_ext - f_int),  c1 = 1/(θ dt²)
 // where u_pred = u_t + dt v_t. CPU twin: `cpu::assemble_residual`.
@@ -30,13 +31,17 @@ const WORKGROUP = 64u;
 @group(0) @binding(4) var<storage, read> u: array<real>;
 @group(0) @binding(5) var<storage, read> step: array<DofStep>;
 @group(0) @binding(6) var<storage, read_write> dof_out: array<DofOut>;
+@group(0) @binding(7) var<storage, read> members: array<MemberRange>;
+@group(0) @binding(8) var<storage, read> jobs: array<Active>;
 
 @compute @workgroup_size(WORKGROUP)
-fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
-    let d = id.x + id.y * groups.x * WORKGROUP;
-    if d >= arrayLength(&dof_out) {
+fn main(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workgroup: vec3<u32>) {
+    let range = members[jobs[workgroup.z].member];
+    let local = chunk_of(workgroup) * WORKGROUP + lane;
+    if local >= range.dofs {
         return;
     }
+    let d = range.dof_start + local;
     var f = real(0.0);
     for (var j = gather_start[d]; j < gather_start[d + 1u]; j++) {
         f += element_out[gather[j]];

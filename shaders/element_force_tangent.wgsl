@@ -1,121 +1,223 @@
-// Internal force and tangent stiffness of one element per invocation (total Lagrangian), with
-// the material's stress and tangent at each quadrature point. CPU twin:
-// `element::element_force_tangent`, which this file follows step by step.
+// Internal force and tangent stiffness of the elements of one batch (one element kind and one
+// material model, the elements of many bodies), total Lagrangian. CPU twin:
+// `element::element_force_tangent`; these are its sums, spread over the invocations of a
+// workgroup so that no invocation holds a whole element matrix.
 // The prelude defines `real`, the element constants NEN (nodes), NQP (quadrature points), DIM,
-// NDOF = NEN * DIM, and includes `element.wgsl` and the material (`material_stress_tangent`).
+// NDOF = NEN * DIM, and includes `element.wgsl` and the material (`material_stress` and
+// `material_stress_tangent`, which read the private `material`).
+//
+// Two entry points:
+//   `forces`: one element per invocation, the internal force only (Newton evaluations that keep
+//             a factorisation need no tangent).
+//   `main`:   force and tangent of ELEMENTS_PER_GROUP elements per workgroup. Phase 1: one
+//             invocation per quadrature point computes F, dV S and dV D into workgroup memory.
+//             Phase 2: one invocation per node pair (a <= b) integrates the DIM x DIM block
+//             K_ab = Σ_q B_aᵀ (dV D) B_b + (g_a · dV S g_b) I, and for a == b the force of node a.
+//
+// Per element out: NDOF forces, then the upper triangle (row <= col) of the tangent packed row
+// by row, local order (node a, component i) -> a * DIM + i.
+// Per member of the batch (`batch.wgsl`): its material and the lowest failing element of each
+// failure kind; `forces` runs the active members in mode FORCES, `main` those in mode TANGENT.
 
-// Per element out: NDOF forces, then the NDOF x NDOF tangent row-major, local order
-// (node a, component i) -> a * DIM + i.
-const OUT_STRIDE = NDOF + NDOF * NDOF;
-const NONE = 0xffffffffu;
+const PACKED = NDOF * (NDOF + 1u) / 2u;
+const OUT_STRIDE = NDOF + PACKED;
+const PAIRS = NEN * (NEN + 1u) / 2u;
+const WORKGROUP = 64u;
+const ELEMENTS_PER_GROUP = WORKGROUP / PAIRS;
+const POINTS_PER_GROUP = ELEMENTS_PER_GROUP * NQP;
 const INVERTED = 0u;
 const NON_FINITE = 1u;
-const WORKGROUP = 64u;
 
-@group(0) @binding(0) var<storage, read> material: MaterialParams;
-@group(0) @binding(1) var<storage, read> geometry: array<real>;
-@group(0) @binding(2) var<storage, read> connectivity: array<u32>;
-@group(0) @binding(3) var<storage, read> u: array<real>;
-@group(0) @binding(4) var<storage, read_write> element_out: array<real>;
-// The lowest element that failed, per failure kind (NONE when none): deterministic.
-@group(0) @binding(5) var<storage, read_write> failure: array<atomic<u32>, 2>;
+@group(0) @binding(0) var<storage, read> geometry: array<real>;
+@group(0) @binding(1) var<storage, read> connectivity: array<u32>;
+@group(0) @binding(2) var<storage, read> u: array<real>;
+@group(0) @binding(3) var<storage, read_write> element_out: array<real>;
+// Per member: its lowest failing element (index in the member) per failure kind; the host
+// resets them to 0xffffffff.
+@group(0) @binding(4) var<storage, read_write> failure: array<atomic<u32>>;
+@group(0) @binding(5) var<storage, read> members: array<MemberRange>;
+@group(0) @binding(6) var<storage, read> materials: array<MaterialParams>;
+@group(0) @binding(7) var<storage, read> jobs: array<Active>;
+
+var<private> material: MaterialParams;
+
+// What phase 1 leaves for phase 2, per quadrature point of the workgroup's elements.
+var<workgroup> point_f: array<Mat3, POINTS_PER_GROUP>;
+var<workgroup> point_s: array<Mat3, POINTS_PER_GROUP>;
+var<workgroup> point_d: array<Tangent, POINTS_PER_GROUP>;
+var<workgroup> point_ok: array<u32, POINTS_PER_GROUP>;
 
 fn is_finite(x: real) -> bool {
     return abs(x) <= REAL_MAX;
 }
 
+// Index of entry (row, col), row <= col, in the packed upper triangle.
+fn packed(row: u32, col: u32) -> u32 {
+    return row * NDOF - row * (row + 1u) / 2u + col;
+}
+
+fn fail(m: u32, local: u32, kind: u32) {
+    atomicMin(&failure[m * 2u + kind], local);
+}
+
 @compute @workgroup_size(WORKGROUP)
-fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
-    let e = id.x + id.y * groups.x * WORKGROUP;
-    if e >= arrayLength(&connectivity) / NEN {
+fn forces(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workgroup: vec3<u32>) {
+    let job = jobs[workgroup.z];
+    let range = members[job.member];
+    let local = chunk_of(workgroup) * WORKGROUP + lane;
+    if job.mode != FORCES || local >= range.elements {
         return;
     }
+    let e = range.element_start + local;
+    material = materials[range.material];
     let ue = element_displacements(e);
     var force: array<real, NDOF>;
-    var tangent: array<real, NDOF * NDOF>;
-    var b: array<array<real, 6>, NDOF>;
-    var inverted = false;
     for (var q = 0u; q < NQP; q++) {
         let point = (e * NQP + q) * POINT_STRIDE;
-        let dv = point_volume(point);
         let f = deformation_gradient(point, ue);
-        let det = determinant(f);
-        if !(det > real(0.0)) {
-            inverted = true;
-            break;
+        if !(determinant(f) > real(0.0)) {
+            fail(job.member, local, INVERTED);
+            return;
         }
-        let strain = green_lagrange(f);
-        // Stress and tangent from one material call.
-        let st = material_stress_tangent(strain);
-        let s = st.s;
-        let d = st.d;
-        let fs = f * s;
+        let fs = f * material_stress(green_lagrange(f)) * point_volume(point);
         for (var a = 0u; a < NEN; a++) {
-            let g = gradient(point, a);
+            let g = fs * gradient(point, a);
             for (var i = 0u; i < DIM; i++) {
-                force[a * DIM + i] += dv * (at(fs, i, 0u) * g.x + at(fs, i, 1u) * g.y + at(fs, i, 2u) * g.z);
-            }
-        }
-        // Nonlinear strain-displacement operator, engineering shear components.
-        for (var a = 0u; a < NEN; a++) {
-            let g = gradient(point, a);
-            for (var i = 0u; i < DIM; i++) {
-                for (var r = 0u; r < 6u; r++) {
-                    let k = VOIGT_I[r];
-                    let l = VOIGT_J[r];
-                    if k == l {
-                        b[a * DIM + i][r] = at(f, i, k) * g[k];
-                    } else {
-                        b[a * DIM + i][r] = at(f, i, k) * g[l] + at(f, i, l) * g[k];
-                    }
-                }
-            }
-        }
-        // The quadrature weight is folded into D B and S, once per point; the tangent is
-        // symmetric, so only its upper triangle (row <= col) is integrated.
-        let s_dv = s * dv;
-        for (var col = 0u; col < NDOF; col++) {
-            // dv D B_col, then B_row · dv D B_col for every row up to col.
-            var db: array<real, 6>;
-            for (var r = 0u; r < 6u; r++) {
-                var sum = real(0.0);
-                for (var c = 0u; c < 6u; c++) {
-                    sum += d[r * 6u + c] * b[col][c];
-                }
-                db[r] = sum * dv;
-            }
-            let bn = col / DIM;
-            let j = col % DIM;
-            let sgb = s_dv * gradient(point, bn);
-            for (var row = 0u; row <= col; row++) {
-                var k = real(0.0);
-                for (var r = 0u; r < 6u; r++) {
-                    k += b[row][r] * db[r];
-                }
-                if row % DIM == j {
-                    k += dot(sgb, gradient(point, row / DIM));
-                }
-                tangent[row * NDOF + col] += k;
+                force[a * DIM + i] += g[i];
             }
         }
     }
-    let base = e * OUT_STRIDE;
     var finite = true;
     for (var r = 0u; r < NDOF; r++) {
-        element_out[base + r] = force[r];
+        element_out[e * OUT_STRIDE + r] = force[r];
         finite = finite && is_finite(force[r]);
     }
-    for (var r = 0u; r < NDOF; r++) {
-        for (var c = 0u; c < NDOF; c++) {
-            // The lower triangle mirrors the upper one.
-            let k = tangent[min(r, c) * NDOF + max(r, c)];
-            element_out[base + NDOF + r * NDOF + c] = k;
-            finite = finite && is_finite(k);
+    if !finite {
+        fail(job.member, local, NON_FINITE);
+    }
+}
+
+// Row r of B_a (engineering shear), for the DIM components i of node a: dE_r / du_ai.
+fn b_row(f: Mat3, g: vec3<real>, r: u32) -> vec3<real> {
+    let k = VOIGT_I[r];
+    let l = VOIGT_J[r];
+    var out = vec3<real>(real(0.0));
+    for (var i = 0u; i < DIM; i++) {
+        if k == l {
+            out[i] = at(f, i, k) * g[k];
+        } else {
+            out[i] = at(f, i, k) * g[l] + at(f, i, l) * g[k];
         }
     }
-    if inverted {
-        atomicMin(&failure[INVERTED], e);
-    } else if !finite {
-        atomicMin(&failure[NON_FINITE], e);
+    return out;
+}
+
+@compute @workgroup_size(WORKGROUP)
+fn main(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workgroup: vec3<u32>) {
+    let job = jobs[workgroup.z];
+    let range = members[job.member];
+    let first = chunk_of(workgroup) * ELEMENTS_PER_GROUP;
+    // Phase 1: one quadrature point per invocation.
+    if lane < POINTS_PER_GROUP {
+        let local = first + lane / NQP;
+        let e = range.element_start + local;
+        let q = lane % NQP;
+        point_ok[lane] = 0u;
+        if job.mode == TANGENT && local < range.elements {
+            material = materials[range.material];
+            let point = (e * NQP + q) * POINT_STRIDE;
+            let f = deformation_gradient(point, element_displacements(e));
+            point_f[lane] = f;
+            if determinant(f) > real(0.0) {
+                let st = material_stress_tangent(green_lagrange(f));
+                let dv = point_volume(point);
+                point_s[lane] = st.s * dv;
+                var d = st.d;
+                for (var r = 0u; r < 36u; r++) {
+                    d[r] *= dv;
+                }
+                point_d[lane] = d;
+                point_ok[lane] = 1u;
+            } else {
+                fail(job.member, local, INVERTED);
+            }
+        }
+    }
+    workgroupBarrier();
+    // Phase 2: one node pair (a <= b) per invocation.
+    let slot = lane / PAIRS;
+    let local = first + slot;
+    if job.mode != TANGENT || slot >= ELEMENTS_PER_GROUP || local >= range.elements {
+        return;
+    }
+    let e = range.element_start + local;
+    var pair = lane % PAIRS;
+    var a = 0u;
+    while pair >= NEN - a {
+        pair -= NEN - a;
+        a++;
+    }
+    let b = a + pair;
+    let base = slot * NQP;
+    for (var q = 0u; q < NQP; q++) {
+        if point_ok[base + q] == 0u {
+            // The element is inverted: phase 1 reported it.
+            return;
+        }
+    }
+    var k: array<array<real, 3>, 3>;
+    var force = vec3<real>(real(0.0));
+    for (var q = 0u; q < NQP; q++) {
+        let point = (e * NQP + q) * POINT_STRIDE;
+        let f = point_f[base + q];
+        let s = point_s[base + q];
+        let d = point_d[base + q];
+        let ga = gradient(point, a);
+        let gb = gradient(point, b);
+        // (dV D) B_b, one column per component j of node b.
+        var db: array<vec3<real>, 6>;
+        for (var r = 0u; r < 6u; r++) {
+            db[r] = vec3<real>(real(0.0));
+        }
+        for (var c = 0u; c < 6u; c++) {
+            let bc = b_row(f, gb, c);
+            for (var r = 0u; r < 6u; r++) {
+                db[r] += d[r * 6u + c] * bc;
+            }
+        }
+        let geometric = dot(ga, s * gb);
+        for (var r = 0u; r < 6u; r++) {
+            let ba = b_row(f, ga, r);
+            for (var i = 0u; i < DIM; i++) {
+                for (var j = 0u; j < DIM; j++) {
+                    k[i][j] += ba[i] * db[r][j];
+                }
+            }
+        }
+        for (var i = 0u; i < DIM; i++) {
+            k[i][i] += geometric;
+        }
+        if a == b {
+            force += f * (s * ga);
+        }
+    }
+    let out = e * OUT_STRIDE;
+    var finite = true;
+    for (var i = 0u; i < DIM; i++) {
+        for (var j = 0u; j < DIM; j++) {
+            let row = a * DIM + i;
+            let col = b * DIM + j;
+            if row <= col {
+                element_out[out + NDOF + packed(row, col)] = k[i][j];
+                finite = finite && is_finite(k[i][j]);
+            }
+        }
+        if a == b {
+            element_out[out + a * DIM + i] = force[i];
+            finite = finite && is_finite(force[i]);
+        }
+    }
+    if !finite {
+        fail(job.member, local, NON_FINITE);
     }
 }

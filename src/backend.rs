@@ -2,7 +2,7 @@
 //! or on the CPU. The rest of the engine asks [`Backend::apply`] to place each body's kernels
 //! and does not care where they went.
 
-use crate::gpu::{self, Gpu, GpuError};
+use crate::gpu::{self, Gpu, GpuError, GpuWorld};
 use crate::precision::{Precision, PRECISION_NAME};
 use crate::solver::Simulation;
 use std::sync::Arc;
@@ -135,12 +135,12 @@ impl Backend {
         }
     }
 
-    /// Places every body's element and assembly kernels (the CPU twins are the default).
+    /// Places every body's element and assembly kernels (the CPU twins are the default): on a
+    /// GPU, all bodies go into one device world.
     pub fn apply(&self, sim: &mut Simulation) -> Result<(), GpuError> {
         if let Backend::Gpu(gpu) = self {
-            for body in &mut sim.bodies {
-                body.use_gpu(gpu.clone())?;
-            }
+            let bodies: Vec<_> = sim.bodies.iter().map(|b| b.world_body()).collect();
+            sim.world = Some(GpuWorld::new(gpu.clone(), &bodies)?);
         }
         Ok(())
     }

@@ -7,7 +7,7 @@ use crate::cpu;
 use crate::element::ReferenceGeometry;
 use crate::gpu::types::{Coefficients, DofOut, DofStep};
 use crate::gpu::uzawa_step::{UzawaPoint, UzawaStepKernel};
-use crate::gpu::{Gpu, GpuBody, GpuError};
+use crate::gpu::{Evaluation, Gpu, GpuError, GpuWorld, WorldKernel};
 use crate::material::{BlatzKo, Lvf, Model, NeoHookean};
 use crate::mesh::{generate, ElementKind, Mesh};
 use crate::precision::{Precision, Real};
@@ -78,11 +78,24 @@ impl BenchCase {
         self.elements() * element_out_stride(self.pattern.element_dofs)
     }
 
-    pub fn on(&self, gpu: &Arc<Gpu>) -> Result<GpuBody, GpuError> {
-        let mut body = GpuBody::new(gpu.clone(), &self.mesh, &self.geometry, &self.model, &self.pattern, &self.gather)?;
-        body.begin_step(&self.step);
-        body.take_traffic();
-        Ok(body)
+    /// A GPU world of this one body, with its step inputs uploaded.
+    pub fn on(&self, gpu: &Arc<Gpu>) -> Result<GpuWorld, GpuError> {
+        let body = crate::gpu::WorldBody { mesh: &self.mesh, geometry: &self.geometry, model: &self.model, pattern: &self.pattern, gather: &self.gather };
+        let mut world = GpuWorld::new(gpu.clone(), &[body])?;
+        world.begin_step(0, &self.step);
+        world.take_traffic();
+        Ok(world)
+    }
+
+    /// One device pass over the case's body: forces and residual, with the tangent and the
+    /// stiffness values if `tangent`. The error names a rejected state.
+    pub fn evaluate_on(&self, world: &mut GpuWorld, tangent: bool, values: &mut [Real], dof_out: &mut [DofOut<Real>]) -> Result<(), GpuError> {
+        let mut list = [Evaluation { body: 0, u: &self.u, tangent, values, dof_out: Some(dof_out), failure: None }];
+        world.evaluate(&mut list, self.coefficients, &mut PhaseTimes::default())?;
+        match list[0].failure {
+            None => Ok(()),
+            Some(f) => Err(GpuError::Kernel { kernel: "element_force_tangent".into(), message: format!("the bench state was rejected: {f:?}") }),
+        }
     }
 }
 
@@ -168,7 +181,7 @@ fn element_energies(case: &BenchCase) -> Vec<Real> {
 
 /// Runs the benchmark; `gpus` are the devices to compare with the CPU (f64 and/or f32).
 pub fn run_bench(options: &BenchOptions, gpus: &[Arc<Gpu>], mut row: impl FnMut(BenchRow)) -> Result<(), GpuError> {
-    let element_kernels = ["element_force_tangent", "assemble", "energy"].iter().any(|k| wanted(options, k));
+    let element_kernels = ["element_force_tangent", "assemble", "evaluate", "energy"].iter().any(|k| wanted(options, k));
     for kind in KINDS.into_iter().filter(|_| element_kernels) {
         for model in bench_models() {
             let case = BenchCase::new(kind, model, options.elements);
@@ -190,44 +203,53 @@ pub fn run_bench(options: &BenchOptions, gpus: &[Arc<Gpu>], mut row: impl FnMut(
             if wanted(options, "assemble") {
                 row(make("assemble_csr+assemble_residual", "cpu f64".into(), t, 0, 0.0));
             }
-            let t = time_calls(options.min_time, || reference.energy = cpu::reduce_sum(&element_energies(&case)));
+            let t = time_calls(options.min_time, || reference.energy = element_energies(&case).iter().sum());
             if wanted(options, "energy") {
-                row(make("element_energy+reduce_sum", "cpu f64".into(), t, 0, 0.0));
+                row(make("element_energy", "cpu f64".into(), t, 0, 0.0));
             }
             for gpu in gpus {
                 let backend = format!("gpu {}", gpu.precision.name());
-                let mut body = case.on(gpu)?;
+                let mut world = case.on(gpu)?;
                 let stride = element_out_stride(case.pattern.element_dofs);
+                let mut values = vec![0.0; case.pattern.nnz()];
+                let mut dof_out = vec![DofOut::default(); case.u.len()];
+                // A whole evaluation first: the displacements and the active list are on the
+                // device, so the kernel rows below time the kernels alone (nothing moves).
+                case.evaluate_on(&mut world, true, &mut values, &mut dof_out)?;
+                world.take_traffic();
                 if wanted(options, "element_force_tangent") {
-                    let mut result = Ok(None);
-                    let t = time_calls(options.min_time, || result = body.run_elements(&case.u, &mut PhaseTimes::default()));
-                    result?;
-                    let traffic = body.take_traffic().total();
-                    let (results, _) = body.element_results(&case.u)?;
-                    body.take_traffic();
+                    let results = world.element_results(0)?;
+                    world.take_traffic();
                     let error = blockwise_error(&results, &reference.results, stride);
-                    row(make("element_force_tangent", backend.clone(), t, traffic, error));
+                    let mut result = Ok(());
+                    let t = time_calls(options.min_time, || result = world.replay(WorldKernel::ForceTangent));
+                    result?;
+                    row(make("element_force_tangent", backend.clone(), t, 0, error));
                 }
                 if wanted(options, "assemble") {
-                    body.run_elements(&case.u, &mut PhaseTimes::default())?;
-                    body.take_traffic();
-                    let mut values = vec![0.0; case.pattern.nnz()];
-                    let mut dof_out = vec![DofOut::default(); case.u.len()];
-                    let mut result = Ok(());
-                    let t = time_calls(options.min_time, || result = body.assemble(case.coefficients, &mut values, Some(&mut dof_out), &mut PhaseTimes::default()));
-                    result?;
-                    let traffic = body.take_traffic().total();
                     let residual: Vec<Real> = dof_out.iter().map(|d| d.g).collect();
                     let expected: Vec<Real> = reference.dof_out.iter().map(|d| d.g).collect();
                     let error = blockwise_error(&values, &reference.values, values.len().max(1)).max(blockwise_error(&residual, &expected, residual.len().max(1)));
-                    row(make("assemble_csr+assemble_residual", backend.clone(), t, traffic, error));
+                    let mut result = Ok(());
+                    let t = time_calls(options.min_time, || result = world.replay(WorldKernel::Assembly));
+                    result?;
+                    row(make("assemble_csr+assemble_residual", backend.clone(), t, 0, error));
+                }
+                if wanted(options, "evaluate") {
+                    // What a refactorising Newton iteration costs the device: upload, kernels,
+                    // read-back of the stiffness values and residual.
+                    let mut result = Ok(());
+                    let t = time_calls(options.min_time, || result = case.evaluate_on(&mut world, true, &mut values, &mut dof_out));
+                    result?;
+                    let traffic = world.take_traffic().total();
+                    row(make("evaluate (all kernels, transfers)", backend.clone(), t, traffic, 0.0));
                 }
                 if wanted(options, "energy") {
-                    let mut result = Ok(0.0);
-                    let t = time_calls(options.min_time, || result = body.strain_energy(&case.u));
-                    let energy = result?;
-                    let traffic = body.take_traffic().total();
-                    row(make("element_energy+reduce_sum", backend.clone(), t, traffic, (energy - reference.energy).abs() / reference.energy.abs()));
+                    let mut energies = Ok(Vec::new());
+                    let t = time_calls(options.min_time, || energies = world.element_energies(&[(0, &case.u[..])], &mut PhaseTimes::default()));
+                    let energy: Real = energies?[0].iter().sum();
+                    let traffic = world.take_traffic().total();
+                    row(make("element_energy", backend.clone(), t, traffic, (energy - reference.energy).abs() / reference.energy.abs()));
                 }
             }
         }

@@ -96,6 +96,8 @@ pub struct RunSummary {
     pub wall_by_phase: PhaseTimes,
     /// Bytes moved between host and GPU over the run.
     pub bytes_moved: u64,
+    /// GPU queue submits over the run (one per device pass over all bodies).
+    pub device_submits: u64,
     /// Energies at the end, with the dissipation and the energy balance error.
     pub energy: crate::solver::Energies,
     pub output: PathBuf,
@@ -276,7 +278,7 @@ impl Logger {
     fn solver(&mut self, r: &StepReport, t: Real, status: &str, message: Option<String>) -> Result<(), OutputError> {
         let msg = json!({
             "t": t, "step": r.step, "dt": r.dt, "newton_iterations": r.newton_iterations, "uzawa_iterations": r.uzawa_iterations,
-            "bodies_iterated": r.bodies_iterated, "factorizations": r.factorizations, "residual_norm": r.residual_norm, "cutbacks": r.cutbacks, "wall_s": r.wall, "bytes_moved": r.bytes_moved,
+            "bodies_iterated": r.bodies_iterated, "factorizations": r.factorizations, "residual_norm": r.residual_norm, "cutbacks": r.cutbacks, "wall_s": r.wall, "bytes_moved": r.bytes_moved, "device_submits": r.device_submits,
             "status": status, "message": message,
         });
         self.log.write("/solver", t, &msg)
@@ -320,6 +322,7 @@ struct Totals {
     max_penetration: Real,
     wall: PhaseTimes,
     bytes_moved: u64,
+    device_submits: u64,
 }
 
 /// Runs a loaded scene to its end time, logging to `out`.
@@ -382,6 +385,7 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
         wall_s: started.elapsed().as_secs_f64(),
         wall_by_phase: totals.wall,
         bytes_moved: totals.bytes_moved,
+        device_submits: totals.device_submits,
         energy: sim.energies(),
         output: out.to_path_buf(),
     };
@@ -414,6 +418,7 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
         totals.max_penetration = totals.max_penetration.max(report.contact.max_penetration);
         totals.wall += report.wall;
         totals.bytes_moved += report.bytes_moved;
+        totals.device_submits += report.device_submits;
         if !sim.energies().total.is_finite() {
             break Some((Stop::NotFinite { step: sim.step, t: sim.t }, report));
         }

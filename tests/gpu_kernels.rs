@@ -5,14 +5,13 @@
 mod random;
 
 use bifirst::assembly::{element_out_stride, DofMap, GatherMap, StiffnessPattern};
-use bifirst::bench::BenchCase;
 use bifirst::contact::Status;
 use bifirst::cpu;
 use bifirst::element::{ElementOutput, ReferenceGeometry};
 use bifirst::gpu::shaders::{is_element_kernel, validate, ElementVariant, SHADERS};
 use bifirst::gpu::types::{Coefficients, DofOut, DofStep, MaterialParams};
 use bifirst::gpu::uzawa_step::{UzawaPoint, UzawaStepKernel};
-use bifirst::gpu::GpuBody;
+use bifirst::gpu::{ElementFailure, Evaluation, GpuWorld, WorldBody};
 use bifirst::material::{BlatzKo, Lvf, Model, NeoHookean};
 use bifirst::mesh::{generate, ElementKind, Mesh};
 use bifirst::precision::Precision;
@@ -108,6 +107,26 @@ fn kernel_structs_match_the_shader_layouts() {
     check_all_real_struct("assemble_residual", None, "DofOut", &["f_int", "g"], [size_of::<DofOut<f32>>(), size_of::<DofOut<f64>>()]);
     let o = DofOut::<f64> { f_int: 1.0, g: 2.0 };
     assert_eq!(bytemuck::cast::<_, [f64; 2]>(o), [1.0, 2.0], "field order");
+}
+
+#[test]
+fn batch_structs_match_the_shader_layout() {
+    use bifirst::gpu::types::{Active, MemberRange};
+    let range = ["element_start", "elements", "nonzero_start", "nonzeros", "dof_start", "dofs", "material", "unused"];
+    for precision in PRECISIONS {
+        for kernel in SHADERS.iter().map(|(name, _)| *name).filter(|k| bifirst::gpu::shaders::is_batch_kernel(k)) {
+            let variant = is_element_kernel(kernel).then_some(ElementVariant { kind: ElementKind::Tet4, material: "blatz_ko" });
+            let module = validate(kernel, precision, variant).unwrap();
+            let (members, span) = naga_layout(&module, "MemberRange");
+            let expected: Vec<(String, u32)> = range.iter().enumerate().map(|(i, f)| (f.to_string(), 4 * i as u32)).collect();
+            assert_eq!((members, span as usize), (expected, std::mem::size_of::<MemberRange>()), "{kernel}");
+            let (members, span) = naga_layout(&module, "Active");
+            assert_eq!((members, span as usize), (vec![("member".to_string(), 0), ("mode".to_string(), 4)], std::mem::size_of::<Active>()), "{kernel}");
+        }
+    }
+    let r = MemberRange { element_start: 1, elements: 2, nonzero_start: 3, nonzeros: 4, dof_start: 5, dofs: 6, material: 7, unused: 8 };
+    assert_eq!(bytemuck::cast::<_, [u32; 8]>(r), [1, 2, 3, 4, 5, 6, 7, 8], "field order");
+    assert_eq!(bytemuck::cast::<_, [u32; 2]>(Active { member: 1, mode: 2 }), [1, 2], "field order");
 }
 
 /// An adapter when there is one. Without one, a GPU test fails in CI (`CI=true`) and is
@@ -247,13 +266,62 @@ fn case(variant: ElementVariant, seed: u64) -> Case {
 }
 
 impl Case {
-    fn on(&self, gpu: &Arc<bifirst::gpu::Gpu>) -> GpuBody {
-        GpuBody::new(gpu.clone(), &self.mesh, &self.geometry, &self.model, &self.pattern, &self.gather).expect("device body")
+    fn world_body(&self) -> WorldBody<'_> {
+        WorldBody { mesh: &self.mesh, geometry: &self.geometry, model: &self.model, pattern: &self.pattern, gather: &self.gather }
     }
 
     fn element_u(&self, e: usize) -> Vec<[f64; 3]> {
         self.mesh.element_displacements(&self.u, e)
     }
+
+    /// The CPU twin's element results in the kernel's layout: forces, then the packed upper
+    /// triangle of the tangent (forces only without it).
+    fn cpu_results(&self, e: usize, tangent: bool) -> Vec<f64> {
+        let mut out = ElementOutput::default();
+        cpu::element_force_tangent(&self.model, self.geometry.element_points(e), &self.element_u(e), self.mesh.dim(), tangent, &mut out).unwrap();
+        let ndof = out.force.len();
+        let mut packed = out.force.clone();
+        if tangent {
+            for row in 0..ndof {
+                packed.extend_from_slice(&out.tangent[row * ndof + row..(row + 1) * ndof]);
+            }
+        }
+        packed
+    }
+}
+
+/// Two bodies of one variant in one world: the case, and a second one from another seed with
+/// its material stiffened, so that the batch holds two members with two materials.
+fn two_bodies(variant: ElementVariant, seed: u64) -> [Case; 2] {
+    let mut second = case(variant, seed + 1000);
+    second.model = match second.model {
+        Model::BlatzKo(m) => Model::BlatzKo(BlatzKo { g: 2.0 * m.g }),
+        Model::Lvf(m) => Model::Lvf(Lvf { g: 2.0 * m.g, a4: 0.5 * m.a4, ..m }),
+        Model::NeoHookean(m) => Model::NeoHookean(NeoHookean { g: 2.0 * m.g, k: 1.5 * m.k }),
+    };
+    [case(variant, seed), second]
+}
+
+fn world_of(gpu: &Arc<bifirst::gpu::Gpu>, cases: &[Case]) -> GpuWorld {
+    let bodies: Vec<WorldBody> = cases.iter().map(Case::world_body).collect();
+    GpuWorld::new(gpu.clone(), &bodies).expect("device world")
+}
+
+/// One device pass over every case of the world; returns each case's failure.
+fn evaluate_all(world: &mut GpuWorld, cases: &[Case], tangent: bool, values: &mut [Vec<f64>], dof_out: &mut [Vec<DofOut<f64>>], coefficients: Coefficients<f64>) -> Vec<Option<ElementFailure>> {
+    let mut list: Vec<Evaluation> = cases
+        .iter()
+        .zip(values.iter_mut())
+        .zip(dof_out.iter_mut())
+        .enumerate()
+        .map(|(b, ((c, values), dof_out))| Evaluation { body: b, u: &c.u, tangent, values, dof_out: Some(dof_out), failure: None })
+        .collect();
+    world.evaluate(&mut list, coefficients, &mut Default::default()).expect("device pass");
+    list.iter().map(|e| e.failure).collect()
+}
+
+fn buffers_for(cases: &[Case]) -> (Vec<Vec<f64>>, Vec<Vec<DofOut<f64>>>) {
+    (cases.iter().map(|c| vec![0.0; c.pattern.nnz()]).collect(), cases.iter().map(|c| vec![DofOut::default(); c.u.len()]).collect())
 }
 
 /// `max |a - b| / max |b|` over a block: the relative error in the max norm.
@@ -266,118 +334,169 @@ const TOLERANCES: [(Precision, f64); 2] = [(Precision::F64, 1e-12), (Precision::
 
 #[test]
 fn element_force_tangent_kernel_matches_its_cpu_twin() {
-    // Per element, the relative error in the max norm over its forces and tangent entries.
+    // Per element, the relative error in the max norm over its forces and packed tangent, for
+    // both entry points (`forces`: forces only; `main`: forces and tangent) and both members.
     for (precision, tolerance) in TOLERANCES {
         let Some(gpu) = gpu_or_skip("element_force_tangent_kernel_matches_its_cpu_twin", precision) else { continue };
         let gpu = Arc::new(gpu);
         for (k, variant) in ElementVariant::all().into_iter().enumerate() {
-            let c = case(variant, 100 + k as u64);
-            let (on_gpu, failure) = c.on(&gpu).element_results(&c.u).expect("kernel runs");
-            assert_eq!(failure, None, "{variant:?}");
-            let ndof = c.pattern.element_dofs;
-            let stride = element_out_stride(ndof);
-            let mut worst = 0.0f64;
-            let mut out = ElementOutput::default();
-            for e in 0..c.mesh.element_count() {
-                cpu::element_force_tangent(&c.model, c.geometry.element_points(e), &c.element_u(e), variant.kind.dim(), true, &mut out).unwrap();
-                let expected: Vec<f64> = out.force.iter().chain(&out.tangent).copied().collect();
-                worst = worst.max(relative_error(&on_gpu[e * stride..(e + 1) * stride], &expected));
+            let cases = two_bodies(variant, 100 + k as u64);
+            let mut world = world_of(&gpu, &cases);
+            let (mut values, mut dof_out) = buffers_for(&cases);
+            for tangent in [false, true] {
+                let failures = evaluate_all(&mut world, &cases, tangent, &mut values, &mut dof_out, Coefficients { factor: 0.5, c1: 1.0 });
+                assert_eq!(failures, [None, None], "{variant:?}");
+                let mut worst = 0.0f64;
+                for (b, c) in cases.iter().enumerate() {
+                    let on_gpu = world.element_results(b).expect("read back");
+                    let stride = element_out_stride(c.pattern.element_dofs);
+                    for e in 0..c.mesh.element_count() {
+                        let expected = c.cpu_results(e, tangent);
+                        worst = worst.max(relative_error(&on_gpu[e * stride..e * stride + expected.len()], &expected));
+                    }
+                }
+                eprintln!("{} {} {} tangent {tangent}: max relative error {worst:.2e}", precision.name(), variant.kind.name(), variant.material);
+                assert!(worst <= tolerance, "{variant:?} {} tangent {tangent}: {worst:.3e}", precision.name());
             }
-            eprintln!("{} {} {}: max relative error {worst:.2e}", precision.name(), variant.kind.name(), variant.material);
-            assert!(worst <= tolerance, "{variant:?} {}: {worst:.3e}", precision.name());
         }
     }
 }
 
 #[test]
-fn element_force_tangent_kernel_reports_the_first_inverted_element() {
-    let Some(gpu) = gpu_or_skip("element_force_tangent_kernel_reports_the_first_inverted_element", Precision::F64) else { return };
+fn element_force_tangent_kernel_reports_the_first_inverted_element_of_each_body() {
+    let Some(gpu) = gpu_or_skip("element_force_tangent_kernel_reports_the_first_inverted_element_of_each_body", Precision::F64) else { return };
     let variant = ElementVariant { kind: ElementKind::Quad4, material: "neo_hookean" };
-    let mut c = case(variant, 5);
-    // Turn elements 7 and 20 inside out by moving their third node through the first.
+    let [good, mut bad] = two_bodies(variant, 5);
+    // Turn elements 7 and 20 of the second body inside out by moving their third node through
+    // the first.
     for e in [20, 7] {
-        let nodes = c.mesh.element(e).to_vec();
+        let nodes = bad.mesh.element(e).to_vec();
         let (a, b) = (nodes[0] as usize, nodes[2] as usize);
         for i in 0..2 {
-            let target = c.mesh.nodes[a][i] + c.u[a * 2 + i] - 0.5 * (c.mesh.nodes[b][i] - c.mesh.nodes[a][i]);
-            c.u[b * 2 + i] = target - c.mesh.nodes[b][i];
+            let target = bad.mesh.nodes[a][i] + bad.u[a * 2 + i] - 0.5 * (bad.mesh.nodes[b][i] - bad.mesh.nodes[a][i]);
+            bad.u[b * 2 + i] = target - bad.mesh.nodes[b][i];
         }
     }
-    let (_, failure) = c.on(&Arc::new(gpu)).element_results(&c.u).expect("kernel runs");
-    assert!(matches!(failure, Some(bifirst::gpu::body::ElementFailure::Inverted(e)) if e <= 7), "{failure:?}");
+    let cases = [good, bad];
+    let mut world = world_of(&Arc::new(gpu), &cases);
+    let (mut values, mut dof_out) = buffers_for(&cases);
+    for tangent in [false, true] {
+        let failures = evaluate_all(&mut world, &cases, tangent, &mut values, &mut dof_out, Coefficients { factor: 0.5, c1: 1.0 });
+        assert_eq!(failures[0], None, "the good body passes");
+        assert!(matches!(failures[1], Some(ElementFailure::Inverted(e)) if e <= 7), "tangent {tangent}: {:?}", failures[1]);
+    }
 }
 
 #[test]
 fn assembly_kernels_match_their_cpu_twins() {
     // The twins get the element results the GPU computed, so each kernel is checked alone:
-    // stiffness values and residuals, relative error in the max norm over the body.
+    // stiffness values and residuals, relative error in the max norm over each body.
     for (precision, tolerance) in TOLERANCES {
         let Some(gpu) = gpu_or_skip("assembly_kernels_match_their_cpu_twins", precision) else { continue };
         let gpu = Arc::new(gpu);
         for (k, kind) in [ElementKind::Tri3, ElementKind::Quad4, ElementKind::Tet4, ElementKind::Hex8].into_iter().enumerate() {
-            let c = case(ElementVariant { kind, material: "blatz_ko" }, 200 + k as u64);
+            let cases = two_bodies(ElementVariant { kind, material: "blatz_ko" }, 200 + k as u64);
             let mut rng = random::rng(300 + k as u64);
-            let ndof = c.u.len();
-            let step: Vec<DofStep<f64>> = (0..ndof)
-                .map(|_| DofStep { mass: rng.random_range(0.1..1.0), u_pred: rng.random_range(-0.1..0.1), f_int_t: rng.random_range(-50.0..50.0), f_ext: rng.random_range(-5.0..5.0) })
+            let steps: Vec<Vec<DofStep<f64>>> = cases
+                .iter()
+                .map(|c| {
+                    (0..c.u.len())
+                        .map(|_| DofStep { mass: rng.random_range(0.1..1.0), u_pred: rng.random_range(-0.1..0.1), f_int_t: rng.random_range(-50.0..50.0), f_ext: rng.random_range(-5.0..5.0) })
+                        .collect()
+                })
                 .collect();
             let coefficients = Coefficients { factor: 0.55, c1: 4e4 };
-            let mut body = c.on(&gpu);
-            body.begin_step(&step);
-            let (element_out, _) = body.element_results(&c.u).unwrap();
-            let mut values = vec![0.0; c.pattern.nnz()];
-            let mut dof_out = vec![DofOut::default(); ndof];
-            let failure = body.evaluate(&c.u, coefficients, &mut values, Some(&mut dof_out), &mut Default::default()).unwrap();
-            assert_eq!(failure, None);
-            let mut expected_values = vec![0.0; values.len()];
-            cpu::assemble_csr(&element_out, &c.gather.csr_start, &c.gather.csr, coefficients, &mut expected_values);
-            let mut expected_dofs = vec![DofOut::default(); ndof];
-            cpu::assemble_residual(&element_out, &c.gather.dof_start, &c.gather.dof, coefficients, &c.u, &step, &mut expected_dofs);
-            let csr_error = relative_error(&values, &expected_values);
-            let flat = |d: &[DofOut<f64>]| -> (Vec<f64>, Vec<f64>) { (d.iter().map(|o| o.f_int).collect(), d.iter().map(|o| o.g).collect()) };
-            let ((f, g), (fe, ge)) = (flat(&dof_out), flat(&expected_dofs));
-            let (f_error, g_error) = (relative_error(&f, &fe), relative_error(&g, &ge));
-            eprintln!("{} {}: assemble_csr {csr_error:.2e}, f_int {f_error:.2e}, residual {g_error:.2e}", precision.name(), kind.name());
-            assert!(csr_error <= tolerance && f_error <= tolerance && g_error <= tolerance, "{} {}", precision.name(), kind.name());
-            if precision == Precision::F64 {
-                // The same sums in the same order: identical, not just close.
-                assert_eq!(values, expected_values, "assemble_csr is deterministic and ordered like its twin");
+            let mut world = world_of(&gpu, &cases);
+            for (b, step) in steps.iter().enumerate() {
+                world.begin_step(b, step);
+            }
+            let (mut values, mut dof_out) = buffers_for(&cases);
+            let failures = evaluate_all(&mut world, &cases, true, &mut values, &mut dof_out, coefficients);
+            assert_eq!(failures, [None, None]);
+            for (b, c) in cases.iter().enumerate() {
+                let element_out = world.element_results(b).unwrap();
+                let mut expected_values = vec![0.0; c.pattern.nnz()];
+                cpu::assemble_csr(&element_out, &c.gather.csr_start, &c.gather.csr, coefficients, &mut expected_values);
+                let mut expected_dofs = vec![DofOut::default(); c.u.len()];
+                cpu::assemble_residual(&element_out, &c.gather.dof_start, &c.gather.dof, coefficients, &c.u, &steps[b], &mut expected_dofs);
+                let csr_error = relative_error(&values[b], &expected_values);
+                let flat = |d: &[DofOut<f64>]| -> (Vec<f64>, Vec<f64>) { (d.iter().map(|o| o.f_int).collect(), d.iter().map(|o| o.g).collect()) };
+                let ((f, g), (fe, ge)) = (flat(&dof_out[b]), flat(&expected_dofs));
+                let (f_error, g_error) = (relative_error(&f, &fe), relative_error(&g, &ge));
+                eprintln!("{} {} body {b}: assemble_csr {csr_error:.2e}, f_int {f_error:.2e}, residual {g_error:.2e}", precision.name(), kind.name());
+                assert!(csr_error <= tolerance && f_error <= tolerance && g_error <= tolerance, "{} {}", precision.name(), kind.name());
+                if precision == Precision::F64 {
+                    // The same sums in the same order: identical, not just close.
+                    assert_eq!(values[b], expected_values, "assemble_csr is deterministic and ordered like its twin");
+                }
             }
         }
     }
 }
 
 #[test]
-fn energy_kernels_match_their_cpu_twins() {
-    // element_energy per element, and reduce_sum of the GPU's element energies over more than
-    // one level of the reduction (Tet4 mesh of 4·3·3·6 = 216 elements, Tri3 scaled up below).
+fn element_energy_kernel_matches_its_cpu_twin() {
     for (precision, tolerance) in TOLERANCES {
-        let Some(gpu) = gpu_or_skip("energy_kernels_match_their_cpu_twins", precision) else { continue };
+        let Some(gpu) = gpu_or_skip("element_energy_kernel_matches_its_cpu_twin", precision) else { continue };
         let gpu = Arc::new(gpu);
         for (k, variant) in ElementVariant::all().into_iter().enumerate() {
-            let c = case(variant, 400 + k as u64);
-            let mut body = c.on(&gpu);
-            let energies = body.element_energies(&c.u).unwrap();
-            let expected: Vec<f64> = (0..c.mesh.element_count()).map(|e| cpu::element_energy(&c.model, c.geometry.element_points(e), &c.element_u(e))).collect();
-            let error = energies.iter().zip(&expected).map(|(a, b)| (a - b).abs() / b.abs().max(1e-300)).fold(0.0, f64::max);
-            assert!(error <= tolerance, "{variant:?} {}: element energy {error:.3e}", precision.name());
-            let total = body.strain_energy(&c.u).unwrap();
-            let reduced = cpu::reduce_sum(&energies);
-            let reduce_error = (total - reduced).abs() / reduced.abs();
-            assert!(reduce_error <= tolerance, "{variant:?} {}: reduce_sum {reduce_error:.3e}", precision.name());
+            let cases = two_bodies(variant, 400 + k as u64);
+            let mut world = world_of(&gpu, &cases);
+            let list: Vec<(usize, &[f64])> = cases.iter().enumerate().map(|(b, c)| (b, &c.u[..])).collect();
+            let energies = world.element_energies(&list, &mut Default::default()).unwrap();
+            for (c, energies) in cases.iter().zip(&energies) {
+                let expected: Vec<f64> = (0..c.mesh.element_count()).map(|e| cpu::element_energy(&c.model, c.geometry.element_points(e), &c.element_u(e))).collect();
+                let error = energies.iter().zip(&expected).map(|(a, b)| (a - b).abs() / b.abs().max(1e-300)).fold(0.0, f64::max);
+                assert!(error <= tolerance, "{variant:?} {}: element energy {error:.3e}", precision.name());
+            }
         }
-        // A reduction over three levels of workgroups: 72 200 elements -> 283 -> 2 -> 1.
-        let big = BenchCase::new(ElementKind::Tri3, model_of("neo_hookean"), 72_200);
-        assert_eq!(big.elements(), 72_200);
-        let mut body = big.on(&gpu).unwrap();
-        let energies = body.element_energies(&big.u).unwrap();
-        let (total, reduced) = (body.strain_energy(&big.u).unwrap(), cpu::reduce_sum(&energies));
-        let plain: f64 = energies.iter().sum();
-        assert!((reduced - plain).abs() <= 1e-12 * plain, "the twin sums: {reduced} vs {plain}");
-        if precision == Precision::F64 {
-            assert_eq!(total, reduced, "reduce_sum adds in its twin's order");
-        } else {
-            assert!((total - reduced).abs() <= tolerance * reduced, "f32 reduce_sum: {total} vs {reduced}");
+    }
+}
+
+#[test]
+fn one_device_pass_serves_any_number_of_bodies() {
+    // A world of 40 bodies: evaluating all of them, or a scattered few, is one submit each
+    // time, and each body's results are those of the same body evaluated alone.
+    let Some(gpu) = gpu_or_skip("one_device_pass_serves_any_number_of_bodies", Precision::F64) else { return };
+    let gpu = Arc::new(gpu);
+    let variant = ElementVariant { kind: ElementKind::Tet4, material: "lvf" };
+    let cases: Vec<Case> = (0..40).map(|k| case(variant, 600 + k)).collect();
+    let mut world = world_of(&gpu, &cases);
+    let coefficients = Coefficients { factor: 0.5, c1: 10.0 };
+    for (b, c) in cases.iter().enumerate() {
+        world.begin_step(b, &vec![DofStep { mass: 1.0, u_pred: 0.0, f_int_t: 0.0, f_ext: 0.0 }; c.u.len()]);
+    }
+    let (mut values, mut dof_out) = buffers_for(&cases);
+    let before = world.submits();
+    evaluate_all(&mut world, &cases, true, &mut values, &mut dof_out, coefficients);
+    assert_eq!(world.submits() - before, 1, "all 40 bodies in one submit");
+    let few = [3usize, 4, 17, 39];
+    let (mut few_values, mut few_dofs) = buffers_for(&cases);
+    let mut list: Vec<Evaluation> = Vec::new();
+    for (b, ((c, v), d)) in cases.iter().zip(few_values.iter_mut()).zip(few_dofs.iter_mut()).enumerate() {
+        if few.contains(&b) {
+            list.push(Evaluation { body: b, u: &c.u, tangent: b % 2 == 1, values: v, dof_out: Some(d), failure: None });
+        }
+    }
+    let before = world.submits();
+    world.evaluate(&mut list, coefficients, &mut Default::default()).unwrap();
+    assert_eq!(world.submits() - before, 1, "a few bodies in one submit");
+    drop(list);
+    for b in 0..cases.len() {
+        let chosen = few.contains(&b);
+        assert_eq!(few_dofs[b].iter().any(|d| d.g != 0.0), chosen, "body {b}: residual only for the bodies evaluated");
+        if chosen {
+            // The forces entry point sums in another order than the tangent one: equal to
+            // round-off, and exactly equal in the same mode.
+            let g = |d: &[DofOut<f64>]| -> Vec<f64> { d.iter().map(|o| o.g).collect() };
+            let error = relative_error(&g(&few_dofs[b]), &g(&dof_out[b]));
+            assert!(error <= 1e-12, "body {b}: the same residual as with every body ({error:.2e})");
+            if b % 2 == 1 {
+                assert!(few_dofs[b] == dof_out[b], "body {b}: the same residual, bit for bit, in the same mode");
+                assert!(few_values[b] == values[b], "body {b}: the same stiffness values");
+            } else {
+                assert!(few_values[b].iter().all(|&v| v == 0.0), "body {b}: no values read back without the tangent");
+            }
         }
     }
 }

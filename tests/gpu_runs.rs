@@ -108,3 +108,34 @@ fn reduced_3d_impact_on_the_gpu_matches_the_cpu_backend() {
     let friction = run_with(&path, &["output.scene_every=0"], "impact_3d_friction", &options(BackendChoice::Cpu, None)).series("/energy", "friction_dissipation");
     assert!(friction.last().unwrap() > &0.0, "the blocks slide on each other");
 }
+
+#[test]
+fn grains_on_the_gpu_take_a_fixed_number_of_submits_per_newton_iteration() {
+    // The device passes of a step do not depend on the number of bodies: per Newton iteration
+    // one pass evaluates every body still iterating and at most one computes the tangents of
+    // those that refactorise; one more per step gives the strain energies. Without cut-backs,
+    // submits <= 2 (newton_iterations + steps) whatever the number of grains, and the energies
+    // match the CPU backend's.
+    let test = "grains_on_the_gpu_take_a_fixed_number_of_submits_per_newton_iteration";
+    if !gpu_available(test) {
+        return;
+    }
+    let path = scene_path("grains_many");
+    let mut evaluations = Vec::new();
+    for count in [6, 30] {
+        let sets = [format!("packing.count={count}"), "time.end=0.05".into(), "output.every=1".into(), "output.scene_every=0".into()];
+        let sets: Vec<&str> = sets.iter().map(String::as_str).collect();
+        let cpu = run_with(&path, &sets, &format!("{test}_cpu_{count}"), &options(BackendChoice::Cpu, None));
+        let gpu = run_with(&path, &sets, &format!("{test}_gpu_{count}"), &options(BackendChoice::Gpu, Some(Precision::F64)));
+        let summary = &gpu.topics["/summary"][0];
+        let field = |name: &str| summary[name].as_u64().unwrap_or_else(|| panic!("{name}"));
+        let (submits, newton, steps) = (field("device_submits"), field("newton_iterations"), field("steps"));
+        assert_eq!(field("cutbacks"), 0);
+        eprintln!("{count} grains: {submits} submits, {newton} Newton iterations, {steps} steps, {} body evaluations", field("bodies_iterated"));
+        assert!(submits > 0 && submits <= 2 * (newton + steps), "{count} grains: {submits} submits for {newton} iterations in {steps} steps");
+        evaluations.push(field("bodies_iterated"));
+        let worst = energy_difference(&cpu, &gpu);
+        assert!(worst <= 1e-9, "{count} grains: energies differ by {worst:.3e}");
+    }
+    assert!(evaluations[1] > 3 * evaluations[0], "more grains, more body evaluations: {evaluations:?}");
+}

@@ -9,6 +9,13 @@ fn material_energy(e: Mat3) -> real {
     return real(0.5) * material.g * (i2 / i3 + real(2.0) * sqrt(i3) - real(5.0));
 }
 
+// S alone (Newton evaluations that need no tangent).
+fn material_stress(e: Mat3) -> Mat3 {
+    let c = e * real(2.0) + identity3();
+    let ci = inverse3(c);
+    return (ci * sqrt(determinant(c)) - ci * ci) * material.g;
+}
+
 // S and dS/dE = 2G [ J/2 C⁻¹⊗C⁻¹ - J C⁻¹⊙C⁻¹ + C⁻¹⊙C⁻² + C⁻²⊙C⁻¹ ], sharing J, C⁻¹ and C⁻².
 fn material_stress_tangent(e: Mat3) -> StressTangent {
     let c = e * real(2.0) + identity3();

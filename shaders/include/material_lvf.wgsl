@@ -16,6 +16,18 @@ fn material_energy(e: Mat3) -> real {
         + m.a2 / real(3.0) * z * z * z + real(0.25) * m.a4 * z * z * z * z + real(0.25) * m.a5 * s2 * s2;
 }
 
+// S alone (Newton evaluations that need no tangent).
+fn material_stress(e: Mat3) -> Mat3 {
+    let ed = dev(e);
+    let ed2 = ed * ed;
+    let s2 = trace3(ed2);
+    let z = trace3(e) / real(SQRT3);
+    let m = material;
+    let dw_dz = real(0.5) * m.a3 * z * s2 + real(3.0) * m.k * z + m.a2 * z * z + m.a4 * z * z * z;
+    let dw_ds2 = m.g + real(0.25) * m.a3 * z * z + real(0.5) * m.a5 * s2;
+    return ed * (real(2.0) * dw_ds2) + identity3() * (dw_dz / real(SQRT3)) + dev(ed2) * (m.a1 * real(SQRT6));
+}
+
 // S and dS/dE, sharing Ed, Ed², s2 and z.
 fn material_stress_tangent(e: Mat3) -> StressTangent {
     let i = identity3();

@@ -114,9 +114,17 @@ impl StiffnessPattern {
 }
 
 /// Entries per element of the element results (`element_force_tangent`'s output): `ndof`
-/// forces, then the `ndof x ndof` tangent, row-major.
+/// forces, then the upper triangle of the symmetric `ndof x ndof` tangent packed row by row
+/// ([`packed_index`]).
 pub fn element_out_stride(element_dofs: usize) -> usize {
-    element_dofs + element_dofs * element_dofs
+    element_dofs + element_dofs * (element_dofs + 1) / 2
+}
+
+/// Where tangent entry (`row`, `col`) of an element with `ndof` dofs lies in the packed upper
+/// triangle (either order: the tangent is symmetric).
+pub fn packed_index(ndof: usize, row: usize, col: usize) -> usize {
+    let (r, c) = (row.min(col), row.max(col));
+    r * ndof - r * (r + 1) / 2 + c
 }
 
 /// For every stiffness non-zero and every dof, the element-result entries that sum into it, in
@@ -142,7 +150,7 @@ impl GatherMap {
             let base = e * stride;
             for (local, &idx) in pattern.element_scatter(e).iter().enumerate() {
                 if idx != SKIP {
-                    csr_lists[idx as usize].push((base + ndof + local) as u32);
+                    csr_lists[idx as usize].push((base + ndof + packed_index(ndof, local / ndof, local % ndof)) as u32);
                 }
             }
             for (a, &node) in mesh.element(e).iter().enumerate() {

@@ -8,7 +8,6 @@
 //! | `element_energy` | [`element_energy`] |
 //! | `assemble_csr` | [`assemble_csr`] |
 //! | `assemble_residual` | [`assemble_residual`] |
-//! | `reduce_sum` | [`reduce_sum`] |
 //! | `uzawa_step` | [`uzawa_step`] |
 
 pub use crate::contact::law::uzawa_step;
@@ -50,7 +49,12 @@ pub fn dispatch_element_force_tangent<M: Hyperelastic + Sync>(
             }
             out[..ndof].copy_from_slice(&scratch.force);
             if with_tangent {
-                out[ndof..].copy_from_slice(&scratch.tangent);
+                // The upper triangle, row by row: the packed layout of `element_out_stride`.
+                let mut k = ndof;
+                for row in 0..ndof {
+                    out[k..k + ndof - row].copy_from_slice(&scratch.tangent[row * ndof + row..(row + 1) * ndof]);
+                    k += ndof - row;
+                }
             }
         }
         None
@@ -103,33 +107,4 @@ fn gather_sum(element_out: &[Real], gather_start: &[u32], gather: &[u32], k: usi
         f += element_out[gather[j as usize] as usize];
     }
     f
-}
-
-/// Width of one block of `reduce_sum` (its workgroup size).
-pub const REDUCE_WIDTH: usize = 256;
-
-/// The sum of `input` in the order of the `reduce_sum` kernel: blocks of [`REDUCE_WIDTH`] values
-/// summed by halving, pass after pass, until one value is left.
-pub fn reduce_sum(input: &[Real]) -> Real {
-    let mut values = input.to_vec();
-    loop {
-        values = values.chunks(REDUCE_WIDTH).map(reduce_block).collect();
-        if values.len() <= 1 {
-            return values.first().copied().unwrap_or(0.0);
-        }
-    }
-}
-
-/// One workgroup of `reduce_sum`: pairs at distance 128, 64, ..., 1.
-fn reduce_block(block: &[Real]) -> Real {
-    let mut scratch = [0.0; REDUCE_WIDTH];
-    scratch[..block.len()].copy_from_slice(block);
-    let mut width = REDUCE_WIDTH / 2;
-    while width > 0 {
-        for lane in 0..width {
-            scratch[lane] += scratch[lane + width];
-        }
-        width /= 2;
-    }
-    scratch[0]
 }

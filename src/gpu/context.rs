@@ -136,6 +136,11 @@ impl Gpu {
     /// A compute pipeline for a shader of `shaders/` at this device's precision; shader errors
     /// come back as [`GpuError::Kernel`] instead of wgpu's default panic.
     pub fn pipeline(&self, kernel: &str, variant: Option<ElementVariant>) -> Result<wgpu::ComputePipeline, GpuError> {
+        self.pipeline_at(kernel, "main", variant)
+    }
+
+    /// [`Gpu::pipeline`] for another entry point of the kernel's module.
+    pub fn pipeline_at(&self, kernel: &str, entry: &str, variant: Option<ElementVariant>) -> Result<wgpu::ComputePipeline, GpuError> {
         let source = super::shaders::source(kernel, self.precision, variant).map_err(|message| GpuError::Kernel { kernel: kernel.into(), message })?;
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let module = self.device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some(kernel), source: wgpu::ShaderSource::Wgsl(source.into()) });
@@ -143,7 +148,7 @@ impl Gpu {
             label: Some(kernel),
             layout: None,
             module: &module,
-            entry_point: Some("main"),
+            entry_point: Some(entry),
             compilation_options: Default::default(),
             cache: None,
         });
@@ -155,15 +160,20 @@ impl Gpu {
 
     /// Waits for submitted work and maps `buffer` for reading.
     pub fn read(&self, kernel: &str, buffer: &wgpu::Buffer) -> Result<Vec<u8>, GpuError> {
+        self.read_range(kernel, buffer, buffer.size())
+    }
+
+    /// Maps the first `bytes` of a buffer (after what was submitted) and copies them out.
+    pub fn read_range(&self, kernel: &str, buffer: &wgpu::Buffer, bytes: u64) -> Result<Vec<u8>, GpuError> {
         let err = |message: String| GpuError::Kernel { kernel: kernel.into(), message };
         let (sender, receiver) = std::sync::mpsc::channel();
-        buffer.map_async(wgpu::MapMode::Read, .., move |result| {
+        buffer.map_async(wgpu::MapMode::Read, ..bytes, move |result| {
             let _ = sender.send(result);
         });
         self.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| err(e.to_string()))?;
         receiver.recv().map_err(|e| err(e.to_string()))?.map_err(|e| err(e.to_string()))?;
-        let bytes = buffer.get_mapped_range(..).map_err(|e| err(e.to_string()))?.to_vec();
+        let out = buffer.get_mapped_range(..bytes).map_err(|e| err(e.to_string()))?.to_vec();
         buffer.unmap();
-        Ok(bytes)
+        Ok(out)
     }
 }

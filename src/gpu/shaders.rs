@@ -1,6 +1,7 @@
 //! The WGSL sources of `shaders/`, compiled into the binary, and how a kernel's module is
-//! composed: the precision prelude, then for element kernels the element constants and the
-//! shared includes of `shaders/include/`, then the kernel.
+//! composed: the precision prelude, the batch layout (`include/batch.wgsl`) for the kernels that
+//! run over a batch of bodies, then for element kernels the element constants and the shared
+//! includes of `shaders/include/`, then the kernel.
 
 use crate::mesh::ElementKind;
 use crate::precision::Precision;
@@ -11,12 +12,12 @@ pub const SHADERS: &[(&str, &str)] = &[
     ("assemble_residual", include_str!("../../shaders/assemble_residual.wgsl")),
     ("element_energy", include_str!("../../shaders/element_energy.wgsl")),
     ("element_force_tangent", include_str!("../../shaders/element_force_tangent.wgsl")),
-    ("reduce_sum", include_str!("../../shaders/reduce_sum.wgsl")),
     ("uzawa_step", include_str!("../../shaders/uzawa_step.wgsl")),
 ];
 
 /// The shared includes of `shaders/include/`.
 pub const INCLUDES: &[(&str, &str)] = &[
+    ("batch", include_str!("../../shaders/include/batch.wgsl")),
     ("element", include_str!("../../shaders/include/element.wgsl")),
     ("ln_f32", include_str!("../../shaders/include/ln_f32.wgsl")),
     ("ln_f64", include_str!("../../shaders/include/ln_f64.wgsl")),
@@ -49,6 +50,11 @@ pub fn is_element_kernel(kernel: &str) -> bool {
     kernel.starts_with("element_")
 }
 
+/// Whether a kernel runs over the members of a batch (`shaders/include/batch.wgsl`).
+pub fn is_batch_kernel(kernel: &str) -> bool {
+    is_element_kernel(kernel) || kernel.starts_with("assemble_")
+}
+
 fn include(name: &str) -> Result<&'static str, String> {
     INCLUDES.iter().find(|(n, _)| *n == name).map(|(_, text)| *text).ok_or_else(|| format!("no include `{name}`"))
 }
@@ -57,6 +63,9 @@ fn include(name: &str) -> Result<&'static str, String> {
 pub fn source(kernel: &str, precision: Precision, variant: Option<ElementVariant>) -> Result<String, String> {
     let text = SHADERS.iter().find(|(name, _)| *name == kernel).map(|(_, text)| *text).ok_or_else(|| format!("no shader `{kernel}`"))?;
     let mut module = precision.wgsl_prelude();
+    if is_batch_kernel(kernel) {
+        module += include("batch")?;
+    }
     match (is_element_kernel(kernel), variant) {
         (false, _) => {}
         (true, None) => return Err(format!("kernel `{kernel}` needs an element kind and a material")),

@@ -62,3 +62,32 @@ impl MaterialParams<f64> {
         Self { g, k, a1, a2, a3, a4, a5, unused: 0.0 }
     }
 }
+
+/// `struct MemberRange` of `shaders/include/batch.wgsl`: where one body of a batch lies in the
+/// batch's elements, stiffness non-zeros and dofs, and which of the batch's materials it has.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct MemberRange {
+    pub element_start: u32,
+    pub elements: u32,
+    pub nonzero_start: u32,
+    pub nonzeros: u32,
+    pub dof_start: u32,
+    pub dofs: u32,
+    pub material: u32,
+    pub unused: u32,
+}
+
+/// `struct Active` of `shaders/include/batch.wgsl`: a member a dispatch works on, and what it
+/// asks of it ([`MODE_FORCES`] or [`MODE_TANGENT`]).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct Active {
+    pub member: u32,
+    pub mode: u32,
+}
+
+/// `FORCES` of `batch.wgsl`: internal force and residual.
+pub const MODE_FORCES: u32 = 1;
+/// `TANGENT` of `batch.wgsl`: also the tangent and the stiffness values.
+pub const MODE_TANGENT: u32 = 2;

@@ -4,16 +4,14 @@
 use super::linear::{CholeskySolver, LinearError};
 use super::PhaseTimes;
 use crate::assembly::{element_out_stride, DofMap, GatherMap, StiffnessPattern};
-use crate::cpu::{assemble_csr, assemble_residual, dispatch_element_force_tangent, element_energy, element_force_tangent, reduce_sum};
+use crate::cpu::{assemble_csr, assemble_residual, dispatch_element_force_tangent, element_energy, element_force_tangent};
 use crate::element::{element_cell_fields, element_von_mises, CellFields, ElementError, ElementOutput, ReferenceGeometry};
-use crate::gpu::body::{ElementFailure, Traffic};
 use crate::gpu::types::{Coefficients, DofOut, DofStep};
-use crate::gpu::{Gpu, GpuBody, GpuError};
+use crate::gpu::{ElementFailure, Evaluation, GpuError, WorldBody};
 use crate::material::Model;
 use crate::mesh::Mesh;
-use crate::precision::{Precision, Real};
+use crate::precision::Real;
 use crate::scene::OrderingChoice;
-use std::sync::Arc;
 use std::time::Instant;
 
 /// Displacement, velocity and internal force of every dof.
@@ -35,7 +33,7 @@ pub struct Prescribed {
 }
 
 /// The assembly coefficients of a step: `ξ` on the stiffness, `c1 = 1/(θ dt²)` on the mass.
-fn coefficients(p: &StepParams) -> Coefficients<Real> {
+pub fn coefficients(p: &StepParams) -> Coefficients<Real> {
     Coefficients { factor: p.xi, c1: 1.0 / (p.theta * p.dt * p.dt) }
 }
 
@@ -107,8 +105,6 @@ pub struct Body {
     /// The step's start values of every dof, for `assemble_residual`.
     step_inputs: Vec<DofStep<Real>>,
     dof_out: Vec<DofOut<Real>>,
-    /// The body's kernels on a GPU; `None` runs their CPU twins.
-    device: Option<GpuBody>,
     f_ext: Vec<Real>,
     /// Contact-free residual of the last evaluation, every dof.
     pub g: Vec<Real>,
@@ -196,7 +192,6 @@ impl Body {
             element_results,
             step_inputs: vec![DofStep::default(); ndof],
             dof_out: vec![DofOut::default(); ndof],
-            device: None,
             f_ext: vec![0.0; ndof],
             g: vec![0.0; ndof],
             contact_force: vec![0.0; ndof],
@@ -211,18 +206,18 @@ impl Body {
         })
     }
 
-    /// Moves the body's element and assembly kernels to `gpu` (its data is uploaded now).
-    pub fn use_gpu(&mut self, gpu: Arc<Gpu>) -> Result<(), GpuError> {
-        self.device = Some(GpuBody::new(gpu, &self.mesh, &self.geometry, &self.model, &self.pattern, &self.gather)?);
-        Ok(())
+    /// What the GPU world uploads of the body.
+    pub fn world_body(&self) -> WorldBody<'_> {
+        WorldBody { mesh: &self.mesh, geometry: &self.geometry, model: &self.model, pattern: &self.pattern, gather: &self.gather }
     }
 
-    /// Bytes moved to and from the GPU since the last call (zero on the CPU).
-    pub fn take_traffic(&mut self) -> Traffic {
-        self.device.as_mut().map(GpuBody::take_traffic).unwrap_or_default()
+    /// The step's start values of every dof (after [`Body::begin_step`]).
+    pub fn step_inputs(&self) -> &[DofStep<Real>] {
+        &self.step_inputs
     }
 
-    fn device_failure(&self, error: GpuError) -> StepFailure {
+    /// A device failure of an evaluation that involved this body.
+    pub fn device_failure(&self, error: &GpuError) -> StepFailure {
         StepFailure::Device { body: self.name.clone(), error: error.to_string() }
     }
 
@@ -262,27 +257,27 @@ impl Body {
         for (d, s) in self.step_inputs.iter_mut().enumerate() {
             *s = DofStep { mass: self.mass[d], u_pred: self.state.u[d] + p.dt * self.state.v[d], f_int_t: self.state.f_int[d], f_ext: self.f_ext[d] };
         }
-        if let Some(device) = &mut self.device {
-            device.begin_step(&self.step_inputs);
-        }
         self.last_increment = None;
         self.previous_residual = None;
         self.contraction = None;
     }
 
-    /// Assembles force and `ξ K` at the trial displacement and the contact-free residual
-    /// `g(u) = M (u - u_t - dt v_t) / (θ dt²) - (1-ξ) F_t - ξ F(u)` at every dof.
-    ///
-    /// On a GPU in f64 every kernel runs there. In f32 only the stiffness comes from the GPU:
-    /// the internal force and residual are evaluated in f64 by the CPU twins, so Newton converges
-    /// to the same answer and the f32 tangent only changes how fast (doc/ARCHITECTURE.md).
-    ///
-    /// With factorisation reuse the CPU computes forces only; [`Body::refresh_factor`] adds
-    /// the tangent when it refactorises.
+    /// Assembles force (and, without factorisation reuse, `ξ K`) at the trial displacement and
+    /// the contact-free residual `g(u) = M (u - u_t - dt v_t) / (θ dt²) - (1-ξ) F_t - ξ F(u)` at
+    /// every dof, with the CPU kernels. [`Body::refresh_factor`] adds the tangent when it
+    /// refactorises. A GPU world evaluates through [`Body::device_evaluation`] instead.
     pub fn evaluate(&mut self, p: &StepParams, times: &mut PhaseTimes) -> Result<(), StepFailure> {
-        let xi = p.xi;
         let u = std::mem::take(&mut self.trial.u);
         let result = self.assemble_with(&u, coefficients(p), !self.reuse_factorization, times);
+        self.trial.u = u;
+        result?;
+        self.absorb_residual(p);
+        Ok(())
+    }
+
+    /// Takes the internal force and residual of the last evaluation, and the force scale.
+    fn absorb_residual(&mut self, p: &StepParams) {
+        let xi = p.xi;
         let mut scale2 = 0.0;
         for (d, out) in self.dof_out.iter().enumerate() {
             self.trial.f_int[d] = out.f_int;
@@ -293,44 +288,59 @@ impl Body {
             scale2 += inertia * inertia + (xi * out.f_int).powi(2) + ((1.0 - xi) * self.state.f_int[d]).powi(2) + self.f_ext[d].powi(2);
         }
         self.force_scale = scale2.sqrt();
-        self.trial.u = u;
-        result
     }
 
-    /// The kernels of one Newton evaluation at `u`: element results, stiffness values (`ξ K`)
-    /// and, with the step's inputs from [`Body::begin_step`], internal force and residual.
+    /// The body's share of a GPU world evaluation at the trial displacement: the tangent if
+    /// `tangent`, the residual if `residual`. Finish with [`Body::finish_device_evaluation`].
+    pub fn device_evaluation(&mut self, body: usize, tangent: bool, residual: bool) -> Evaluation<'_> {
+        self.tangent_current = false;
+        Evaluation { body, u: &self.trial.u, tangent, values: &mut self.values, dof_out: residual.then_some(&mut self.dof_out[..]), failure: None }
+    }
+
+    /// Takes the results of a GPU world evaluation (see [`Body::device_evaluation`]). A residual
+    /// the device did not compute (f32 kernels) is computed here in f64 by the CPU twins, so
+    /// that Newton converges to the same answer and the f32 tangent only changes how fast.
+    pub fn finish_device_evaluation(&mut self, p: &StepParams, failure: Option<ElementFailure>, tangent: bool, residual: bool) -> Result<(), StepFailure> {
+        if let Some(failure) = failure {
+            return Err(self.element_failure(&self.trial.u, failure));
+        }
+        self.tangent_current = tangent;
+        if residual {
+            self.absorb_residual(p);
+        }
+        Ok(())
+    }
+
+    /// The f64 residual on the CPU for a device that evaluates tangents only (f32 kernels).
+    pub fn evaluate_residual_on_cpu(&mut self, p: &StepParams, times: &mut PhaseTimes) -> Result<(), StepFailure> {
+        let u = std::mem::take(&mut self.trial.u);
+        let result = self.cpu_elements(&u, false, times);
+        if result.is_ok() {
+            let t0 = Instant::now();
+            assemble_residual(&self.element_results, &self.gather.dof_start, &self.gather.dof, coefficients(p), &u, &self.step_inputs, &mut self.dof_out);
+            times.assembly += t0.elapsed().as_secs_f64();
+        }
+        self.trial.u = u;
+        result?;
+        self.absorb_residual(p);
+        Ok(())
+    }
+
+    /// The kernels of one Newton evaluation at `u` on the CPU: element results, stiffness values
+    /// (`ξ K`) and, with the step's inputs from [`Body::begin_step`], internal force and residual.
     pub fn assemble(&mut self, u: &[Real], coefficients: Coefficients<Real>, times: &mut PhaseTimes) -> Result<(), StepFailure> {
         self.assemble_with(u, coefficients, true, times)
     }
 
-    /// [`Body::assemble`], with the stiffness values only if `with_tangent` (a GPU computes
-    /// them anyway).
+    /// [`Body::assemble`], with the stiffness values only if `with_tangent`.
     fn assemble_with(&mut self, u: &[Real], coefficients: Coefficients<Real>, with_tangent: bool, times: &mut PhaseTimes) -> Result<(), StepFailure> {
         self.tangent_current = false;
-        let gathered_on_cpu = match &mut self.device {
-            Some(device) => {
-                let f64_residual = device.precision() == Precision::F64;
-                let dof_out = f64_residual.then_some(&mut self.dof_out[..]);
-                match device.evaluate(u, coefficients, &mut self.values, dof_out, times) {
-                    Err(e) => return Err(self.device_failure(e)),
-                    Ok(Some(failure)) => return Err(self.element_failure(u, failure)),
-                    Ok(None) if f64_residual => return Ok(()),
-                    Ok(None) => {
-                        self.cpu_elements(u, false, times)?;
-                        false
-                    }
-                }
-            }
-            None => {
-                self.cpu_elements(u, with_tangent, times)?;
-                with_tangent
-            }
-        };
+        self.cpu_elements(u, with_tangent, times)?;
         let t0 = Instant::now();
-        if gathered_on_cpu {
+        if with_tangent {
             assemble_csr(&self.element_results, &self.gather.csr_start, &self.gather.csr, coefficients, &mut self.values);
         }
-        self.tangent_current = gathered_on_cpu || self.device.is_some();
+        self.tangent_current = with_tangent;
         assemble_residual(&self.element_results, &self.gather.dof_start, &self.gather.dof, coefficients, u, &self.step_inputs, &mut self.dof_out);
         times.assembly += t0.elapsed().as_secs_f64();
         Ok(())
@@ -432,9 +442,10 @@ impl Body {
         (self.trial.u[d] - self.state.u[d] - p.dt * (1.0 - p.theta) * self.state.v[d]) / (p.theta * p.dt)
     }
 
-    /// Ends a converged step: end velocities, support reactions `g - f_c` at the prescribed dofs,
-    /// and the step's energy terms.
-    pub fn finish_step(&mut self, p: &StepParams) -> Result<StepEnergy, StepFailure> {
+    /// Ends a converged step whose strain energy at the trial displacement is `strain`: end
+    /// velocities, support reactions `g - f_c` at the prescribed dofs, and the step's energy
+    /// terms.
+    pub fn finish_step(&mut self, p: &StepParams, strain: Real) -> StepEnergy {
         let ndof = self.mass.len();
         let v: Vec<Real> = (0..ndof).map(|d| self.trial_velocity(p, d)).collect();
         self.trial.v = v;
@@ -442,10 +453,7 @@ impl Body {
             self.trial.v[pr.dof] = pr.velocity;
             self.reactions[k] = self.g[pr.dof] - self.contact_force[pr.dof];
         }
-        let u = std::mem::take(&mut self.trial.u);
-        let strain = self.energy_of(&u);
-        self.trial.u = u;
-        self.trial.strain = strain?;
+        self.trial.strain = strain;
         let (mut theta_term, mut force_work, mut support_work) = (0.0, 0.0, 0.0);
         for d in 0..ndof {
             let du = self.trial.u[d] - self.state.u[d];
@@ -455,11 +463,11 @@ impl Body {
         for (pr, r) in self.prescribed.iter().zip(&self.reactions) {
             support_work += r * (self.trial.u[pr.dof] - self.state.u[pr.dof]);
         }
-        Ok(StepEnergy {
+        StepEnergy {
             theta_dissipation: (p.theta - 0.5) * theta_term,
             force_dissipation: force_work - (self.trial.strain - self.state.strain),
             support_work,
-        })
+        }
     }
 
     /// Makes sure a factorisation fit for the next Newton increment is there: refactorises
@@ -468,8 +476,7 @@ impl Body {
     /// last one is kept, across iterations and steps. Returns whether it refactorised.
     pub fn refresh_factor(&mut self, p: &StepParams, times: &mut PhaseTimes) -> Result<bool, StepFailure> {
         let c1 = coefficients(p).c1;
-        let fresh = self.reuse_factorization && self.factor_c1 == Some(c1) && self.contraction.is_none_or(|r| r <= REFACTOR_CONTRACTION);
-        if fresh {
+        if !self.needs_factorization(p) {
             return Ok(false);
         }
         if !self.tangent_current {
@@ -480,6 +487,18 @@ impl Body {
         }
         self.factorize_effective(c1, times)?;
         Ok(true)
+    }
+
+    /// Whether [`Body::refresh_factor`] would refactorise now.
+    pub fn needs_factorization(&self, p: &StepParams) -> bool {
+        let fresh = self.reuse_factorization && self.factor_c1 == Some(coefficients(p).c1) && self.contraction.is_none_or(|r| r <= REFACTOR_CONTRACTION);
+        !fresh
+    }
+
+    /// Whether [`Body::refresh_factor`] needs a tangent it does not have: a GPU world computes
+    /// those of all such bodies in one pass first.
+    pub fn needs_tangent(&self, p: &StepParams) -> bool {
+        self.needs_factorization(p) && !self.tangent_current
     }
 
     /// Adds `c1 M` to the assembled `ξ K` and factorises `K̄ = ξ K + c1 M` (eq. 17).
@@ -522,14 +541,9 @@ impl Body {
         self.state.strain
     }
 
-    /// Strain energy at `u`: `element_energy` and `reduce_sum`, on the GPU in f64 (in f32, on
-    /// the CPU, like the residual).
-    fn energy_of(&mut self, u: &[Real]) -> Result<Real, StepFailure> {
-        if let Some(device) = self.device.as_mut().filter(|d| d.precision() == Precision::F64) {
-            return device.strain_energy(u).map_err(|e| self.device_failure(e));
-        }
-        let energies: Vec<Real> = (0..self.mesh.element_count()).map(|e| element_energy(&self.model, self.geometry.element_points(e), &self.mesh.element_displacements(u, e))).collect();
-        Ok(reduce_sum(&energies))
+    /// Strain energy at the trial displacement, `element_energy` on the CPU.
+    pub fn trial_strain_energy(&self) -> Real {
+        (0..self.mesh.element_count()).map(|e| element_energy(&self.model, self.geometry.element_points(e), &self.mesh.element_displacements(&self.trial.u, e))).sum()
     }
 
     /// Current position of a node.

@@ -4,11 +4,12 @@
 //! leaves the loop, so a grain in free flight or at rest costs one evaluation per step, not one
 //! per Newton iteration of the busiest cluster. Groups run in parallel.
 
-use super::body::{Body, StepFailure, StepParams};
+use super::body::{coefficients, Body, StepFailure, StepParams};
 use super::coupling::ContactStep;
 use super::PhaseTimes;
 use crate::contact::{ContactPoint, Master, Settings};
-use crate::precision::Real;
+use crate::gpu::{ElementFailure, Evaluation, GpuWorld};
+use crate::precision::{Precision, Real};
 use rayon::prelude::*;
 use std::collections::HashMap;
 
@@ -66,11 +67,16 @@ struct Group {
     bodies: Vec<Body>,
     point_ids: Vec<usize>,
     contact: ContactStep,
+    newton: NewtonState,
 }
 
-/// Solves a step's Newton problem group by group, in parallel. The bodies go back into
-/// `bodies` and the points (global indices, with their solution) are returned in detection
-/// order, whether the step converged or not. Forming the groups counts as `contact` time.
+/// Solves a step's Newton problem group by group: on the CPU each group runs its own loop, the
+/// groups in parallel; with a GPU `world` the groups iterate in lockstep, so that each Newton
+/// iteration evaluates the bodies of every group still iterating in one device pass. The bodies
+/// go back into `bodies` and the points (global indices, with their solution) are returned in
+/// detection order, whether the step converged or not. Forming the groups counts as `contact`
+/// time, the device passes in `times`.
+#[allow(clippy::too_many_arguments)]
 pub fn solve_groups(
     bodies: &mut Vec<Body>,
     points: Vec<ContactPoint>,
@@ -78,6 +84,7 @@ pub fn solve_groups(
     settings: Option<&Settings>,
     warm: &HashMap<(u32, u32, Master), ([Real; 3], Real)>,
     velocity_scale: Real,
+    world: Option<&mut GpuWorld>,
     times: &mut PhaseTimes,
 ) -> (Vec<ContactPoint>, Vec<Result<GroupReport, StepFailure>>) {
     let started = std::time::Instant::now();
@@ -105,11 +112,15 @@ pub fn solve_groups(
                 })
                 .collect();
             let contact = ContactStep::new(group_points, &group_bodies, p, warm, velocity_scale);
-            Group { ids, bodies: group_bodies, point_ids, contact }
+            Group { ids, bodies: group_bodies, point_ids, contact, newton: NewtonState::default() }
         })
         .collect();
     times.contact += started.elapsed().as_secs_f64();
-    let reports: Vec<Result<GroupReport, StepFailure>> = groups.par_iter_mut().map(|g| newton(&mut g.bodies, &mut g.contact, p, settings, velocity_scale)).collect();
+    let context = Context { p, settings, velocity_scale };
+    let reports = match world {
+        None => groups.par_iter_mut().map(|g| g.newton_on_cpu(&context)).collect(),
+        Some(world) => newton_in_lockstep(&mut groups, world, &context, times),
+    };
     for g in groups {
         for (c, i) in g.contact.points.into_iter().zip(g.point_ids) {
             let mut c = c;
@@ -126,32 +137,59 @@ pub fn solve_groups(
     (points.into_iter().map(|c| c.expect("every point came back")).collect(), reports)
 }
 
-/// The Newton loop of one group (paper eqs. 16-19, with contact as in `coupling.rs`), until its
-/// bodies meet the solver tolerances and its contact points the contact criteria.
-fn newton(bodies: &mut [Body], contact: &mut ContactStep, p: &StepParams, settings: Option<&Settings>, velocity_scale: Real) -> Result<GroupReport, StepFailure> {
-    let mut report = GroupReport::default();
-    let mut last_change: Option<Real> = None;
-    let mut uzawa_converged = true;
-    loop {
-        for body in bodies.iter_mut() {
-            body.evaluate(p, &mut report.wall)?;
+/// What every group's Newton loop shares in a step.
+struct Context<'a> {
+    p: &'a StepParams,
+    settings: Option<&'a Settings>,
+    velocity_scale: Real,
+}
+
+/// Where a group's Newton loop stands between two evaluations.
+#[derive(Default)]
+struct NewtonState {
+    report: GroupReport,
+    last_change: Option<Real>,
+    /// `false` until the first increment: the Uzawa sweeps have not run yet.
+    uzawa_ran: bool,
+    uzawa_converged: bool,
+}
+
+impl Group {
+    /// The Newton loop of one group on the CPU (paper eqs. 16-19, with contact as in
+    /// `coupling.rs`), until its bodies meet the solver tolerances and its contact points the
+    /// contact criteria.
+    fn newton_on_cpu(&mut self, c: &Context) -> Result<GroupReport, StepFailure> {
+        loop {
+            for body in self.bodies.iter_mut() {
+                body.evaluate(c.p, &mut self.newton.report.wall)?;
+            }
+            self.newton.report.bodies_iterated += self.bodies.len();
+            if self.converged(c)? {
+                return Ok(self.finish(c.p));
+            }
+            self.increment(c)?;
         }
-        report.bodies_iterated += bodies.len();
+    }
+
+    /// After the bodies' evaluation: applies the contact forces and tests convergence; an error
+    /// when the iterations are spent.
+    fn converged(&mut self, c: &Context) -> Result<bool, StepFailure> {
+        let (p, bodies, contact, state) = (c.p, &mut self.bodies, &mut self.contact, &mut self.newton);
         contact.apply_forces(bodies);
         let mut converged = true;
         for body in bodies.iter_mut() {
-            converged &= body.converged(p, velocity_scale * p.dt)?;
+            converged &= body.converged(p, c.velocity_scale * p.dt)?;
         }
         let mut contact_unmet = Vec::new();
         if !contact.is_empty() {
-            let tolerance = settings.expect("contact points need contact settings").tolerance;
+            let tolerance = c.settings.expect("contact points need contact settings").tolerance;
             // A step that starts from last step's solution may already satisfy everything.
-            match last_change {
-                Some(c) if c > tolerance => contact_unmet.push(format!("contact forces still changing by {c:.3e} > {tolerance:.3e}")),
+            match state.last_change {
+                Some(change) if change > tolerance => contact_unmet.push(format!("contact forces still changing by {change:.3e} > {tolerance:.3e}")),
                 None if !contact.all_warm() => contact_unmet.push("contact forces not solved yet".to_string()),
                 _ => {}
             }
-            if !uzawa_converged {
+            if state.uzawa_ran && !state.uzawa_converged {
                 contact_unmet.push("Uzawa iterations not converged".to_string());
             }
             let complementarity = contact.complementarity(bodies, p);
@@ -161,33 +199,159 @@ fn newton(bodies: &mut [Body], contact: &mut ContactStep, p: &StepParams, settin
             converged &= contact_unmet.is_empty();
         }
         if converged {
-            break;
+            return Ok(true);
         }
-        if report.iterations == p.max_iterations {
+        if state.report.iterations == p.max_iterations {
             let names: Vec<String> = bodies.iter().map(|b| format!("`{}`", b.name)).collect();
             let bodies_named = if names.len() == 1 { format!("body {}", names[0]) } else { format!("bodies {} (coupled by contact)", names.join(", ")) };
             let unmet: Vec<String> = bodies.iter().flat_map(|b| b.unmet().iter().cloned()).chain(contact_unmet).collect();
-            return Err(StepFailure::NotConverged { bodies: bodies_named, iterations: report.iterations, unmet: unmet.join("; ") });
+            return Err(StepFailure::NotConverged { bodies: bodies_named, iterations: state.report.iterations, unmet: unmet.join("; ") });
         }
+        Ok(false)
+    }
+
+    /// One Newton increment: the factorisations that are due, then the increment of every body,
+    /// through the contact coupling when the group has contact points.
+    fn increment(&mut self, c: &Context) -> Result<(), StepFailure> {
+        let (p, bodies, contact, state) = (c.p, &mut self.bodies, &mut self.contact, &mut self.newton);
         let mut refactorized = false;
         for body in bodies.iter_mut() {
-            let fresh = body.refresh_factor(p, &mut report.wall)?;
+            let fresh = body.refresh_factor(p, &mut state.report.wall)?;
             refactorized |= fresh;
-            report.factorizations += fresh as usize;
+            state.report.factorizations += fresh as usize;
         }
         if contact.is_empty() {
             for body in bodies.iter_mut() {
-                body.newton_step(&mut report.wall);
+                body.newton_step(&mut state.report.wall);
             }
         } else {
-            let (outcome, change) = contact.newton_increment(bodies, p, settings.expect("contact settings"), refactorized, &mut report.wall);
-            report.uzawa_iterations += outcome.iterations;
-            uzawa_converged = outcome.converged;
-            last_change = Some(change);
+            let (outcome, change) = contact.newton_increment(bodies, p, c.settings.expect("contact settings"), refactorized, &mut state.report.wall);
+            state.report.uzawa_iterations += outcome.iterations;
+            state.uzawa_ran = true;
+            state.uzawa_converged = outcome.converged;
+            state.last_change = Some(change);
         }
-        report.iterations += 1;
+        state.report.iterations += 1;
+        Ok(())
     }
-    report.residual_norm = bodies.iter().map(Body::residual_norm).fold(0.0, Real::max);
-    contact.finish(bodies, p);
-    Ok(report)
+
+    /// The report of a converged group, after the contact points take their solution.
+    fn finish(&mut self, p: &StepParams) -> GroupReport {
+        self.newton.report.residual_norm = self.bodies.iter().map(Body::residual_norm).fold(0.0, Real::max);
+        self.contact.finish(&self.bodies, p);
+        self.newton.report
+    }
+}
+
+/// The Newton loops of all groups in lockstep with a GPU world. Each round: one device pass
+/// evaluates the bodies of every group still iterating (forces and residuals); the groups test
+/// convergence in parallel; one device pass computes the tangents of the bodies that
+/// refactorise; the groups take their increments in parallel. The number of device passes per
+/// Newton iteration does not depend on the number of bodies.
+fn newton_in_lockstep(groups: &mut [Group], world: &mut GpuWorld, c: &Context, times: &mut PhaseTimes) -> Vec<Result<GroupReport, StepFailure>> {
+    let mut outcome: Vec<Option<Result<GroupReport, StepFailure>>> = (0..groups.len()).map(|_| None).collect();
+    // In f32 the residual is computed in f64 on the CPU; the device gives the tangents.
+    let device_residual = world.precision() == Precision::F64;
+    loop {
+        let live: Vec<bool> = outcome.iter().map(Option::is_none).collect();
+        if !live.iter().any(|&l| l) {
+            break;
+        }
+        let wanted = |_: &Body| true;
+        let evaluated = if device_residual {
+            device_pass(groups, &live, world, c.p, false, &wanted, times)
+        } else {
+            groups
+                .par_iter_mut()
+                .zip(&live)
+                .map(|(g, &l)| {
+                    if !l {
+                        return Ok(());
+                    }
+                    for body in g.bodies.iter_mut() {
+                        body.evaluate_residual_on_cpu(c.p, &mut g.newton.report.wall)?;
+                    }
+                    Ok(())
+                })
+                .collect()
+        };
+        let checked: Vec<Option<Result<bool, StepFailure>>> = groups
+            .par_iter_mut()
+            .zip(evaluated)
+            .zip(&live)
+            .map(|((g, evaluated), &l)| {
+                l.then(|| {
+                    evaluated?;
+                    g.newton.report.bodies_iterated += g.bodies.len();
+                    g.converged(c)
+                })
+            })
+            .collect();
+        let mut continuing = vec![false; groups.len()];
+        for (k, check) in checked.into_iter().enumerate() {
+            match check {
+                None => {}
+                Some(Ok(true)) => outcome[k] = Some(Ok(groups[k].finish(c.p))),
+                Some(Ok(false)) => continuing[k] = true,
+                Some(Err(e)) => outcome[k] = Some(Err(e)),
+            }
+        }
+        let p = c.p;
+        let tangents = device_pass(groups, &continuing, world, p, true, &|b: &Body| b.needs_tangent(p), times);
+        let incremented: Vec<Option<Result<(), StepFailure>>> =
+            groups.par_iter_mut().zip(tangents).zip(&continuing).map(|((g, tangents), &go)| go.then(|| tangents.and_then(|()| g.increment(c)))).collect();
+        for (k, result) in incremented.into_iter().enumerate() {
+            if let Some(Err(e)) = result {
+                outcome[k] = Some(Err(e));
+            }
+        }
+    }
+    outcome.into_iter().map(|o| o.expect("every group has an outcome")).collect()
+}
+
+/// One device pass over the bodies of the `live` groups that `wanted` selects: the tangent and
+/// stiffness values if `tangent`, else forces and residuals. Returns each group's result (a
+/// body's element failure or a device error fails its group); no pass when nothing is wanted.
+fn device_pass(
+    groups: &mut [Group],
+    live: &[bool],
+    world: &mut GpuWorld,
+    p: &StepParams,
+    tangent: bool,
+    wanted: &(dyn Fn(&Body) -> bool + Sync),
+    times: &mut PhaseTimes,
+) -> Vec<Result<(), StepFailure>> {
+    let mut results: Vec<Result<(), StepFailure>> = groups.iter().map(|_| Ok(())).collect();
+    let chosen: Vec<Vec<bool>> = groups.iter().zip(live).map(|(g, &l)| g.bodies.iter().map(|b| l && wanted(b)).collect()).collect();
+    if !chosen.iter().flatten().any(|&x| x) {
+        return results;
+    }
+    let mut list: Vec<Evaluation> = Vec::new();
+    for (g, chosen) in groups.iter_mut().zip(&chosen) {
+        for ((body, &id), &yes) in g.bodies.iter_mut().zip(&g.ids).zip(chosen) {
+            if yes {
+                list.push(body.device_evaluation(id, tangent, !tangent));
+            }
+        }
+    }
+    let passed = world.evaluate(&mut list, coefficients(p), times);
+    let failures: Vec<Option<ElementFailure>> = list.iter().map(|e| e.failure).collect();
+    drop(list);
+    let mut failures = failures.into_iter();
+    for ((g, chosen), result) in groups.iter_mut().zip(&chosen).zip(&mut results) {
+        for (body, &yes) in g.bodies.iter_mut().zip(chosen) {
+            if !yes {
+                continue;
+            }
+            let failure = failures.next().expect("one result per evaluation");
+            let finished = match &passed {
+                Err(e) => Err(body.device_failure(e)),
+                Ok(()) => body.finish_device_evaluation(p, failure, tangent, !tangent),
+            };
+            if let (Ok(()), Err(e)) = (&*result, finished) {
+                *result = Err(e);
+            }
+        }
+    }
+    results
 }

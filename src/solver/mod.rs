@@ -13,7 +13,8 @@ pub use setup::build_simulation;
 
 use crate::contact::detect::detect;
 use crate::contact::{ContactModel, ContactPoint, ContactStats, Master};
-use crate::precision::Real;
+use crate::gpu::GpuWorld;
+use crate::precision::{Precision, Real};
 use body::StepParams;
 use group::solve_groups;
 use rayon::prelude::*;
@@ -82,6 +83,9 @@ pub struct StepReport {
     pub wall: PhaseTimes,
     /// Bytes moved between host and GPU (zero on the CPU backend).
     pub bytes_moved: u64,
+    /// Queue submits to the GPU (zero on the CPU backend): one per device pass, whatever the
+    /// number of bodies.
+    pub device_submits: u64,
     /// One line per cut-back: why the step failed and the new time step.
     pub events: Vec<String>,
 }
@@ -142,6 +146,8 @@ pub struct Simulation {
     pub contact_points: Vec<ContactPoint>,
     /// Net force of each obstacle on the bodies over the last step (mean over the step).
     pub obstacle_reactions: Vec<[Real; 3]>,
+    /// Every body's element and assembly kernels on a GPU; `None` runs their CPU twins.
+    pub world: Option<GpuWorld>,
 }
 
 impl Simulation {
@@ -160,9 +166,13 @@ impl Simulation {
         let started = std::time::Instant::now();
         let dt = self.dt.min(self.end - self.t).max(self.dt * 1e-9);
         let mut report = StepReport { step: self.step + 1, dt, ..Default::default() };
+        let submits = self.world.as_ref().map_or(0, GpuWorld::submits);
         let result = self.advance_by(dt, 0, &mut report);
         report.wall.total = started.elapsed().as_secs_f64();
-        report.bytes_moved = self.bodies.iter_mut().map(|b| b.take_traffic().total()).sum();
+        if let Some(world) = &mut self.world {
+            report.bytes_moved = world.take_traffic().total();
+            report.device_submits = world.submits() - submits;
+        }
         match result {
             Ok(()) => {
                 self.step += 1;
@@ -202,7 +212,12 @@ impl Simulation {
         let settings = self.contact.as_ref().map(|c| c.settings.clone());
         let gravity = self.gravity;
         self.bodies.par_iter_mut().for_each(|body| body.begin_step(&p, &gravity));
-        let (points, groups) = solve_groups(&mut self.bodies, points, &p, settings.as_ref(), &warm, velocity_scale, &mut report.wall);
+        if let Some(world) = &mut self.world {
+            for (b, body) in self.bodies.iter().enumerate() {
+                world.begin_step(b, body.step_inputs());
+            }
+        }
+        let (points, groups) = solve_groups(&mut self.bodies, points, &p, settings.as_ref(), &warm, velocity_scale, self.world.as_mut(), &mut report.wall);
         let (mut failure, mut iterations) = (None, 0);
         for group in groups {
             match group {
@@ -225,7 +240,7 @@ impl Simulation {
         // The step took as many Newton iterations as its slowest group.
         report.newton_iterations += iterations;
         let stats = ContactStats::of(&points, dt);
-        self.book_step(&p, &points, stats.friction_dissipation_step)?;
+        self.book_step(&p, &points, stats.friction_dissipation_step, &mut report.wall)?;
         let r = &mut report.contact;
         r.active = r.active.max(stats.active);
         r.sticking = r.sticking.max(stats.sticking);
@@ -268,9 +283,18 @@ impl Simulation {
 
     /// Energy bookkeeping of a converged step (before commit): external work, friction (as
     /// [`ContactStats`] counts it) and numerical dissipation, and the obstacles' reactions.
-    fn book_step(&mut self, p: &StepParams, points: &[ContactPoint], friction: Real) -> Result<(), StepFailure> {
-        let energies: Result<Vec<_>, StepFailure> = self.bodies.par_iter_mut().map(|body| body.finish_step(p)).collect();
-        for e in energies? {
+    fn book_step(&mut self, p: &StepParams, points: &[ContactPoint], friction: Real, times: &mut PhaseTimes) -> Result<(), StepFailure> {
+        // f32 kernels leave the energies, like the residual, to the f64 CPU twins.
+        let strains: Vec<Real> = match self.world.as_mut().filter(|w| w.precision() == Precision::F64) {
+            None => self.bodies.par_iter().map(Body::trial_strain_energy).collect(),
+            Some(world) => {
+                let list: Vec<(usize, &[Real])> = self.bodies.iter().enumerate().map(|(b, body)| (b, &body.trial.u[..])).collect();
+                let energies = world.element_energies(&list, times).map_err(|e| self.bodies[0].device_failure(&e))?;
+                energies.iter().map(|e| e.iter().sum()).collect()
+            }
+        };
+        let energies: Vec<_> = self.bodies.par_iter_mut().zip(strains).map(|(body, strain)| body.finish_step(p, strain)).collect();
+        for e in energies {
             self.external_work += e.support_work;
             self.numerical_dissipation += e.theta_dissipation + e.force_dissipation;
         }

@@ -207,6 +207,7 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
         obstacle_reactions: vec![[0.0; 3]; contact.as_ref().map_or(0, |c| c.obstacles.len())],
         contact,
         contact_points: Vec::new(),
+        world: None,
     })
 }
 

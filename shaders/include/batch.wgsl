@@ -1,0 +1,32 @@
+// How the kernels of a batch find their work. A batch holds the elements of many bodies (its
+// "members"), each owning a range of elements, stiffness non-zeros and dofs. A dispatch runs
+// over the list of active members: one z-slice of workgroups per active member, x (and y past
+// MAX_ROW) counting the workgroups inside the member, so the work follows the bodies that are
+// still iterating, not the size of the world. CPU side: `gpu::world`.
+
+struct MemberRange {
+    element_start: u32,
+    elements: u32,
+    nonzero_start: u32,
+    nonzeros: u32,
+    dof_start: u32,
+    dofs: u32,
+    material: u32,
+    unused: u32,
+}
+
+// An active member and what is asked of it.
+struct Active {
+    member: u32,
+    mode: u32,
+}
+
+// Modes: the internal force (and residual), or also the tangent (and stiffness values).
+const FORCES = 1u;
+const TANGENT = 2u;
+const MAX_ROW = 65535u;
+
+// The workgroup's index inside its member.
+fn chunk_of(workgroup: vec3<u32>) -> u32 {
+    return workgroup.x + workgroup.y * MAX_ROW;
+}

@@ -1,0 +1,687 @@
+//! Every deformable body on the device at once. The bodies' elements live in shared buffers, one
+//! batch per (element kind, material model); a body is a "member" of its batch, with its range
+//! of elements, stiffness non-zeros and dofs (`shaders/include/batch.wgsl`).
+//!
+//! One [`GpuWorld::evaluate`] serves every body a Newton iteration evaluates, whatever their
+//! number: their displacements go up (one write per run of consecutive members), each batch
+//! records one dispatch per kernel over its active members, and one submit is followed by one
+//! mapping of one read-back buffer that holds what the CPU needs: the failure flags, the
+//! residuals of the evaluated bodies, and the stiffness values only of the bodies whose tangent
+//! was asked for (those that refactorise).
+
+use super::types::{Active, Coefficients, DofOut, DofStep, MaterialParams, MemberRange, MODE_FORCES, MODE_TANGENT};
+use super::{ElementVariant, Gpu, GpuError};
+use crate::assembly::{element_out_stride, GatherMap, StiffnessPattern};
+use crate::element::ReferenceGeometry;
+use crate::material::Model;
+use crate::mesh::Mesh;
+use crate::precision::{Precision, Real};
+use crate::solver::PhaseTimes;
+use std::sync::Arc;
+use std::time::Instant;
+use wgpu::util::DeviceExt;
+use wgpu::{BindGroup, Buffer, BufferUsages, ComputePipeline};
+
+/// Invocations per workgroup of the kernels that take one item per invocation.
+const WORKGROUP: usize = 64;
+/// Workgroups per row of a dispatch (`MAX_ROW` of `batch.wgsl`).
+const MAX_ROW: usize = 65_535;
+/// `failure` entries per member: the lowest inverted element, the lowest non-finite one.
+const NO_FAILURE: u32 = u32::MAX;
+
+/// Why the element kernel rejected a body's state: its lowest failing element of each kind.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ElementFailure {
+    Inverted(usize),
+    NonFinite(usize),
+}
+
+/// Bytes moved between host and device.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Traffic {
+    pub up: u64,
+    pub down: u64,
+}
+
+impl Traffic {
+    pub fn total(self) -> u64 {
+        self.up + self.down
+    }
+}
+
+/// What the world needs of a body, once, when it is built.
+pub struct WorldBody<'a> {
+    pub mesh: &'a Mesh,
+    pub geometry: &'a ReferenceGeometry,
+    pub model: &'a Model,
+    pub pattern: &'a StiffnessPattern,
+    pub gather: &'a GatherMap,
+}
+
+/// One body's share of an evaluation: its displacement in, its results out.
+pub struct Evaluation<'a> {
+    pub body: usize,
+    pub u: &'a [Real],
+    /// Whether the tangent and the stiffness values `ξ K` are wanted (into `values`).
+    pub tangent: bool,
+    pub values: &'a mut [Real],
+    /// Internal force and residual of every dof, when wanted.
+    pub dof_out: Option<&'a mut [DofOut<Real>]>,
+    /// Out: why the element kernel rejected the state, if it did.
+    pub failure: Option<ElementFailure>,
+}
+
+/// A pipeline with its bind group.
+struct Pass {
+    pipeline: ComputePipeline,
+    bind_group: BindGroup,
+}
+
+impl Pass {
+    fn new(gpu: &Gpu, kernel: &str, entry: &str, variant: Option<ElementVariant>, buffers: &[&Buffer]) -> Result<Self, GpuError> {
+        let pipeline = gpu.pipeline_at(kernel, entry, variant)?;
+        let entries: Vec<wgpu::BindGroupEntry> =
+            buffers.iter().enumerate().map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() }).collect();
+        let bind_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(kernel), layout: &pipeline.get_bind_group_layout(0), entries: &entries });
+        Ok(Self { pipeline, bind_group })
+    }
+
+    /// One z-slice per active member, enough workgroups of `per_group` items for `max_items`.
+    fn record(&self, encoder: &mut wgpu::CommandEncoder, per_group: usize, max_items: usize, active: usize) {
+        let chunks = max_items.div_ceil(per_group);
+        if chunks == 0 || active == 0 {
+            return;
+        }
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes: None });
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &self.bind_group, &[]);
+        pass.dispatch_workgroups(chunks.min(MAX_ROW) as u32, chunks.div_ceil(MAX_ROW) as u32, active as u32);
+    }
+}
+
+/// The bodies of one element kind and material model.
+struct Batch {
+    members: Vec<MemberRange>,
+    /// Entries per element of the element results.
+    stride: usize,
+    /// Elements per workgroup of the tangent entry point (`ELEMENTS_PER_GROUP`).
+    tangent_elements_per_group: usize,
+    /// The displacements of every dof of the batch, as last uploaded.
+    u_host: Vec<Real>,
+    u: Buffer,
+    step: Buffer,
+    failure: Buffer,
+    active: Buffer,
+    element_out: Buffer,
+    values: Buffer,
+    dof_out: Buffer,
+    energy: Buffer,
+    forces: Pass,
+    tangent: Deferred,
+    csr: Pass,
+    residual: Pass,
+    element_energy: Pass,
+}
+
+/// A pipeline compiling on another thread until it is first needed: the tangent kernel is the
+/// largest, and a software adapter compiles it on the CPU while the first evaluations run.
+enum Deferred {
+    Compiling(std::thread::JoinHandle<Result<Pass, GpuError>>),
+    Ready(Pass),
+    Failed,
+}
+
+impl Deferred {
+    fn spawn(compile: impl FnOnce() -> Result<Pass, GpuError> + Send + 'static) -> Self {
+        Self::Compiling(std::thread::spawn(compile))
+    }
+
+    /// Waits for the pipeline if it is still compiling.
+    fn ready(&mut self) -> Result<&Pass, GpuError> {
+        if let Self::Compiling(_) = self {
+            let Self::Compiling(handle) = std::mem::replace(self, Self::Failed) else { unreachable!() };
+            *self = Self::Ready(handle.join().map_err(|_| GpuError::Kernel { kernel: "element_force_tangent".into(), message: "the pipeline's compilation panicked".into() })??);
+        }
+        match self {
+            Self::Ready(pass) => Ok(pass),
+            _ => Err(GpuError::Kernel { kernel: "element_force_tangent".into(), message: "the pipeline failed to compile".into() }),
+        }
+    }
+}
+
+/// The kernels [`GpuWorld::replay`] can run alone.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum WorldKernel {
+    /// `element_force_tangent`, entry point `forces`.
+    Forces,
+    /// `element_force_tangent`, entry point `main`.
+    ForceTangent,
+    /// `assemble_residual` and `assemble_csr`.
+    Assembly,
+    Energy,
+}
+
+/// A copy from a batch's buffer into the read-back buffer.
+struct Copy {
+    batch: usize,
+    what: Source,
+    /// Byte range in the source buffer, and where it lands.
+    source: std::ops::Range<u64>,
+    target: u64,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Source {
+    Failure,
+    DofOut,
+    Values,
+    Energy,
+}
+
+pub struct GpuWorld {
+    gpu: Arc<Gpu>,
+    batches: Vec<Batch>,
+    /// Each body's batch and member.
+    place: Vec<(usize, usize)>,
+    coefficients: Buffer,
+    readback: Buffer,
+    traffic: Traffic,
+    submits: u64,
+}
+
+fn buffer(gpu: &Gpu, label: &str, bytes: usize, usage: BufferUsages) -> Buffer {
+    // wgpu binds no empty buffer; copies need multiples of 4 bytes.
+    gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some(label), size: (bytes.max(8).div_ceil(8) * 8) as u64, usage, mapped_at_creation: false })
+}
+
+fn buffer_init(gpu: &Gpu, label: &str, contents: &[u8], usage: BufferUsages) -> Buffer {
+    let mut padded = contents.to_vec();
+    padded.resize(contents.len().max(8).div_ceil(8) * 8, 0);
+    gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents: &padded, usage })
+}
+
+/// Device bytes of the largest buffer a body brings to a batch, and of its element results.
+fn largest_buffer(body: &WorldBody, real: usize) -> u64 {
+    let stride = element_out_stride(body.pattern.element_dofs);
+    let element_out = body.mesh.element_count() * stride * real;
+    let gathers = (body.gather.csr.len() + body.gather.dof.len()) * 4;
+    (element_out.max(gathers).max(body.pattern.nnz() * real)) as u64
+}
+
+impl GpuWorld {
+    /// Uploads every body's mesh, geometry, material and gather maps, in batches of one element
+    /// kind and material model (split where a batch would pass the device's buffer limits).
+    pub fn new(gpu: Arc<Gpu>, bodies: &[WorldBody]) -> Result<Self, GpuError> {
+        let limits = gpu.device.limits();
+        let real = gpu.precision.size();
+        let max_bytes = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+        let max_members = limits.max_compute_workgroups_per_dimension as usize;
+        let mut groups: Vec<(ElementVariant, Vec<usize>, u64)> = Vec::new();
+        for (b, body) in bodies.iter().enumerate() {
+            let variant = ElementVariant { kind: body.mesh.kind, material: body.model.name() };
+            let bytes = largest_buffer(body, real);
+            if bytes > max_bytes {
+                return Err(GpuError::Kernel {
+                    kernel: "element_force_tangent".into(),
+                    message: format!("a body of {} elements needs a buffer of {bytes} bytes; this device binds at most {max_bytes}", body.mesh.element_count()),
+                });
+            }
+            match groups.iter_mut().rev().find(|(v, members, total)| *v == variant && members.len() < max_members && total + bytes <= max_bytes) {
+                Some((_, members, total)) => {
+                    members.push(b);
+                    *total += bytes;
+                }
+                None => groups.push((variant, vec![b], bytes)),
+            }
+        }
+        let mut place = vec![(0, 0); bodies.len()];
+        let mut batches = Vec::with_capacity(groups.len());
+        let coefficients = buffer(&gpu, "coefficients", 2 * real.max(8), BufferUsages::UNIFORM | BufferUsages::COPY_DST);
+        let mut traffic = Traffic::default();
+        let mut readback_bytes = 0usize;
+        for (variant, members, _) in groups {
+            for (m, &b) in members.iter().enumerate() {
+                place[b] = (batches.len(), m);
+            }
+            let batch = Batch::new(&gpu, variant, members, bodies, &coefficients, &mut traffic)?;
+            let (elements, dofs, nnz) = batch.totals();
+            readback_bytes += (batch.members.len() * 8 + dofs * 2 * real + nnz * real + elements * real).div_ceil(8) * 8;
+            batches.push(batch);
+        }
+        let readback = buffer(&gpu, "readback", readback_bytes, BufferUsages::MAP_READ | BufferUsages::COPY_DST);
+        Ok(Self { gpu, batches, place, coefficients, readback, traffic, submits: 0 })
+    }
+
+    pub fn precision(&self) -> Precision {
+        self.gpu.precision
+    }
+
+    /// Bytes moved since the last call (the upload of the bodies' data counts in the first).
+    pub fn take_traffic(&mut self) -> Traffic {
+        std::mem::take(&mut self.traffic)
+    }
+
+    /// Queue submits so far: one per [`GpuWorld::evaluate`] and per [`GpuWorld::element_energies`].
+    pub fn submits(&self) -> u64 {
+        self.submits
+    }
+
+    /// Number of batches (dispatches per kernel per evaluation).
+    pub fn batch_count(&self) -> usize {
+        self.batches.len()
+    }
+
+    fn upload(&mut self, buffer: &Buffer, offset: u64, bytes: &[u8]) {
+        self.traffic.up += bytes.len() as u64;
+        self.gpu.queue.write_buffer(buffer, offset, bytes);
+    }
+
+    /// The step's start values of some bodies, for `assemble_residual` (once per step; they go
+    /// up with the next submit).
+    pub fn begin_step(&mut self, body: usize, step: &[DofStep<Real>]) {
+        let (b, m) = self.place[body];
+        let offset = self.batches[b].members[m].dof_start as usize * 4 * self.gpu.precision.size();
+        let bytes = to_device(self.gpu.precision, bytemuck::cast_slice(step));
+        let buffer = self.batches[b].step.clone();
+        self.upload(&buffer, offset as u64, &bytes);
+    }
+
+    /// Writes the displacements of the listed members (sorted, per batch) in runs of
+    /// consecutive members.
+    fn upload_displacements(&mut self, batch: usize, members: &[usize]) {
+        let real = self.gpu.precision.size();
+        for run in runs(members) {
+            let b = &self.batches[batch];
+            let (first, last) = (&b.members[run[0]], &b.members[*run.last().expect("a run has members")]);
+            let (start, end) = (first.dof_start as usize, (last.dof_start + last.dofs) as usize);
+            let bytes = to_device(self.gpu.precision, &b.u_host[start..end]);
+            let buffer = b.u.clone();
+            self.upload(&buffer, (start * real) as u64, &bytes);
+        }
+    }
+
+    /// Evaluates the listed bodies at their displacements in one pass: `element_force_tangent`
+    /// (forces, or forces and tangent), `assemble_residual` and, for those that want the
+    /// tangent, `assemble_csr`, then one read-back. Each evaluation's `failure` says whether its
+    /// element kernel rejected the state (its outputs are then not written).
+    pub fn evaluate(&mut self, list: &mut [Evaluation], coefficients: Coefficients<Real>, times: &mut PhaseTimes) -> Result<(), GpuError> {
+        let t0 = Instant::now();
+        let precision = self.gpu.precision;
+        let real = precision.size() as u64;
+        let coefficient_buffer = self.coefficients.clone();
+        self.upload(&coefficient_buffer, 0, &to_device(precision, &[coefficients.factor, coefficients.c1]));
+        // Per batch, its evaluations in member order.
+        let mut order: Vec<usize> = (0..list.len()).collect();
+        order.sort_by_key(|&i| self.place[list[i].body]);
+        let mut copies: Vec<Copy> = Vec::new();
+        let mut target = 0u64;
+        let mut encoder = self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("evaluate") });
+        for batch in 0..self.batches.len() {
+            let mine: Vec<usize> = order.iter().copied().filter(|&i| self.place[list[i].body].0 == batch).collect();
+            if mine.is_empty() {
+                continue;
+            }
+            let members: Vec<usize> = mine.iter().map(|&i| self.place[list[i].body].1).collect();
+            for &i in &mine {
+                let range = self.batches[batch].members[self.place[list[i].body].1];
+                self.batches[batch].u_host[range.dof_start as usize..(range.dof_start + range.dofs) as usize].copy_from_slice(list[i].u);
+            }
+            self.upload_displacements(batch, &members);
+            let active: Vec<Active> = mine.iter().map(|&i| Active { member: self.place[list[i].body].1 as u32, mode: if list[i].tangent { MODE_TANGENT } else { MODE_FORCES } }).collect();
+            let b = &self.batches[batch];
+            let (active_buffer, failure_buffer) = (b.active.clone(), b.failure.clone());
+            let failures = vec![NO_FAILURE; 2 * b.members.len()];
+            self.upload(&active_buffer, 0, bytemuck::cast_slice(&active));
+            self.upload(&failure_buffer, 0, bytemuck::cast_slice(&failures));
+            if active.iter().any(|a| a.mode == MODE_TANGENT) {
+                self.batches[batch].tangent.ready()?;
+            }
+            let b = &self.batches[batch];
+            let extent = |mode: u32, f: fn(&MemberRange) -> u32| active.iter().filter(|a| a.mode == mode || mode == 0).map(|a| f(&b.members[a.member as usize]) as usize).max().unwrap_or(0);
+            b.forces.record(&mut encoder, WORKGROUP, extent(MODE_FORCES, |m| m.elements), active.len());
+            if let Deferred::Ready(tangent) = &b.tangent {
+                tangent.record(&mut encoder, b.tangent_elements_per_group, extent(MODE_TANGENT, |m| m.elements), active.len());
+            }
+            b.residual.record(&mut encoder, WORKGROUP, extent(0, |m| m.dofs), active.len());
+            b.csr.record(&mut encoder, WORKGROUP, extent(MODE_TANGENT, |m| m.nonzeros), active.len());
+            copies.push(Copy { batch, what: Source::Failure, source: 0..(8 * b.members.len()) as u64, target });
+            target += (8 * b.members.len()) as u64;
+            let wants = |i: usize, what: Source| match what {
+                Source::DofOut => list[i].dof_out.is_some(),
+                _ => list[i].tangent,
+            };
+            for what in [Source::DofOut, Source::Values] {
+                let wanted: Vec<usize> = mine.iter().copied().filter(|&i| wants(i, what)).map(|i| self.place[list[i].body].1).collect();
+                for run in runs(&wanted) {
+                    let (first, last) = (&b.members[run[0]], &b.members[*run.last().expect("a run has members")]);
+                    let source = match what {
+                        Source::DofOut => first.dof_start as u64 * 2 * real..(last.dof_start + last.dofs) as u64 * 2 * real,
+                        _ => first.nonzero_start as u64 * real..(last.nonzero_start + last.nonzeros) as u64 * real,
+                    };
+                    let size = source.end - source.start;
+                    if size > 0 {
+                        copies.push(Copy { batch, what, source, target });
+                        target += size.div_ceil(8) * 8;
+                    }
+                }
+            }
+        }
+        self.read_back(encoder, &copies, "element_force_tangent", times, t0, |world, bytes| {
+            for &i in &order {
+                let (batch, member) = world.place[list[i].body];
+                let range = world.batches[batch].members[member];
+                let find = |what: Source, at: u64| {
+                    copies.iter().find(|c| c.batch == batch && c.what == what && c.source.contains(&at)).map(|c| (c.target + at - c.source.start) as usize)
+                };
+                let flags_at = find(Source::Failure, member as u64 * 8).expect("the failure flags came back");
+                let flags: [u32; 2] = bytemuck::pod_read_unaligned(&bytes[flags_at..flags_at + 8]);
+                list[i].failure = if flags[0] != NO_FAILURE {
+                    Some(ElementFailure::Inverted(flags[0] as usize))
+                } else if flags[1] != NO_FAILURE {
+                    Some(ElementFailure::NonFinite(flags[1] as usize))
+                } else {
+                    None
+                };
+                if list[i].failure.is_some() {
+                    continue;
+                }
+                let dofs = range.dofs as usize;
+                if let Some(out) = list[i].dof_out.as_deref_mut() {
+                    if let Some(at) = find(Source::DofOut, range.dof_start as u64 * 2 * real) {
+                        let reals = from_device(precision, &bytes[at..at + dofs * 2 * real as usize]);
+                        out.copy_from_slice(bytemuck::cast_slice(&reals));
+                    }
+                }
+                if list[i].tangent && range.nonzeros > 0 {
+                    let at = find(Source::Values, range.nonzero_start as u64 * real).expect("the values came back");
+                    list[i].values.copy_from_slice(&from_device(precision, &bytes[at..at + range.nonzeros as usize * real as usize]));
+                }
+            }
+        })
+    }
+
+    /// The strain energy of every element of each listed body at its displacement
+    /// (`element_energy`), in one pass.
+    pub fn element_energies(&mut self, list: &[(usize, &[Real])], times: &mut PhaseTimes) -> Result<Vec<Vec<Real>>, GpuError> {
+        let t0 = Instant::now();
+        let precision = self.gpu.precision;
+        let real = precision.size() as u64;
+        let mut order: Vec<usize> = (0..list.len()).collect();
+        order.sort_by_key(|&i| self.place[list[i].0]);
+        let mut copies = Vec::new();
+        let mut target = 0u64;
+        let mut encoder = self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("energies") });
+        for batch in 0..self.batches.len() {
+            let mine: Vec<usize> = order.iter().copied().filter(|&i| self.place[list[i].0].0 == batch).collect();
+            if mine.is_empty() {
+                continue;
+            }
+            let members: Vec<usize> = mine.iter().map(|&i| self.place[list[i].0].1).collect();
+            for &i in &mine {
+                let range = self.batches[batch].members[self.place[list[i].0].1];
+                self.batches[batch].u_host[range.dof_start as usize..(range.dof_start + range.dofs) as usize].copy_from_slice(list[i].1);
+            }
+            self.upload_displacements(batch, &members);
+            let active: Vec<Active> = members.iter().map(|&m| Active { member: m as u32, mode: MODE_FORCES }).collect();
+            let active_buffer = self.batches[batch].active.clone();
+            self.upload(&active_buffer, 0, bytemuck::cast_slice(&active));
+            let b = &self.batches[batch];
+            let most = members.iter().map(|&m| b.members[m].elements as usize).max().unwrap_or(0);
+            b.element_energy.record(&mut encoder, WORKGROUP, most, active.len());
+            for run in runs(&members) {
+                let (first, last) = (&b.members[run[0]], &b.members[*run.last().expect("a run has members")]);
+                let source = first.element_start as u64 * real..(last.element_start + last.elements) as u64 * real;
+                let size = source.end - source.start;
+                if size > 0 {
+                    copies.push(Copy { batch, what: Source::Energy, source, target });
+                    target += size.div_ceil(8) * 8;
+                }
+            }
+        }
+        let mut energies = vec![Vec::new(); list.len()];
+        self.read_back(encoder, &copies, "element_energy", times, t0, |world, bytes| {
+            for &i in &order {
+                let (batch, member) = world.place[list[i].0];
+                let range = world.batches[batch].members[member];
+                let at = range.element_start as u64 * real;
+                if let Some(c) = copies.iter().find(|c| c.batch == batch && c.source.contains(&at)) {
+                    let start = (c.target + at - c.source.start) as usize;
+                    energies[i] = from_device(precision, &bytes[start..start + range.elements as usize * real as usize]);
+                }
+            }
+        })?;
+        Ok(energies)
+    }
+
+    /// Runs `kernel` again on the members and modes of the last pass, with no upload and no
+    /// read-back: what `bifirst bench` times as the kernel alone.
+    pub fn replay(&mut self, kernel: WorldKernel) -> Result<(), GpuError> {
+        if kernel == WorldKernel::ForceTangent {
+            for b in &mut self.batches {
+                b.tangent.ready()?;
+            }
+        }
+        let mut encoder = self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("replay") });
+        for b in &self.batches {
+            let all = b.members.len();
+            let most = |f: fn(&MemberRange) -> u32| b.members.iter().map(|m| f(m) as usize).max().unwrap_or(0);
+            match kernel {
+                WorldKernel::Forces => b.forces.record(&mut encoder, WORKGROUP, most(|m| m.elements), all),
+                WorldKernel::ForceTangent => {
+                    if let Deferred::Ready(tangent) = &b.tangent {
+                        tangent.record(&mut encoder, b.tangent_elements_per_group, most(|m| m.elements), all);
+                    }
+                }
+                WorldKernel::Assembly => {
+                    b.residual.record(&mut encoder, WORKGROUP, most(|m| m.dofs), all);
+                    b.csr.record(&mut encoder, WORKGROUP, most(|m| m.nonzeros), all);
+                }
+                WorldKernel::Energy => b.element_energy.record(&mut encoder, WORKGROUP, most(|m| m.elements), all),
+            }
+        }
+        self.gpu.queue.submit([encoder.finish()]);
+        self.submits += 1;
+        self.gpu.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Kernel { kernel: "replay".into(), message: e.to_string() })?;
+        Ok(())
+    }
+
+    /// A body's element results as the last pass left them (forces, then the packed tangent):
+    /// for the parity tests and `bifirst bench`.
+    pub fn element_results(&mut self, body: usize) -> Result<Vec<Real>, GpuError> {
+        let (b, m) = self.place[body];
+        let range = self.batches[b].members[m];
+        let real = self.gpu.precision.size() as u64;
+        let stride = self.batches[b].stride as u64;
+        let (start, size) = (range.element_start as u64 * stride * real, range.elements as u64 * stride * real);
+        let staging = self.gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some("element results"), size: size.max(8), usage: BufferUsages::MAP_READ | BufferUsages::COPY_DST, mapped_at_creation: false });
+        let mut encoder = self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("element results") });
+        encoder.copy_buffer_to_buffer(&self.batches[b].element_out, start, &staging, 0, size);
+        self.gpu.queue.submit([encoder.finish()]);
+        self.submits += 1;
+        self.traffic.down += size;
+        Ok(from_device(self.gpu.precision, &self.gpu.read_range("element_force_tangent", &staging, size)?))
+    }
+
+    /// Records the copies into the read-back buffer, submits once, maps once and hands the
+    /// mapped bytes to `unpack`. The device's work counts as `elements`, the host's packing and
+    /// unpacking as `transfer`.
+    fn read_back(
+        &mut self,
+        mut encoder: wgpu::CommandEncoder,
+        copies: &[Copy],
+        kernel: &str,
+        times: &mut PhaseTimes,
+        started: Instant,
+        unpack: impl FnOnce(&Self, &[u8]),
+    ) -> Result<(), GpuError> {
+        for c in copies {
+            let b = &self.batches[c.batch];
+            let source = match c.what {
+                Source::Failure => &b.failure,
+                Source::DofOut => &b.dof_out,
+                Source::Values => &b.values,
+                Source::Energy => &b.energy,
+            };
+            encoder.copy_buffer_to_buffer(source, c.source.start, &self.readback, c.target, c.source.end - c.source.start);
+        }
+        let submitted = Instant::now();
+        self.gpu.queue.submit([encoder.finish()]);
+        self.submits += 1;
+        let end = copies.iter().map(|c| c.target + (c.source.end - c.source.start)).max().unwrap_or(0);
+        let bytes = if end == 0 {
+            self.gpu.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Kernel { kernel: kernel.into(), message: e.to_string() })?;
+            Vec::new()
+        } else {
+            self.gpu.read_range(kernel, &self.readback, end)?
+        };
+        self.traffic.down += end;
+        let mapped = Instant::now();
+        unpack(self, &bytes);
+        times.transfer += (submitted - started).as_secs_f64() + mapped.elapsed().as_secs_f64();
+        times.elements += (mapped - submitted).as_secs_f64();
+        Ok(())
+    }
+}
+
+/// Sorted member indices cut into runs of consecutive members.
+fn runs(members: &[usize]) -> Vec<Vec<usize>> {
+    let mut out: Vec<Vec<usize>> = Vec::new();
+    for &m in members {
+        match out.last_mut() {
+            Some(run) if run.last() == Some(&(m.wrapping_sub(1))) => run.push(m),
+            _ => out.push(vec![m]),
+        }
+    }
+    out
+}
+
+impl Batch {
+    fn new(gpu: &Arc<Gpu>, variant: ElementVariant, members: Vec<usize>, bodies: &[WorldBody], coefficients: &Buffer, traffic: &mut Traffic) -> Result<Self, GpuError> {
+        let kind = variant.kind;
+        let dim = kind.dim();
+        let stride = element_out_stride(kind.nodes() * dim);
+        let precision = gpu.precision;
+        let real = precision.size();
+        let mut ranges = Vec::with_capacity(members.len());
+        let mut materials: Vec<MaterialParams<Real>> = Vec::new();
+        let (mut geometry, mut connectivity) = (Vec::new(), Vec::new());
+        let (mut csr_start, mut csr, mut dof_start, mut dof) = (vec![0u32], Vec::new(), vec![0u32], Vec::new());
+        let (mut elements, mut dofs, mut nnz) = (0usize, 0usize, 0usize);
+        for &b in &members {
+            let body = &bodies[b];
+            let params = MaterialParams::of(body.model);
+            let material = materials.iter().position(|m| *m == params).unwrap_or_else(|| {
+                materials.push(params);
+                materials.len() - 1
+            });
+            let element_start = elements;
+            let node_start = (dofs / dim) as u32;
+            for p in &body.geometry.points {
+                geometry.extend(p.dn_dx.iter().flatten());
+                geometry.push(p.dv);
+            }
+            connectivity.extend(body.mesh.connectivity.iter().map(|&n| n + node_start));
+            let shift = (element_start * stride) as u32;
+            let (gather_base, dof_base) = (csr.len() as u32, dof.len() as u32);
+            csr.extend(body.gather.csr.iter().map(|&j| j + shift));
+            csr_start.extend(body.gather.csr_start[1..].iter().map(|&s| s + gather_base));
+            dof.extend(body.gather.dof.iter().map(|&j| j + shift));
+            dof_start.extend(body.gather.dof_start[1..].iter().map(|&s| s + dof_base));
+            let body_dofs = body.mesh.nodes.len() * dim;
+            ranges.push(MemberRange {
+                element_start: element_start as u32,
+                elements: body.mesh.element_count() as u32,
+                nonzero_start: nnz as u32,
+                nonzeros: body.pattern.nnz() as u32,
+                dof_start: dofs as u32,
+                dofs: body_dofs as u32,
+                material: material as u32,
+                unused: 0,
+            });
+            elements += body.mesh.element_count();
+            dofs += body_dofs;
+            nnz += body.pattern.nnz();
+        }
+        if (elements * stride) as u64 >= u64::from(u32::MAX) {
+            return Err(GpuError::Kernel { kernel: "element_force_tangent".into(), message: format!("{elements} elements of {} are too many for 32-bit indices", kind.name()) });
+        }
+        let storage = BufferUsages::STORAGE;
+        let (read, write, copy_out) = (storage, storage | BufferUsages::COPY_DST, storage | BufferUsages::COPY_SRC);
+        let mut uploaded = |label: &str, bytes: &[u8]| {
+            traffic.up += bytes.len() as u64;
+            buffer_init(gpu, label, bytes, read)
+        };
+        let material_buffer = uploaded("materials", &to_device(precision, bytemuck::cast_slice(&materials)));
+        let geometry = uploaded("geometry", &to_device(precision, &geometry));
+        let connectivity = uploaded("connectivity", bytemuck::cast_slice(&connectivity));
+        let member_buffer = uploaded("members", bytemuck::cast_slice(&ranges));
+        let csr_start = uploaded("csr gather start", bytemuck::cast_slice(&csr_start));
+        let csr = uploaded("csr gather", bytemuck::cast_slice(&csr));
+        let dof_start = uploaded("dof gather start", bytemuck::cast_slice(&dof_start));
+        let dof = uploaded("dof gather", bytemuck::cast_slice(&dof));
+        let u = buffer(gpu, "u", dofs * real, write);
+        let step = buffer(gpu, "step", dofs * 4 * real, write);
+        let failure = buffer(gpu, "failure", members.len() * 8, write | BufferUsages::COPY_SRC);
+        let active = buffer(gpu, "active", members.len() * 8, write);
+        let element_out = buffer(gpu, "element_out", elements * stride * real, copy_out);
+        let values = buffer(gpu, "values", nnz * real, copy_out);
+        let dof_out = buffer(gpu, "dof_out", dofs * 2 * real, copy_out);
+        let energy = buffer(gpu, "energy", elements * real, copy_out);
+        let v = Some(variant);
+        let element_buffers = [&geometry, &connectivity, &u, &element_out, &failure, &member_buffer, &material_buffer, &active];
+        // The pipelines compile in parallel: a software adapter compiles each on the CPU.
+        let tangent = {
+            let (gpu, buffers) = (gpu.clone(), element_buffers.map(Buffer::clone));
+            Deferred::spawn(move || Pass::new(&gpu, "element_force_tangent", "main", v, &buffers.each_ref()))
+        };
+        let (forces, csr_pass, residual, element_energy) = std::thread::scope(|scope| {
+            let forces = scope.spawn(|| Pass::new(gpu, "element_force_tangent", "forces", v, &element_buffers));
+            let csr = scope.spawn(|| Pass::new(gpu, "assemble_csr", "main", None, &[&element_out, &csr_start, &csr, coefficients, &values, &member_buffer, &active]));
+            let residual = scope.spawn(|| Pass::new(gpu, "assemble_residual", "main", None, &[&element_out, &dof_start, &dof, coefficients, &u, &step, &dof_out, &member_buffer, &active]));
+            let energy = Pass::new(gpu, "element_energy", "main", v, &[&geometry, &connectivity, &u, &energy, &member_buffer, &material_buffer, &active]);
+            let join = |h: std::thread::ScopedJoinHandle<'_, Result<Pass, GpuError>>| h.join().expect("a pipeline compiles without panicking");
+            Ok::<_, GpuError>((join(forces)?, join(csr)?, join(residual)?, energy?))
+        })?;
+        let pairs = kind.nodes() * (kind.nodes() + 1) / 2;
+        Ok(Self {
+            members: ranges,
+            stride,
+            tangent_elements_per_group: (WORKGROUP / pairs).max(1),
+            u_host: vec![0.0; dofs],
+            u,
+            step,
+            failure,
+            active,
+            element_out,
+            values,
+            dof_out,
+            energy,
+            forces,
+            tangent,
+            csr: csr_pass,
+            residual,
+            element_energy,
+        })
+    }
+
+    /// Elements, dofs and stiffness non-zeros of the batch.
+    fn totals(&self) -> (usize, usize, usize) {
+        self.members.iter().fold((0, 0, 0), |(e, d, n), m| (e + m.elements as usize, d + m.dofs as usize, n + m.nonzeros as usize))
+    }
+}
+
+/// Reals as the device stores them.
+pub fn to_device(precision: Precision, reals: &[Real]) -> Vec<u8> {
+    match precision {
+        Precision::F64 => bytemuck::cast_slice(reals).to_vec(),
+        Precision::F32 => bytemuck::cast_slice(&reals.iter().map(|&x| x as f32).collect::<Vec<f32>>()).to_vec(),
+    }
+}
+
+/// Reals read back from the device (copied: mapped bytes need not be aligned for f64).
+pub fn from_device(precision: Precision, bytes: &[u8]) -> Vec<Real> {
+    match precision {
+        Precision::F64 => bytemuck::pod_collect_to_vec(bytes),
+        Precision::F32 => bytemuck::pod_collect_to_vec::<u8, f32>(bytes).into_iter().map(Real::from).collect(),
+    }
+}
