@@ -7,6 +7,7 @@ use crate::cpu;
 use crate::element::ReferenceGeometry;
 use crate::gpu::types::{Coefficients, DofOut, DofStep};
 use crate::gpu::uzawa_step::{UzawaPoint, UzawaStepKernel};
+use crate::gpu::peak::{measure as measure_peaks, Peaks, FMA_FLOPS_PER_VALUE};
 use crate::gpu::{Evaluation, Gpu, GpuError, GpuWorld, WorldKernel};
 use crate::material::{BlatzKo, Lvf, Model, NeoHookean};
 use crate::mesh::{generate, ElementKind, Mesh};
@@ -120,6 +121,13 @@ pub struct BenchRow {
     /// Largest relative error against the CPU in f64 (max norm, per element for element
     /// results, over the body for assembled values).
     pub max_relative_error: f64,
+    /// Device-memory traffic and arithmetic achieved ([`kernel_cost`] over the time per call),
+    /// on a GPU, for the kernels with a cost model.
+    pub gbytes_per_second: Option<f64>,
+    pub gflops_per_second: Option<f64>,
+    /// Those as fractions of the adapter's measured peaks (`peak_copy`, `peak_fma`).
+    pub peak_bandwidth_fraction: Option<f64>,
+    pub peak_flops_fraction: Option<f64>,
 }
 
 /// What to run.
@@ -181,6 +189,7 @@ fn element_energies(case: &BenchCase) -> Vec<Real> {
 
 /// Runs the benchmark; `gpus` are the devices to compare with the CPU (f64 and/or f32).
 pub fn run_bench(options: &BenchOptions, gpus: &[Arc<Gpu>], mut row: impl FnMut(BenchRow)) -> Result<(), GpuError> {
+    let peaks = peak_rows(options, gpus, &mut row)?;
     let element_kernels = ["element_force_tangent", "assemble", "evaluate", "energy"].iter().any(|k| wanted(options, k));
     for kind in KINDS.into_iter().filter(|_| element_kernels) {
         for model in bench_models() {
@@ -207,8 +216,9 @@ pub fn run_bench(options: &BenchOptions, gpus: &[Arc<Gpu>], mut row: impl FnMut(
             if wanted(options, "energy") {
                 row(make("element_energy", "cpu f64".into(), t, 0, 0.0));
             }
-            for gpu in gpus {
+            for (gpu, peaks) in gpus.iter().zip(&peaks) {
                 let backend = format!("gpu {}", gpu.precision.name());
+                let real = gpu.precision.size();
                 let mut world = case.on(gpu)?;
                 let stride = element_out_stride(case.pattern.element_dofs);
                 let mut values = vec![0.0; case.pattern.nnz()];
@@ -224,7 +234,7 @@ pub fn run_bench(options: &BenchOptions, gpus: &[Arc<Gpu>], mut row: impl FnMut(
                     let mut result = Ok(());
                     let t = time_calls(options.min_time, || result = world.replay(WorldKernel::ForceTangent));
                     result?;
-                    row(make("element_force_tangent", backend.clone(), t, 0, error));
+                    row(make("element_force_tangent", backend.clone(), t, 0, error).with_roofline(kernel_cost(Costed::ForceTangent, &case, real), peaks));
                 }
                 if wanted(options, "assemble") {
                     let residual: Vec<Real> = dof_out.iter().map(|d| d.g).collect();
@@ -233,7 +243,7 @@ pub fn run_bench(options: &BenchOptions, gpus: &[Arc<Gpu>], mut row: impl FnMut(
                     let mut result = Ok(());
                     let t = time_calls(options.min_time, || result = world.replay(WorldKernel::Assembly));
                     result?;
-                    row(make("assemble_csr+assemble_residual", backend.clone(), t, 0, error));
+                    row(make("assemble_csr+assemble_residual", backend.clone(), t, 0, error).with_roofline(kernel_cost(Costed::Assembly, &case, real), peaks));
                 }
                 if wanted(options, "evaluate") {
                     // What a refactorising Newton iteration costs the device: upload, kernels,
@@ -249,7 +259,8 @@ pub fn run_bench(options: &BenchOptions, gpus: &[Arc<Gpu>], mut row: impl FnMut(
                     let t = time_calls(options.min_time, || energies = world.element_energies(&[(0, &case.u[..])], &mut PhaseTimes::default()));
                     let energy: Real = energies?[0].iter().sum();
                     let traffic = world.take_traffic().total();
-                    row(make("element_energy", backend.clone(), t, traffic, (energy - reference.energy).abs() / reference.energy.abs()));
+                    let error = (energy - reference.energy).abs() / reference.energy.abs();
+                    row(make("element_energy", backend.clone(), t, traffic, error).with_roofline(kernel_cost(Costed::Energy, &case, real), peaks));
                 }
             }
         }
@@ -258,6 +269,91 @@ pub fn run_bench(options: &BenchOptions, gpus: &[Arc<Gpu>], mut row: impl FnMut(
         uzawa_rows(options, gpus, &mut row)?;
     }
     Ok(())
+}
+
+/// The kernels with a cost model.
+#[derive(Debug, Clone, Copy)]
+enum Costed {
+    ForceTangent,
+    Assembly,
+    Energy,
+}
+
+/// Floating-point operations of a material call at one point, counted from the WGSL source
+/// (stress and tangent; energy), to about 20 %.
+fn material_flops(model: &Model) -> (f64, f64) {
+    match model {
+        Model::BlatzKo(_) => (600.0, 80.0),
+        Model::Lvf(_) => (700.0, 90.0),
+        Model::NeoHookean(_) => (350.0, 110.0),
+    }
+}
+
+/// Device-memory bytes (each input read once, each output written once) and floating-point
+/// operations (a multiply-add counts 2) of one call of a kernel on a case, counted from the
+/// shader loops: the inputs of the roofline columns.
+fn kernel_cost(kernel: Costed, case: &BenchCase, real: usize) -> (f64, f64) {
+    let kind = case.mesh.kind;
+    let (n, nen, dim) = (case.elements() as f64, kind.nodes() as f64, kind.dim() as f64);
+    let nqp = crate::element::shape::quadrature(kind).len() as f64;
+    let stride = element_out_stride(case.pattern.element_dofs) as f64;
+    let (tangent_flops, energy_flops) = material_flops(&case.model);
+    let real = real as f64;
+    let element_inputs = real * (nqp * (3.0 * nen + 1.0) + nen * dim) + 4.0 * nen;
+    match kernel {
+        Costed::ForceTangent => {
+            let pairs = nen * (nen + 1.0) / 2.0;
+            // Phase 1 per point: F, det F, E, the material, the weighting; phase 2 per point
+            // and node pair: D B_b, the geometric term, B_aᵀ (D B_b); the forces per node.
+            let per_point = 18.0 * nen + 116.0 + tangent_flops;
+            let per_pair = 36.0 * dim + 236.0 + 12.0 * dim * dim + dim;
+            (n * (element_inputs + real * stride), n * nqp * (per_point + pairs * per_pair + nen * 36.0))
+        }
+        Costed::Assembly => {
+            let g = &case.gather;
+            let (nnz, dofs) = (case.pattern.nnz() as f64, case.u.len() as f64);
+            let (csr, dof) = (g.csr.len() as f64, g.dof.len() as f64);
+            let bytes = (real + 4.0) * (csr + dof) + 4.0 * (nnz + dofs) + real * nnz + real * 7.0 * dofs;
+            (bytes, 2.0 * csr + dof + 10.0 * dofs)
+        }
+        Costed::Energy => (n * (element_inputs + real), n * nqp * (18.0 * nen + 54.0 + energy_flops)),
+    }
+}
+
+/// The rows of the peak kernels (`peak_copy`, `peak_fma`) on the CPU and on each device, and
+/// each device's peaks for the roofline columns of the other rows.
+fn peak_rows(options: &BenchOptions, gpus: &[Arc<Gpu>], row: &mut impl FnMut(BenchRow)) -> Result<Vec<Peaks>, GpuError> {
+    let shown = wanted(options, "peak");
+    let make = |kernel: &str, items: usize, backend: String, seconds: f64| {
+        BenchRow::new(kernel, "-", "-", items, backend, Timing { per_call: seconds, calls: 1 }, 0, 0.0)
+    };
+    if shown {
+        // The CPU twins on every thread, on 2^24 values.
+        let n = 1 << 24;
+        let source = vec![1.0; n];
+        let mut target = vec![0.0; n];
+        let t = time_calls(options.min_time, || cpu::peak_copy(&source, &mut target));
+        let bytes = 2.0 * (n * 8) as f64;
+        let flops = FMA_FLOPS_PER_VALUE * (n / 16) as f64;
+        let cpu_peaks = |copy: f64, fma: f64| Peaks { bytes_per_second: copy, flops_per_second: fma, copy_values: n, copy_seconds: 0.0, fma_values: n / 16, fma_seconds: 0.0 };
+        row(make("peak_copy", n, "cpu f64".into(), t.per_call).with_roofline((bytes, 0.0), &cpu_peaks(bytes / t.per_call, f64::INFINITY)));
+        let mut values = vec![1.0; n / 16];
+        let t = time_calls(options.min_time, || cpu::peak_fma(&mut values));
+        row(make("peak_fma", n / 16, "cpu f64".into(), t.per_call).with_roofline((0.0, flops), &cpu_peaks(f64::INFINITY, flops / t.per_call)));
+    }
+    let mut all = Vec::with_capacity(gpus.len());
+    for gpu in gpus {
+        let peaks = measure_peaks(gpu, 0.02)?;
+        if shown {
+            let backend = format!("gpu {}", gpu.precision.name());
+            let copy_bytes = 2.0 * (peaks.copy_values * gpu.precision.size()) as f64;
+            row(make("peak_copy", peaks.copy_values, backend.clone(), peaks.copy_seconds).with_roofline((copy_bytes, 0.0), &peaks));
+            let fma_flops = FMA_FLOPS_PER_VALUE * peaks.fma_values as f64;
+            row(make("peak_fma", peaks.fma_values, backend, peaks.fma_seconds).with_roofline((0.0, fma_flops), &peaks));
+        }
+        all.push(peaks);
+    }
+    Ok(all)
 }
 
 /// Contact points over every regime of the law (separated, sticking, sliding, frictionless),
@@ -314,7 +410,10 @@ fn uzawa_rows(options: &BenchOptions, gpus: &[Arc<Gpu>], row: &mut impl FnMut(Be
 
 /// The table `bifirst bench` prints.
 pub fn table_header() -> String {
-    format!("{:<32} {:<6} {:<12} {:>8} {:<8} {:>12} {:>12} {:>12} {:>10}", "kernel", "elem", "material", "items", "backend", "time/call", "items/s", "bytes/call", "max rel err")
+    format!(
+        "{:<32} {:<6} {:<12} {:>8} {:<8} {:>12} {:>12} {:>12} {:>10} {:>9} {:>9} {:>7} {:>7}",
+        "kernel", "elem", "material", "items", "backend", "time/call", "items/s", "bytes/call", "max rel err", "GB/s", "GFLOP/s", "%bw", "%flop"
+    )
 }
 
 impl BenchRow {
@@ -331,12 +430,27 @@ impl BenchRow {
             items_per_second: items as f64 / timing.per_call,
             bytes_per_call: traffic / timing.calls,
             max_relative_error: error,
+            gbytes_per_second: None,
+            gflops_per_second: None,
+            peak_bandwidth_fraction: None,
+            peak_flops_fraction: None,
         }
     }
 
+    /// Adds the roofline columns from the bytes and operations of one call and the peaks.
+    fn with_roofline(mut self, cost: (f64, f64), peaks: &Peaks) -> Self {
+        let (bytes, flops) = (cost.0 / self.seconds_per_call, cost.1 / self.seconds_per_call);
+        self.gbytes_per_second = Some(bytes * 1e-9);
+        self.gflops_per_second = Some(flops * 1e-9);
+        self.peak_bandwidth_fraction = Some(bytes / peaks.bytes_per_second);
+        self.peak_flops_fraction = Some(flops / peaks.flops_per_second);
+        self
+    }
+
     pub fn line(&self) -> String {
+        let column = |x: Option<f64>, scale: f64| x.map_or("-".to_string(), |v| format!("{:.1}", v * scale));
         format!(
-            "{:<32} {:<6} {:<12} {:>8} {:<8} {:>10.3}ms {:>12.3e} {:>12} {:>10.1e}",
+            "{:<32} {:<6} {:<12} {:>8} {:<8} {:>10.3}ms {:>12.3e} {:>12} {:>10.1e} {:>9} {:>9} {:>7} {:>7}",
             self.kernel,
             self.element,
             self.material,
@@ -345,7 +459,11 @@ impl BenchRow {
             self.seconds_per_call * 1e3,
             self.items_per_second,
             self.bytes_per_call,
-            self.max_relative_error
+            self.max_relative_error,
+            column(self.gbytes_per_second, 1.0),
+            column(self.gflops_per_second, 1.0),
+            column(self.peak_bandwidth_fraction, 100.0),
+            column(self.peak_flops_fraction, 100.0)
         )
     }
 }

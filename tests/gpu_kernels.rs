@@ -500,3 +500,22 @@ fn one_device_pass_serves_any_number_of_bodies() {
         }
     }
 }
+
+#[test]
+fn peak_kernels_match_their_cpu_twins() {
+    for (precision, tolerance) in TOLERANCES {
+        let Some(gpu) = gpu_or_skip("peak_kernels_match_their_cpu_twins", precision) else { continue };
+        let values: Vec<f64> = (0..4096).map(|i| (i as f64 * 0.37).sin()).collect();
+        let (copied, _) = bifirst::gpu::peak::peak_copy(&gpu, &values, 2).unwrap();
+        let mut expected = vec![0.0; values.len()];
+        cpu::peak_copy(&values, &mut expected);
+        assert!(relative_error(&copied, &expected) <= tolerance, "peak_copy {}", precision.name());
+        let (on_gpu, _) = bifirst::gpu::peak::peak_fma(&gpu, &values, 2).unwrap();
+        let mut expected = values.clone();
+        cpu::peak_fma(&mut expected);
+        let error = relative_error(&on_gpu, &expected);
+        assert!(error <= tolerance, "peak_fma {}: {error:.2e}", precision.name());
+        let peaks = bifirst::gpu::peak::measure(&gpu, 0.0).unwrap();
+        assert!(peaks.bytes_per_second > 0.0 && peaks.flops_per_second > 0.0, "{peaks:?}");
+    }
+}

@@ -9,6 +9,8 @@
 //! | `assemble_csr` | [`assemble_csr`] |
 //! | `assemble_residual` | [`assemble_residual`] |
 //! | `uzawa_step` | [`uzawa_step`] |
+//! | `peak_copy` | [`peak_copy`] |
+//! | `peak_fma` | [`peak_fma`] |
 
 pub use crate::contact::law::uzawa_step;
 pub use crate::element::{element_energy, element_force_tangent};
@@ -107,4 +109,28 @@ fn gather_sum(element_out: &[Real], gather_start: &[u32], gather: &[u32], k: usi
         f += element_out[gather[j as usize] as usize];
     }
     f
+}
+
+/// `peak_copy`: every value of `source` into `destination` (the kernel copies vec4s).
+pub fn peak_copy(source: &[Real], destination: &mut [Real]) {
+    destination.par_iter_mut().with_min_len(PER_TASK).zip(source).for_each(|(d, s)| *d = *s);
+}
+
+/// Fused multiply-adds per chain of `peak_fma`.
+pub const PEAK_FMA_STEPS: usize = 256;
+
+/// `peak_fma`: per value, eight independent chains of [`PEAK_FMA_STEPS`] multiply-adds from
+/// it, summed as the kernel sums them (separate multiply and add: the target need not have
+/// FMA, so the results agree with the kernel's to round-off, not bit for bit).
+pub fn peak_fma(values: &mut [Real]) {
+    values.par_iter_mut().with_min_len(PER_TASK).for_each(|v| {
+        let x = *v;
+        let mut a = [x, x + 1.0, x + 2.0, x + 3.0];
+        let mut b = a.map(|y| y + 0.5);
+        for _ in 0..PEAK_FMA_STEPS {
+            a = a.map(|y| y * 0.999 + 0.001);
+            b = b.map(|y| y * 0.999 + 0.001);
+        }
+        *v = (a[0] + a[1]) + (a[2] + a[3]) + ((b[0] + b[1]) + (b[2] + b[3]));
+    });
 }

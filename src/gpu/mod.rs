@@ -4,6 +4,7 @@
 //! in [`crate::cpu`], which is the test oracle.
 
 pub mod context;
+pub mod peak;
 pub mod shaders;
 pub mod types;
 pub mod uzawa_step;

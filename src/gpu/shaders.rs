@@ -12,6 +12,8 @@ pub const SHADERS: &[(&str, &str)] = &[
     ("assemble_residual", include_str!("../../shaders/assemble_residual.wgsl")),
     ("element_energy", include_str!("../../shaders/element_energy.wgsl")),
     ("element_force_tangent", include_str!("../../shaders/element_force_tangent.wgsl")),
+    ("peak_copy", include_str!("../../shaders/peak_copy.wgsl")),
+    ("peak_fma", include_str!("../../shaders/peak_fma.wgsl")),
     ("uzawa_step", include_str!("../../shaders/uzawa_step.wgsl")),
 ];
 
