@@ -83,7 +83,7 @@ impl BenchCase {
     pub fn on(&self, gpu: &Arc<Gpu>) -> Result<GpuWorld, GpuError> {
         let body = crate::gpu::WorldBody { mesh: &self.mesh, geometry: &self.geometry, model: &self.model, pattern: &self.pattern, gather: &self.gather };
         let mut world = GpuWorld::new(gpu.clone(), &[body])?;
-        world.begin_step(0, &self.step);
+        world.begin_step(&[(0, &self.step[..])]);
         world.take_traffic();
         Ok(world)
     }

@@ -407,9 +407,8 @@ fn assembly_kernels_match_their_cpu_twins() {
                 .collect();
             let coefficients = Coefficients { factor: 0.55, c1: 4e4 };
             let mut world = world_of(&gpu, &cases);
-            for (b, step) in steps.iter().enumerate() {
-                world.begin_step(b, step);
-            }
+            let list: Vec<(usize, &[DofStep<f64>])> = steps.iter().enumerate().map(|(b, s)| (b, &s[..])).collect();
+            world.begin_step(&list);
             let (mut values, mut dof_out) = buffers_for(&cases);
             let failures = evaluate_all(&mut world, &cases, true, &mut values, &mut dof_out, coefficients);
             assert_eq!(failures, [None, None]);
@@ -463,9 +462,9 @@ fn one_device_pass_serves_any_number_of_bodies() {
     let cases: Vec<Case> = (0..40).map(|k| case(variant, 600 + k)).collect();
     let mut world = world_of(&gpu, &cases);
     let coefficients = Coefficients { factor: 0.5, c1: 10.0 };
-    for (b, c) in cases.iter().enumerate() {
-        world.begin_step(b, &vec![DofStep { mass: 1.0, u_pred: 0.0, f_int_t: 0.0, f_ext: 0.0 }; c.u.len()]);
-    }
+    let steps: Vec<Vec<DofStep<f64>>> = cases.iter().map(|c| vec![DofStep { mass: 1.0, u_pred: 0.0, f_int_t: 0.0, f_ext: 0.0 }; c.u.len()]).collect();
+    let list: Vec<(usize, &[DofStep<f64>])> = steps.iter().enumerate().map(|(b, s)| (b, &s[..])).collect();
+    world.begin_step(&list);
     let (mut values, mut dof_out) = buffers_for(&cases);
     let before = world.submits();
     evaluate_all(&mut world, &cases, true, &mut values, &mut dof_out, coefficients);

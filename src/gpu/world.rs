@@ -108,6 +108,8 @@ struct Batch {
     tangent_elements_per_group: usize,
     /// The displacements of every dof of the batch, as last uploaded.
     u_host: Vec<Real>,
+    /// The step inputs (`DofStep`, 4 reals) of every dof, as last uploaded.
+    step_host: Vec<Real>,
     u: Buffer,
     step: Buffer,
     failure: Buffer,
@@ -159,6 +161,13 @@ pub enum WorldKernel {
     /// `assemble_residual` and `assemble_csr`.
     Assembly,
     Energy,
+}
+
+/// The per-dof inputs a batch keeps a host copy of, uploaded by runs of members.
+#[derive(Clone, Copy)]
+enum Mirror {
+    Displacement,
+    Step,
 }
 
 /// A copy from a batch's buffer into the read-back buffer.
@@ -276,26 +285,40 @@ impl GpuWorld {
         self.gpu.queue.write_buffer(buffer, offset, bytes);
     }
 
-    /// The step's start values of some bodies, for `assemble_residual` (once per step; they go
-    /// up with the next submit).
-    pub fn begin_step(&mut self, body: usize, step: &[DofStep<Real>]) {
-        let (b, m) = self.place[body];
-        let offset = self.batches[b].members[m].dof_start as usize * 4 * self.gpu.precision.size();
-        let bytes = to_device(self.gpu.precision, bytemuck::cast_slice(step));
-        let buffer = self.batches[b].step.clone();
-        self.upload(&buffer, offset as u64, &bytes);
+    /// The step's start values of the listed bodies, for `assemble_residual` (once per step;
+    /// they go up with the next submit, one write per run of consecutive members).
+    pub fn begin_step(&mut self, steps: &[(usize, &[DofStep<Real>])]) {
+        for batch in 0..self.batches.len() {
+            let mut members = Vec::new();
+            for &(body, step) in steps.iter().filter(|(body, _)| self.place[*body].0 == batch) {
+                let m = self.place[body].1;
+                let range = self.batches[batch].members[m];
+                let start = range.dof_start as usize * 4;
+                self.batches[batch].step_host[start..start + 4 * range.dofs as usize].copy_from_slice(bytemuck::cast_slice(step));
+                members.push(m);
+            }
+            members.sort_unstable();
+            self.upload_runs(batch, &members, Mirror::Step);
+        }
     }
 
-    /// Writes the displacements of the listed members (sorted, per batch) in runs of
-    /// consecutive members.
-    fn upload_displacements(&mut self, batch: usize, members: &[usize]) {
+    /// Writes a host mirror's values of the listed members (sorted) to the device, one write
+    /// per run of consecutive members.
+    fn upload_runs(&mut self, batch: usize, members: &[usize], mirror: Mirror) {
         let real = self.gpu.precision.size();
+        let per_dof = match mirror {
+            Mirror::Displacement => 1,
+            Mirror::Step => 4,
+        };
         for run in runs(members) {
             let b = &self.batches[batch];
             let (first, last) = (&b.members[run[0]], &b.members[*run.last().expect("a run has members")]);
-            let (start, end) = (first.dof_start as usize, (last.dof_start + last.dofs) as usize);
-            let bytes = to_device(self.gpu.precision, &b.u_host[start..end]);
-            let buffer = b.u.clone();
+            let (start, end) = (first.dof_start as usize * per_dof, (last.dof_start + last.dofs) as usize * per_dof);
+            let (host, buffer) = match mirror {
+                Mirror::Displacement => (&b.u_host, b.u.clone()),
+                Mirror::Step => (&b.step_host, b.step.clone()),
+            };
+            let bytes = to_device(self.gpu.precision, &host[start..end]);
             self.upload(&buffer, (start * real) as u64, &bytes);
         }
     }
@@ -326,7 +349,7 @@ impl GpuWorld {
                 let range = self.batches[batch].members[self.place[list[i].body].1];
                 self.batches[batch].u_host[range.dof_start as usize..(range.dof_start + range.dofs) as usize].copy_from_slice(list[i].u);
             }
-            self.upload_displacements(batch, &members);
+            self.upload_runs(batch, &members, Mirror::Displacement);
             let active: Vec<Active> = mine.iter().map(|&i| Active { member: self.place[list[i].body].1 as u32, mode: if list[i].tangent { MODE_TANGENT } else { MODE_FORCES } }).collect();
             let b = &self.batches[batch];
             let (active_buffer, failure_buffer) = (b.active.clone(), b.failure.clone());
@@ -421,7 +444,7 @@ impl GpuWorld {
                 let range = self.batches[batch].members[self.place[list[i].0].1];
                 self.batches[batch].u_host[range.dof_start as usize..(range.dof_start + range.dofs) as usize].copy_from_slice(list[i].1);
             }
-            self.upload_displacements(batch, &members);
+            self.upload_runs(batch, &members, Mirror::Displacement);
             let active: Vec<Active> = members.iter().map(|&m| Active { member: m as u32, mode: MODE_FORCES }).collect();
             let active_buffer = self.batches[batch].active.clone();
             self.upload(&active_buffer, 0, bytemuck::cast_slice(&active));
@@ -648,6 +671,7 @@ impl Batch {
             stride,
             tangent_elements_per_group: (WORKGROUP / pairs).max(1),
             u_host: vec![0.0; dofs],
+            step_host: vec![0.0; 4 * dofs],
             u,
             step,
             failure,

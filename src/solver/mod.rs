@@ -213,9 +213,8 @@ impl Simulation {
         let gravity = self.gravity;
         self.bodies.par_iter_mut().for_each(|body| body.begin_step(&p, &gravity));
         if let Some(world) = &mut self.world {
-            for (b, body) in self.bodies.iter().enumerate() {
-                world.begin_step(b, body.step_inputs());
-            }
+            let steps: Vec<_> = self.bodies.iter().enumerate().map(|(b, body)| (b, body.step_inputs())).collect();
+            world.begin_step(&steps);
         }
         let (points, groups) = solve_groups(&mut self.bodies, points, &p, settings.as_ref(), &warm, velocity_scale, self.world.as_mut(), &mut report.wall);
         let (mut failure, mut iterations) = (None, 0);
