@@ -11,8 +11,9 @@
 //             a factorisation need no tangent).
 //   `main`:   force and tangent of ELEMENTS_PER_GROUP elements per workgroup. Phase 1: one
 //             invocation per quadrature point computes F, dV S and dV D into workgroup memory.
-//             Phase 2: one invocation per node pair (a <= b) integrates the DIM x DIM block
-//             K_ab = Σ_q B_aᵀ (dV D) B_b + (g_a · dV S g_b) I, and for a == b the force of node a.
+//             Phase 2: the node pairs (a <= b) of those elements, spread over the invocations,
+//             each integrating the DIM x DIM block K_ab = Σ_q B_aᵀ (dV D) B_b + (g_a · dV S g_b) I
+//             and, for a == b, the force of node a.
 //
 // Per element out: NDOF forces, then the upper triangle (row <= col) of the tangent packed row
 // by row, local order (node a, component i) -> a * DIM + i.
@@ -23,7 +24,10 @@ const PACKED = NDOF * (NDOF + 1u) / 2u;
 const OUT_STRIDE = NDOF + PACKED;
 const PAIRS = NEN * (NEN + 1u) / 2u;
 const WORKGROUP = 64u;
-const ELEMENTS_PER_GROUP = WORKGROUP / PAIRS;
+// The tangent entry point: one quadrature point per invocation in phase 1 (32 points of dV D,
+// dV S and F fit the 16 KiB of workgroup memory every adapter has, in f64).
+const TANGENT_WORKGROUP = 32u;
+const ELEMENTS_PER_GROUP = TANGENT_WORKGROUP / NQP;
 const POINTS_PER_GROUP = ELEMENTS_PER_GROUP * NQP;
 const INVERTED = 0u;
 const NON_FINITE = 1u;
@@ -112,53 +116,58 @@ fn b_row(f: Mat3, g: vec3<real>, r: u32) -> vec3<real> {
     return out;
 }
 
-@compute @workgroup_size(WORKGROUP)
+@compute @workgroup_size(TANGENT_WORKGROUP)
 fn main(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workgroup: vec3<u32>) {
     let job = jobs[workgroup.z];
     let range = members[job.member];
     let first = chunk_of(workgroup) * ELEMENTS_PER_GROUP;
-    // Phase 1: one quadrature point per invocation.
-    if lane < POINTS_PER_GROUP {
-        let local = first + lane / NQP;
-        let e = range.element_start + local;
-        let q = lane % NQP;
-        point_ok[lane] = 0u;
-        if job.mode == TANGENT && local < range.elements {
-            material = materials[range.material];
-            let point = (e * NQP + q) * POINT_STRIDE;
-            let f = deformation_gradient(point, element_displacements(e));
-            point_f[lane] = f;
-            if determinant(f) > real(0.0) {
-                let st = material_stress_tangent(green_lagrange(f));
-                let dv = point_volume(point);
-                point_s[lane] = st.s * dv;
-                var d = st.d;
-                for (var r = 0u; r < 36u; r++) {
-                    d[r] *= dv;
-                }
-                point_d[lane] = d;
-                point_ok[lane] = 1u;
-            } else {
-                fail(job.member, local, INVERTED);
+    // Phase 1: one quadrature point per invocation, every invocation busy.
+    let point_element = first + lane / NQP;
+    point_ok[lane] = 0u;
+    if job.mode == TANGENT && point_element < range.elements {
+        let e = range.element_start + point_element;
+        material = materials[range.material];
+        let point = (e * NQP + lane % NQP) * POINT_STRIDE;
+        let f = deformation_gradient(point, element_displacements(e));
+        point_f[lane] = f;
+        if determinant(f) > real(0.0) {
+            let st = material_stress_tangent(green_lagrange(f));
+            let dv = point_volume(point);
+            point_s[lane] = st.s * dv;
+            var d = st.d;
+            for (var r = 0u; r < 36u; r++) {
+                d[r] *= dv;
             }
+            point_d[lane] = d;
+            point_ok[lane] = 1u;
+        } else {
+            fail(job.member, point_element, INVERTED);
         }
     }
     workgroupBarrier();
-    // Phase 2: one node pair (a <= b) per invocation.
-    let slot = lane / PAIRS;
-    let local = first + slot;
-    if job.mode != TANGENT || slot >= ELEMENTS_PER_GROUP || local >= range.elements {
+    if job.mode != TANGENT {
         return;
     }
-    let e = range.element_start + local;
-    var pair = lane % PAIRS;
+    // Phase 2: the node pairs (a <= b) of the workgroup's elements, spread over the invocations.
+    for (var task = lane; task < ELEMENTS_PER_GROUP * PAIRS; task += TANGENT_WORKGROUP) {
+        let slot = task / PAIRS;
+        let local = first + slot;
+        if local < range.elements {
+            pair_block(job.member, range.element_start + local, local, slot * NQP, task % PAIRS);
+        }
+    }
+}
+
+// The block K_ab of node pair `pair` (a <= b) of element `e`, from the points of phase 1 at
+// `base`, and for a == b the force of node a.
+fn pair_block(member: u32, e: u32, local: u32, base: u32, pair_index: u32) {
+    var pair = pair_index;
     var a = 0u;
     while pair >= NEN - a {
         pair -= NEN - a;
         a++;
     }
     let b = a + pair;
-    let base = slot * NQP;
     for (var q = 0u; q < NQP; q++) {
         if point_ok[base + q] == 0u {
             // The element is inverted: phase 1 reported it.
@@ -171,18 +180,14 @@ fn main(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workg
         let point = (e * NQP + q) * POINT_STRIDE;
         let f = point_f[base + q];
         let s = point_s[base + q];
-        let d = point_d[base + q];
         let ga = gradient(point, a);
         let gb = gradient(point, b);
         // (dV D) B_b, one column per component j of node b.
         var db: array<vec3<real>, 6>;
-        for (var r = 0u; r < 6u; r++) {
-            db[r] = vec3<real>(real(0.0));
-        }
         for (var c = 0u; c < 6u; c++) {
             let bc = b_row(f, gb, c);
             for (var r = 0u; r < 6u; r++) {
-                db[r] += d[r * 6u + c] * bc;
+                db[r] += point_d[base + q][r * 6u + c] * bc;
             }
         }
         let geometric = dot(ga, s * gb);
@@ -218,6 +223,6 @@ fn main(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workg
         }
     }
     if !finite {
-        fail(job.member, local, NON_FINITE);
+        fail(member, local, NON_FINITE);
     }
 }

@@ -24,6 +24,9 @@ use wgpu::{BindGroup, Buffer, BufferUsages, ComputePipeline};
 
 /// Invocations per workgroup of the kernels that take one item per invocation.
 const WORKGROUP: usize = 64;
+/// Invocations per workgroup of the tangent entry point (`TANGENT_WORKGROUP`): one per
+/// quadrature point of its elements.
+const TANGENT_WORKGROUP: usize = 32;
 /// Workgroups per row of a dispatch (`MAX_ROW` of `batch.wgsl`).
 const MAX_ROW: usize = 65_535;
 /// `failure` entries per member: the lowest inverted element, the lowest non-finite one.
@@ -665,11 +668,10 @@ impl Batch {
             let join = |h: std::thread::ScopedJoinHandle<'_, Result<Pass, GpuError>>| h.join().expect("a pipeline compiles without panicking");
             Ok::<_, GpuError>((join(forces)?, join(csr)?, join(residual)?, energy?))
         })?;
-        let pairs = kind.nodes() * (kind.nodes() + 1) / 2;
         Ok(Self {
             members: ranges,
             stride,
-            tangent_elements_per_group: (WORKGROUP / pairs).max(1),
+            tangent_elements_per_group: TANGENT_WORKGROUP / crate::element::shape::quadrature(kind).len(),
             u_host: vec![0.0; dofs],
             step_host: vec![0.0; 4 * dofs],
             u,
