@@ -458,7 +458,7 @@ fn main() -> ExitCode {
             println!("solver precision: {} (factorisation, time stepping, contact)", bifirst::precision::PRECISION_NAME);
             println!("WGSL kernels: {}", bifirst::gpu::shaders::SHADERS.iter().map(|(name, _)| *name).collect::<Vec<_>>().join(", "));
             println!("  `run --backend gpu` runs the element, assembly and energy kernels on the adapter; the contact loop stays on the CPU");
-            println!("  `run --backend auto` takes a hardware GPU for bodies of {} dofs or more, else the CPU", bifirst::backend::GPU_MIN_BODY_DOFS);
+            println!("  `run --backend auto` runs on the CPU: a hardware GPU {}", bifirst::backend::AUTO_REASON_GPU);
             println!("worker threads: {} (--threads)", rayon::current_num_threads());
             let adapters = bifirst::gpu::describe_adapters();
             if adapters.is_empty() {

@@ -329,8 +329,7 @@ struct Totals {
 pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor: &mut dyn Monitor) -> Result<RunSummary, RunError> {
     let started = std::time::Instant::now();
     let mut sim = build_simulation(loaded)?;
-    let largest_body_dofs = sim.bodies.iter().map(|b| b.mass.len()).max().unwrap_or(0);
-    let resolved = Backend::resolve(&options.backend, largest_body_dofs)?;
+    let resolved = Backend::resolve(&options.backend)?;
     if let Some(notice) = &resolved.notice {
         monitor.warning(notice);
     }

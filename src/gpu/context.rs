@@ -107,13 +107,10 @@ pub fn open(name: Option<&str>, precision: Option<Precision>) -> Result<Gpu, Gpu
     open_adapter(adapter, precision)
 }
 
-/// The best hardware GPU, if the machine has one (software adapters are never taken), with
-/// what `bifirst info` says of it.
-pub fn hardware_adapter() -> Option<(Adapter, AdapterReport)> {
-    ranked(adapters()).into_iter().map(|a| {
-        let report = AdapterReport::of(&a);
-        (a, report)
-    }).find(|(_, report)| !report.software())
+/// The best hardware GPU, if the machine has one (software adapters are never taken), as
+/// `bifirst info` describes it.
+pub fn hardware_adapter() -> Option<AdapterReport> {
+    ranked(adapters()).iter().map(AdapterReport::of).find(|report| !report.software())
 }
 
 /// Opens a device on `adapter` in `precision` (default: f64 when the adapter has it, else f32).

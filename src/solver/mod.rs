@@ -23,10 +23,12 @@ use std::collections::HashMap;
 /// Wall-clock seconds spent per phase.
 #[derive(Debug, Clone, Copy, Default, serde::Serialize)]
 pub struct PhaseTimes {
-    /// Element kernels (on a GPU: with the upload of the displacements before them).
+    /// Element kernels (on a GPU: the device passes, all kernels, from submission to the mapped
+    /// read-back).
     pub elements: f64,
+    /// Assembly kernels on the CPU (on a GPU they count in `elements`).
     pub assembly: f64,
-    /// Reading results back from a GPU (zero on the CPU backend).
+    /// On a GPU, packing the uploads and unpacking the read-back (zero on the CPU backend).
     pub transfer: f64,
     pub factorization: f64,
     pub solve: f64,
