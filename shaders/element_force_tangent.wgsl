@@ -103,8 +103,8 @@ fn forces(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) wor
 
 // Row r of B_a (engineering shear), for the DIM components i of node a: dE_r / du_ai.
 fn b_row(f: Mat3, g: vec3<real>, r: u32) -> vec3<real> {
-    let k = VOIGT_I[r];
-    let l = VOIGT_J[r];
+    let k = voigt_i(r);
+    let l = voigt_j(r);
     var out = vec3<real>(real(0.0));
     for (var i = 0u; i < DIM; i++) {
         if k == l {
@@ -134,11 +134,9 @@ fn main(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workg
             let st = material_stress_tangent(green_lagrange(f));
             let dv = point_volume(point);
             point_s[lane] = st.s * dv;
-            var d = st.d;
             for (var r = 0u; r < 36u; r++) {
-                d[r] *= dv;
+                point_d[lane][r] = st.d[r] * dv;
             }
-            point_d[lane] = d;
             point_ok[lane] = 1u;
         } else {
             fail(job.member, point_element, INVERTED);

@@ -24,9 +24,9 @@ fn material_stress_tangent(e: Mat3) -> StressTangent {
     let ci2 = ci * ci;
     let g2 = real(2.0) * material.g;
     var d: Tangent;
-    add_scaled(&d, outer(ci, ci), g2 * real(0.5) * j);
-    add_scaled(&d, odot(ci, ci), -g2 * j);
-    add_scaled(&d, odot(ci, ci2), g2);
-    add_scaled(&d, odot(ci2, ci), g2);
+    add_outer(&d, ci, ci, g2 * real(0.5) * j);
+    add_odot(&d, ci, ci, -g2 * j);
+    add_odot(&d, ci, ci2, g2);
+    add_odot(&d, ci2, ci, g2);
     return StressTangent((ci * j - ci2) * material.g, d);
 }

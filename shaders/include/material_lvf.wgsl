@@ -47,16 +47,16 @@ fn material_stress_tangent(e: Mat3) -> StressTangent {
     let ded = ed * real(2.0);
     var d: Tangent;
     // Deviatoric projector P = I⊙I - I⊗I/3.
-    add_scaled(&d, odot(i, i), real(2.0) * dw_ds2);
-    add_scaled(&d, outer(i, i), -real(2.0) * dw_ds2 / real(3.0));
-    add_scaled(&d, outer(ded, ded), d2w_ds2ds2);
-    add_scaled(&d, outer(ded, iz), d2w_dzds2);
-    add_scaled(&d, outer(iz, ded), d2w_dzds2);
-    add_scaled(&d, outer(iz, iz), d2w_dz2);
+    add_odot(&d, i, i, real(2.0) * dw_ds2);
+    add_outer(&d, i, i, -real(2.0) * dw_ds2 / real(3.0));
+    add_outer(&d, ded, ded, d2w_ds2ds2);
+    add_outer(&d, ded, iz, d2w_dzds2);
+    add_outer(&d, iz, ded, d2w_dzds2);
+    add_outer(&d, iz, iz, d2w_dz2);
     // d dev(Ed²)/dE = I⊙Ed + Ed⊙I - 2/3 (Ed⊗I + I⊗Ed)
     let a = m.a1 * real(SQRT6);
-    add_scaled(&d, odot(i, ed), real(2.0) * a);
-    add_scaled(&d, outer(ed, i), -real(2.0) / real(3.0) * a);
-    add_scaled(&d, outer(i, ed), -real(2.0) / real(3.0) * a);
+    add_odot(&d, i, ed, real(2.0) * a);
+    add_outer(&d, ed, i, -real(2.0) / real(3.0) * a);
+    add_outer(&d, i, ed, -real(2.0) / real(3.0) * a);
     return StressTangent(s, d);
 }

@@ -26,7 +26,7 @@ fn material_stress_tangent(e: Mat3) -> StressTangent {
     let ln_j = real(0.5) * ln_real(determinant(c));
     let ci = inverse3(c);
     var d: Tangent;
-    add_scaled(&d, outer(ci, ci), lambda());
-    add_scaled(&d, odot(ci, ci), real(2.0) * (material.g - lambda() * ln_j));
+    add_outer(&d, ci, ci, lambda());
+    add_odot(&d, ci, ci, real(2.0) * (material.g - lambda() * ln_j));
     return StressTangent((identity3() - ci) * material.g + ci * (lambda() * ln_j), d);
 }

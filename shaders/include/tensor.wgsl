@@ -23,8 +23,15 @@ struct MaterialParams {
     unused: real,
 }
 
-var<private> VOIGT_I: array<u32, 6> = array<u32, 6>(0u, 1u, 2u, 0u, 1u, 0u);
-var<private> VOIGT_J: array<u32, 6> = array<u32, 6>(0u, 1u, 2u, 1u, 2u, 2u);
+// The index pair (i, j) of Voigt entry r: (0,0) (1,1) (2,2) (0,1) (1,2) (0,2). Arithmetic, not
+// a private table: a GPU would keep a dynamically indexed table in per-invocation memory.
+fn voigt_i(r: u32) -> u32 {
+    return select(select(0u, 1u, r == 4u), r, r < 3u);
+}
+
+fn voigt_j(r: u32) -> u32 {
+    return select(select(2u, 1u, r == 3u), r, r < 3u);
+}
 
 fn at(m: Mat3, i: u32, k: u32) -> real {
     return m[k][i];
@@ -58,36 +65,27 @@ fn inverse3(m: Mat3) -> Mat3 {
     return transpose(Mat3(c0, c1, c2)) * (real(1.0) / det);
 }
 
-// `(A ⊗ B)_ijkl = A_ij B_kl`.
-fn outer(a: Mat3, b: Mat3) -> Tangent {
-    var t: Tangent;
+// `t += s (A ⊗ B)`, `(A ⊗ B)_ijkl = A_ij B_kl`, accumulated in place (no second 36-entry
+// array alive: in f64 that would not fit a GPU's registers).
+fn add_outer(t: ptr<function, Tangent>, a: Mat3, b: Mat3, s: real) {
     for (var r = 0u; r < 6u; r++) {
+        let sa = s * at(a, voigt_i(r), voigt_j(r));
         for (var c = 0u; c < 6u; c++) {
-            t[r * 6u + c] = at(a, VOIGT_I[r], VOIGT_J[r]) * at(b, VOIGT_I[c], VOIGT_J[c]);
+            (*t)[r * 6u + c] += sa * at(b, voigt_i(c), voigt_j(c));
         }
     }
-    return t;
 }
 
-// `¼(A_ik B_jl + A_il B_jk + A_jk B_il + A_jl B_ik)`.
-fn odot(a: Mat3, b: Mat3) -> Tangent {
-    var t: Tangent;
+// `t += s (A ⊙ B)`, `(A ⊙ B)_ijkl = ¼(A_ik B_jl + A_il B_jk + A_jk B_il + A_jl B_ik)`, in place.
+fn add_odot(t: ptr<function, Tangent>, a: Mat3, b: Mat3, s: real) {
     for (var r = 0u; r < 6u; r++) {
-        let i = VOIGT_I[r];
-        let j = VOIGT_J[r];
+        let i = voigt_i(r);
+        let j = voigt_j(r);
         for (var c = 0u; c < 6u; c++) {
-            let k = VOIGT_I[c];
-            let l = VOIGT_J[c];
-            t[r * 6u + c] = real(0.25) * (at(a, i, k) * at(b, j, l) + at(a, i, l) * at(b, j, k) + at(a, j, k) * at(b, i, l) + at(a, j, l) * at(b, i, k));
+            let k = voigt_i(c);
+            let l = voigt_j(c);
+            (*t)[r * 6u + c] += s * real(0.25) * (at(a, i, k) * at(b, j, l) + at(a, i, l) * at(b, j, k) + at(a, j, k) * at(b, i, l) + at(a, j, l) * at(b, i, k));
         }
-    }
-    return t;
-}
-
-// `t += s a`.
-fn add_scaled(t: ptr<function, Tangent>, a: Tangent, s: real) {
-    for (var r = 0u; r < 36u; r++) {
-        (*t)[r] += s * a[r];
     }
 }
 
