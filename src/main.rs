@@ -225,7 +225,8 @@ fn print_summary(s: &RunSummary) {
 }
 
 /// Interrupts (SIGINT, SIGTERM, SIGHUP: a closed terminal or SSH session) set the first flag,
-/// which stops the run after its current step so the log is closed properly; a second interrupt
+/// which abandons the step in progress at its next Newton iteration, cut-back or Uzawa sweep
+/// and stops the run with its log closed properly; a second interrupt
 /// exits at once. The second flag tells a hang-up apart (exit 129 instead of 130).
 fn interrupt_flags() -> Result<(Arc<AtomicBool>, Arc<AtomicBool>)> {
     use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM};

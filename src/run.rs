@@ -9,11 +9,11 @@ use crate::output::{schemas, OutputError, RunLog, VtuSeries};
 use crate::backend::{Backend, BackendError, BackendRequest};
 use crate::precision::Real;
 use crate::scene::{LoadedScene, OutputSpec, SceneError};
-use crate::solver::{build_simulation, PhaseTimes, RunFailure, Simulation, StepReport};
+use crate::solver::{build_simulation, PhaseTimes, RunFailure, Simulation, StepFailure, StepReport};
 use serde_json::{json, Value};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
 #[derive(Debug, thiserror::Error)]
@@ -60,7 +60,8 @@ impl Stop {
 pub struct RunOptions {
     /// Directory for VTU frames; overrides the scene's `output.vtu`.
     pub vtu: Option<PathBuf>,
-    /// When set (by a signal handler), the run stops after the current step.
+    /// When set (by a signal handler), the run stops within a Newton iteration, at the last
+    /// finished step.
     pub interrupt: Option<Arc<AtomicBool>>,
     /// Where the kernels run (default: the CPU).
     pub backend: BackendRequest,
@@ -340,6 +341,7 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
         return Err(PlotError::Draw { path: path.clone(), message: "contour plots are drawn for 2D scenes; use --vtu and ParaView for 3D".into() }.into());
     }
     sim.start();
+    sim.interrupt = options.interrupt.clone();
     let mut logger = Logger::new(out, loaded, &sim, options, &backend)?;
     let free_dofs: usize = sim.bodies.iter().map(|b| b.dofs.free_count).sum();
     let start = format!(
@@ -388,17 +390,22 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
         energy: sim.energies(),
         output: out.to_path_buf(),
     };
-    let interrupted = || options.interrupt.as_ref().is_some_and(|f| f.load(Ordering::SeqCst));
     let stop = loop {
         if sim.finished() {
             break None;
         }
-        if interrupted() {
+        if sim.interrupted() {
             break Some((Stop::Interrupted, StepReport { step: sim.step, t: sim.t, ..Default::default() }));
         }
         let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| sim.advance()));
         let report = match result {
             Ok(Ok(report)) => report,
+            Ok(Err(failure)) if matches!(failure.failure, StepFailure::Interrupted) => {
+                // The abandoned step leaves the state at the last finished one.
+                totals.cutbacks += failure.cutbacks;
+                logger.events(monitor, failure.t, &failure.report.events)?;
+                break Some((Stop::Interrupted, StepReport { step: sim.step, t: sim.t, ..Default::default() }));
+            }
             Ok(Err(failure)) => {
                 totals.cutbacks += failure.cutbacks;
                 logger.events(monitor, failure.t, &failure.report.events)?;

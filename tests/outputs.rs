@@ -318,6 +318,40 @@ fn sigint_sigterm_and_sighup_stop_a_run_with_a_complete_log() {
     }
 }
 
+/// Caught by the issue: a step that never finishes (a fine sliding block, cut back again and
+/// again with thousands of Uzawa sweeps per Newton iteration) ignored SIGINT for 90 s, since
+/// the flag was read between steps only. Now Newton, the cut-backs and the Uzawa sweeps read it,
+/// and the run stops within a Newton iteration with its log closed.
+#[test]
+fn an_interrupt_stops_a_step_that_never_finishes() {
+    let out = temp_path("interrupt_in_step.mcap");
+    let mut child = bifirst()
+        .args(["run", scene_path("sliding_block").to_str().unwrap(), "--set", "body.block.mesh.divisions=[800,4]", "--quiet", "--out"])
+        .arg(&out)
+        .spawn()
+        .unwrap();
+    // Set-up takes well under a second; the first step alone takes minutes.
+    std::thread::sleep(std::time::Duration::from_secs(3));
+    assert!(child.try_wait().unwrap().is_none(), "the first step is still running");
+    let sent = std::time::Instant::now();
+    assert!(std::process::Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap().success());
+    let status = loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            break status;
+        }
+        if sent.elapsed().as_secs() > 20 {
+            child.kill().unwrap();
+            panic!("SIGINT was not honoured within 20 s");
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    };
+    assert_eq!(status.code(), Some(130));
+    let log = common_run::read_log(&out);
+    let summary = &log.topics["/summary"][0];
+    assert_eq!((summary["status"].as_str(), summary["steps"].as_u64()), (Some("interrupted"), Some(0)));
+    assert_eq!(log.topics["/solver"].last().unwrap()["status"], "interrupted");
+}
+
 /// Caught by `--out /dev/full`: the MCAP writer panicked in its destructor after the first
 /// failed write and the process aborted (exit 134). A full disk is a failed run (exit 1) that
 /// names the file.

@@ -10,6 +10,7 @@
 use super::geometry::norm;
 use super::law::uzawa_step;
 use crate::precision::Real;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Block-sparse Delassus operator.
 #[derive(Debug, Clone, Default)]
@@ -99,17 +100,22 @@ pub struct Outcome {
 }
 
 /// Uzawa iterations from the reactions in `r` until the estimated distance to the fixed point
-/// is below `tolerance * max(max |r|, floor)`, or `max_iterations`.
+/// is below `tolerance * max(max |r|, floor)`, or `max_iterations`, or until `stop` is set (an
+/// interrupt: then not converged).
 ///
 /// The sweep contracts linearly with a factor `q` that can be close to 1 when the points are
 /// strongly coupled (a stiff body), so a small change is not a small error: the error is
 /// estimated as `change q / (1 - q)`, with `q` the ratio of the last two changes.
-pub fn solve(w: &Delassus, local: &[Local], r: &mut [[Real; 3]], sweep: Sweep, tolerance: Real, floor: Real, max_iterations: usize) -> Outcome {
+#[allow(clippy::too_many_arguments)]
+pub fn solve(w: &Delassus, local: &[Local], r: &mut [[Real; 3]], sweep: Sweep, tolerance: Real, floor: Real, max_iterations: usize, stop: Option<&AtomicBool>) -> Outcome {
     let n = local.len();
     let mut next = vec![[0.0; 3]; n];
     let mut outcome = Outcome::default();
     let mut previous = Real::INFINITY;
     for it in 1..=max_iterations {
+        if stop.is_some_and(|s| s.load(Ordering::Relaxed)) {
+            break;
+        }
         let (mut change, mut size): (Real, Real) = (0.0, 0.0);
         match sweep {
             Sweep::Jacobi => {

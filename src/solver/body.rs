@@ -63,6 +63,9 @@ pub enum StepFailure {
     NotFinite { body: String },
     #[error("body `{body}`: {error}")]
     Device { body: String, error: String },
+    /// The run's interrupt flag was set during the step: it is abandoned, not cut back.
+    #[error("interrupted during the step")]
+    Interrupted,
 }
 
 /// Energy terms of one body over a step (see doc/ARCHITECTURE.md, "Energy balance").

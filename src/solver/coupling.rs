@@ -13,6 +13,7 @@ use crate::contact::geometry::norm;
 use crate::contact::{uzawa_step, ContactPoint, Settings, Status};
 use crate::precision::Real;
 use std::collections::HashMap;
+use std::sync::atomic::AtomicBool;
 
 /// The Uzawa iterations of a Newton iteration go this much below the contact tolerance, so that
 /// their own error does not keep the reactions from settling between Newton iterations.
@@ -162,7 +163,7 @@ impl ContactStep {
     /// problem. `refactorized`: some body has a new factorisation since the last increment, so
     /// the Delassus blocks are rebuilt (they are kept otherwise). Returns the Uzawa outcome and
     /// the relative change of the contact forces.
-    pub fn newton_increment(&mut self, bodies: &mut [Body], p: &StepParams, settings: &Settings, refactorized: bool, times: &mut PhaseTimes) -> (Outcome, Real) {
+    pub fn newton_increment(&mut self, bodies: &mut [Body], p: &StepParams, settings: &Settings, refactorized: bool, stop: Option<&AtomicBool>, times: &mut PhaseTimes) -> (Outcome, Real) {
         let dim = self.dim;
         let theta_dt = p.theta * p.dt;
         let started = std::time::Instant::now();
@@ -191,7 +192,7 @@ impl ContactStep {
             self.build_delassus(bodies, theta_dt, settings, times);
         }
         let floor = self.floor;
-        let outcome = uzawa::solve(&self.delassus, &self.local, &mut self.r, settings.sweep, INNER_TOLERANCE * settings.tolerance, floor, settings.max_iterations);
+        let outcome = uzawa::solve(&self.delassus, &self.local, &mut self.r, settings.sweep, INNER_TOLERANCE * settings.tolerance, floor, settings.max_iterations, stop);
         // The change is judged on the nodal forces H^T r: with redundant constraints (two passes
         // over matching nodes) r itself is not unique, but H^T r is.
         let before: Vec<Vec<Real>> = bodies.iter().map(|b| b.contact_force.clone()).collect();

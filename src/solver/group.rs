@@ -12,6 +12,7 @@ use crate::gpu::{ElementFailure, Evaluation, GpuWorld};
 use crate::precision::{Precision, Real};
 use rayon::prelude::*;
 use std::collections::HashMap;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// What the Newton loop of one group did.
 #[derive(Debug, Clone, Copy, Default)]
@@ -85,6 +86,7 @@ pub fn solve_groups(
     warm: &HashMap<(u32, u32, Master), ([Real; 3], Real)>,
     velocity_scale: Real,
     world: Option<&mut GpuWorld>,
+    interrupt: Option<&AtomicBool>,
     times: &mut PhaseTimes,
 ) -> (Vec<ContactPoint>, Vec<Result<GroupReport, StepFailure>>) {
     let started = std::time::Instant::now();
@@ -116,7 +118,7 @@ pub fn solve_groups(
         })
         .collect();
     times.contact += started.elapsed().as_secs_f64();
-    let context = Context { p, settings, velocity_scale };
+    let context = Context { p, settings, velocity_scale, interrupt };
     let reports = match world {
         None => groups.par_iter_mut().map(|g| g.newton_on_cpu(&context)).collect(),
         Some(world) => newton_in_lockstep(&mut groups, world, &context, times),
@@ -142,6 +144,8 @@ struct Context<'a> {
     p: &'a StepParams,
     settings: Option<&'a Settings>,
     velocity_scale: Real,
+    /// The run's interrupt flag, checked before every increment.
+    interrupt: Option<&'a AtomicBool>,
 }
 
 /// Where a group's Newton loop stands between two evaluations.
@@ -213,6 +217,9 @@ impl Group {
     /// One Newton increment: the factorisations that are due, then the increment of every body,
     /// through the contact coupling when the group has contact points.
     fn increment(&mut self, c: &Context) -> Result<(), StepFailure> {
+        if c.interrupt.is_some_and(|f| f.load(Ordering::SeqCst)) {
+            return Err(StepFailure::Interrupted);
+        }
         let (p, bodies, contact, state) = (c.p, &mut self.bodies, &mut self.contact, &mut self.newton);
         let mut refactorized = false;
         for body in bodies.iter_mut() {
@@ -225,7 +232,10 @@ impl Group {
                 body.newton_step(&mut state.report.wall);
             }
         } else {
-            let (outcome, change) = contact.newton_increment(bodies, p, c.settings.expect("contact settings"), refactorized, &mut state.report.wall);
+            let (outcome, change) = contact.newton_increment(bodies, p, c.settings.expect("contact settings"), refactorized, c.interrupt, &mut state.report.wall);
+            if c.interrupt.is_some_and(|f| f.load(Ordering::SeqCst)) {
+                return Err(StepFailure::Interrupted);
+            }
             state.report.uzawa_iterations += outcome.iterations;
             state.uzawa_ran = true;
             state.uzawa_converged = outcome.converged;

@@ -19,6 +19,8 @@ use body::StepParams;
 use group::solve_groups;
 use rayon::prelude::*;
 use std::collections::HashMap;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 
 /// Wall-clock seconds spent per phase.
 #[derive(Debug, Clone, Copy, Default, serde::Serialize)]
@@ -150,6 +152,10 @@ pub struct Simulation {
     pub obstacle_reactions: Vec<[Real; 3]>,
     /// Every body's element and assembly kernels on a GPU; `None` runs their CPU twins.
     pub world: Option<GpuWorld>,
+    /// When set (by a signal handler), the step in progress is abandoned at its next Newton
+    /// iteration or cut-back ([`StepFailure::Interrupted`]), so that a stop takes effect within
+    /// one iteration, not after a step that may never finish.
+    pub interrupt: Option<Arc<AtomicBool>>,
 }
 
 impl Simulation {
@@ -186,8 +192,12 @@ impl Simulation {
     }
 
     fn advance_by(&mut self, dt: Real, depth: usize, report: &mut StepReport) -> Result<(), (StepFailure, Real)> {
+        if self.interrupted() {
+            return Err((StepFailure::Interrupted, dt));
+        }
         match self.try_step(dt, report) {
             Ok(()) => Ok(()),
+            Err(StepFailure::Interrupted) => Err((StepFailure::Interrupted, dt)),
             Err(failure) if depth < self.max_cutbacks => {
                 report.cutbacks += 1;
                 report.events.push(format!("t = {:.6e}: {failure}; retrying with dt = {:.3e}", self.t, dt / 2.0));
@@ -196,6 +206,11 @@ impl Simulation {
             }
             Err(failure) => Err((failure, dt)),
         }
+    }
+
+    /// Whether the interrupt flag is set.
+    pub fn interrupted(&self) -> bool {
+        self.interrupt.as_ref().is_some_and(|f| f.load(Ordering::SeqCst))
     }
 
     fn try_step(&mut self, dt: Real, report: &mut StepReport) -> Result<(), StepFailure> {
@@ -218,7 +233,8 @@ impl Simulation {
             let steps: Vec<_> = self.bodies.iter().enumerate().map(|(b, body)| (b, body.step_inputs())).collect();
             world.begin_step(&steps);
         }
-        let (points, groups) = solve_groups(&mut self.bodies, points, &p, settings.as_ref(), &warm, velocity_scale, self.world.as_mut(), &mut report.wall);
+        let stop = self.interrupt.as_deref();
+        let (points, groups) = solve_groups(&mut self.bodies, points, &p, settings.as_ref(), &warm, velocity_scale, self.world.as_mut(), stop, &mut report.wall);
         let (mut failure, mut iterations) = (None, 0);
         for group in groups {
             match group {

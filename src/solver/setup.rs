@@ -208,6 +208,7 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
         contact,
         contact_points: Vec::new(),
         world: None,
+        interrupt: None,
     })
 }
 
