@@ -352,6 +352,26 @@ fn an_interrupt_stops_a_step_that_never_finishes() {
     assert_eq!(log.topics["/solver"].last().unwrap()["status"], "interrupted");
 }
 
+/// Caught by the issue: two runs given the same `--out` both exited 0 and left an unreadable
+/// file. The second now fails at once (exit 1, naming the file) and the first one's log is
+/// whole.
+#[test]
+fn a_second_run_on_the_same_output_fails_and_leaves_the_first_log_whole() {
+    let out = temp_path("same_out.mcap");
+    let mut first = bifirst().args(["run", scene_path("bar_impact").to_str().unwrap(), "--set", "time.end=100.0", "--quiet", "--out"]).arg(&out).spawn().unwrap();
+    std::thread::sleep(std::time::Duration::from_secs(2));
+    let second = bifirst().args(["run", scene_path("bar_impact").to_str().unwrap(), "--set", "time.end=0.001", "--quiet", "--out"]).arg(&out).output().unwrap();
+    let stderr = String::from_utf8_lossy(&second.stderr);
+    assert_eq!(second.status.code(), Some(1), "{stderr}");
+    assert!(stderr.contains(&format!("`{}` is being written by another bifirst run", out.display())), "{stderr}");
+    assert!(std::process::Command::new("kill").args(["-INT", &first.id().to_string()]).status().unwrap().success());
+    assert_eq!(first.wait().unwrap().code(), Some(130));
+    let log = common_run::read_log(&out);
+    let summary = &log.topics["/summary"][0];
+    assert_eq!(summary["status"], "interrupted");
+    assert_eq!(log.topics["/energy"].len() as u64, summary["steps"].as_u64().unwrap() + 1, "every finished step is there");
+}
+
 /// Caught by `--out /dev/full`: the MCAP writer panicked in its destructor after the first
 /// failed write and the process aborted (exit 134). A full disk is a failed run (exit 1) that
 /// names the file.

@@ -16,6 +16,8 @@ pub enum OutputError {
     Create { path: PathBuf, source: std::io::Error },
     #[error("MCAP write to `{path}` failed: {message}")]
     Write { path: PathBuf, message: String },
+    #[error("`{path}` is being written by another bifirst run; choose another --out")]
+    Busy { path: PathBuf },
 }
 
 pub struct RunLog {
@@ -35,7 +37,7 @@ impl RunLog {
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
             std::fs::create_dir_all(dir).map_err(|source| OutputError::Create { path: path.into(), source })?;
         }
-        let file = File::create(path).map_err(|source| OutputError::Create { path: path.into(), source })?;
+        let file = Self::open_exclusive(path)?;
         let writer = mcap::WriteOptions::new()
             .compression(Some(mcap::Compression::Zstd))
             .chunk_size(Some(1 << 20))
@@ -44,6 +46,24 @@ impl RunLog {
             .create(BufWriter::new(file))
             .map_err(|e| OutputError::Write { path: path.into(), message: e.to_string() })?;
         Ok(Self { path: path.into(), writer: Some(writer), channels: HashMap::new(), sequence: 0 })
+    }
+
+    /// Opens `path` for writing under an exclusive lock, held until the log is closed, and only
+    /// then empties it: a second run given the same `--out` fails and leaves the first run's
+    /// file alone (two runs writing one file left it unreadable). Where the file system has no
+    /// locks, the file is written without one.
+    fn open_exclusive(path: &Path) -> Result<File, OutputError> {
+        let create = |source| OutputError::Create { path: path.into(), source };
+        let file = std::fs::OpenOptions::new().write(true).create(true).truncate(false).open(path).map_err(create)?;
+        match file.try_lock() {
+            Ok(()) | Err(std::fs::TryLockError::Error(_)) => {}
+            Err(std::fs::TryLockError::WouldBlock) => return Err(OutputError::Busy { path: path.into() }),
+        }
+        // Devices (`/dev/null`, `/dev/full`) cannot be truncated, and need not be.
+        if file.metadata().map_err(create)?.is_file() {
+            file.set_len(0).map_err(create)?;
+        }
+        Ok(file)
     }
 
     pub fn path(&self) -> &Path {
