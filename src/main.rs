@@ -395,23 +395,52 @@ fn sweep_command(args: SweepArgs) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// Reads every run given, saying on stderr which could not be read; the others are used (one
+/// unreadable file does not hide the rest). Fails when none can be read.
+fn read_runs<T>(runs: &[PathBuf], read: impl Fn(&std::path::Path) -> Result<T, bifirst::output::ReadError>) -> Result<(Vec<T>, bool)> {
+    let mut good = Vec::new();
+    let mut failed = false;
+    for path in runs {
+        match read(path) {
+            Ok(record) => good.push(record),
+            Err(e) => {
+                eprintln!("error: {e}");
+                failed = true;
+            }
+        }
+    }
+    if good.is_empty() {
+        anyhow::bail!("none of the {} file(s) could be read", runs.len());
+    }
+    Ok((good, failed))
+}
+
+/// Success, or the bad-input status when some of the files given could not be read.
+fn read_status(failed: bool) -> ExitCode {
+    if failed {
+        ExitCode::from(2)
+    } else {
+        ExitCode::SUCCESS
+    }
+}
+
 fn plot_command(runs: Vec<PathBuf>, out: Option<PathBuf>, trace: Option<[String; 3]>) -> Result<ExitCode> {
-    let records = runs.iter().map(|p| read_run(p)).collect::<Result<Vec<_>, _>>()?;
+    let (records, failed) = read_runs(&runs, read_run)?;
     let out = out.unwrap_or_else(|| runs[0].with_file_name(format!("{}_plots", runs[0].file_stem().map_or("run".into(), |s| s.to_string_lossy()))));
     for file in plot::plot_runs(&records, &out, &PlotOptions { labels: None, trace })? {
         println!("{}", file.display());
     }
-    Ok(ExitCode::SUCCESS)
+    Ok(read_status(failed))
 }
 
 fn summary_command(runs: Vec<PathBuf>, json: bool) -> Result<ExitCode> {
-    let summaries = runs.iter().map(|p| read_run(p).and_then(|r| summary::summarize(&r))).collect::<Result<Vec<_>, _>>()?;
+    let (summaries, failed) = read_runs(&runs, |p| read_run(p).and_then(|r| summary::summarize(&r)))?;
     if json {
         println!("{}", serde_json::to_string_pretty(&summaries)?);
     } else {
         print!("{}", summary::table(&summaries));
     }
-    Ok(ExitCode::SUCCESS)
+    Ok(read_status(failed))
 }
 
 fn main() -> ExitCode {

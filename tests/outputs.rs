@@ -372,6 +372,65 @@ fn a_second_run_on_the_same_output_fails_and_leaves_the_first_log_whole() {
     assert_eq!(log.topics["/energy"].len() as u64, summary["steps"].as_u64().unwrap() + 1, "every finished step is there");
 }
 
+/// Caught by the issue: after SIGKILL (or a crash) `summary` and `plot` refused the log
+/// ("Chunk ended in the middle of a record", exit 2) and skipped the good files given with it.
+/// Now the log is read up to the cut and reported `incomplete`, and an unreadable file is named
+/// while the others are still summarised.
+#[test]
+fn a_killed_run_is_summarised_as_incomplete_next_to_good_files() {
+    let killed = temp_path("killed.mcap");
+    let mut child = bifirst().args(["run", scene_path("bar_impact").to_str().unwrap(), "--set", "time.end=100.0", "--quiet", "--out"]).arg(&killed).spawn().unwrap();
+    std::thread::sleep(std::time::Duration::from_secs(3));
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let good = temp_path("good_next_to_killed.mcap");
+    assert!(bifirst().args(["run", scene_path("bar_impact").to_str().unwrap(), "--set", "time.end=0.001", "--quiet", "--out"]).arg(&good).status().unwrap().success());
+    let missing = temp_path("no_such_run.mcap");
+    let out = bifirst().args(["summary", "--json"]).arg(&killed).arg(&missing).arg(&good).output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "one file could not be read: {stderr}");
+    assert!(stderr.contains("no_such_run.mcap") && !stderr.contains("killed.mcap"), "{stderr}");
+    let rows: Value = serde_json::from_slice(&out.stdout).expect("the readable files are summarised");
+    assert_eq!(rows.as_array().unwrap().len(), 2);
+    assert_eq!(rows[0]["status"], "incomplete");
+    assert!(rows[0]["steps"].as_u64().unwrap() > 0, "{}", rows[0]);
+    assert_eq!((rows[1]["status"].as_str(), rows[1]["steps"].as_u64()), (Some("finished"), Some(20)));
+}
+
+/// A log cut at every 4 KiB boundary (a crash can stop the writer anywhere) reads back every
+/// message of the chunks that were complete before the cut (and the whole messages the reader
+/// can decompress from the chunk the cut went through), and nothing else: the messages are the
+/// full log's, in order, and a later cut never gives fewer.
+#[test]
+fn a_log_cut_at_any_4_kib_boundary_gives_every_message_of_its_complete_chunks() {
+    let full = temp_path("to_cut.mcap");
+    let status = bifirst()
+        .args(["run", scene_path("bar_impact").to_str().unwrap(), "--set", "time.end=0.02", "--set", "output.scene_every=0", "--quiet", "--out"])
+        .arg(&full)
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let bytes = std::fs::read(&full).unwrap();
+    let summary = mcap::Summary::read(&bytes).unwrap().expect("a finished log");
+    let chunks: Vec<(usize, usize)> = summary.chunk_indexes.iter().map(|c| ((c.chunk_start_offset + c.chunk_length) as usize, summary.stream_chunk(&bytes, c).unwrap().count())).collect();
+    assert!(chunks.len() >= 2, "the log spans several chunks: {chunks:?}");
+    let whole = bifirst::output::read_run(&full).unwrap();
+    let cut_path = temp_path("cut.mcap");
+    let mut before = 0;
+    for cut in (4096..bytes.len()).step_by(4096) {
+        std::fs::write(&cut_path, &bytes[..cut]).unwrap();
+        let record = bifirst::output::read_run(&cut_path).unwrap_or_else(|e| panic!("cut at {cut}: {e}"));
+        assert!(!record.has_summary);
+        let complete: usize = chunks.iter().filter(|(end, _)| *end <= cut).map(|(_, n)| n).sum();
+        let read: usize = record.topics.values().map(Vec::len).sum();
+        assert!(read >= complete && read >= before, "cut at {cut}: {read} messages, {complete} in complete chunks, {before} at the last cut");
+        before = read;
+        for (topic, messages) in &record.topics {
+            assert_eq!(messages[..], whole.topics[topic][..messages.len()], "cut at {cut}: {topic}");
+        }
+    }
+}
+
 /// Caught by `--out /dev/full`: the MCAP writer panicked in its destructor after the first
 /// failed write and the process aborted (exit 134). A full disk is a failed run (exit 1) that
 /// names the file.

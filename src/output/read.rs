@@ -68,15 +68,22 @@ impl RunRecord {
     }
 }
 
-/// Reads every message of a run log. A log without its summary section (a killed process) is
-/// read as far as it goes.
+/// Reads every message of a run log. A log without its summary section (a killed process, a
+/// crashed machine) is read as far as it goes: every message of its complete chunks, up to the
+/// first record the cut left unfinished.
 pub fn read_run(path: &Path) -> Result<RunRecord, ReadError> {
     let bytes = std::fs::read(path).map_err(|source| ReadError::Io { path: path.into(), source })?;
     let mcap_err = |e: mcap::McapError| ReadError::Mcap { path: path.into(), message: e.to_string() };
+    // A finished log ends with its footer; only then is a broken record an error.
+    let summary = mcap::Summary::read(&bytes).ok().flatten();
     let mut topics: BTreeMap<String, Vec<Value>> = BTreeMap::new();
     let mut schemas = BTreeMap::new();
     for message in mcap::MessageStream::new(&bytes).map_err(mcap_err)? {
-        let message = message.map_err(mcap_err)?;
+        let message = match message {
+            Ok(message) => message,
+            Err(_) if summary.is_none() => break,
+            Err(e) => return Err(mcap_err(e)),
+        };
         let topic = message.channel.topic.clone();
         if let Some(schema) = &message.channel.schema {
             schemas.entry(topic.clone()).or_insert_with(|| ChannelSchema {
@@ -90,7 +97,6 @@ pub fn read_run(path: &Path) -> Result<RunRecord, ReadError> {
         let value = serde_json::from_slice(&message.data).map_err(|e| ReadError::Json { path: path.into(), topic, index: list.len(), message: e.to_string() })?;
         list.push(value);
     }
-    let summary = mcap::Summary::read(&bytes).map_err(mcap_err)?;
     let has_summary = summary.is_some();
     let (mut attachments, mut metadata) = (Vec::new(), BTreeMap::new());
     if let Some(summary) = summary {
