@@ -287,3 +287,15 @@ fn a_packing_of_huge_grains_is_rejected_at_once() {
     assert!(stderr.contains("limits.max_elements") && !stderr.contains("panicked"), "{stderr}");
     println!("rejected in {:.2} s", started.elapsed().as_secs_f64());
 }
+
+/// Caught by the issue: these reached the log as `null` (non-finite energies) or failed as an
+/// "inverted element (det F = 0)". Inputs whose products overflow are bad input, named by key.
+#[test]
+fn inputs_too_large_for_finite_energies() {
+    assert_error("huge_gravity", GOOD, &["gravity=[0.0, 1e308]"], "gravity", None, "beyond ±1e100");
+    assert_error("huge_initial_velocity", GOOD, &["body.block.initial_velocity=[0.0, 1e200]"], "body.block.initial_velocity", None, "beyond ±1e100");
+    // Node 4 of the Gmsh square moved to x = 1e300.
+    let msh = common_gmsh::unit_square_msh(false).replace("0 1 0\n$EndNodes", "1e300 1 0\n$EndNodes");
+    std::fs::write(dir().join("far_node.msh"), msh).unwrap();
+    assert_error("far_node", &with_mesh_file("far_node.msh", "left"), &[], "body.block.mesh.file", Some(13), "node 3 is at");
+}

@@ -170,3 +170,18 @@ fn polygon_mesh_is_conforming_positive_and_fills_the_outline() {
         }
     }
 }
+
+/// Caught by the issue: a non-finite displacement failed as an "inverted element (det F = NaN)".
+#[test]
+fn a_non_finite_state_is_not_an_inverted_element() {
+    let mesh = generate::rectangle([0.0; 2], [1.0, 1.0], [1, 1], ElementKind::Quad4);
+    let geometry = ReferenceGeometry::new(&mesh).unwrap();
+    let model = BlatzKo { g: 1000.0 };
+    let mut u = vec![[0.0; 3]; 4];
+    u[2][0] = f64::NAN;
+    let error = element_force_tangent(&model, geometry.element_points(0), &u, 2, true, &mut ElementOutput::default()).unwrap_err();
+    assert!(matches!(error, bifirst::element::ElementError::NonFinite), "{error:?}");
+    u[2][0] = -3.0;
+    let error = element_force_tangent(&model, geometry.element_points(0), &u, 2, true, &mut ElementOutput::default()).unwrap_err();
+    assert!(matches!(error, bifirst::element::ElementError::Inverted(_)), "{error:?}");
+}

@@ -63,6 +63,10 @@ pub fn element_force_tangent<M: Hyperelastic>(
     for gp in points {
         let f = deformation_gradient(gp, u);
         let det = f.determinant();
+        // A state that is not finite is not an inverted element (it was reported as one).
+        if det.is_nan() {
+            return Err(ElementError::NonFinite);
+        }
         if !(det > 0.0) {
             return Err(ElementError::Inverted(det));
         }

@@ -63,6 +63,16 @@ fn build_mesh(loaded: &LoadedScene, key: &str, spec: &MeshSpec) -> Result<Mesh, 
 }
 
 /// Sets up every body, boundary set and probe of the scene.
+/// The largest magnitude a coordinate, velocity or acceleration of a scene may have: energies
+/// multiply such numbers with each other and with masses, and must stay finite in f64 (a node at
+/// 1e300 or a gravity of 1e308 reached the log as `null`, or failed as an inverted element).
+pub const LARGEST_INPUT: Real = 1e100;
+const RANGE_WHY: &str = " (energies multiply such numbers and must stay finite)";
+
+fn within_range(v: &[Real]) -> bool {
+    v.iter().all(|x| x.abs() <= LARGEST_INPUT)
+}
+
 pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> {
     let scene = &loaded.scene;
     let mut meshes = Vec::new();
@@ -74,13 +84,22 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
             Some(d) if d != mesh.dim() => return Err(loaded.error(Invalid, &key, format!("a {}D mesh in a {d}D scene.", mesh.dim()))),
             _ => dim = Some(mesh.dim()),
         }
-        let geometry = ReferenceGeometry::new(&mesh).map_err(|e| {
-            let where_ = if spec.mesh.file.is_some() { format!("{key}.file") } else { key.clone() };
-            loaded.error(MeshError, &where_, format!("{e}; the mesh must have positive element volumes at t = 0."))
-        })?;
+        let where_ = if spec.mesh.file.is_some() { format!("{key}.file") } else { key.clone() };
+        if let Some((n, x)) = mesh.nodes.iter().enumerate().find(|(_, x)| !within_range(&x[..])) {
+            return Err(loaded.error(Invalid, &where_, format!("node {n} is at {x:?}, beyond ±{LARGEST_INPUT:e}{RANGE_WHY}.")));
+        }
+        let geometry = ReferenceGeometry::new(&mesh)
+            .map_err(|e| loaded.error(MeshError, &where_, format!("{e}; the mesh must have positive element volumes at t = 0.")))?;
         meshes.push((name.clone(), mesh, geometry));
     }
     let dim = dim.expect("a scene has a body");
+    let range_check = |key: &str, v: &[Real]| {
+        if within_range(v) {
+            Ok(())
+        } else {
+            Err(loaded.error(Invalid, key, format!("{v:?} is beyond ±{LARGEST_INPUT:e}{RANGE_WHY}.")))
+        }
+    };
     let vec_len_check = |key: &str, v: &[Real]| {
         if v.len() == dim {
             Ok(())
@@ -142,12 +161,14 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
         let material = &scene.material[&spec.material];
         let v0 = spec.initial_velocity.clone().unwrap_or_else(|| vec![0.0; dim]);
         vec_len_check(&format!("{key}.initial_velocity"), &v0)?;
+        range_check(&format!("{key}.initial_velocity"), &v0)?;
         let omega = match (&spec.angular_velocity, dim) {
             (None, _) => [0.0; 3],
             (Some(AngularVelocity::Planar(w)), 2) => [0.0, 0.0, *w],
             (Some(AngularVelocity::Spatial(w)), 3) if w.len() == 3 => [w[0], w[1], w[2]],
             _ => return Err(loaded.error(Invalid, &format!("{key}.angular_velocity"), "give one number in 2D and a vector of 3 components in 3D.")),
         };
+        range_check(&format!("{key}.angular_velocity"), &omega)?;
         let masses = geometry.lumped_masses(&mesh, material.density);
         let total: Real = masses.iter().sum();
         let mut c = [0.0; 3];
@@ -181,6 +202,7 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
     let mut gravity = [0.0; 3];
     if let Some(g) = &scene.gravity {
         vec_len_check("gravity", g)?;
+        range_check("gravity", g)?;
         gravity[..dim].copy_from_slice(g);
     }
     let contact = build_contact(loaded, &bodies, dim)?;
