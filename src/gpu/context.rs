@@ -114,7 +114,7 @@ pub fn hardware_adapter() -> Option<AdapterReport> {
 }
 
 /// Opens a device on `adapter` in `precision` (default: f64 when the adapter has it, else f32).
-pub fn open_adapter(adapter: Adapter, precision: Option<Precision>) -> Result<Gpu, GpuError> {
+fn open_adapter(adapter: Adapter, precision: Option<Precision>) -> Result<Gpu, GpuError> {
     let report = AdapterReport::of(&adapter);
     let precision = match precision {
         Some(Precision::F64) if !report.f64 => return Err(GpuError::NoF64 { adapter: report.name }),

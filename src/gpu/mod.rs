@@ -11,5 +11,5 @@ pub mod uzawa_step;
 pub mod world;
 
 pub use world::{ElementFailure, Evaluation, GpuWorld, Traffic, WorldBody, WorldKernel};
-pub use context::{describe_adapters, hardware_adapter, open, open_adapter, AdapterReport, Gpu, GpuError};
+pub use context::{describe_adapters, hardware_adapter, open, AdapterReport, Gpu, GpuError};
 pub use shaders::ElementVariant;

@@ -157,13 +157,10 @@ impl Deferred {
 /// The kernels [`GpuWorld::replay`] can run alone.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum WorldKernel {
-    /// `element_force_tangent`, entry point `forces`.
-    Forces,
     /// `element_force_tangent`, entry point `main`.
     ForceTangent,
     /// `assemble_residual` and `assemble_csr`.
     Assembly,
-    Energy,
 }
 
 /// The per-dof inputs a batch keeps a host copy of, uploaded by runs of members.
@@ -188,6 +185,35 @@ enum Source {
     DofOut,
     Values,
     Energy,
+}
+
+/// The copies of one pass into the read-back buffer, each landing 8-byte aligned after the last.
+#[derive(Default)]
+struct ReadBack {
+    copies: Vec<Copy>,
+    end: u64,
+}
+
+impl ReadBack {
+    /// Queues a copy of the byte range `source` of a batch's buffer; returns where it lands.
+    fn queue(&mut self, batch: usize, what: Source, source: std::ops::Range<u64>) -> u64 {
+        let target = self.end;
+        self.end += (source.end - source.start).div_ceil(8) * 8;
+        self.copies.push(Copy { batch, what, source, target });
+        target
+    }
+
+    /// Queues the byte span of each listed member (sorted), one copy per run of consecutive
+    /// members; returns where each member's span lands, in the order given.
+    fn queue_runs(&mut self, batch: usize, what: Source, members: &[usize], span: &dyn Fn(usize) -> std::ops::Range<u64>) -> Vec<usize> {
+        let mut landing = Vec::with_capacity(members.len());
+        for run in runs(members) {
+            let (first, last) = (span(run[0]), span(*run.last().expect("a run has members")));
+            let target = if last.end > first.start { self.queue(batch, what, first.start..last.end) } else { self.end };
+            landing.extend(run.iter().map(|&m| (target + span(m).start - first.start) as usize));
+        }
+        landing
+    }
 }
 
 pub struct GpuWorld {
@@ -278,11 +304,6 @@ impl GpuWorld {
         self.submits
     }
 
-    /// Number of batches (dispatches per kernel per evaluation).
-    pub fn batch_count(&self) -> usize {
-        self.batches.len()
-    }
-
     fn upload(&mut self, buffer: &Buffer, offset: u64, bytes: &[u8]) {
         self.traffic.up += bytes.len() as u64;
         self.gpu.queue.write_buffer(buffer, offset, bytes);
@@ -326,6 +347,28 @@ impl GpuWorld {
         }
     }
 
+    /// Copies the displacements of the listed bodies (`(body, u)`) into their batches' mirrors
+    /// and uploads them; returns, per batch with any of them, the list indices in member order.
+    fn stage_displacements(&mut self, list: &[(usize, &[Real])]) -> Vec<(usize, Vec<usize>)> {
+        let mut order: Vec<usize> = (0..list.len()).collect();
+        order.sort_by_key(|&i| self.place[list[i].0]);
+        let mut by_batch: Vec<(usize, Vec<usize>)> = Vec::new();
+        for i in order {
+            let (batch, member) = self.place[list[i].0];
+            let range = self.batches[batch].members[member];
+            self.batches[batch].u_host[range.dof_start as usize..(range.dof_start + range.dofs) as usize].copy_from_slice(list[i].1);
+            match by_batch.last_mut() {
+                Some((b, mine)) if *b == batch => mine.push(i),
+                _ => by_batch.push((batch, vec![i])),
+            }
+        }
+        for (batch, mine) in &by_batch {
+            let members: Vec<usize> = mine.iter().map(|&i| self.place[list[i].0].1).collect();
+            self.upload_runs(*batch, &members, Mirror::Displacement);
+        }
+        by_batch
+    }
+
     /// Evaluates the listed bodies at their displacements in one pass: `element_force_tangent`
     /// (forces, or forces and tangent), `assemble_residual` and, for those that want the
     /// tangent, `assemble_csr`, then one read-back. Each evaluation's `failure` says whether its
@@ -336,24 +379,15 @@ impl GpuWorld {
         let real = precision.size() as u64;
         let coefficient_buffer = self.coefficients.clone();
         self.upload(&coefficient_buffer, 0, &to_device(precision, &[coefficients.factor, coefficients.c1]));
-        // Per batch, its evaluations in member order.
-        let mut order: Vec<usize> = (0..list.len()).collect();
-        order.sort_by_key(|&i| self.place[list[i].body]);
-        let mut copies: Vec<Copy> = Vec::new();
-        let mut target = 0u64;
+        let by_batch = self.stage_displacements(&list.iter().map(|e| (e.body, e.u)).collect::<Vec<_>>());
+        let mut readback = ReadBack::default();
+        // Where each evaluation's failure flags, residuals and values land in the read-back.
+        let mut landing = vec![[0usize; 3]; list.len()];
         let mut encoder = self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("evaluate") });
-        for batch in 0..self.batches.len() {
-            let mine: Vec<usize> = order.iter().copied().filter(|&i| self.place[list[i].body].0 == batch).collect();
-            if mine.is_empty() {
-                continue;
-            }
-            let members: Vec<usize> = mine.iter().map(|&i| self.place[list[i].body].1).collect();
-            for &i in &mine {
-                let range = self.batches[batch].members[self.place[list[i].body].1];
-                self.batches[batch].u_host[range.dof_start as usize..(range.dof_start + range.dofs) as usize].copy_from_slice(list[i].u);
-            }
-            self.upload_runs(batch, &members, Mirror::Displacement);
-            let active: Vec<Active> = mine.iter().map(|&i| Active { member: self.place[list[i].body].1 as u32, mode: if list[i].tangent { MODE_TANGENT } else { MODE_FORCES } }).collect();
+        for (batch, mine) in by_batch {
+            // (list index, member) in member order.
+            let mine: Vec<(usize, usize)> = mine.into_iter().map(|i| (i, self.place[list[i].body].1)).collect();
+            let active: Vec<Active> = mine.iter().map(|&(i, m)| Active { member: m as u32, mode: if list[i].tangent { MODE_TANGENT } else { MODE_FORCES } }).collect();
             let b = &self.batches[batch];
             let (active_buffer, failure_buffer) = (b.active.clone(), b.failure.clone());
             let failures = vec![NO_FAILURE; 2 * b.members.len()];
@@ -370,57 +404,41 @@ impl GpuWorld {
             }
             b.residual.record(&mut encoder, WORKGROUP, extent(0, |m| m.dofs), active.len());
             b.csr.record(&mut encoder, WORKGROUP, extent(MODE_TANGENT, |m| m.nonzeros), active.len());
-            copies.push(Copy { batch, what: Source::Failure, source: 0..(8 * b.members.len()) as u64, target });
-            target += (8 * b.members.len()) as u64;
-            let wants = |i: usize, what: Source| match what {
-                Source::DofOut => list[i].dof_out.is_some(),
-                _ => list[i].tangent,
-            };
-            for what in [Source::DofOut, Source::Values] {
-                let wanted: Vec<usize> = mine.iter().copied().filter(|&i| wants(i, what)).map(|i| self.place[list[i].body].1).collect();
-                for run in runs(&wanted) {
-                    let (first, last) = (&b.members[run[0]], &b.members[*run.last().expect("a run has members")]);
-                    let source = match what {
-                        Source::DofOut => first.dof_start as u64 * 2 * real..(last.dof_start + last.dofs) as u64 * 2 * real,
-                        _ => first.nonzero_start as u64 * real..(last.nonzero_start + last.nonzeros) as u64 * real,
-                    };
-                    let size = source.end - source.start;
-                    if size > 0 {
-                        copies.push(Copy { batch, what, source, target });
-                        target += size.div_ceil(8) * 8;
-                    }
+            let flags = readback.queue(batch, Source::Failure, 0..(8 * b.members.len()) as u64);
+            for &(i, m) in &mine {
+                landing[i][0] = flags as usize + 8 * m;
+            }
+            let dof_span = |m: usize| b.members[m].dof_start as u64 * 2 * real..(b.members[m].dof_start + b.members[m].dofs) as u64 * 2 * real;
+            let value_span = |m: usize| b.members[m].nonzero_start as u64 * real..(b.members[m].nonzero_start + b.members[m].nonzeros) as u64 * real;
+            let wanted: [(Source, Vec<(usize, usize)>); 2] =
+                [(Source::DofOut, mine.iter().copied().filter(|&(i, _)| list[i].dof_out.is_some()).collect()), (Source::Values, mine.iter().copied().filter(|&(i, _)| list[i].tangent).collect())];
+            for (slot, (what, chosen)) in wanted.into_iter().enumerate() {
+                let members: Vec<usize> = chosen.iter().map(|&(_, m)| m).collect();
+                let span: &dyn Fn(usize) -> std::ops::Range<u64> = if what == Source::DofOut { &dof_span } else { &value_span };
+                for ((i, _), at) in chosen.into_iter().zip(readback.queue_runs(batch, what, &members, span)) {
+                    landing[i][slot + 1] = at;
                 }
             }
         }
-        self.read_back(encoder, &copies, "element_force_tangent", times, t0, |world, bytes| {
-            for &i in &order {
-                let (batch, member) = world.place[list[i].body];
-                let range = world.batches[batch].members[member];
-                let find = |what: Source, at: u64| {
-                    copies.iter().find(|c| c.batch == batch && c.what == what && c.source.contains(&at)).map(|c| (c.target + at - c.source.start) as usize)
-                };
-                let flags_at = find(Source::Failure, member as u64 * 8).expect("the failure flags came back");
+        self.read_back(encoder, &readback, "element_force_tangent", times, t0, |bytes| {
+            for (e, [flags_at, dof_at, values_at]) in list.iter_mut().zip(landing) {
                 let flags: [u32; 2] = bytemuck::pod_read_unaligned(&bytes[flags_at..flags_at + 8]);
-                list[i].failure = if flags[0] != NO_FAILURE {
+                e.failure = if flags[0] != NO_FAILURE {
                     Some(ElementFailure::Inverted(flags[0] as usize))
                 } else if flags[1] != NO_FAILURE {
                     Some(ElementFailure::NonFinite(flags[1] as usize))
                 } else {
                     None
                 };
-                if list[i].failure.is_some() {
+                if e.failure.is_some() {
                     continue;
                 }
-                let dofs = range.dofs as usize;
-                if let Some(out) = list[i].dof_out.as_deref_mut() {
-                    if let Some(at) = find(Source::DofOut, range.dof_start as u64 * 2 * real) {
-                        let reals = from_device(precision, &bytes[at..at + dofs * 2 * real as usize]);
-                        out.copy_from_slice(bytemuck::cast_slice(&reals));
-                    }
+                if let Some(out) = e.dof_out.as_deref_mut() {
+                    let reals = from_device(precision, &bytes[dof_at..dof_at + out.len() * 2 * real as usize]);
+                    out.copy_from_slice(bytemuck::cast_slice(&reals));
                 }
-                if list[i].tangent && range.nonzeros > 0 {
-                    let at = find(Source::Values, range.nonzero_start as u64 * real).expect("the values came back");
-                    list[i].values.copy_from_slice(&from_device(precision, &bytes[at..at + range.nonzeros as usize * real as usize]));
+                if e.tangent && !e.values.is_empty() {
+                    e.values.copy_from_slice(&from_device(precision, &bytes[values_at..values_at + e.values.len() * real as usize]));
                 }
             }
         })
@@ -432,48 +450,28 @@ impl GpuWorld {
         let t0 = Instant::now();
         let precision = self.gpu.precision;
         let real = precision.size() as u64;
-        let mut order: Vec<usize> = (0..list.len()).collect();
-        order.sort_by_key(|&i| self.place[list[i].0]);
-        let mut copies = Vec::new();
-        let mut target = 0u64;
+        let by_batch = self.stage_displacements(list);
+        let mut readback = ReadBack::default();
+        // Where each body's energies land in the read-back, and how many there are.
+        let mut landing = vec![(0usize, 0usize); list.len()];
         let mut encoder = self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("energies") });
-        for batch in 0..self.batches.len() {
-            let mine: Vec<usize> = order.iter().copied().filter(|&i| self.place[list[i].0].0 == batch).collect();
-            if mine.is_empty() {
-                continue;
-            }
+        for (batch, mine) in by_batch {
             let members: Vec<usize> = mine.iter().map(|&i| self.place[list[i].0].1).collect();
-            for &i in &mine {
-                let range = self.batches[batch].members[self.place[list[i].0].1];
-                self.batches[batch].u_host[range.dof_start as usize..(range.dof_start + range.dofs) as usize].copy_from_slice(list[i].1);
-            }
-            self.upload_runs(batch, &members, Mirror::Displacement);
             let active: Vec<Active> = members.iter().map(|&m| Active { member: m as u32, mode: MODE_FORCES }).collect();
             let active_buffer = self.batches[batch].active.clone();
             self.upload(&active_buffer, 0, bytemuck::cast_slice(&active));
             let b = &self.batches[batch];
             let most = members.iter().map(|&m| b.members[m].elements as usize).max().unwrap_or(0);
             b.element_energy.record(&mut encoder, WORKGROUP, most, active.len());
-            for run in runs(&members) {
-                let (first, last) = (&b.members[run[0]], &b.members[*run.last().expect("a run has members")]);
-                let source = first.element_start as u64 * real..(last.element_start + last.elements) as u64 * real;
-                let size = source.end - source.start;
-                if size > 0 {
-                    copies.push(Copy { batch, what: Source::Energy, source, target });
-                    target += size.div_ceil(8) * 8;
-                }
+            let span = |m: usize| b.members[m].element_start as u64 * real..(b.members[m].element_start + b.members[m].elements) as u64 * real;
+            for ((i, m), at) in mine.into_iter().zip(&members).zip(readback.queue_runs(batch, Source::Energy, &members, &span)) {
+                landing[i] = (at, b.members[*m].elements as usize);
             }
         }
         let mut energies = vec![Vec::new(); list.len()];
-        self.read_back(encoder, &copies, "element_energy", times, t0, |world, bytes| {
-            for &i in &order {
-                let (batch, member) = world.place[list[i].0];
-                let range = world.batches[batch].members[member];
-                let at = range.element_start as u64 * real;
-                if let Some(c) = copies.iter().find(|c| c.batch == batch && c.source.contains(&at)) {
-                    let start = (c.target + at - c.source.start) as usize;
-                    energies[i] = from_device(precision, &bytes[start..start + range.elements as usize * real as usize]);
-                }
+        self.read_back(encoder, &readback, "element_energy", times, t0, |bytes| {
+            for (energy, (at, count)) in energies.iter_mut().zip(landing) {
+                *energy = from_device(precision, &bytes[at..at + count * real as usize]);
             }
         })?;
         Ok(energies)
@@ -492,7 +490,6 @@ impl GpuWorld {
             let all = b.members.len();
             let most = |f: fn(&MemberRange) -> u32| b.members.iter().map(|m| f(m) as usize).max().unwrap_or(0);
             match kernel {
-                WorldKernel::Forces => b.forces.record(&mut encoder, WORKGROUP, most(|m| m.elements), all),
                 WorldKernel::ForceTangent => {
                     if let Deferred::Ready(tangent) = &b.tangent {
                         tangent.record(&mut encoder, b.tangent_elements_per_group, most(|m| m.elements), all);
@@ -502,7 +499,6 @@ impl GpuWorld {
                     b.residual.record(&mut encoder, WORKGROUP, most(|m| m.dofs), all);
                     b.csr.record(&mut encoder, WORKGROUP, most(|m| m.nonzeros), all);
                 }
-                WorldKernel::Energy => b.element_energy.record(&mut encoder, WORKGROUP, most(|m| m.elements), all),
             }
         }
         self.gpu.queue.submit([encoder.finish()]);
@@ -528,19 +524,19 @@ impl GpuWorld {
         Ok(from_device(self.gpu.precision, &self.gpu.read_range("element_force_tangent", &staging, size)?))
     }
 
-    /// Records the copies into the read-back buffer, submits once, maps once and hands the
+    /// Records the read-back's copies, submits once, maps once and hands the
     /// mapped bytes to `unpack`. The device's work counts as `elements`, the host's packing and
     /// unpacking as `transfer`.
     fn read_back(
         &mut self,
         mut encoder: wgpu::CommandEncoder,
-        copies: &[Copy],
+        readback: &ReadBack,
         kernel: &str,
         times: &mut PhaseTimes,
         started: Instant,
-        unpack: impl FnOnce(&Self, &[u8]),
+        unpack: impl FnOnce(&[u8]),
     ) -> Result<(), GpuError> {
-        for c in copies {
+        for c in &readback.copies {
             let b = &self.batches[c.batch];
             let source = match c.what {
                 Source::Failure => &b.failure,
@@ -553,7 +549,7 @@ impl GpuWorld {
         let submitted = Instant::now();
         self.gpu.queue.submit([encoder.finish()]);
         self.submits += 1;
-        let end = copies.iter().map(|c| c.target + (c.source.end - c.source.start)).max().unwrap_or(0);
+        let end = readback.end;
         let bytes = if end == 0 {
             self.gpu.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Kernel { kernel: kernel.into(), message: e.to_string() })?;
             Vec::new()
@@ -562,7 +558,7 @@ impl GpuWorld {
         };
         self.traffic.down += end;
         let mapped = Instant::now();
-        unpack(self, &bytes);
+        unpack(&bytes);
         times.transfer += (submitted - started).as_secs_f64() + mapped.elapsed().as_secs_f64();
         times.elements += (mapped - submitted).as_secs_f64();
         Ok(())

@@ -270,8 +270,13 @@ impl Body {
     /// every dof, with the CPU kernels. [`Body::refresh_factor`] adds the tangent when it
     /// refactorises. A GPU world evaluates through [`Body::device_evaluation`] instead.
     pub fn evaluate(&mut self, p: &StepParams, times: &mut PhaseTimes) -> Result<(), StepFailure> {
+        self.evaluate_with(p, !self.reuse_factorization, times)
+    }
+
+    /// [`Body::evaluate`], with the stiffness values only if `with_tangent`.
+    fn evaluate_with(&mut self, p: &StepParams, with_tangent: bool, times: &mut PhaseTimes) -> Result<(), StepFailure> {
         let u = std::mem::take(&mut self.trial.u);
-        let result = self.assemble_with(&u, coefficients(p), !self.reuse_factorization, times);
+        let result = self.assemble_with(&u, coefficients(p), with_tangent, times);
         self.trial.u = u;
         result?;
         self.absorb_residual(p);
@@ -314,19 +319,10 @@ impl Body {
         Ok(())
     }
 
-    /// The f64 residual on the CPU for a device that evaluates tangents only (f32 kernels).
+    /// The f64 residual on the CPU for a device that evaluates tangents only (f32 kernels):
+    /// [`Body::evaluate`] without a tangent whatever `reuse_factorization` says.
     pub fn evaluate_residual_on_cpu(&mut self, p: &StepParams, times: &mut PhaseTimes) -> Result<(), StepFailure> {
-        let u = std::mem::take(&mut self.trial.u);
-        let result = self.cpu_elements(&u, false, times);
-        if result.is_ok() {
-            let t0 = Instant::now();
-            assemble_residual(&self.element_results, &self.gather.dof_start, &self.gather.dof, coefficients(p), &u, &self.step_inputs, &mut self.dof_out);
-            times.assembly += t0.elapsed().as_secs_f64();
-        }
-        self.trial.u = u;
-        result?;
-        self.absorb_residual(p);
-        Ok(())
+        self.evaluate_with(p, false, times)
     }
 
     /// The kernels of one Newton evaluation at `u` on the CPU: element results, stiffness values
