@@ -255,7 +255,11 @@ fn common_scene_path(name: &str) -> PathBuf {
 fn bad_packing_and_polygon_grains() {
     let packing = format!("{GOOD}\n[packing]\ncount = 4\nmaterial = \"steel\"\n");
     assert_error("packing_material", &packing, &[], "packing.material", Some(21), "unknown material `steel`");
-    assert_error("packing_radius", &packing.replace("\"steel\"", "\"rubber\""), &["packing.radius=[0.5, 0.2]"], "packing.radius", None, "0 < min <= max");
+    let rubber = packing.replace("\"steel\"", "\"rubber\"");
+    assert_error("packing_radius", &rubber, &["packing.radius=[0.5, 0.2]"], "packing.radius", None, "0 < min <= max");
+    // Caught by the fuzz test (seed 1): a huge `packing.divisions` overflowed the disk generator.
+    assert_error("packing_divisions", &rubber, &["packing.divisions=9223372036854775807"], "packing.divisions", None, "limits.max_elements");
+    assert_error("packing_count", &rubber, &["packing.count=9223372036854775807"], "packing.count", None, "limits.max_elements");
     let concave = r#"{ generator = "polygon", element = "tri3", points = [[0.0, 0.0], [2.0, 0.0], [1.0, 0.3], [1.0, 2.0]], divisions = [3] }"#;
     let polygon = GOOD.replace(r#"{ generator = "rectangle", element = "quad4", size = [1.0, 1.0], divisions = [2, 2] }"#, concave).replace("nodes = \"y_min\"", "nodes = \"center\"");
     assert_error("concave_polygon", &polygon, &[], "body.block.mesh.points", Some(13), "not convex");
@@ -298,4 +302,9 @@ fn inputs_too_large_for_finite_energies() {
     let msh = common_gmsh::unit_square_msh(false).replace("0 1 0\n$EndNodes", "1e300 1 0\n$EndNodes");
     std::fs::write(dir().join("far_node.msh"), msh).unwrap();
     assert_error("far_node", &with_mesh_file("far_node.msh", "left"), &[], "body.block.mesh.file", Some(13), "node 3 is at");
+    assert_error("huge_density", GOOD, &["material.rubber.density=1e200"], "material.rubber.density", None, "outside [1e-100, 1e100]");
+    assert_error("tiny_modulus", GOOD, &["material.rubber.G=1e-200"], "material.rubber.G", None, "outside [1e-100, 1e100]");
+    // Each input within range, their product beyond f64.
+    let sets = ["material.rubber.density=1e100", "body.block.mesh.size=[1e60, 1e60]", "body.block.initial_velocity=[1e100, 0.0]"];
+    assert_error("infinite_initial_energy", GOOD, &sets, "body.block", Some(11), "non-finite energy (kinetic inf");
 }

@@ -275,6 +275,31 @@ fn quiet_json_run_prints_only_the_machine_readable_summary() {
     assert!(String::from_utf8_lossy(&missing.stderr).contains("no/such/run.mcap"));
 }
 
+#[test]
+fn summary_tells_apart_two_runs_of_one_scene_by_file_and_backend() {
+    let run = |backend: &str| {
+        let out = temp_path(&format!("summary_{backend}.mcap"));
+        let result = bifirst()
+            .args(["run", scene_path("bar_impact").to_str().unwrap(), "--set", "time.end=0.0005", "--quiet", "--backend", backend, "--out"])
+            .arg(&out)
+            .output()
+            .unwrap();
+        assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
+        out
+    };
+    let (cpu, gpu) = (run("cpu"), run("gpu"));
+    let table = bifirst().arg("summary").arg(&cpu).arg(&gpu).output().unwrap();
+    let text = String::from_utf8_lossy(&table.stdout);
+    let row = |label: &str| text.lines().find(|l| l.starts_with(label)).unwrap_or_else(|| panic!("no {label} row:\n{text}")).to_string();
+    let files = row("file");
+    assert!(files.contains(cpu.to_str().unwrap()) && files.contains(gpu.to_str().unwrap()), "{text}");
+    let backend_row = row("backend, precision");
+    let backends: Vec<&str> = backend_row.split("  ").map(str::trim).filter(|c| !c.is_empty()).skip(1).collect();
+    // The GPU run's precision is the adapter's (f64 on lavapipe, f32 on an adapter without it).
+    assert!(backends.len() == 2 && backends[0] == "cpu f64" && backends[1].starts_with("gpu f"), "{text}");
+    assert!(text.contains("adapter ") && text.lines().any(|l| l.starts_with("wall s, transfer")), "{text}");
+}
+
 /// Starts a long run, waits until it has logged some steps, sends `signal`, and reads the log.
 fn interrupt_run(signal: &str, tag: &str, code: i32) -> common_run::Log {
     use std::io::{BufRead, BufReader};

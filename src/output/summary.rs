@@ -3,12 +3,20 @@
 use super::read::{ReadError, RunRecord};
 use serde_json::Value;
 
-const PHASES: [&str; 5] = ["elements", "assembly", "factorization", "solve", "contact"];
+const PHASES: [&str; 6] = ["elements", "assembly", "transfer", "factorization", "solve", "contact"];
 
 /// The totals of one run log.
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct LogSummary {
     pub name: String,
+    /// The log file, as given: two runs of one scene differ here.
+    pub file: String,
+    /// `cpu` or `gpu`, from `/run`.
+    pub backend: String,
+    /// `f64` or `f32`, from `/run`.
+    pub precision: String,
+    /// The GPU adapter, when the run used one.
+    pub adapter: Option<String>,
     /// `finished`, `failed`, `interrupted`, or `incomplete` (no `/summary`: the process died).
     pub status: String,
     pub message: Option<String>,
@@ -96,8 +104,14 @@ pub fn summarize(record: &RunRecord) -> Result<LogSummary, ReadError> {
     let (e0, e1) = (number(&first["total"]), number(&last["total"]));
     let drift = e1 - e0;
     let wall = &s["wall_by_phase"];
+    let run = record.messages("/run").first().cloned().unwrap_or(Value::Null);
+    let text = |key: &str| run[key].as_str().unwrap_or("unknown").to_string();
     Ok(LogSummary {
         name: record.name(),
+        file: record.path.display().to_string(),
+        backend: text("backend"),
+        precision: text("precision"),
+        adapter: run["adapter"].as_str().map(String::from),
         status: status.to_string(),
         message: s["message"].as_str().map(String::from),
         steps: count(&s["steps"]),
@@ -121,6 +135,8 @@ pub fn table(runs: &[LogSummary]) -> String {
     let per_step = |r: &LogSummary, n: u64| if r.steps > 0 { format!("{n} ({:.2}/step)", n as f64 / r.steps as f64) } else { n.to_string() };
     let mut rows: Vec<(String, Vec<String>)> = vec![
         ("run".into(), runs.iter().map(|r| r.name.clone()).collect()),
+        ("file".into(), runs.iter().map(|r| r.file.clone()).collect()),
+        ("backend, precision".into(), runs.iter().map(|r| format!("{} {}", r.backend, r.precision)).collect()),
         ("status".into(), runs.iter().map(|r| r.status.clone()).collect()),
         ("steps".into(), runs.iter().map(|r| r.steps.to_string()).collect()),
         ("t end".into(), runs.iter().map(|r| format!("{:.6e}", r.t_end)).collect()),
@@ -164,8 +180,11 @@ pub fn table(runs: &[LogSummary]) -> String {
         }
         out.push('\n');
     }
+    for r in runs.iter().filter(|r| r.adapter.is_some()) {
+        out.push_str(&format!("{}: adapter {}\n", r.file, r.adapter.as_deref().unwrap_or_default()));
+    }
     for r in runs.iter().filter(|r| r.message.is_some()) {
-        out.push_str(&format!("{}: {}\n", r.name, r.message.as_deref().unwrap_or_default()));
+        out.push_str(&format!("{}: {}\n", r.file, r.message.as_deref().unwrap_or_default()));
     }
     out
 }

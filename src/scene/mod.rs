@@ -13,3 +13,4 @@ pub use error::{SceneError, SceneErrorKind};
 pub use load::{load_scene, parse_scene, LoadedScene};
 pub use packing::grain_name;
 pub use types::*;
+pub use validate::LARGEST_INPUT;

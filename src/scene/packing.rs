@@ -56,6 +56,15 @@ fn check(p: &PackingSpec, s: &Scene) -> Result<(), Failure> {
     if p.divisions == 0 {
         return bad("divisions", "at least one cell per radius is needed.".into());
     }
+    // A disk of n divisions has 8 n² triangles; checked here, before any grain is meshed (a
+    // huge `divisions` overflowed the mesh generator).
+    let n = p.divisions as u128;
+    let elements = (p.count as u128).saturating_mul(n.saturating_mul(n).saturating_mul(8));
+    if elements > s.limits.max_elements as u128 {
+        let field = if p.count as u128 > s.limits.max_elements as u128 / 8 { "count" } else { "divisions" };
+        let message = format!("{} grains of {} divisions make {elements} elements or more, more than limits.max_elements = {}; raise the limit (`--set limits.max_elements=N`) if you mean it.", p.count, p.divisions, s.limits.max_elements);
+        return bad(field, message);
+    }
     if !(p.gap >= 0.0 && p.gap.is_finite()) {
         return bad("gap", format!("the gap must be zero or positive (got {}).", p.gap));
     }

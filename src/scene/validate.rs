@@ -11,11 +11,19 @@ fn fail(kind: SceneErrorKind, key: impl Into<String>, message: impl Into<String>
     Err((kind, key.into(), message.into()))
 }
 
+/// The largest magnitude a coordinate, velocity, acceleration, density or modulus of a scene may
+/// have: energies multiply such numbers with each other and with masses, and must stay finite in
+/// f64 (a node at 1e300 or a gravity of 1e308 reached the log as `null`, or failed as an inverted
+/// element).
+pub const LARGEST_INPUT: Real = 1e100;
+
 fn positive(key: String, what: &str, v: Real) -> Result<(), Failure> {
-    if v > 0.0 && v.is_finite() {
-        Ok(())
-    } else {
+    if !(v > 0.0 && v.is_finite()) {
         fail(Invalid, key, format!("{what} must be positive and finite (got {v})."))
+    } else if !(1.0 / LARGEST_INPUT..=LARGEST_INPUT).contains(&v) {
+        fail(Invalid, key, format!("{what} is {v:e}, outside [{:e}, {LARGEST_INPUT:e}] (energies multiply such numbers and must stay finite).", 1.0 / LARGEST_INPUT))
+    } else {
+        Ok(())
     }
 }
 

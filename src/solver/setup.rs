@@ -62,17 +62,14 @@ fn build_mesh(loaded: &LoadedScene, key: &str, spec: &MeshSpec) -> Result<Mesh, 
     })
 }
 
-/// Sets up every body, boundary set and probe of the scene.
-/// The largest magnitude a coordinate, velocity or acceleration of a scene may have: energies
-/// multiply such numbers with each other and with masses, and must stay finite in f64 (a node at
-/// 1e300 or a gravity of 1e308 reached the log as `null`, or failed as an inverted element).
-pub const LARGEST_INPUT: Real = 1e100;
+use crate::scene::LARGEST_INPUT;
 const RANGE_WHY: &str = " (energies multiply such numbers and must stay finite)";
 
 fn within_range(v: &[Real]) -> bool {
     v.iter().all(|x| x.abs() <= LARGEST_INPUT)
 }
 
+/// Sets up every body, boundary set and probe of the scene.
 pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> {
     let scene = &loaded.scene;
     let mut meshes = Vec::new();
@@ -206,6 +203,18 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
         gravity[..dim].copy_from_slice(g);
     }
     let contact = build_contact(loaded, &bodies, dim)?;
+    for b in &bodies {
+        let (kinetic, strain, potential) = (b.kinetic_energy(), b.strain_energy(), b.potential_energy(&gravity));
+        if ![kinetic, strain, potential].iter().all(|e| e.is_finite()) {
+            return Err(loaded.error(
+                Invalid,
+                &format!("body.{}", b.name),
+                format!(
+                    "the initial state has a non-finite energy (kinetic {kinetic:e}, strain {strain:e}, potential {potential:e}): its density, size, velocities and the gravity are too large together."
+                ),
+            ));
+        }
+    }
     Ok(Simulation {
         dim,
         bodies,
