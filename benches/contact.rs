@@ -51,6 +51,7 @@ fn detection(c: &mut Criterion) {
             surfaces,
             obstacles: Vec::new(),
             friction: vec![vec![None, None], vec![Some(0.3), None]],
+            second_pass: vec![vec![false; 2]; 2],
         };
         let positions = vec![lower.nodes.clone(), upper.nodes.clone()];
         let margin = 0.01 / cells as f64;

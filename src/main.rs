@@ -222,6 +222,12 @@ fn print_summary(s: &RunSummary) {
         s.energy.energy_balance_error,
         s.output.display()
     );
+    if s.energy_gain_steps > 0 {
+        eprintln!("warning: {} steps created energy (largest {:.3e} of the energy scale); see /log", s.energy_gain_steps, s.max_energy_gain);
+    }
+    if s.max_overlap_ratio > 0.01 {
+        eprintln!("warning: a node ended {:.3e} inside another body or an obstacle ({:.1} % of its element); see /contact.max_overlap", s.max_overlap, 100.0 * s.max_overlap_ratio);
+    }
 }
 
 /// Interrupts (SIGINT, SIGTERM, SIGHUP: a closed terminal or SSH session) set the first flag,

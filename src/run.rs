@@ -92,6 +92,14 @@ pub struct RunSummary {
     pub factorizations: usize,
     /// Largest penetration over the run (0 without contact).
     pub max_penetration: Real,
+    /// Deepest node inside another body or behind an obstacle over the run, and the largest
+    /// such depth relative to the local element size (`/contact.max_overlap*`).
+    pub max_overlap: Real,
+    pub max_overlap_ratio: Real,
+    /// Steps whose numerical dissipation was negative beyond [`ENERGY_GAIN_TOLERANCE`] (energy
+    /// created by the scheme), and the largest such gain relative to the energy scale.
+    pub energy_gain_steps: usize,
+    pub max_energy_gain: Real,
     pub wall_s: f64,
     /// Wall time of the steps by phase, summed over the run.
     pub wall_by_phase: PhaseTimes,
@@ -321,9 +329,28 @@ struct Totals {
     bodies_iterated: usize,
     factorizations: usize,
     max_penetration: Real,
+    max_overlap: Real,
+    max_overlap_ratio: Real,
+    energy_gain_steps: usize,
+    max_energy_gain: Real,
     wall: PhaseTimes,
     bytes_moved: u64,
     device_submits: u64,
+}
+
+/// A step whose numerical dissipation is negative by more than this share of the energy scale
+/// created energy: the scheme is meant to dissipate (theta, xi, impacts), never to add.
+pub const ENERGY_GAIN_TOLERANCE: Real = 1e-4;
+/// Energy-gain warnings written to `/log` before they are only counted.
+const ENERGY_GAIN_LINES: usize = 10;
+
+/// The energy the last step created relative to the energy scale (`max(|E(0)|, |E|, |W_ext|)`),
+/// when beyond [`ENERGY_GAIN_TOLERANCE`]; `dissipated` is the numerical dissipation before it.
+fn energy_gain(sim: &Simulation, dissipated: Real) -> Option<Real> {
+    let e = sim.energies();
+    let scale = [sim.initial_energy, e.total, e.external_work].iter().map(|x| x.abs()).fold(Real::MIN_POSITIVE, Real::max);
+    let gain = (dissipated - sim.numerical_dissipation) / scale;
+    (gain > ENERGY_GAIN_TOLERANCE).then_some(gain)
 }
 
 /// Runs a loaded scene to its end time, logging to `out`.
@@ -383,6 +410,10 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
         bodies_iterated: totals.bodies_iterated,
         factorizations: totals.factorizations,
         max_penetration: totals.max_penetration,
+        max_overlap: totals.max_overlap,
+        max_overlap_ratio: totals.max_overlap_ratio,
+        energy_gain_steps: totals.energy_gain_steps,
+        max_energy_gain: totals.max_energy_gain,
         wall_s: started.elapsed().as_secs_f64(),
         wall_by_phase: totals.wall,
         bytes_moved: totals.bytes_moved,
@@ -397,6 +428,7 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
         if sim.interrupted() {
             break Some((Stop::Interrupted, StepReport { step: sim.step, t: sim.t, ..Default::default() }));
         }
+        let dissipated = sim.numerical_dissipation;
         let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| sim.advance()));
         let report = match result {
             Ok(Ok(report)) => report,
@@ -422,11 +454,23 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
         totals.bodies_iterated += report.bodies_iterated;
         totals.factorizations += report.factorizations;
         totals.max_penetration = totals.max_penetration.max(report.contact.max_penetration);
+        totals.max_overlap = totals.max_overlap.max(report.contact.max_overlap);
+        totals.max_overlap_ratio = totals.max_overlap_ratio.max(report.contact.max_overlap_ratio);
         totals.wall += report.wall;
         totals.bytes_moved += report.bytes_moved;
         totals.device_submits += report.device_submits;
         if !sim.energies().total.is_finite() {
             break Some((Stop::NotFinite { step: sim.step, t: sim.t }, report));
+        }
+        if let Some(gain) = energy_gain(&sim, dissipated) {
+            totals.energy_gain_steps += 1;
+            totals.max_energy_gain = totals.max_energy_gain.max(gain);
+            if totals.energy_gain_steps <= ENERGY_GAIN_LINES {
+                let more = if totals.energy_gain_steps == ENERGY_GAIN_LINES { " (further such steps are counted in the summary only)" } else { "" };
+                let message = format!("step {} at t = {:.6e} created energy: numerical dissipation {:.3e} of the energy scale (a time step too large for the impact speeds?){more}", report.step, sim.t, -gain);
+                monitor.warning(&message);
+                logger.line(sim.t, Level::Warning, &message)?;
+            }
         }
         if report.step % every == 0 || sim.finished() {
             logger.solver(&report, sim.t, "converged", None)?;

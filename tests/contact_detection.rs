@@ -93,6 +93,7 @@ fn broad_phase_finds_what_brute_force_finds() {
             surfaces: surfaces.clone(),
             obstacles: Vec::new(),
             friction: vec![vec![None, None], vec![Some(0.2), None]],
+            second_pass: vec![vec![false; 2]; 2],
         };
         let positions: Vec<Vec<[f64; 3]>> = meshes.iter().map(|m| m.nodes.clone()).collect();
         let margin = 0.01;

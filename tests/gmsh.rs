@@ -11,7 +11,7 @@ use common_run::{read_log, temp_path};
 
 #[test]
 fn reads_nodes_elements_and_physical_groups() {
-    let mesh = gmsh::read(common_gmsh::unit_square_msh(false).as_bytes()).expect("valid msh");
+    let mesh = gmsh::read(common_gmsh::unit_square_msh(false).as_bytes(), None).expect("valid msh");
     assert_eq!(mesh.kind, ElementKind::Tri3);
     assert_eq!(mesh.nodes.len(), 4);
     assert_eq!(mesh.element_count(), 2);
@@ -73,7 +73,7 @@ fn gmsh_square_matches_generated_square() {
 #[test]
 fn an_older_msh_version_is_named_with_the_fix() {
     let legacy = "$MeshFormat\n2.2 0 8\n$EndMeshFormat\n$Nodes\n3\n1 0 0 0\n2 1 0 0\n3 0 1 0\n$EndNodes\n$Elements\n1\n1 2 2 0 1 1 2 3\n$EndElements\n";
-    let message = gmsh::read(legacy.as_bytes()).unwrap_err().to_string();
+    let message = gmsh::read(legacy.as_bytes(), None).unwrap_err().to_string();
     assert!(message.contains("MSH version 2.2 is not supported") && message.contains("-format msh41"), "{message}");
 }
 
@@ -81,7 +81,7 @@ fn an_older_msh_version_is_named_with_the_fix() {
 #[test]
 fn a_second_order_mesh_names_what_it_has() {
     let tri6 = common_gmsh::unit_square_msh(false).replace("2 1 2 2\n2 1 2 3\n3 1 3 4", "2 1 9 2\n2 1 2 3 1 2 3\n3 1 3 4 1 3 4");
-    let message = gmsh::read(tri6.as_bytes()).unwrap_err().to_string();
+    let message = gmsh::read(tri6.as_bytes(), None).unwrap_err().to_string();
     assert!(message.contains("(it has Lin2, Tri6)") && message.contains("first-order"), "{message}");
 }
 
@@ -89,7 +89,7 @@ fn a_second_order_mesh_names_what_it_has() {
 #[test]
 fn a_parse_error_says_where_the_file_is_broken() {
     let broken = common_gmsh::unit_square_msh(false).replace("0 1 0\n$EndNodes", "0 1 x\n");
-    let message = gmsh::read(broken.as_bytes()).unwrap_err().to_string();
+    let message = gmsh::read(broken.as_bytes(), None).unwrap_err().to_string();
     assert!(message.contains("in node coordinates") && message.contains("z coordinate"), "{message}");
     assert!(!message.contains("Hex dump") && !message.contains('\n'), "{message}");
 }

@@ -30,7 +30,7 @@ fn run_log_has_every_channel_of_the_contract() {
     let steps = 10;
     let expected: &[(&str, &str, &[&str], usize)] = &[
         ("/run", "bifirst.Run", &["version", "git_revision", "scene_name", "scene", "backend", "precision", "adapter"], 1),
-        ("/energy", "bifirst.Energy", &["t", "kinetic", "strain", "potential", "external_work", "friction_dissipation", "numerical_dissipation", "total", "energy_balance_error"], steps + 1),
+        ("/energy", "bifirst.Energy", &["t", "kinetic", "strain", "potential", "external_work", "friction_dissipation", "numerical_dissipation", "contact_correction", "total", "energy_balance_error"], steps + 1),
         (
             "/solver",
             "bifirst.Solver",
@@ -46,7 +46,7 @@ fn run_log_has_every_channel_of_the_contract() {
             "bifirst.Summary",
             &[
                 "scene", "status", "message", "backend", "precision", "adapter", "steps", "t_end", "cutbacks", "newton_iterations", "uzawa_iterations",
-                "bodies_iterated", "factorizations", "max_penetration", "wall_s", "wall_by_phase", "bytes_moved", "device_submits", "energy", "output",
+                "bodies_iterated", "factorizations", "max_penetration", "max_overlap", "max_overlap_ratio", "energy_gain_steps", "max_energy_gain", "wall_s", "wall_by_phase", "bytes_moved", "device_submits", "energy", "output",
             ],
             1,
         ),
@@ -138,7 +138,7 @@ fn contact_scenes_log_the_contact_channel_and_obstacle_reactions() {
     let log = run("bar_impact", &["time.end=0.005"], "contract_contact");
     let (name, schema) = &log.schemas["/contact"];
     assert_eq!(name, "bifirst.Contact");
-    let fields = ["t", "active", "sticking", "sliding", "max_penetration", "normal_impulse", "friction_dissipation_step"];
+    let fields = ["t", "active", "sticking", "sliding", "max_penetration", "max_overlap", "max_overlap_ratio", "normal_impulse", "friction_dissipation_step"];
     assert_eq!(schema_fields(schema), sorted(&fields));
     assert_eq!(log.topics["/contact"].len(), 100, "one message per step");
     assert!(log.topics["/contact"].iter().all(|m| message_fields(m) == sorted(&fields)));

@@ -7,6 +7,7 @@ use super::grid::Grid;
 use super::obstacle::Touch;
 use super::{ContactModel, ContactPoint, Master, Status, Term};
 use crate::precision::Real;
+use std::collections::{HashMap, HashSet};
 
 /// How far beyond a facet's edge (relative) a projection is still accepted, so that a node
 /// cannot slip between two neighbouring facets.
@@ -21,6 +22,7 @@ fn point(slave_body: usize, slave_node: u32, master: Master, frame: [Vec3; 3], g
         master,
         terms,
         term_count: 1,
+        second: false,
         frame,
         gap,
         friction,
@@ -62,6 +64,70 @@ pub fn detect(model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, t: Real
     obstacles(model, positions, dim, t, dt, margin, &mut points);
     body_pairs(model, positions, dim, margin, &mut points);
     points
+}
+
+/// A facet lies flat on a master facet when their normals are this close to opposite (cosine,
+/// about 25°).
+const FLAT: Real = 0.9;
+
+/// A second-pass point this deep (in the slave's facet sizes) is kept however it lies: the first
+/// pass did not hold it.
+const KEPT_DEPTH: Real = 0.001;
+
+/// Drops the second-pass points whose slave node lies flat on the master: every facet around
+/// the node faces the master's facet (normals nearly opposite), the node is on the master facet
+/// of a first-pass point of the same pair, and it has not penetrated. There both passes
+/// constrain nearly the same thing, and in a few configurations (a polygon pressed between two
+/// disks in `grains_box`) the Uzawa iterations stall on how to split the reactions between
+/// them. What stays of the second pass are the nodes the first pass cannot hold: the corners of
+/// its master. The solver takes this when a step fails with both passes whole; it lets
+/// penetrations of a fraction of an element through for that step (`FLAT`).
+pub fn thin_second_pass(model: &ContactModel, positions: &[Vec<Vec3>], points: &mut Vec<ContactPoint>) {
+    if !points.iter().any(|c| c.second) {
+        return;
+    }
+    // First-pass points by the (body, node) of their master facets, with their slave body.
+    let mut held: HashSet<(u32, u32, u32)> = HashSet::new();
+    for c in points.iter().filter(|c| matches!(c.master, Master::Body(_)) && !c.second) {
+        for t in &c.terms()[1..] {
+            held.insert((t.body, t.node, c.slave_body));
+        }
+    }
+    // Facets around each node, per body that has second-pass points.
+    let mut around: HashMap<u32, HashMap<u32, Vec<usize>>> = HashMap::new();
+    let lies_flat = |c: &ContactPoint, around: &mut HashMap<u32, HashMap<u32, Vec<usize>>>| {
+        let surface = &model.surfaces[c.slave_body as usize];
+        let facets = around.entry(c.slave_body).or_insert_with(|| {
+            let mut map: HashMap<u32, Vec<usize>> = HashMap::new();
+            for f in 0..surface.facet_count() {
+                for &n in surface.facet(f) {
+                    map.entry(n).or_default().push(f);
+                }
+            }
+            map
+        });
+        let x = &positions[c.slave_body as usize];
+        facets.get(&c.slave_node).is_some_and(|list| {
+            let mut h = Real::INFINITY;
+            let flat = list.iter().all(|&f| {
+                let p: Vec<Vec3> = surface.facet(f).iter().map(|&n| x[n as usize]).collect();
+                h = h.min(facet_size(&p));
+                geometry::dot(geometry::normalize(facet_normal(&p)), c.frame[0]) < -FLAT
+            });
+            flat && c.gap > -KEPT_DEPTH * h
+        })
+    };
+    let mut keep = Vec::with_capacity(points.len());
+    for c in points.iter() {
+        let master = match c.master {
+            Master::Body(m) => m,
+            Master::Obstacle { .. } => u32::MAX,
+        };
+        let repeated = c.second && held.contains(&(c.slave_body, c.slave_node, master)) && lies_flat(c, &mut around);
+        keep.push(!repeated);
+    }
+    let mut keep = keep.into_iter();
+    points.retain(|_| keep.next().unwrap_or(true));
 }
 
 fn obstacles(model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, t: Real, dt: Real, margin: Real, out: &mut Vec<ContactPoint>) {
@@ -165,9 +231,22 @@ fn body_pairs(model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, margin:
                     c.terms[1 + k] = Term { body: m as u32, node: n, coef: -p.weights[k] };
                 }
                 c.term_count = 1 + facet.len();
+                c.second = model.second_pass[s][m];
                 out.push(c);
             }
         }
+    }
+}
+
+/// Outward normal of a facet, scaled by its area (length in 2D).
+fn facet_normal(p: &[Vec3]) -> Vec3 {
+    match p.len() {
+        2 => {
+            let d = sub(p[1], p[0]);
+            [d[1], -d[0], 0.0]
+        }
+        3 => geometry::scale(geometry::cross(sub(p[1], p[0]), sub(p[2], p[0])), 0.5),
+        _ => geometry::scale(geometry::cross(sub(p[2], p[0]), sub(p[3], p[1])), 0.5),
     }
 }
 
@@ -178,14 +257,7 @@ fn node_normals(surface: &super::Surface, x: &[Vec3]) -> Vec<Vec3> {
     for f in 0..surface.facet_count() {
         let facet = surface.facet(f);
         let p: Vec<Vec3> = facet.iter().map(|&n| x[n as usize]).collect();
-        let n = match p.len() {
-            2 => {
-                let d = sub(p[1], p[0]);
-                [d[1], -d[0], 0.0]
-            }
-            3 => geometry::scale(geometry::cross(sub(p[1], p[0]), sub(p[2], p[0])), 0.5),
-            _ => geometry::scale(geometry::cross(sub(p[2], p[0]), sub(p[3], p[1])), 0.5),
-        };
+        let n = facet_normal(&p);
         for &k in facet {
             normals[k as usize] = geometry::add(normals[k as usize], n);
         }

@@ -11,6 +11,7 @@ pub mod geometry;
 pub mod grid;
 pub mod law;
 pub mod obstacle;
+pub mod overlap;
 pub mod surface;
 pub mod uzawa;
 
@@ -48,6 +49,8 @@ pub struct ContactPoint {
     /// The slave node (coef 1) and the master facet's nodes (coef `-weight`).
     pub terms: [Term; 5],
     pub term_count: usize,
+    /// The point belongs to the second pass of a two-pass pair.
+    pub second: bool,
     /// `[n, t1, t2]`, `n` pointing from the master towards the slave.
     pub frame: [Vec3; 3],
     /// Signed gap at the start of the step (negative: penetration).
@@ -59,8 +62,9 @@ pub struct ContactPoint {
     /// Obstacle velocity at the start and the end of the step, and its displacement over it.
     pub obstacle_velocity: [Vec3; 2],
     pub obstacle_displacement: Vec3,
-    /// Added to the end-of-step normal velocity: `max(g + (1 - θ) dt v_n,t, 0) / (θ dt)`, so that
-    /// a point that is still open may close its gap but not more.
+    /// Added to the end-of-step normal velocity (`solver::coupling::shift`): an open point may
+    /// close its gap but not more; a penetrated one must separate by part of its penetration
+    /// (drift correction).
     pub shift: Real,
     /// Uzawa step length, from the local response.
     pub rho: Real,
@@ -115,6 +119,9 @@ pub struct ContactModel {
     /// `friction[slave][master]`: the coefficient of a body pair treated with that body as the
     /// slave, `None` when that pass is not done.
     pub friction: Vec<Vec<Option<Real>>>,
+    /// `second_pass[slave][master]`: that pass is the second of a two-pass pair; its points are
+    /// dropped where they only repeat a first-pass point ([`detect`]).
+    pub second_pass: Vec<Vec<bool>>,
 }
 
 /// Contact totals of one step (the `/contact` channel).
@@ -123,7 +130,13 @@ pub struct ContactStats {
     pub active: usize,
     pub sticking: usize,
     pub sliding: usize,
+    /// Deepest linearised end gap of the contact points (what the contact law saw).
     pub max_penetration: Real,
+    /// Deepest node inside another body or behind an obstacle at the end of the step, measured
+    /// on the configuration itself ([`overlap::overlaps`]).
+    pub max_overlap: Real,
+    /// The largest such depth relative to the local element size.
+    pub max_overlap_ratio: Real,
     pub normal_impulse: Real,
     pub friction_dissipation_step: Real,
 }

@@ -95,28 +95,68 @@ pub struct Local {
 pub struct Outcome {
     pub iterations: usize,
     pub converged: bool,
-    /// Last `max |Δr| / max(max |r|, floor)`.
+    /// Last largest change of a nodal force over `max(largest nodal force, floor)`.
     pub change: Real,
 }
 
-/// Uzawa iterations from the reactions in `r` until the estimated distance to the fixed point
-/// is below `tolerance * max(max |r|, floor)`, or `max_iterations`, or until `stop` is set (an
-/// interrupt: then not converged).
+/// Where each point's reaction lands: the nodes of its terms (numbered `0..nodes`), with their
+/// coefficients, and the point's frame. The iterations are judged on the nodal forces `Hᵀ r`:
+/// with nearly redundant points (two passes over faces lying on each other) the split of a
+/// reaction between them is ill-determined and settles very slowly, while the forces on the
+/// nodes, which are all the bodies see, have long converged.
+#[derive(Debug, Clone, Default)]
+pub struct NodalMap {
+    pub terms: Vec<Vec<(u32, Real)>>,
+    pub frames: Vec<[[Real; 3]; 3]>,
+    pub nodes: usize,
+}
+
+impl NodalMap {
+    /// Largest change of a nodal force for the reaction changes `dr`, and the largest nodal
+    /// force of `r` (its scale); `scratch` holds one vector per node and is left zeroed.
+    pub fn change(&self, dr: &[[Real; 3]], r: &[[Real; 3]], scratch: &mut Vec<[[Real; 3]; 2]>) -> (Real, Real) {
+        scratch.resize(self.nodes, [[0.0; 3]; 2]);
+        for (i, terms) in self.terms.iter().enumerate() {
+            let f = &self.frames[i];
+            let global = |x: &[Real; 3]| [0, 1, 2].map(|k| x[0] * f[0][k] + x[1] * f[1][k] + x[2] * f[2][k]);
+            let (d, a) = (global(&dr[i]), global(&r[i]));
+            for &(node, coef) in terms {
+                let slot = &mut scratch[node as usize];
+                for k in 0..3 {
+                    slot[0][k] += coef * d[k];
+                    slot[1][k] += coef * a[k];
+                }
+            }
+        }
+        let (mut change, mut size): (Real, Real) = (0.0, 0.0);
+        for slot in scratch.iter_mut() {
+            change = change.max(norm(slot[0]));
+            size = size.max(norm(slot[1]));
+            *slot = [[0.0; 3]; 2];
+        }
+        (change, size)
+    }
+}
+
+/// Uzawa iterations from the reactions in `r` until the estimated distance to the fixed point,
+/// in nodal forces, is below `tolerance * max(largest nodal force, floor)`, or `max_iterations`,
+/// or until `stop` is set (an interrupt: then not converged).
 ///
 /// The sweep contracts linearly with a factor `q` that can be close to 1 when the points are
 /// strongly coupled (a stiff body), so a small change is not a small error: the error is
 /// estimated as `change q / (1 - q)`, with `q` the ratio of the last two changes.
 #[allow(clippy::too_many_arguments)]
-pub fn solve(w: &Delassus, local: &[Local], r: &mut [[Real; 3]], sweep: Sweep, tolerance: Real, floor: Real, max_iterations: usize, stop: Option<&AtomicBool>) -> Outcome {
+pub fn solve(w: &Delassus, local: &[Local], nodal: &NodalMap, r: &mut [[Real; 3]], sweep: Sweep, tolerance: Real, floor: Real, max_iterations: usize, stop: Option<&AtomicBool>) -> Outcome {
     let n = local.len();
     let mut next = vec![[0.0; 3]; n];
+    let mut dr = vec![[0.0; 3]; n];
+    let mut scratch = Vec::new();
     let mut outcome = Outcome::default();
     let mut previous = Real::INFINITY;
     for it in 1..=max_iterations {
         if stop.is_some_and(|s| s.load(Ordering::Relaxed)) {
             break;
         }
-        let (mut change, mut size): (Real, Real) = (0.0, 0.0);
         match sweep {
             Sweep::Jacobi => {
                 for i in 0..n {
@@ -126,8 +166,7 @@ pub fn solve(w: &Delassus, local: &[Local], r: &mut [[Real; 3]], sweep: Sweep, t
                     next[i] = uzawa_step(r[i], v, l.mu, l.rho).0;
                 }
                 for i in 0..n {
-                    change = change.max(norm([next[i][0] - r[i][0], next[i][1] - r[i][1], next[i][2] - r[i][2]]));
-                    size = size.max(norm(next[i]));
+                    dr[i] = [next[i][0] - r[i][0], next[i][1] - r[i][1], next[i][2] - r[i][2]];
                 }
                 r.copy_from_slice(&next);
             }
@@ -151,11 +190,11 @@ pub fn solve(w: &Delassus, local: &[Local], r: &mut [[Real; 3]], sweep: Sweep, t
                         }
                     }
                     r[i] = ri;
-                    change = change.max(norm([ri[0] - start[0], ri[1] - start[1], ri[2] - start[2]]));
-                    size = size.max(norm(ri));
+                    dr[i] = [ri[0] - start[0], ri[1] - start[1], ri[2] - start[2]];
                 }
             }
         }
+        let (change, size) = nodal.change(&dr, r, &mut scratch);
         let scale = size.max(floor).max(Real::MIN_POSITIVE);
         let q = change / previous;
         previous = change;

@@ -4,6 +4,8 @@
 //! The mesh is made of the elements of the highest dimension present (Tri3/Quad4 in 2D,
 //! Tet4/Hex8 in 3D; one kind per mesh). Node sets come from physical groups of any dimension,
 //! named by `$PhysicalNames` (or `physical_<tag>` when unnamed). Nodes no element uses are dropped.
+//! A body may take only the elements of one physical group, so that one file holds several
+//! bodies (a packing of grains, each a group).
 
 use super::{ElementKind, Mesh};
 use crate::precision::Real;
@@ -24,6 +26,8 @@ pub enum GmshError {
     MissingNode { element: u64, tag: u64 },
     #[error("a 2D mesh must lie in the plane z = 0 (node tag {0} has z = {1})")]
     NotPlanar(u64, Real),
+    #[error("it has no physical group `{group}` of {kind} elements (its groups of that dimension: {available})")]
+    NoGroup { group: String, kind: &'static str, available: String },
 }
 
 fn kind_of(t: ElementType) -> Option<ElementKind> {
@@ -64,7 +68,9 @@ fn declared_version(bytes: &[u8]) -> Option<String> {
     lines.next()?.split_whitespace().next().map(String::from)
 }
 
-pub fn read(bytes: &[u8]) -> Result<Mesh, GmshError> {
+/// The mesh of a Gmsh file: all elements of its highest dimension, or with `group` only those of
+/// that physical group (by name).
+pub fn read(bytes: &[u8], group: Option<&str>) -> Result<Mesh, GmshError> {
     if let Some(version) = declared_version(bytes).filter(|v| v.parse::<f64>().map_or(true, |v| (v - 4.1).abs() > 1e-9)) {
         return Err(GmshError::Version(version));
     }
@@ -96,6 +102,25 @@ pub fn read(bytes: &[u8]) -> Result<Mesh, GmshError> {
             }
         }
     }
+    let names = physical_names(bytes);
+    let mut entity_groups: HashMap<(i32, i32), Vec<i32>> = HashMap::new();
+    if let Some(ent) = &data.entities {
+        for p in &ent.points {
+            entity_groups.insert((0, p.tag), p.physical_tags.clone());
+        }
+        for c in &ent.curves {
+            entity_groups.insert((1, c.tag), c.physical_tags.clone());
+        }
+        for s in &ent.surfaces {
+            entity_groups.insert((2, s.tag), s.physical_tags.clone());
+        }
+        for v in &ent.volumes {
+            entity_groups.insert((3, v.tag), v.physical_tags.clone());
+        }
+    }
+    let group_names = |dim: i32, tag: i32| -> Vec<String> {
+        entity_groups.get(&(dim, tag)).map(Vec::as_slice).unwrap_or_default().iter().map(|p| names.get(&(dim, p.abs())).cloned().unwrap_or_else(|| format!("physical_{}", p.abs()))).collect()
+    };
     let blocks = data.elements.map(|e| e.element_blocks).unwrap_or_default();
     let kind = blocks
         .iter()
@@ -109,7 +134,8 @@ pub fn read(bytes: &[u8]) -> Result<Mesh, GmshError> {
     let mut index: HashMap<u64, u32> = HashMap::new();
     let mut nodes = Vec::new();
     let mut connectivity = Vec::new();
-    for b in blocks.iter().filter(|b| kind_of(b.element_type).is_some_and(|k| k.dim() == kind.dim())) {
+    let chosen = |b: &&mshio::mshfile::ElementBlock<u64, i32>| group.is_none_or(|g| group_names(b.entity_dim, b.entity_tag).iter().any(|n| n == g));
+    for b in blocks.iter().filter(|b| kind_of(b.element_type).is_some_and(|k| k.dim() == kind.dim())).filter(chosen) {
         let k = kind_of(b.element_type).expect("filtered");
         if k != kind {
             return Err(GmshError::Mixed(kind.name(), k.name()));
@@ -132,28 +158,21 @@ pub fn read(bytes: &[u8]) -> Result<Mesh, GmshError> {
             }
         }
     }
-    let names = physical_names(bytes);
-    let mut entity_groups: HashMap<(i32, i32), Vec<i32>> = HashMap::new();
-    if let Some(ent) = &data.entities {
-        for p in &ent.points {
-            entity_groups.insert((0, p.tag), p.physical_tags.clone());
-        }
-        for c in &ent.curves {
-            entity_groups.insert((1, c.tag), c.physical_tags.clone());
-        }
-        for s in &ent.surfaces {
-            entity_groups.insert((2, s.tag), s.physical_tags.clone());
-        }
-        for v in &ent.volumes {
-            entity_groups.insert((3, v.tag), v.physical_tags.clone());
-        }
+    if let (Some(g), true) = (group, connectivity.is_empty()) {
+        let mut available: Vec<String> = blocks.iter().filter(|b| b.entity_dim as usize == kind.dim()).flat_map(|b| group_names(b.entity_dim, b.entity_tag)).collect();
+        available.sort();
+        available.dedup();
+        let available = if available.is_empty() { "none".into() } else { available.join(", ") };
+        return Err(GmshError::NoGroup { group: g.to_string(), kind: kind.name(), available });
     }
+    // The sets of the groups that touch the mesh (with `group`, many do not).
     let mut node_sets: BTreeMap<String, Vec<u32>> = BTreeMap::new();
     for b in &blocks {
-        for &phys in entity_groups.get(&(b.entity_dim, b.entity_tag)).map(Vec::as_slice).unwrap_or_default() {
-            let name = names.get(&(b.entity_dim, phys.abs())).cloned().unwrap_or_else(|| format!("physical_{}", phys.abs()));
-            let set = node_sets.entry(name).or_default();
-            set.extend(b.elements.iter().flat_map(|e| e.nodes.iter()).filter_map(|t| index.get(t).copied()));
+        for name in group_names(b.entity_dim, b.entity_tag) {
+            let nodes: Vec<u32> = b.elements.iter().flat_map(|e| e.nodes.iter()).filter_map(|t| index.get(t).copied()).collect();
+            if !nodes.is_empty() {
+                node_sets.entry(name).or_default().extend(nodes);
+            }
         }
     }
     let mut mesh = Mesh { kind, nodes, connectivity, node_sets };

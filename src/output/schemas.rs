@@ -36,7 +36,7 @@ pub fn run() -> Value {
 }
 
 pub fn energy() -> Value {
-    let f = ["t", "kinetic", "strain", "potential", "external_work", "friction_dissipation", "numerical_dissipation", "total", "energy_balance_error"];
+    let f = ["t", "kinetic", "strain", "potential", "external_work", "friction_dissipation", "numerical_dissipation", "contact_correction", "total", "energy_balance_error"];
     object("bifirst.Energy", &f.map(|k| (k, number())))
 }
 
@@ -103,7 +103,9 @@ pub fn contact() -> Value {
             ("active", integer()),
             ("sticking", integer()),
             ("sliding", integer()),
-            ("max_penetration", number()),
+            ("max_penetration", json!({"type": "number", "description": "deepest linearised end gap of the contact points"})),
+            ("max_overlap", json!({"type": "number", "description": "deepest boundary node inside another body or behind an obstacle at the end of the step (point in element)"})),
+            ("max_overlap_ratio", json!({"type": "number", "description": "the largest such depth over the local element size"})),
             ("normal_impulse", number()),
             ("friction_dissipation_step", number()),
         ],
@@ -112,7 +114,7 @@ pub fn contact() -> Value {
 
 /// The run's totals, written once when it ends (however it ends).
 pub fn summary() -> Value {
-    let energies = ["kinetic", "strain", "potential", "external_work", "friction_dissipation", "numerical_dissipation", "total", "energy_balance_error"];
+    let energies = ["kinetic", "strain", "potential", "external_work", "friction_dissipation", "numerical_dissipation", "contact_correction", "total", "energy_balance_error"];
     object(
         "bifirst.Summary",
         &[
@@ -130,6 +132,10 @@ pub fn summary() -> Value {
             ("bodies_iterated", integer()),
             ("factorizations", integer()),
             ("max_penetration", number()),
+            ("max_overlap", number()),
+            ("max_overlap_ratio", number()),
+            ("energy_gain_steps", json!({"type": "integer", "description": "steps whose numerical dissipation was negative beyond 1e-4 of the energy scale"})),
+            ("max_energy_gain", number()),
             ("wall_s", number()),
             ("wall_by_phase", wall_times()),
             ("bytes_moved", integer()),

@@ -33,6 +33,11 @@ pub struct LogSummary {
     pub relative_energy_drift: f64,
     pub energy_balance_error: f64,
     pub max_penetration: f64,
+    /// Deepest node inside another body or an obstacle, and that depth in local element sizes.
+    pub max_overlap: f64,
+    pub max_overlap_ratio: f64,
+    /// Steps that created energy (numerical dissipation below zero beyond a tolerance).
+    pub energy_gain_steps: u64,
     /// Wall seconds per phase (`elements`, ..., `contact`, then `total`).
     pub wall_by_phase: Vec<(String, f64)>,
     pub probes: Vec<ProbeSummary>,
@@ -87,6 +92,8 @@ fn from_steps(record: &RunRecord) -> (Value, &'static str) {
         "bodies_iterated": sum("bodies_iterated"),
         "factorizations": sum("factorizations"),
         "max_penetration": record.series("/contact", "max_penetration").into_iter().fold(0.0, f64::max),
+        "max_overlap": record.series("/contact", "max_overlap").into_iter().fold(0.0, f64::max),
+        "max_overlap_ratio": record.series("/contact", "max_overlap_ratio").into_iter().fold(0.0, f64::max),
         "wall_by_phase": wall,
         "message": Value::Null,
     });
@@ -125,6 +132,9 @@ pub fn summarize(record: &RunRecord) -> Result<LogSummary, ReadError> {
         relative_energy_drift: drift / e0.abs().max(e1.abs()).max(f64::MIN_POSITIVE),
         energy_balance_error: number(&last["energy_balance_error"]),
         max_penetration: number(&s["max_penetration"]),
+        max_overlap: number(&s["max_overlap"]),
+        max_overlap_ratio: number(&s["max_overlap_ratio"]),
+        energy_gain_steps: count(&s["energy_gain_steps"]),
         wall_by_phase: PHASES.iter().chain(&["total"]).map(|p| (p.to_string(), number(&wall[*p]))).collect(),
         probes: record.names_under("/probe/").into_iter().map(|name| probe_summary(record, name)).collect(),
     })
@@ -148,6 +158,8 @@ pub fn table(runs: &[LogSummary]) -> String {
         ("energy drift".into(), runs.iter().map(|r| format!("{:.4e} ({:+.2e} rel.)", r.energy_drift, r.relative_energy_drift)).collect()),
         ("energy balance error".into(), runs.iter().map(|r| format!("{:.2e}", r.energy_balance_error)).collect()),
         ("max penetration".into(), runs.iter().map(|r| format!("{:.3e}", r.max_penetration)).collect()),
+        ("steps creating energy".into(), runs.iter().map(|r| r.energy_gain_steps.to_string()).collect()),
+        ("max overlap".into(), runs.iter().map(|r| format!("{:.3e} ({:.2}% of h)", r.max_overlap, 100.0 * r.max_overlap_ratio)).collect()),
     ];
     for (i, phase) in PHASES.iter().chain(&["total"]).enumerate() {
         let label = if *phase == "total" { "wall s, steps total".to_string() } else { format!("wall s, {phase}") };

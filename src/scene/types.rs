@@ -175,6 +175,8 @@ pub struct MeshSpec {
     pub radius: Option<Real>,
     /// Polygon: the vertices of a convex outline, `[[x, y], ...]`.
     pub points: Option<Vec<Vec<Real>>>,
+    /// Mesh file: only the elements of this physical group (one file, several bodies).
+    pub group: Option<String>,
 }
 
 /// A random packing of `count` grains (disks and convex polygons, Tri3) in a rigid box whose
@@ -284,14 +286,17 @@ pub struct ContactSpec {
     pub max_iterations: usize,
     /// Order of the Uzawa updates: `gauss_seidel` (robust) or `jacobi` (parallel, as on the GPU).
     pub sweep: Sweep,
-    /// Body pairs with their own friction coefficient (or, with `all_pairs = false`, the only
-    /// pairs in contact).
+    /// Body pairs with their own friction coefficient or slave (or, with `all_pairs = false`,
+    /// the only pairs in contact).
     pub pair: BTreeMap<String, PairSpec>,
+    /// Bodies that overlap at t = 0 (a node inside another body or behind an obstacle) are an
+    /// error; with this, they are pushed apart by rigid translations before the first step.
+    pub resolve_initial_overlap: bool,
 }
 
 impl Default for ContactSpec {
     fn default() -> Self {
-        Self { friction: 0.0, two_pass: false, all_pairs: true, tolerance: 1e-8, max_iterations: 5000, sweep: Sweep::GaussSeidel, pair: BTreeMap::new() }
+        Self { friction: 0.0, two_pass: false, all_pairs: true, tolerance: 1e-8, max_iterations: 5000, sweep: Sweep::GaussSeidel, pair: BTreeMap::new(), resolve_initial_overlap: false }
     }
 }
 
@@ -301,6 +306,9 @@ pub struct PairSpec {
     /// The two bodies.
     pub bodies: Vec<String>,
     pub friction: Option<Real>,
+    /// The body whose nodes are checked against the other's facets in a single pass (default:
+    /// the finer mesh, then the one with more boundary nodes, then the first in the scene).
+    pub slave: Option<String>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]

@@ -214,6 +214,9 @@ fn validate_mesh(key: &str, m: &MeshSpec) -> Result<(), Failure> {
     if m.file.is_some() {
         return fail(Invalid, format!("{key}.file"), "give either `generator` or `file`, not both.");
     }
+    if m.group.is_some() {
+        return fail(Invalid, format!("{key}.group"), "a physical group selects elements of a mesh file; a generated mesh has none.");
+    }
     let dim = generator_dim(m).expect("generator set");
     let Some(kind) = m.element else {
         return fail(Invalid, format!("{key}.element"), "a generated mesh needs `element` (tri3, quad4, tet4 or hex8).");
@@ -333,6 +336,11 @@ fn validate_contact(s: &Scene, _dim: Option<usize>) -> Result<(), Failure> {
         }
         if let Some(mu) = pair.friction {
             friction(format!("{key}.friction"), mu)?;
+        }
+        if let Some(slave) = &pair.slave {
+            if !pair.bodies.contains(slave) {
+                fail(Reference, format!("{key}.slave"), format!("`{slave}` is not one of the pair's bodies ({}).", pair.bodies.join(", ")))?;
+            }
         }
     }
     Ok(())

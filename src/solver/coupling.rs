@@ -8,8 +8,7 @@
 
 use super::body::{Body, StepParams};
 use super::PhaseTimes;
-use crate::contact::uzawa::{self, Delassus, Local, Outcome};
-use crate::contact::geometry::norm;
+use crate::contact::uzawa::{self, Delassus, Local, NodalMap, Outcome};
 use crate::contact::{uzawa_step, ContactPoint, Settings, Status};
 use crate::precision::Real;
 use std::collections::HashMap;
@@ -34,6 +33,7 @@ pub struct ContactStep {
     h: Vec<Vec<[Vec<(u32, Real)>; 3]>>,
     pub r: Vec<[Real; 3]>,
     pub local: Vec<Local>,
+    nodal: NodalMap,
     dim: usize,
     /// A velocity that matters in this step (the fastest body or obstacle, or what gravity adds
     /// in one step): reactions are compared with `max ρ` times it, so that round-off in a
@@ -53,7 +53,8 @@ impl ContactStep {
         for c in &mut points {
             let vn_start = local_velocity(c, dim, |b, d| bodies[b].state.v[d], 0)[0];
             c.predicted_gap = c.gap + (1.0 - theta) * dt * vn_start;
-            c.shift = c.predicted_gap.max(0.0) / (theta * dt);
+            // The first term is the slave node (its body index is local to the group).
+            c.shift = shift(c.gap, c.predicted_gap, bodies[c.terms[0].body as usize].length_scale(), theta * dt);
         }
         let mut lists: Vec<Vec<u32>> = vec![Vec::new(); bodies.len()];
         for (i, c) in points.iter().enumerate() {
@@ -109,7 +110,17 @@ impl ContactStep {
         let r = previous.iter().map(|p| p.0).collect();
         let local: Vec<Local> = points.iter().zip(&previous).map(|(c, p)| Local { v_free: [0.0; 3], shift: c.shift, mu: c.friction, rho: p.1 }).collect();
         let floor = velocity_scale * local.iter().map(|l| l.rho).fold(0.0, Real::max);
-        Self { points, delassus, per_body, h, r, local, dim, velocity_scale, floor, delassus_current: false }
+        let mut slots: HashMap<(u32, u32), u32> = HashMap::new();
+        let mut nodal = NodalMap { terms: Vec::with_capacity(points.len()), frames: points.iter().map(|c| c.frame).collect(), nodes: 0 };
+        for c in &points {
+            let terms = c.terms().iter().map(|t| {
+                let next = slots.len() as u32;
+                (*slots.entry((t.body, t.node)).or_insert(next), t.coef)
+            });
+            nodal.terms.push(terms.collect());
+        }
+        nodal.nodes = slots.len();
+        Self { points, delassus, per_body, h, r, local, nodal, dim, velocity_scale, floor, delassus_current: false }
     }
 
     pub fn is_empty(&self) -> bool {
@@ -142,21 +153,24 @@ impl ContactStep {
     /// Largest Uzawa residual `|r - proj(r - ρ ṽ)|` at the trial displacements, relative to
     /// `max(max |r|, ρ v_scale)`: zero when the reactions satisfy the law with the current velocities.
     pub fn complementarity(&self, bodies: &[Body], p: &StepParams) -> Real {
-        let floor = self.floor;
-        let (mut worst, mut size): (Real, Real) = (0.0, 0.0);
-        for (i, c) in self.points.iter().enumerate() {
-            let l = &self.local[i];
-            let r = self.r[i];
-            size = size.max(norm(r));
-            if l.rho == 0.0 {
-                continue;
-            }
-            let mut v = end_velocity(c, bodies, p);
-            v[0] += l.shift;
-            let (next, _) = uzawa_step(r, v, l.mu, l.rho);
-            worst = worst.max(norm([next[0] - r[0], next[1] - r[1], next[2] - r[2]]));
-        }
-        worst / size.max(floor).max(Real::MIN_POSITIVE)
+        let residual: Vec<[Real; 3]> = self
+            .points
+            .iter()
+            .enumerate()
+            .map(|(i, c)| {
+                let (l, r) = (&self.local[i], self.r[i]);
+                if l.rho == 0.0 {
+                    return [0.0; 3];
+                }
+                let mut v = end_velocity(c, bodies, p);
+                v[0] += l.shift;
+                let (next, _) = uzawa_step(r, v, l.mu, l.rho);
+                [next[0] - r[0], next[1] - r[1], next[2] - r[2]]
+            })
+            .collect();
+        // Judged on the nodal forces, as the Uzawa iterations are (see `NodalMap`).
+        let (worst, size) = self.nodal.change(&residual, &self.r, &mut Vec::new());
+        worst / size.max(self.floor).max(Real::MIN_POSITIVE)
     }
 
     /// One Newton increment of every body with the reactions solved on the linearised contact
@@ -192,7 +206,7 @@ impl ContactStep {
             self.build_delassus(bodies, theta_dt, settings, times);
         }
         let floor = self.floor;
-        let outcome = uzawa::solve(&self.delassus, &self.local, &mut self.r, settings.sweep, INNER_TOLERANCE * settings.tolerance, floor, settings.max_iterations, stop);
+        let outcome = uzawa::solve(&self.delassus, &self.local, &self.nodal, &mut self.r, settings.sweep, INNER_TOLERANCE * settings.tolerance, floor, settings.max_iterations, stop);
         // The change is judged on the nodal forces H^T r: with redundant constraints (two passes
         // over matching nodes) r itself is not unique, but H^T r is.
         let before: Vec<Vec<Real>> = bodies.iter().map(|b| b.contact_force.clone()).collect();
@@ -264,6 +278,27 @@ impl ContactStep {
             c.end_gap = c.predicted_gap + p.theta * p.dt * c.v[0];
         }
     }
+}
+
+/// Share of a penetration that the drift correction removes in one step.
+pub const DRIFT_FRACTION: Real = 0.5;
+/// Most a drift correction removes in one step, in element sizes of the slave body.
+pub const DRIFT_CAP: Real = 0.05;
+
+/// Added to the end-of-step normal velocity of a point with gap `gap` at the start of the step
+/// and `predicted` = `gap + (1 - θ) dt v_n,t` (the end gap if the end normal velocity were
+/// zero). The end gap must be at least `min(predicted, 0)`: an open point may close its gap but
+/// not more, and a point the theta rule carries past the surface goes no further. A point that
+/// starts penetrated (`gap < 0`) must in addition separate by `min(DRIFT_FRACTION |gap|,
+/// DRIFT_CAP h)` (drift correction, method.md §2), so that a penetration decays geometrically,
+/// half of it per step, instead of staying for good. The reaction's work on the separation of a
+/// point that started penetrated is the energy the correction adds, booked as
+/// `contact_correction`: per point and step at most `r_n DRIFT_CAP h / θ` (this step's removal
+/// and the `(1 - θ)` share of the velocity the last one left).
+pub fn shift(gap: Real, predicted: Real, h: Real, theta_dt: Real) -> Real {
+    let removal = (DRIFT_FRACTION * (-gap).max(0.0)).min(DRIFT_CAP * h);
+    let target = (predicted.min(0.0) + removal).min(0.0);
+    (predicted - target) / theta_dt
 }
 
 /// Classifies a reaction: zero, strictly inside the cone, or on its surface.

@@ -11,7 +11,8 @@ mod setup;
 pub use body::{Body, StepFailure};
 pub use setup::build_simulation;
 
-use crate::contact::detect::detect;
+use crate::contact::detect::{detect, thin_second_pass};
+use crate::contact::overlap::{overlaps, Overlap, Worst};
 use crate::contact::{ContactModel, ContactPoint, ContactStats, Master};
 use crate::gpu::GpuWorld;
 use crate::precision::{Precision, Real};
@@ -118,8 +119,12 @@ pub struct Energies {
     /// The scheme's own dissipation: theta and xi weighting, and the normal (impact) part of
     /// the contact work.
     pub numerical_dissipation: Real,
+    /// Work of the contact reactions on the separation the drift correction asks of penetrated
+    /// points (energy put in; see `coupling::shift`).
+    pub contact_correction: Real,
     pub total: Real,
-    /// `|E(0) + W_ext - E - D_friction - D_numerical| / scale` (see [`Simulation::energies`]).
+    /// `|E(0) + W_ext + W_correction - E - D_friction - D_numerical| / scale` (see
+    /// [`Simulation::energies`]).
     pub energy_balance_error: Real,
 }
 
@@ -143,6 +148,7 @@ pub struct Simulation {
     pub external_work: Real,
     pub friction_dissipation: Real,
     pub numerical_dissipation: Real,
+    pub contact_correction: Real,
     /// Total energy at t = 0 (set by [`Simulation::start`]).
     pub initial_energy: Real,
     pub contact: Option<ContactModel>,
@@ -195,7 +201,14 @@ impl Simulation {
         if self.interrupted() {
             return Err((StepFailure::Interrupted, dt));
         }
-        match self.try_step(dt, report) {
+        let result = match self.try_step(dt, report, false) {
+            Err(failure @ StepFailure::NotConverged { .. }) if self.contact.as_ref().is_some_and(|c| c.second_pass.iter().flatten().any(|&s| s)) => {
+                report.events.push(format!("t = {:.6e}: {failure}; retrying with the second contact pass thinned", self.t));
+                self.try_step(dt, report, true)
+            }
+            other => other,
+        };
+        match result {
             Ok(()) => Ok(()),
             Err(StepFailure::Interrupted) => Err((StepFailure::Interrupted, dt)),
             Err(failure) if depth < self.max_cutbacks => {
@@ -213,7 +226,9 @@ impl Simulation {
         self.interrupt.as_ref().is_some_and(|f| f.load(Ordering::SeqCst))
     }
 
-    fn try_step(&mut self, dt: Real, report: &mut StepReport) -> Result<(), StepFailure> {
+    /// One attempt at a step of length `dt`; `thin`: without the second-pass contact points
+    /// that repeat first-pass ones ([`thin_second_pass`]).
+    fn try_step(&mut self, dt: Real, report: &mut StepReport, thin: bool) -> Result<(), StepFailure> {
         let p = StepParams {
             dt,
             xi: self.xi,
@@ -223,7 +238,10 @@ impl Simulation {
             max_iterations: self.max_iterations,
         };
         let started = std::time::Instant::now();
-        let (points, velocity_scale) = self.detect(dt);
+        let (mut points, velocity_scale) = self.detect(dt);
+        if let (true, Some(model)) = (thin, &self.contact) {
+            thin_second_pass(model, &self.positions(), &mut points);
+        }
         let warm: HashMap<(u32, u32, Master), ([Real; 3], Real)> = self.contact_points.iter().map(|c| (c.key(), (c.r, c.rho))).collect();
         report.wall.contact += started.elapsed().as_secs_f64();
         let settings = self.contact.as_ref().map(|c| c.settings.clone());
@@ -270,7 +288,25 @@ impl Simulation {
             body.commit();
         }
         self.t += dt;
+        let found = self.overlaps();
+        let worst = Worst::of(&found);
+        report.contact.max_overlap = report.contact.max_overlap.max(worst.depth);
+        report.contact.max_overlap_ratio = report.contact.max_overlap_ratio.max(worst.ratio);
         Ok(())
+    }
+
+    /// Current node positions per body.
+    fn positions(&self) -> Vec<Vec<[Real; 3]>> {
+        self.bodies.par_iter().map(|b| (0..b.mesh.nodes.len()).map(|n| b.position(n)).collect()).collect()
+    }
+
+    /// The boundary nodes of the committed state that are inside another body or behind an
+    /// obstacle (none without contact).
+    pub fn overlaps(&self) -> Vec<Overlap> {
+        let Some(model) = &self.contact else { return Vec::new() };
+        let positions = self.positions();
+        let meshes: Vec<&crate::mesh::Mesh> = self.bodies.iter().map(|b| &b.mesh).collect();
+        overlaps(model, &meshes, &positions, self.t)
     }
 
     /// Contact points for a step of length `dt` from the committed state, and the step's
@@ -292,7 +328,7 @@ impl Simulation {
         let gravity = self.gravity.iter().map(|g| g * g).sum::<Real>().sqrt();
         let velocity_scale = body_speed.max(obstacle_speed).max(gravity * dt).max(1e-9 * h / dt);
         let Some(model) = &self.contact else { return (Vec::new(), velocity_scale) };
-        let positions: Vec<Vec<[Real; 3]>> = self.bodies.iter().map(|b| (0..b.mesh.nodes.len()).map(|n| b.position(n)).collect()).collect();
+        let positions = self.positions();
         // The search reaches as far as anything can travel in two steps, plus a little.
         let margin = 2.0 * dt * (2.0 * body_speed + obstacle_speed) + 0.01 * h;
         (detect(model, &positions, dim, self.t, dt, margin), velocity_scale)
@@ -317,7 +353,7 @@ impl Simulation {
         }
         let dim = self.dim;
         let mut reactions = vec![[0.0; 3]; self.contact.as_ref().map_or(0, |c| c.obstacles.len())];
-        let mut relative_work = 0.0;
+        let (mut relative_work, mut correction) = (0.0, 0.0);
         for c in points {
             let f = c.force();
             let mut du = c.obstacle_displacement.map(|x| -x);
@@ -329,6 +365,13 @@ impl Simulation {
                 }
             }
             relative_work += f[0] * du[0] + f[1] * du[1] + f[2] * du[2];
+            // A point that started penetrated and separates does so because of the drift
+            // correction (this step's, or the velocity the last one left): the reaction's work
+            // on that separation is the correction's.
+            let separation: Real = (0..3).map(|i| c.frame[0][i] * du[i]).sum();
+            if c.gap < 0.0 && separation > 0.0 {
+                correction += c.r[0] * separation;
+            }
             if let Master::Obstacle { obstacle, .. } = c.master {
                 let d = c.obstacle_displacement;
                 self.external_work += f[0] * d[0] + f[1] * d[1] + f[2] * d[2];
@@ -338,7 +381,8 @@ impl Simulation {
             }
         }
         self.friction_dissipation += friction;
-        self.numerical_dissipation += -relative_work - friction;
+        self.contact_correction += correction;
+        self.numerical_dissipation += correction - relative_work - friction;
         self.obstacle_reactions = reactions;
         Ok(())
     }
@@ -355,6 +399,7 @@ impl Simulation {
             external_work: self.external_work,
             friction_dissipation: self.friction_dissipation,
             numerical_dissipation: self.numerical_dissipation,
+            contact_correction: self.contact_correction,
             ..Default::default()
         };
         for b in &self.bodies {
@@ -364,11 +409,11 @@ impl Simulation {
         }
         e.total = e.kinetic + e.strain + e.potential;
         let e0 = self.initial_energy;
-        let scale = [e0, e.total, e.external_work, e.friction_dissipation, e.numerical_dissipation, e.kinetic, e.strain]
+        let scale = [e0, e.total, e.external_work, e.contact_correction, e.friction_dissipation, e.numerical_dissipation, e.kinetic, e.strain]
             .iter()
             .map(|x| x.abs())
             .fold(Real::MIN_POSITIVE, Real::max);
-        e.energy_balance_error = (e0 + e.external_work - e.total - e.friction_dissipation - e.numerical_dissipation).abs() / scale;
+        e.energy_balance_error = (e0 + e.external_work + e.contact_correction - e.total - e.friction_dissipation - e.numerical_dissipation).abs() / scale;
         e
     }
 

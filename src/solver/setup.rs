@@ -4,6 +4,7 @@
 use super::body::{Body, Prescribed};
 use super::{BoundarySet, Probe, Simulation};
 use crate::contact::obstacle::Shape;
+use crate::contact::overlap::{overlaps, Host, Overlap};
 use crate::contact::{ContactModel, Motion, Obstacle, Settings, Surface};
 use crate::element::ReferenceGeometry;
 use crate::material::{BlatzKo, Lvf, Model, NeoHookean};
@@ -56,7 +57,7 @@ fn build_mesh(loaded: &LoadedScene, key: &str, spec: &MeshSpec) -> Result<Mesh, 
         (None, Some(file)) => {
             let path = loaded.base_dir().join(file);
             let bytes = std::fs::read(&path).map_err(|e| loaded.error(Reference, &format!("{key}.file"), format!("cannot read the mesh file `{}`: {e}.", path.display())))?;
-            gmsh::read(&bytes).map_err(|e| loaded.error(MeshError, &format!("{key}.file"), format!("the Gmsh file `{}` is not usable: {e}.", path.display())))?
+            gmsh::read(&bytes, spec.group.as_deref()).map_err(|e| loaded.error(MeshError, &format!("{key}.file"), format!("the Gmsh file `{}` is not usable: {e}.", path.display())))?
         }
         (None, None) => unreachable!("validated: a mesh has a generator or a file"),
     })
@@ -203,6 +204,15 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
         gravity[..dim].copy_from_slice(g);
     }
     let contact = build_contact(loaded, &bodies, dim)?;
+    if let Some(model) = &contact {
+        if scene.contact.resolve_initial_overlap {
+            separate_initial_overlaps(&mut bodies, model).map_err(|(key, message)| loaded.error(Invalid, &key, message))?;
+        }
+        if let Some(o) = initial_overlaps(&bodies, model).into_iter().max_by(|a, b| a.ratio().total_cmp(&b.ratio())) {
+            let (key, message) = describe_overlap(&bodies, model, &o);
+            return Err(loaded.error(Invalid, &key, format!("{message}; move them apart, or set `contact.resolve_initial_overlap = true` to push them apart before the first step.")));
+        }
+    }
     for b in &bodies {
         let (kinetic, strain, potential) = (b.kinetic_energy(), b.strain_energy(), b.potential_energy(&gravity));
         if ![kinetic, strain, potential].iter().all(|e| e.is_finite()) {
@@ -234,6 +244,7 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
         external_work: 0.0,
         friction_dissipation: 0.0,
         numerical_dissipation: 0.0,
+        contact_correction: 0.0,
         initial_energy: 0.0,
         obstacle_reactions: vec![[0.0; 3]; contact.as_ref().map_or(0, |c| c.obstacles.len())],
         contact,
@@ -241,6 +252,92 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
         world: None,
         interrupt: None,
     })
+}
+
+/// Overlaps at t = 0 smaller than this (in element sizes) are round-off of bodies that touch.
+const INITIAL_OVERLAP: Real = 1e-6;
+/// Rounds of rigid translations [`separate_initial_overlaps`] may take.
+const SEPARATION_ROUNDS: usize = 200;
+
+fn initial_overlaps(bodies: &[Body], model: &ContactModel) -> Vec<Overlap> {
+    let positions: Vec<Vec<[Real; 3]>> = bodies.iter().map(|b| (0..b.mesh.nodes.len()).map(|n| b.position(n)).collect()).collect();
+    let meshes: Vec<&Mesh> = bodies.iter().map(|b| &b.mesh).collect();
+    overlaps(model, &meshes, &positions, 0.0).into_iter().filter(|o| o.ratio() > INITIAL_OVERLAP).collect()
+}
+
+/// The scene key and the words of an overlap: the bodies (or obstacle), the node and the depth.
+fn describe_overlap(bodies: &[Body], model: &ContactModel, o: &Overlap) -> (String, String) {
+    let body = &bodies[o.body as usize];
+    let x = body.position(o.node as usize);
+    let at: Vec<String> = x[..body.dim].iter().map(|c| format!("{c:.6}")).collect();
+    let into = match o.host {
+        Host::Body(m) => format!("inside body `{}`", bodies[m as usize].name),
+        Host::Obstacle(k) => format!("behind obstacle `{}`", model.obstacles[k as usize].name),
+    };
+    let key = match o.host {
+        Host::Obstacle(k) => format!("obstacle.{}", model.obstacles[k as usize].name),
+        Host::Body(_) => format!("body.{}", body.name),
+    };
+    (key, format!("body `{}` overlaps at t = 0: its node {} at [{}] is {:.3e} {into} ({:.2} elements deep)", body.name, o.node, at.join(", "), o.depth, o.ratio()))
+}
+
+/// Pushes overlapping bodies apart by rigid translations of their meshes. Each round, every
+/// body with a node behind an obstacle moves along the obstacle's normal, and every body with a
+/// node inside another body moves away from it (along the line between their centroids: a
+/// deep node's nearest way out may lead through the other body), each by the depth of its
+/// deepest node. A body held by boundary conditions stays, and the other body of the pair moves
+/// the other way. Rigid motions leave the bodies unstrained. An error names what could not be
+/// separated.
+fn separate_initial_overlaps(bodies: &mut [Body], model: &ContactModel) -> Result<(), (String, String)> {
+    let movable: Vec<bool> = bodies.iter().map(|b| b.prescribed.is_empty()).collect();
+    let centroid = |b: &Body| {
+        let n = b.mesh.nodes.len() as Real;
+        b.mesh.nodes.iter().fold([0.0; 3], |c, x| [c[0] + x[0] / n, c[1] + x[1] / n, c[2] + x[2] / n])
+    };
+    for _ in 0..SEPARATION_ROUNDS {
+        let found = initial_overlaps(bodies, model);
+        if found.is_empty() {
+            return Ok(());
+        }
+        let mut moves: Vec<Option<[Real; 3]>> = vec![None; bodies.len()];
+        for o in &found {
+            let direction = match o.host {
+                Host::Obstacle(_) => o.out,
+                Host::Body(m) => {
+                    let (a, b) = (centroid(&bodies[o.body as usize]), centroid(&bodies[m as usize]));
+                    let d = [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+                    let length = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+                    if length > 1e-9 * o.size { d.map(|c| c / length) } else { o.out }
+                }
+            };
+            // A little past the surface, so that the node ends outside.
+            let push = direction.map(|c| c * (o.depth * 1.01 + 1e-6 * o.size));
+            let (body, push) = match o.host {
+                _ if movable[o.body as usize] => (o.body as usize, push),
+                Host::Body(m) if movable[m as usize] => (m as usize, push.map(|c| -c)),
+                _ => {
+                    let (key, message) = describe_overlap(bodies, model, o);
+                    return Err((key, format!("{message}, and boundary conditions hold the bodies in place, so they cannot be pushed apart.")));
+                }
+            };
+            let length = |v: &[Real; 3]| v.iter().map(|c| c * c).sum::<Real>();
+            if moves[body].is_none_or(|m| length(&m) < length(&push)) {
+                moves[body] = Some(push);
+            }
+        }
+        for (b, m) in moves.iter().enumerate() {
+            if let Some(m) = m {
+                for x in &mut bodies[b].mesh.nodes {
+                    for i in 0..3 {
+                        x[i] += m[i];
+                    }
+                }
+            }
+        }
+    }
+    let o = initial_overlaps(bodies, model).into_iter().next().expect("overlaps remain");
+    let (key, message) = describe_overlap(bodies, model, &o);
+    Err((key, format!("{message} after {SEPARATION_ROUNDS} rounds of pushing the bodies apart.")))
 }
 
 fn vec3(v: &[Real]) -> [Real; 3] {
@@ -264,22 +361,32 @@ fn build_contact(loaded: &LoadedScene, bodies: &[Body], dim: usize) -> Result<Op
             }
         }
     }
+    let mut chosen: HashMap<(usize, usize), usize> = HashMap::new();
     for pair in spec.pair.values() {
         let (a, b) = (index[pair.bodies[0].as_str()], index[pair.bodies[1].as_str()]);
         pairs[a.min(b)][a.max(b)] = Some(pair.friction.unwrap_or(spec.friction));
+        if let Some(slave) = &pair.slave {
+            chosen.insert((a.min(b), a.max(b)), index[slave.as_str()]);
+        }
     }
-    // Slave/master roles: both ways with two passes, else the finer mesh is the slave.
+    // Slave/master roles: the pair's `slave`, else the finer mesh, then the one with more
+    // boundary nodes, then the first in the scene; with two passes, the other way round too.
+    let surfaces: Vec<Surface> = bodies.iter().map(|b| Surface::of(&b.mesh)).collect();
+    let boundary_nodes = |b: usize| surfaces[b].nodes.len();
     let mut friction: Vec<Vec<Option<Real>>> = vec![vec![None; n]; n];
+    let mut second_pass = vec![vec![false; n]; n];
     for a in 0..n {
         for b in a + 1..n {
             let Some(mu) = pairs[a][b] else { continue };
+            let b_first = match chosen.get(&(a, b)) {
+                Some(&slave) => slave == b,
+                None => bodies[b].length_scale().total_cmp(&bodies[a].length_scale()).then_with(|| boundary_nodes(a).cmp(&boundary_nodes(b))).is_lt(),
+            };
+            let (slave, master) = if b_first { (b, a) } else { (a, b) };
+            friction[slave][master] = Some(mu);
             if spec.two_pass {
-                friction[a][b] = Some(mu);
-                friction[b][a] = Some(mu);
-            } else if bodies[b].length_scale() < bodies[a].length_scale() {
-                friction[b][a] = Some(mu);
-            } else {
-                friction[a][b] = Some(mu);
+                friction[master][slave] = Some(mu);
+                second_pass[master][slave] = true;
             }
         }
     }
@@ -330,6 +437,5 @@ fn build_contact(loaded: &LoadedScene, bodies: &[Body], dim: usize) -> Result<Op
         return Ok(None);
     }
     let settings = Settings { tolerance: spec.tolerance, max_iterations: spec.max_iterations, sweep: spec.sweep };
-    let surfaces = bodies.iter().map(|b| Surface::of(&b.mesh)).collect();
-    Ok(Some(ContactModel { settings, surfaces, obstacles, friction }))
+    Ok(Some(ContactModel { settings, surfaces, obstacles, friction, second_pass }))
 }
