@@ -93,3 +93,57 @@ fn a_parse_error_says_where_the_file_is_broken() {
     assert!(message.contains("in node coordinates") && message.contains("z coordinate"), "{message}");
     assert!(!message.contains("Hex dump") && !message.contains('\n'), "{message}");
 }
+
+/// `tests/data/five_grains.msh`: five square grains (2 x 2 Quad4 each) stacked with gaps of
+/// 0.05, each its own surface and physical group `grain_1`..`grain_5` (written by hand with a
+/// short script, as Gmsh would write it).
+fn five_grains_scene() -> String {
+    let file = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/five_grains.msh");
+    let mut scene = String::from("gravity = [0.0, -10.0]\n[time]\nend = 0.5\ndt = 0.005\nxi = 1.0\ntheta = 1.0\n[material.rubber]\nmodel = \"neo_hookean\"\nG = 1000.0\nK = 2000.0\ndensity = 1.0\n[contact]\nfriction = 0.3\ntwo_pass = true\n[obstacle.floor]\nshape = \"plane\"\npoint = [0.0, 0.0]\nnormal = [0.0, 1.0]\n");
+    for g in 1..=5 {
+        scene += &format!("[body.grain_{g}]\nmaterial = \"rubber\"\nmesh = {{ file = {:?}, group = \"grain_{g}\" }}\n", file.display().to_string());
+    }
+    scene
+}
+
+/// Caught by the issue: grains meshed in one Gmsh file became one body, without self-contact,
+/// so they could pass through each other. Each physical group is now a body of its own.
+#[test]
+fn five_grains_of_one_gmsh_file_are_five_bodies_that_land_on_each_other() {
+    let path = temp_path("five_grains.toml");
+    std::fs::write(&path, five_grains_scene()).unwrap();
+    let loaded = bifirst::scene::load_scene(&path, &[]).unwrap();
+    let mut sim = bifirst::solver::build_simulation(&loaded).unwrap();
+    assert_eq!(sim.bodies.len(), 5);
+    assert!(sim.bodies.iter().all(|b| b.mesh.element_count() == 4 && b.mesh.nodes.len() == 9), "each body holds its own group");
+    let h = sim.bodies.iter().map(|b| b.length_scale()).fold(f64::INFINITY, f64::min);
+    sim.start();
+    let mut deepest: f64 = 0.0;
+    while !sim.finished() {
+        let report = sim.advance().unwrap_or_else(|f| panic!("step {} failed: {}", f.step, f.failure));
+        deepest = deepest.max(report.contact.max_overlap);
+    }
+    // Each grain rests on the one below: four body pairs carry a reaction.
+    let mut pairs: Vec<(u32, u32)> = sim
+        .contact_points
+        .iter()
+        .filter(|c| c.r[0] > 0.0)
+        .filter_map(|c| match c.master {
+            bifirst::contact::Master::Body(m) => Some((c.slave_body.min(m), c.slave_body.max(m))),
+            _ => None,
+        })
+        .collect();
+    pairs.sort_unstable();
+    pairs.dedup();
+    assert_eq!(pairs, [(0, 1), (1, 2), (2, 3), (3, 4)], "grains in contact at the end");
+    assert!(deepest < 0.01 * h, "a node went {deepest:e} into another grain");
+    let tops: Vec<f64> = sim.bodies.iter().map(|b| (0..b.mesh.nodes.len()).map(|n| b.position(n)[1]).fold(f64::NEG_INFINITY, f64::max)).collect();
+    assert!(tops.windows(2).all(|w| w[1] > w[0] + 0.3), "the stack keeps its order: {tops:?}");
+}
+
+#[test]
+fn a_missing_physical_group_names_the_groups_there_are() {
+    let bytes = std::fs::read(std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/five_grains.msh")).unwrap();
+    let message = gmsh::read(&bytes, Some("grain_9")).unwrap_err().to_string();
+    assert!(message.contains("no physical group `grain_9` of quad4 elements") && message.contains("grain_1, grain_2, grain_3, grain_4, grain_5"), "{message}");
+}
