@@ -62,16 +62,20 @@ impl Worst {
 pub fn overlaps(model: &ContactModel, meshes: &[&Mesh], positions: &[Vec<Vec3>], t: Real) -> Vec<Overlap> {
     let bodies = meshes.len();
     let can_touch = |a: usize, b: usize| a != b && (model.friction[a][b].is_some() || model.friction[b][a].is_some());
-    let hosts: Vec<bool> = (0..bodies).map(|m| (0..bodies).any(|s| can_touch(s, m))).collect();
-    // Elements of every body that can host a node, by bounding box.
+    // Only a node inside another body's box can be inside that body, and only elements in the
+    // box of a body that can touch theirs can hold such a node: in a packing that leaves the
+    // rims of the grains (the search cost a quarter of a step with every element).
+    let body_boxes: Vec<(Vec3, Vec3)> = positions.par_iter().map(|x| bounds(x.iter().copied())).collect();
+    let neighbours = overlapping_boxes(&body_boxes, can_touch);
     let mut ids: Vec<(u32, u32)> = Vec::new();
     let mut boxes: Vec<(Vec3, Vec3)> = Vec::new();
-    for (m, mesh) in meshes.iter().enumerate().filter(|(m, _)| hosts[*m]) {
+    for (m, mesh) in meshes.iter().enumerate().filter(|(m, _)| !neighbours[*m].is_empty()) {
         for e in 0..mesh.element_count() {
-            let x = mesh.element(e).iter().map(|&n| positions[m][n as usize]);
-            let (lo, hi) = x.fold(([Real::INFINITY; 3], [Real::NEG_INFINITY; 3]), |(lo, hi), p| ([0, 1, 2].map(|i| lo[i].min(p[i])), [0, 1, 2].map(|i| hi[i].max(p[i]))));
-            ids.push((m as u32, e as u32));
-            boxes.push((lo, hi));
+            let (lo, hi) = bounds(mesh.element(e).iter().map(|&n| positions[m][n as usize]));
+            if neighbours[m].iter().any(|&s| intersect((lo, hi), body_boxes[s])) {
+                ids.push((m as u32, e as u32));
+                boxes.push((lo, hi));
+            }
         }
     }
     let grid = (!ids.is_empty()).then(|| {
@@ -79,6 +83,7 @@ pub fn overlaps(model: &ContactModel, meshes: &[&Mesh], positions: &[Vec<Vec3>],
         Grid::new(boxes.iter().enumerate().map(|(i, &(lo, hi))| (i as u32, lo, hi)), cell.max(Real::MIN_POSITIVE))
     });
     let dim = meshes.first().map_or(2, |m| m.dim());
+    let offsets: Vec<Vec3> = model.obstacles.iter().map(|o| o.motion.displacement(t)).collect();
     (0..bodies)
         .into_par_iter()
         .flat_map_iter(|s| {
@@ -90,7 +95,7 @@ pub fn overlaps(model: &ContactModel, meshes: &[&Mesh], positions: &[Vec<Vec3>],
                 let x = positions[s][node as usize];
                 let own = sizes[node as usize];
                 for (o, obstacle) in model.obstacles.iter().enumerate().filter(|(_, o)| o.bodies[s]) {
-                    obstacle.touches(x, obstacle.motion.displacement(t), 0.0, &mut touches);
+                    obstacle.touches(x, offsets[o], 0.0, &mut touches);
                     if let Some(deepest) = touches.iter().min_by(|a, b| a.gap.total_cmp(&b.gap)) {
                         let depth = -deepest.gap;
                         if depth > 1e-9 * own {
@@ -99,6 +104,9 @@ pub fn overlaps(model: &ContactModel, meshes: &[&Mesh], positions: &[Vec<Vec3>],
                     }
                 }
                 let Some(grid) = &grid else { continue };
+                if !neighbours[s].iter().any(|&m| intersect((x, x), body_boxes[m])) {
+                    continue;
+                }
                 let mut best: Option<Overlap> = None;
                 for &id in grid.query(x) {
                     let (m, e) = ids[id as usize];
@@ -125,6 +133,34 @@ pub fn overlaps(model: &ContactModel, meshes: &[&Mesh], positions: &[Vec<Vec3>],
             found
         })
         .collect()
+}
+
+/// The box of some points.
+fn bounds(points: impl Iterator<Item = Vec3>) -> (Vec3, Vec3) {
+    points.fold(([Real::INFINITY; 3], [Real::NEG_INFINITY; 3]), |(lo, hi), p| ([0, 1, 2].map(|i| lo[i].min(p[i])), [0, 1, 2].map(|i| hi[i].max(p[i]))))
+}
+
+fn intersect(a: (Vec3, Vec3), b: (Vec3, Vec3)) -> bool {
+    (0..3).all(|i| a.0[i] <= b.1[i] && b.0[i] <= a.1[i])
+}
+
+/// Per body, the bodies it can touch whose boxes meet its own (sweep and prune along x).
+fn overlapping_boxes(boxes: &[(Vec3, Vec3)], can_touch: impl Fn(usize, usize) -> bool) -> Vec<Vec<usize>> {
+    let mut order: Vec<usize> = (0..boxes.len()).collect();
+    order.sort_unstable_by(|&a, &b| boxes[a].0[0].total_cmp(&boxes[b].0[0]));
+    let mut neighbours = vec![Vec::new(); boxes.len()];
+    for (k, &a) in order.iter().enumerate() {
+        for &b in &order[k + 1..] {
+            if boxes[b].0[0] > boxes[a].1[0] {
+                break;
+            }
+            if intersect(boxes[a], boxes[b]) && can_touch(a, b) {
+                neighbours[a].push(b);
+                neighbours[b].push(a);
+            }
+        }
+    }
+    neighbours
 }
 
 /// Per node, the shortest edge of the boundary facets around it (infinite off the boundary).
