@@ -63,6 +63,10 @@ pub enum StepFailure {
     NotFinite { body: String },
     #[error("body `{body}`: {error}")]
     Device { body: String, error: String },
+    /// A step solved with the second contact pass thinned let a node through (depth over its
+    /// element size); it is cut back instead.
+    #[error("with the second contact pass thinned, a node went {ratio:.3} elements deep")]
+    ThinnedPenetration { ratio: Real },
     /// The run's interrupt flag was set during the step: it is abandoned, not cut back.
     #[error("interrupted during the step")]
     Interrupted,

@@ -156,7 +156,14 @@ struct NewtonState {
     /// `false` until the first increment: the Uzawa sweeps have not run yet.
     uzawa_ran: bool,
     uzawa_converged: bool,
+    /// Newton iterations in a row whose Uzawa sweeps did not converge.
+    uzawa_stalls: usize,
 }
+
+/// Newton iterations in a row with stalled Uzawa sweeps after which a step is given up (to be
+/// retried thinned or cut back) rather than iterated to `max_iterations`: each costs up to
+/// `contact.max_iterations` sweeps, and a stall that lasts this long did not clear in any run.
+const UZAWA_STALLS: usize = 3;
 
 impl Group {
     /// The Newton loop of one group on the CPU (paper eqs. 16-19, with contact as in
@@ -212,7 +219,7 @@ impl Group {
         if converged {
             return Ok(true);
         }
-        if state.report.iterations == p.max_iterations {
+        if state.report.iterations == p.max_iterations || state.uzawa_stalls >= UZAWA_STALLS {
             let names: Vec<String> = bodies.iter().map(|b| format!("`{}`", b.name)).collect();
             let bodies_named = if names.len() == 1 { format!("body {}", names[0]) } else { format!("bodies {} (coupled by contact)", names.join(", ")) };
             let unmet: Vec<String> = bodies.iter().flat_map(|b| b.unmet().iter().cloned()).chain(contact_unmet).collect();
@@ -246,6 +253,7 @@ impl Group {
             state.report.uzawa_iterations += outcome.iterations;
             state.uzawa_ran = true;
             state.uzawa_converged = outcome.converged;
+            state.uzawa_stalls = if outcome.converged { 0 } else { state.uzawa_stalls + 1 };
             state.last_change = Some(change);
         }
         state.report.iterations += 1;

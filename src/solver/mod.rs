@@ -128,6 +128,10 @@ pub struct Energies {
     pub energy_balance_error: Real,
 }
 
+/// A step retried with the second contact pass thinned is kept only if no node ends deeper than
+/// this share of its element inside another body; otherwise it is cut back.
+pub const THINNED_PENETRATION: Real = 0.01;
+
 pub struct Simulation {
     pub dim: usize,
     pub bodies: Vec<Body>,
@@ -274,6 +278,14 @@ impl Simulation {
         }
         // The step took as many Newton iterations as its slowest group.
         report.newton_iterations += iterations;
+        if thin {
+            // Thinning trades convergence for a little penetration; beyond this, a shorter step
+            // with both passes is the better trade.
+            let ratio = Worst::of(&self.overlaps_of(&self.trial_positions())).ratio;
+            if ratio > THINNED_PENETRATION {
+                return Err(StepFailure::ThinnedPenetration { ratio });
+            }
+        }
         let stats = ContactStats::of(&points, dt);
         self.book_step(&p, &points, stats.friction_dissipation_step, &mut report.wall)?;
         let r = &mut report.contact;
@@ -303,10 +315,21 @@ impl Simulation {
     /// The boundary nodes of the committed state that are inside another body or behind an
     /// obstacle (none without contact).
     pub fn overlaps(&self) -> Vec<Overlap> {
+        self.overlaps_of(&self.positions())
+    }
+
+    fn overlaps_of(&self, positions: &[Vec<[Real; 3]>]) -> Vec<Overlap> {
         let Some(model) = &self.contact else { return Vec::new() };
-        let positions = self.positions();
         let meshes: Vec<&crate::mesh::Mesh> = self.bodies.iter().map(|b| &b.mesh).collect();
-        overlaps(model, &meshes, &positions, self.t)
+        overlaps(model, &meshes, positions, self.t)
+    }
+
+    /// Node positions of the step being solved.
+    fn trial_positions(&self) -> Vec<Vec<[Real; 3]>> {
+        self.bodies
+            .par_iter()
+            .map(|b| b.mesh.nodes.iter().enumerate().map(|(n, x)| [0, 1, 2].map(|i| x[i] + if i < b.dim { b.trial.u[n * b.dim + i] } else { 0.0 })).collect())
+            .collect()
     }
 
     /// Contact points for a step of length `dt` from the committed state, and the step's
