@@ -150,8 +150,9 @@ impl ContactStep {
         }
     }
 
-    /// Largest Uzawa residual `|r - proj(r - ρ ṽ)|` at the trial displacements, relative to
-    /// `max(max |r|, ρ v_scale)`: zero when the reactions satisfy the law with the current velocities.
+    /// The Uzawa residuals `r - proj(r - ρ ṽ)` at the trial displacements as nodal forces, the
+    /// largest relative to `max(largest nodal force, ρ v_scale)`: zero when the reactions satisfy
+    /// the law with the current velocities.
     pub fn complementarity(&self, bodies: &[Body], p: &StepParams) -> Real {
         let residual: Vec<[Real; 3]> = self
             .points

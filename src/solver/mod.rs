@@ -281,7 +281,7 @@ impl Simulation {
         if thin {
             // Thinning trades convergence for a little penetration; beyond this, a shorter step
             // with both passes is the better trade.
-            let ratio = Worst::of(&self.overlaps_of(&self.trial_positions())).ratio;
+            let ratio = Worst::of(&self.overlaps_of(&self.trial_positions(), self.t + dt)).ratio;
             if ratio > THINNED_PENETRATION {
                 return Err(StepFailure::ThinnedPenetration { ratio });
             }
@@ -315,13 +315,14 @@ impl Simulation {
     /// The boundary nodes of the committed state that are inside another body or behind an
     /// obstacle (none without contact).
     pub fn overlaps(&self) -> Vec<Overlap> {
-        self.overlaps_of(&self.positions())
+        self.overlaps_of(&self.positions(), self.t)
     }
 
-    fn overlaps_of(&self, positions: &[Vec<[Real; 3]>]) -> Vec<Overlap> {
+    /// Overlaps of the bodies at `positions`, the obstacles where they are at time `t`.
+    fn overlaps_of(&self, positions: &[Vec<[Real; 3]>], t: Real) -> Vec<Overlap> {
         let Some(model) = &self.contact else { return Vec::new() };
         let meshes: Vec<&crate::mesh::Mesh> = self.bodies.iter().map(|b| &b.mesh).collect();
-        overlaps(model, &meshes, positions, self.t)
+        overlaps(model, &meshes, positions, t)
     }
 
     /// Node positions of the step being solved.
