@@ -9,7 +9,7 @@ use crate::output::{schemas, OutputError, RunLog, VtuSeries};
 use crate::backend::{Backend, BackendError, BackendRequest};
 use crate::precision::Real;
 use crate::scene::{LoadedScene, OutputSpec, SceneError};
-use crate::solver::{build_simulation, PhaseTimes, RunFailure, Simulation, StepFailure, StepReport};
+use crate::solver::{build_simulation, Energies, PhaseTimes, RunFailure, Simulation, StepFailure, StepReport};
 use serde_json::{json, Value};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -345,11 +345,11 @@ pub const ENERGY_GAIN_TOLERANCE: Real = 1e-4;
 const ENERGY_GAIN_LINES: usize = 10;
 
 /// The energy the last step created relative to the energy scale (`max(|E(0)|, |E|, |W_ext|)`),
-/// when beyond [`ENERGY_GAIN_TOLERANCE`]; `dissipated` is the numerical dissipation before it.
-fn energy_gain(sim: &Simulation, dissipated: Real) -> Option<Real> {
-    let e = sim.energies();
+/// when beyond [`ENERGY_GAIN_TOLERANCE`]; `e` are the energies after it and `dissipated` the
+/// numerical dissipation before it.
+fn energy_gain(sim: &Simulation, e: &Energies, dissipated: Real) -> Option<Real> {
     let scale = [sim.initial_energy, e.total, e.external_work].iter().map(|x| x.abs()).fold(Real::MIN_POSITIVE, Real::max);
-    let gain = (dissipated - sim.numerical_dissipation) / scale;
+    let gain = (dissipated - e.numerical_dissipation) / scale;
     (gain > ENERGY_GAIN_TOLERANCE).then_some(gain)
 }
 
@@ -459,10 +459,11 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
         totals.wall += report.wall;
         totals.bytes_moved += report.bytes_moved;
         totals.device_submits += report.device_submits;
-        if !sim.energies().total.is_finite() {
+        let energies = sim.energies();
+        if !energies.total.is_finite() {
             break Some((Stop::NotFinite { step: sim.step, t: sim.t }, report));
         }
-        if let Some(gain) = energy_gain(&sim, dissipated) {
+        if let Some(gain) = energy_gain(&sim, &energies, dissipated) {
             totals.energy_gain_steps += 1;
             totals.max_energy_gain = totals.max_energy_gain.max(gain);
             if totals.energy_gain_steps <= ENERGY_GAIN_LINES {

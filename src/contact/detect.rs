@@ -40,13 +40,7 @@ fn point(slave_body: usize, slave_node: u32, master: Master, frame: [Vec3; 3], g
 
 /// Largest edge of a facet: a size for search boxes and for the penetration depth accepted.
 fn facet_size(x: &[Vec3]) -> Real {
-    let mut h: Real = 0.0;
-    for (i, a) in x.iter().enumerate() {
-        for b in &x[i + 1..] {
-            h = h.max(norm(sub(*a, *b)));
-        }
-    }
-    h
+    geometry::edge_range(x).1
 }
 
 fn project(x: Vec3, f: &[Vec3]) -> Option<Projection> {
@@ -164,8 +158,7 @@ fn body_pairs(model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, margin:
         for f in 0..surface.facet_count() {
             xs.clear();
             xs.extend(surface.facet(f).iter().map(|&n| positions[b][n as usize]));
-            let lo = [0, 1, 2].map(|i| xs.iter().map(|x| x[i]).fold(Real::INFINITY, Real::min));
-            let hi = [0, 1, 2].map(|i| xs.iter().map(|x| x[i]).fold(Real::NEG_INFINITY, Real::max));
+            let (lo, hi) = geometry::bounds(xs.iter().copied());
             ids.push((b as u32, f as u32));
             boxes.push((lo, hi, facet_size(&xs)));
         }

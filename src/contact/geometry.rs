@@ -27,6 +27,24 @@ pub fn normalize(a: Vec3) -> Vec3 {
     scale(a, 1.0 / norm(a))
 }
 
+/// The axis-aligned box `(min, max)` of some points.
+pub fn bounds(points: impl IntoIterator<Item = Vec3>) -> (Vec3, Vec3) {
+    points.into_iter().fold(([Real::INFINITY; 3], [Real::NEG_INFINITY; 3]), |(lo, hi), p| ([0, 1, 2].map(|i| lo[i].min(p[i])), [0, 1, 2].map(|i| hi[i].max(p[i]))))
+}
+
+/// The shortest and the longest distance between two of the points (the edges, and in a
+/// quadrilateral or an element also the diagonals).
+pub fn edge_range(p: &[Vec3]) -> (Real, Real) {
+    let (mut shortest, mut longest) = (Real::INFINITY, 0.0 as Real);
+    for (i, a) in p.iter().enumerate() {
+        for b in &p[i + 1..] {
+            let d = norm(sub(*a, *b));
+            (shortest, longest) = (shortest.min(d), longest.max(d));
+        }
+    }
+    (shortest, longest)
+}
+
 /// Orthonormal frame `[n, t1, t2]` from a unit normal; `t1` follows `hint` when it is not
 /// parallel to `n`. In 2D (`n[2] = 0`), `t1` is `n` turned by +90 degrees and `t2 = 0`.
 pub fn frame(n: Vec3, hint: Option<Vec3>, dim: usize) -> [Vec3; 3] {

@@ -4,7 +4,7 @@
 //! an overlap deeper than the contact search): it refuses overlapping bodies at t = 0 and
 //! measures the penetration after every step.
 
-use super::geometry::{add, cross, dot, norm, scale, sub, Vec3};
+use super::geometry::{add, bounds, cross, dot, edge_range, norm, scale, sub, Vec3};
 use super::grid::Grid;
 use super::obstacle::Touch;
 use super::ContactModel;
@@ -123,7 +123,7 @@ pub fn overlaps(model: &ContactModel, meshes: &[&Mesh], positions: &[Vec<Vec3>],
                         continue;
                     }
                     let (depth, out) = to_surface(&model.surfaces[m as usize], &positions[m as usize], x);
-                    let size = own.min(shortest_edge(&element));
+                    let size = own.min(edge_range(&element).0);
                     if depth > 1e-9 * size && best.is_none_or(|b| depth / size > b.ratio()) {
                         best = Some(Overlap { body: s as u32, node, host: Host::Body(m), depth, out, size });
                     }
@@ -133,11 +133,6 @@ pub fn overlaps(model: &ContactModel, meshes: &[&Mesh], positions: &[Vec<Vec3>],
             found
         })
         .collect()
-}
-
-/// The box of some points.
-fn bounds(points: impl Iterator<Item = Vec3>) -> (Vec3, Vec3) {
-    points.fold(([Real::INFINITY; 3], [Real::NEG_INFINITY; 3]), |(lo, hi), p| ([0, 1, 2].map(|i| lo[i].min(p[i])), [0, 1, 2].map(|i| hi[i].max(p[i]))))
 }
 
 fn intersect(a: (Vec3, Vec3), b: (Vec3, Vec3)) -> bool {
@@ -169,22 +164,12 @@ fn node_sizes(surface: &super::Surface, x: &[Vec3], nodes: usize) -> Vec<Real> {
     for f in 0..surface.facet_count() {
         let facet = surface.facet(f);
         let p: Vec<Vec3> = facet.iter().map(|&n| x[n as usize]).collect();
-        let h = shortest_edge(&p);
+        let h = edge_range(&p).0;
         for &n in facet {
             sizes[n as usize] = sizes[n as usize].min(h);
         }
     }
     sizes
-}
-
-fn shortest_edge(p: &[Vec3]) -> Real {
-    let mut h = Real::INFINITY;
-    for (i, a) in p.iter().enumerate() {
-        for b in &p[i + 1..] {
-            h = h.min(norm(sub(*a, *b)));
-        }
-    }
-    h
 }
 
 /// Whether `x` is inside the element with nodes `p` or on its boundary (up to round-off; a node

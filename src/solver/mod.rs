@@ -128,6 +128,24 @@ pub struct Energies {
     pub energy_balance_error: Real,
 }
 
+/// Node positions per body: the reference nodes plus the displacements `u(body)` (committed or
+/// trial), padded to 3 components.
+pub(crate) fn node_positions(bodies: &[Body], u: impl Fn(&Body) -> &[Real] + Sync) -> Vec<Vec<[Real; 3]>> {
+    bodies
+        .par_iter()
+        .map(|b| {
+            let u = u(b);
+            b.mesh.nodes.iter().enumerate().map(|(n, x)| [0, 1, 2].map(|i| x[i] + if i < b.dim { u[n * b.dim + i] } else { 0.0 })).collect()
+        })
+        .collect()
+}
+
+/// The boundary nodes of `bodies` at `positions` inside another body or behind an obstacle.
+pub(crate) fn body_overlaps(bodies: &[Body], model: &ContactModel, positions: &[Vec<[Real; 3]>], t: Real) -> Vec<Overlap> {
+    let meshes: Vec<&crate::mesh::Mesh> = bodies.iter().map(|b| &b.mesh).collect();
+    overlaps(model, &meshes, positions, t)
+}
+
 /// A step retried with the second contact pass thinned is kept only if no node ends deeper than
 /// this share of its element inside another body; otherwise it is cut back.
 pub const THINNED_PENETRATION: Real = 0.01;
@@ -244,7 +262,7 @@ impl Simulation {
         let started = std::time::Instant::now();
         let (mut points, velocity_scale) = self.detect(dt);
         if let (true, Some(model)) = (thin, &self.contact) {
-            thin_second_pass(model, &self.positions(), &mut points);
+            thin_second_pass(model, &node_positions(&self.bodies, |b| &b.state.u), &mut points);
         }
         let warm: HashMap<(u32, u32, Master), ([Real; 3], Real)> = self.contact_points.iter().map(|c| (c.key(), (c.r, c.rho))).collect();
         report.wall.contact += started.elapsed().as_secs_f64();
@@ -278,13 +296,12 @@ impl Simulation {
         }
         // The step took as many Newton iterations as its slowest group.
         report.newton_iterations += iterations;
-        if thin {
+        // The step's overlaps, measured once on its end state (the state `commit` keeps).
+        let overlap = Worst::of(&self.overlaps_at(&node_positions(&self.bodies, |b| &b.trial.u), self.t + dt));
+        if thin && overlap.ratio > THINNED_PENETRATION {
             // Thinning trades convergence for a little penetration; beyond this, a shorter step
             // with both passes is the better trade.
-            let ratio = Worst::of(&self.overlaps_of(&self.trial_positions(), self.t + dt)).ratio;
-            if ratio > THINNED_PENETRATION {
-                return Err(StepFailure::ThinnedPenetration { ratio });
-            }
+            return Err(StepFailure::ThinnedPenetration { ratio: overlap.ratio });
         }
         let stats = ContactStats::of(&points, dt);
         self.book_step(&p, &points, stats.friction_dissipation_step, &mut report.wall)?;
@@ -300,37 +317,20 @@ impl Simulation {
             body.commit();
         }
         self.t += dt;
-        let found = self.overlaps();
-        let worst = Worst::of(&found);
-        report.contact.max_overlap = report.contact.max_overlap.max(worst.depth);
-        report.contact.max_overlap_ratio = report.contact.max_overlap_ratio.max(worst.ratio);
+        report.contact.max_overlap = report.contact.max_overlap.max(overlap.depth);
+        report.contact.max_overlap_ratio = report.contact.max_overlap_ratio.max(overlap.ratio);
         Ok(())
-    }
-
-    /// Current node positions per body.
-    fn positions(&self) -> Vec<Vec<[Real; 3]>> {
-        self.bodies.par_iter().map(|b| (0..b.mesh.nodes.len()).map(|n| b.position(n)).collect()).collect()
     }
 
     /// The boundary nodes of the committed state that are inside another body or behind an
     /// obstacle (none without contact).
     pub fn overlaps(&self) -> Vec<Overlap> {
-        self.overlaps_of(&self.positions(), self.t)
+        self.overlaps_at(&node_positions(&self.bodies, |b| &b.state.u), self.t)
     }
 
     /// Overlaps of the bodies at `positions`, the obstacles where they are at time `t`.
-    fn overlaps_of(&self, positions: &[Vec<[Real; 3]>], t: Real) -> Vec<Overlap> {
-        let Some(model) = &self.contact else { return Vec::new() };
-        let meshes: Vec<&crate::mesh::Mesh> = self.bodies.iter().map(|b| &b.mesh).collect();
-        overlaps(model, &meshes, positions, t)
-    }
-
-    /// Node positions of the step being solved.
-    fn trial_positions(&self) -> Vec<Vec<[Real; 3]>> {
-        self.bodies
-            .par_iter()
-            .map(|b| b.mesh.nodes.iter().enumerate().map(|(n, x)| [0, 1, 2].map(|i| x[i] + if i < b.dim { b.trial.u[n * b.dim + i] } else { 0.0 })).collect())
-            .collect()
+    fn overlaps_at(&self, positions: &[Vec<[Real; 3]>], t: Real) -> Vec<Overlap> {
+        self.contact.as_ref().map_or_else(Vec::new, |model| body_overlaps(&self.bodies, model, positions, t))
     }
 
     /// Contact points for a step of length `dt` from the committed state, and the step's
@@ -352,7 +352,7 @@ impl Simulation {
         let gravity = self.gravity.iter().map(|g| g * g).sum::<Real>().sqrt();
         let velocity_scale = body_speed.max(obstacle_speed).max(gravity * dt).max(1e-9 * h / dt);
         let Some(model) = &self.contact else { return (Vec::new(), velocity_scale) };
-        let positions = self.positions();
+        let positions = node_positions(&self.bodies, |b| &b.state.u);
         // The search reaches as far as anything can travel in two steps, plus a little.
         let margin = 2.0 * dt * (2.0 * body_speed + obstacle_speed) + 0.01 * h;
         (detect(model, &positions, dim, self.t, dt, margin), velocity_scale)

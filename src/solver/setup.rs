@@ -4,13 +4,15 @@
 use super::body::{Body, Prescribed};
 use super::{BoundarySet, Probe, Simulation};
 use crate::contact::obstacle::Shape;
-use crate::contact::overlap::{overlaps, Host, Overlap};
+use super::{body_overlaps, node_positions};
+use crate::contact::overlap::{Host, Overlap};
 use crate::contact::{ContactModel, Motion, Obstacle, Settings, Surface};
 use crate::element::ReferenceGeometry;
 use crate::material::{BlatzKo, Lvf, Model, NeoHookean};
 use crate::mesh::{generate, gmsh, Mesh};
 use crate::precision::Real;
 use crate::scene::SceneErrorKind::{Invalid, Mesh as MeshError, Reference};
+use crate::scene::LARGEST_INPUT;
 use crate::scene::{AngularVelocity, Axis, Generator, Interpolation, LoadedScene, MaterialSpec, MeshSpec, ModelName, ObstacleShape, SceneError};
 use std::collections::HashMap;
 
@@ -63,7 +65,6 @@ fn build_mesh(loaded: &LoadedScene, key: &str, spec: &MeshSpec) -> Result<Mesh, 
     })
 }
 
-use crate::scene::LARGEST_INPUT;
 const RANGE_WHY: &str = " (energies multiply such numbers and must stay finite)";
 
 fn within_range(v: &[Real]) -> bool {
@@ -260,9 +261,8 @@ const INITIAL_OVERLAP: Real = 1e-6;
 const SEPARATION_ROUNDS: usize = 200;
 
 fn initial_overlaps(bodies: &[Body], model: &ContactModel) -> Vec<Overlap> {
-    let positions: Vec<Vec<[Real; 3]>> = bodies.iter().map(|b| (0..b.mesh.nodes.len()).map(|n| b.position(n)).collect()).collect();
-    let meshes: Vec<&Mesh> = bodies.iter().map(|b| &b.mesh).collect();
-    overlaps(model, &meshes, &positions, 0.0).into_iter().filter(|o| o.ratio() > INITIAL_OVERLAP).collect()
+    let positions = node_positions(bodies, |b| &b.state.u);
+    body_overlaps(bodies, model, &positions, 0.0).into_iter().filter(|o| o.ratio() > INITIAL_OVERLAP).collect()
 }
 
 /// The scene key and the words of an overlap: the bodies (or obstacle), the node and the depth.
