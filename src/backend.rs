@@ -40,6 +40,26 @@ pub struct BackendRequest {
     pub precision: Option<Precision>,
 }
 
+impl BackendRequest {
+    /// The command-line options that make this request (`--backend`, `--adapter`,
+    /// `--precision`), for a command run elsewhere (a Slurm array task).
+    pub fn args(&self) -> Vec<String> {
+        let choice = match self.choice {
+            BackendChoice::Auto => "auto",
+            BackendChoice::Gpu => "gpu",
+            BackendChoice::Cpu => "cpu",
+        };
+        let mut args = vec!["--backend".to_string(), choice.to_string()];
+        if let Some(adapter) = &self.adapter {
+            args.extend(["--adapter".to_string(), adapter.clone()]);
+        }
+        if let Some(precision) = self.precision {
+            args.extend(["--precision".to_string(), precision.name().to_string()]);
+        }
+        args
+    }
+}
+
 #[derive(Debug, thiserror::Error)]
 pub enum BackendError {
     #[error(transparent)]

@@ -9,7 +9,7 @@ use bifirst::precision::Precision;
 use bifirst::run::{run_scene, Monitor, RunError, RunOptions, RunSummary, Stop};
 use bifirst::scene::load_scene;
 use bifirst::solver::StepReport;
-use bifirst::sweep::{Sweep, SweepAxis, VariantOutcome};
+use bifirst::sweep::{report, Report, SbatchOption, Shard, SlurmJob, Sweep, SweepAxis};
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::io::IsTerminal;
@@ -78,9 +78,38 @@ enum Command {
         trace: Option<[String; 3]>,
         #[command(flatten)]
         backend: BackendArgs,
-        /// Print the summaries as JSON instead of a table.
+        /// Print the report as JSON instead of a table.
         #[arg(long)]
         json: bool,
+        /// Run only a share of the grid, variants K, K+N, K+2N, ... (0 <= K < N), e.g. one
+        /// share per machine; `sweep-report DIR` merges the logs afterwards.
+        #[arg(long, value_name = "K/N", conflicts_with = "index")]
+        shard: Option<Shard>,
+        /// Run only the variant with this index (`--list` shows them): what a job-array task runs.
+        #[arg(long, value_name = "I")]
+        index: Option<usize>,
+        /// Print the variants (index, label, log path), without running them.
+        #[arg(long, conflicts_with = "slurm")]
+        list: bool,
+        /// Write a Slurm job-array script, one array task per variant (`--threads` CPUs each),
+        /// instead of running; submit it with `sbatch FILE`.
+        #[arg(long, value_name = "FILE", conflicts_with_all = ["shard", "index"])]
+        slurm: Option<PathBuf>,
+        /// An `#SBATCH` directive for the script, e.g. `--sbatch partition=short --sbatch
+        /// time=02:00:00 --sbatch mem=4G` (a key of the script's own replaces its default).
+        #[arg(long, value_name = "KEY=VALUE", requires = "slurm")]
+        sbatch: Vec<SbatchOption>,
+    },
+    /// The summary table and overlaid plots of a sweep directory's logs, whoever produced them
+    /// (one machine, shards, a Slurm job array), naming the variants missing or not finished.
+    SweepReport {
+        dir: PathBuf,
+        /// Print the report as JSON instead of a table.
+        #[arg(long)]
+        json: bool,
+        /// Probes `B,C,D`: also plot B's path in the plane BCD.
+        #[arg(long, value_name = "B,C,D", value_parser = parse_trace)]
+        trace: Option<[String; 3]>,
     },
     /// Plot run logs into PNGs (energies, solver, probes); several logs are overlaid.
     Plot {
@@ -349,22 +378,46 @@ struct SweepArgs {
     trace: Option<[String; 3]>,
     backend: BackendRequest,
     json: bool,
+    shard: Option<Shard>,
+    index: Option<usize>,
+    list: bool,
+    slurm: Option<PathBuf>,
+    sbatch: Vec<SbatchOption>,
+    threads: Option<usize>,
 }
 
 fn sweep_command(args: SweepArgs) -> Result<ExitCode> {
-    let sweep = Sweep::load(&args.scene, &args.sets, &args.over)?;
-    let out = args.out.unwrap_or_else(|| PathBuf::from(format!("{}_sweep", sweep.name)));
-    let count = sweep.variants().count();
-    let jobs = args.jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())).clamp(1, count);
-    eprintln!("bifirst {}: sweep of `{}`, {count} variants, {jobs} at a time, into {}", env!("CARGO_PKG_VERSION"), sweep.name, out.display());
+    let sweep = Sweep::plan(&args.scene, &args.sets, &args.over)?;
+    let out = args.out.clone().unwrap_or_else(|| PathBuf::from(format!("{}_sweep", sweep.name)));
+    let count = sweep.variants.len();
+    if let Some(script) = &args.slurm {
+        return slurm_command(&sweep, &out, script, &args);
+    }
+    let indices = match (args.shard, args.index) {
+        (Some(shard), _) => shard.indices(count),
+        (None, Some(index)) => vec![index],
+        (None, None) => (0..count).collect(),
+    };
+    let whole = args.shard.is_none() && args.index.is_none();
+    if args.list {
+        for v in indices.iter().filter_map(|&i| sweep.variants.get(i)) {
+            println!("{}\t{}\t{}", v.index, v.label, Sweep::log_path(&out, v).display());
+        }
+        return Ok(ExitCode::SUCCESS);
+    }
+    let runs = sweep.load(&indices)?;
+    sweep.prepare(&out, whole)?;
+    let jobs = args.jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())).clamp(1, runs.len().max(1));
+    let share = if whole { String::new() } else { format!(" ({} of them here)", runs.len()) };
+    eprintln!("bifirst {}: sweep of `{}`, {count} variants{share}, {jobs} at a time, into {}", env!("CARGO_PKG_VERSION"), sweep.name, out.display());
     let options = RunOptions { vtu: None, interrupt: Some(interrupt_flags()?.0), backend: args.backend, contour: None };
     let finished = AtomicUsize::new(0);
-    let outcomes = sweep.run(&out, &options, jobs, |o| {
+    let outcomes = Sweep::run(&runs, &out, &options, jobs, |o| {
         let n = finished.fetch_add(1, Ordering::Relaxed) + 1;
+        let head = format!("[{n}/{}] variant {} ({})", runs.len(), o.variant.index, o.variant.label);
         match (o.summary(), &o.result) {
             (Some(s), _) => eprintln!(
-                "[{n}/{count}] {}: {} ({} steps, {:.1} s, backend {}{}) -> {}",
-                o.variant.label,
+                "{head}: {} ({} steps, {:.1} s, backend {}{}) -> {}",
                 s.status,
                 s.steps,
                 s.wall_s,
@@ -372,33 +425,69 @@ fn sweep_command(args: SweepArgs) -> Result<ExitCode> {
                 s.adapter.as_ref().map_or(String::new(), |a| format!(" on {a}")),
                 o.log.display()
             ),
-            (None, Err(e)) => eprintln!("[{n}/{count}] {}: error: {e}", o.variant.label),
+            (None, Err(e)) => eprintln!("{head}: error: {e}"),
             (None, Ok(_)) => unreachable!("a finished run has a summary"),
         }
-    })?;
-    let logged: Vec<&VariantOutcome> = outcomes.iter().filter(|o| o.summary().is_some()).collect();
-    let records = logged.iter().map(|o| read_run(&o.log)).collect::<Result<Vec<_>, _>>()?;
-    let mut summaries = records.iter().map(summary::summarize).collect::<Result<Vec<_>, _>>()?;
-    for (s, o) in summaries.iter_mut().zip(&logged) {
-        s.name = o.variant.label.clone();
+    });
+    if whole {
+        return print_report(report(&out)?, args.json, args.trace);
     }
-    if args.json {
-        println!("{}", serde_json::to_string_pretty(&summaries)?);
-    } else {
-        print!("{}", summary::table(&summaries));
-    }
-    if !records.is_empty() {
-        let labels = Some(logged.iter().map(|o| o.variant.label.clone()).collect());
-        for file in plot::plot_runs(&records, &out.join("plots"), &PlotOptions { labels, trace: args.trace })? {
-            eprintln!("plot: {}", file.display());
-        }
-    }
-    let failed = outcomes.iter().filter(|o| !matches!(o.result, Ok(_))).count();
+    eprintln!("when every share has run: bifirst sweep-report {}", out.display());
+    let failed = outcomes.iter().filter(|o| o.result.is_err()).count();
     if failed > 0 {
-        eprintln!("error: {failed} of {count} variants did not finish");
+        eprintln!("error: {failed} of {} variants did not finish", outcomes.len());
         return Ok(ExitCode::FAILURE);
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// `sweep --slurm FILE`: every variant validated, the grid recorded in the sweep directory, the
+/// job-array script written.
+fn slurm_command(sweep: &Sweep, out: &std::path::Path, script: &std::path::Path, args: &SweepArgs) -> Result<ExitCode> {
+    sweep.load(&(0..sweep.variants.len()).collect::<Vec<_>>())?;
+    sweep.prepare(out, true)?;
+    let job = SlurmJob {
+        sweep,
+        out_dir: std::fs::canonicalize(out)?,
+        exe: std::env::current_exe().and_then(std::fs::canonicalize)?,
+        threads: args.threads.unwrap_or(1).max(1),
+        run_args: args.backend.args(),
+        sbatch: args.sbatch.clone(),
+    };
+    std::fs::write(script, job.script()).map_err(|e| anyhow::anyhow!("cannot write `{}`: {e}", script.display()))?;
+    eprintln!("wrote {}: a Slurm job array of {} tasks (one variant each, {} CPUs each)", script.display(), sweep.variants.len(), job.threads);
+    eprintln!("submit:      sbatch {}", script.display());
+    eprintln!("then merge:  {}", job.merge_command());
+    eprintln!("  or queue the merge behind the array: sbatch --dependency=afterany:JOB_ID --wrap \"{}\"", job.merge_command());
+    Ok(ExitCode::SUCCESS)
+}
+
+/// The summary table (or JSON) and the overlaid plots of a sweep directory; fails when a variant
+/// is missing or did not finish.
+fn print_report(mut report: Report, json: bool, trace: Option<[String; 3]>) -> Result<ExitCode> {
+    if json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        let summaries: Vec<_> = report.variants.iter().filter_map(|e| e.summary.clone()).collect();
+        if !summaries.is_empty() {
+            print!("{}", summary::table(&summaries));
+        }
+        let unfinished: Vec<_> = report.variants.iter().filter(|e| !e.finished()).collect();
+        println!("{} of {} variants finished", report.variants.len() - unfinished.len(), report.variants.len());
+        for e in unfinished {
+            let index = e.index.map_or(String::new(), |i| format!("variant {i}, "));
+            let message = e.message.as_ref().filter(|m| **m != e.status).map_or(String::new(), |m| format!(": {m}"));
+            println!("  {index}{}: {}{message}", e.label, e.status);
+        }
+    }
+    let labels = report.variants.iter().filter(|e| e.record.is_some()).map(|e| e.label.clone()).collect();
+    let records: Vec<_> = report.variants.iter_mut().filter_map(|e| e.record.take()).collect();
+    if !records.is_empty() {
+        for file in plot::plot_runs(&records, &report.dir.join("plots"), &PlotOptions { labels: Some(labels), trace })? {
+            eprintln!("plot: {}", file.display());
+        }
+    }
+    Ok(if report.complete() { ExitCode::SUCCESS } else { ExitCode::FAILURE })
 }
 
 /// Reads every run given, saying on stderr which could not be read; the others are used (one
@@ -470,7 +559,10 @@ fn main() -> ExitCode {
     }
     let result = match cli.command {
         Command::Run { scene, out, sets, vtu, contour, quiet, json, backend } => run(RunArgs { backend: backend.into(), scene, out, sets, vtu, contour, quiet, json }),
-        Command::Sweep { scene, over, sets, out, jobs, trace, backend, json } => sweep_command(SweepArgs { scene, over, sets, out, jobs, trace, backend: backend.into(), json }),
+        Command::Sweep { scene, over, sets, out, jobs, trace, backend, json, shard, index, list, slurm, sbatch } => {
+            sweep_command(SweepArgs { scene, over, sets, out, jobs, trace, backend: backend.into(), json, shard, index, list, slurm, sbatch, threads: cli.threads })
+        }
+        Command::SweepReport { dir, json, trace } => report(&dir).map_err(anyhow::Error::from).and_then(|r| print_report(r, json, trace)),
         Command::Plot { runs, out, trace } => plot_command(runs, out, trace),
         Command::Summary { runs, json } => summary_command(runs, json),
         Command::Check { scene, sets } => load_scene(&scene, &sets).map_err(anyhow::Error::from).and_then(|loaded| {

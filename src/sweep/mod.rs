@@ -1,5 +1,14 @@
 //! `bifirst sweep`: one scene run over a grid of `--set` values (`--over KEY=V1,V2,...`), the
-//! variants in parallel, one MCAP log each.
+//! variants in parallel, one MCAP log each; a share of the grid per machine (`--shard K/N`,
+//! `--index I`, a Slurm job array) and a report over whatever logs a directory holds.
+
+mod manifest;
+mod report;
+mod slurm;
+
+pub use manifest::MANIFEST_FILE;
+pub use report::{report, Report, ReportEntry};
+pub use slurm::{SbatchOption, SlurmJob};
 
 use crate::run::{run_scene, RunError, RunOptions, RunSummary, Silent};
 use crate::scene::{load_scene, LoadedScene, SceneError};
@@ -13,14 +22,26 @@ pub enum SweepError {
     Over(String),
     #[error("`--over` key `{0}` is given twice")]
     RepeatedKey(String),
+    #[error("`--shard {0}`: expected K/N with 0 <= K < N (variants K, K+N, K+2N, ... run)")]
+    Shard(String),
+    #[error("`--index {index}`: the sweep has {count} variants (0 to {})", count.saturating_sub(1))]
+    Index { index: usize, count: usize },
+    #[error("`--sbatch {0}`: expected KEY=VALUE or KEY, the key made of letters, digits and `-`, the value on one line")]
+    Sbatch(String),
     #[error("variant {label}: {source}")]
     Scene { label: String, source: SceneError },
-    #[error("cannot create the sweep directory `{path}`: {source}")]
-    Create { path: PathBuf, source: std::io::Error },
+    #[error("cannot find the scene `{path}`: {source}")]
+    ScenePath { path: PathBuf, source: std::io::Error },
+    #[error("cannot write `{path}`: {source}")]
+    Write { path: PathBuf, source: std::io::Error },
+    #[error("cannot read `{path}`: {message}")]
+    Read { path: PathBuf, message: String },
+    #[error("`{path}` describes another sweep ({difference}); give this one its own `--out` directory, or remove the file")]
+    OtherSweep { path: PathBuf, difference: String },
 }
 
 /// One swept key and its values (TOML literals, as `--set` takes them).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SweepAxis {
     pub key: String,
     pub values: Vec<String>,
@@ -55,9 +76,11 @@ impl std::str::FromStr for SweepAxis {
     }
 }
 
-/// One point of the grid: its `--set` overrides, a label for plots and a file stem.
-#[derive(Debug, Clone, PartialEq)]
+/// One point of the grid: its place in grid order, its `--set` overrides, a label for plots and
+/// a file stem.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Variant {
+    pub index: usize,
     pub label: String,
     pub sets: Vec<String>,
     pub stem: String,
@@ -81,12 +104,13 @@ pub fn variants(scene_name: &str, axes: &[SweepAxis]) -> Result<Vec<Variant>, Sw
     }
     Ok(grid
         .into_iter()
-        .map(|choice| {
+        .enumerate()
+        .map(|(index, choice)| {
             let picked: Vec<(&SweepAxis, &String, &String)> = axes.iter().zip(&names).zip(choice).map(|((a, n), v)| (a, n, &a.values[v])).collect();
             let label = picked.iter().map(|(_, n, v)| format!("{n}={v}")).collect::<Vec<_>>().join(", ");
             let sets = picked.iter().map(|(a, _, v)| format!("{}={v}", a.key)).collect();
             let stem = std::iter::once(scene_name.to_string()).chain(picked.iter().map(|(_, n, v)| format!("{n}-{v}"))).collect::<Vec<_>>().join("_");
-            Variant { label, sets, stem: sanitize(&stem) }
+            Variant { index, label, sets, stem: sanitize(&stem) }
         })
         .collect())
 }
@@ -94,6 +118,35 @@ pub fn variants(scene_name: &str, axes: &[SweepAxis]) -> Result<Vec<Variant>, Sw
 /// Keeps file names portable: letters, digits, `.`, `_` and `-`; anything else becomes `_`.
 fn sanitize(stem: &str) -> String {
     stem.chars().map(|c| if c.is_ascii_alphanumeric() || "._-".contains(c) { c } else { '_' }).collect()
+}
+
+/// A share of the grid for one machine: variants `k`, `k + n`, `k + 2n`, ...
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Shard {
+    pub k: usize,
+    pub n: usize,
+}
+
+impl std::str::FromStr for Shard {
+    type Err = SweepError;
+
+    /// `K/N`, with `0 <= K < N`.
+    fn from_str(spec: &str) -> Result<Self, SweepError> {
+        let bad = || SweepError::Shard(spec.to_string());
+        let (k, n) = spec.split_once('/').ok_or_else(bad)?;
+        let (k, n): (usize, usize) = (k.trim().parse().map_err(|_| bad())?, n.trim().parse().map_err(|_| bad())?);
+        if k >= n {
+            return Err(bad());
+        }
+        Ok(Self { k, n })
+    }
+}
+
+impl Shard {
+    /// The grid indices of this share of `count` variants.
+    pub fn indices(self, count: usize) -> Vec<usize> {
+        (self.k..count).step_by(self.n).collect()
+    }
 }
 
 /// How one variant ended.
@@ -114,46 +167,67 @@ impl VariantOutcome {
     }
 }
 
-/// A sweep ready to run: every variant's scene loaded and validated up front, so that a bad
-/// value is reported before any run starts.
+/// A sweep's grid: the scene, the overrides every variant shares, and the variants.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Sweep {
     pub name: String,
-    runs: Vec<(Variant, LoadedScene)>,
+    /// The scene file, absolute: array tasks may start in another directory.
+    pub scene: PathBuf,
+    pub sets: Vec<String>,
+    pub axes: Vec<SweepAxis>,
+    pub variants: Vec<Variant>,
 }
 
 impl Sweep {
-    /// Loads `scene` once per variant with `base_sets` then the variant's overrides.
-    pub fn load(scene: &Path, base_sets: &[String], axes: &[SweepAxis]) -> Result<Self, SweepError> {
+    /// The grid of `axes` over `scene` with `base_sets` applied first; the base scene is
+    /// validated here, the variants' own values by [`Sweep::load`].
+    pub fn plan(scene: &Path, base_sets: &[String], axes: &[SweepAxis]) -> Result<Self, SweepError> {
         let base = load_scene(scene, base_sets).map_err(|source| SweepError::Scene { label: "base".into(), source })?;
-        let runs = variants(&base.name, axes)?
-            .into_iter()
-            .map(|variant| {
-                let sets: Vec<String> = base_sets.iter().chain(&variant.sets).cloned().collect();
-                match load_scene(scene, &sets) {
-                    Ok(loaded) => Ok((variant, loaded)),
-                    Err(source) => Err(SweepError::Scene { label: variant.label, source }),
+        let variants = variants(&base.name, axes)?;
+        let scene = std::fs::canonicalize(scene).map_err(|source| SweepError::ScenePath { path: scene.into(), source })?;
+        Ok(Self { name: base.name, scene, sets: base_sets.to_vec(), axes: axes.to_vec(), variants })
+    }
+
+    /// Loads and validates the scenes of the variants at `indices`, so that a bad value is
+    /// reported before any of them runs.
+    pub fn load(&self, indices: &[usize]) -> Result<Vec<(Variant, LoadedScene)>, SweepError> {
+        indices
+            .iter()
+            .map(|&index| {
+                let variant = self.variants.get(index).ok_or(SweepError::Index { index, count: self.variants.len() })?;
+                let sets: Vec<String> = self.sets.iter().chain(&variant.sets).cloned().collect();
+                match load_scene(&self.scene, &sets) {
+                    Ok(loaded) => Ok((variant.clone(), loaded)),
+                    Err(source) => Err(SweepError::Scene { label: variant.label.clone(), source }),
                 }
             })
-            .collect::<Result<_, _>>()?;
-        Ok(Self { name: base.name, runs })
+            .collect()
     }
 
-    pub fn variants(&self) -> impl Iterator<Item = &Variant> {
-        self.runs.iter().map(|(v, _)| v)
+    /// Where a variant's log goes in `out_dir`, whichever machine runs it.
+    pub fn log_path(out_dir: &Path, variant: &Variant) -> PathBuf {
+        out_dir.join(format!("{}.mcap", variant.stem))
     }
 
-    /// Runs every variant into `out_dir/<stem>.mcap`, at most `jobs` at a time; `done` is
-    /// called as each finishes. Outcomes come back in grid order.
-    pub fn run(&self, out_dir: &Path, options: &RunOptions, jobs: usize, done: impl Fn(&VariantOutcome) + Sync) -> Result<Vec<VariantOutcome>, SweepError> {
-        std::fs::create_dir_all(out_dir).map_err(|source| SweepError::Create { path: out_dir.into(), source })?;
+    /// Creates `out_dir` and records the grid there ([`MANIFEST_FILE`]), so that a report can
+    /// name the variants whose logs are missing. A share of the grid (`whole = false`) refuses a
+    /// directory that records another grid; a whole sweep replaces the record.
+    pub fn prepare(&self, out_dir: &Path, whole: bool) -> Result<(), SweepError> {
+        std::fs::create_dir_all(out_dir).map_err(|source| SweepError::Write { path: out_dir.into(), source })?;
+        self.write_manifest(out_dir, whole)
+    }
+
+    /// Runs the loaded variants into `out_dir/<stem>.mcap`, at most `jobs` at a time; `done` is
+    /// called as each finishes. Outcomes come back in the order given.
+    pub fn run(runs: &[(Variant, LoadedScene)], out_dir: &Path, options: &RunOptions, jobs: usize, done: impl Fn(&VariantOutcome) + Sync) -> Vec<VariantOutcome> {
         let next = AtomicUsize::new(0);
-        let outcomes: Mutex<Vec<Option<VariantOutcome>>> = Mutex::new((0..self.runs.len()).map(|_| None).collect());
+        let outcomes: Mutex<Vec<Option<VariantOutcome>>> = Mutex::new((0..runs.len()).map(|_| None).collect());
         std::thread::scope(|scope| {
-            for _ in 0..jobs.clamp(1, self.runs.len().max(1)) {
+            for _ in 0..jobs.clamp(1, runs.len().max(1)) {
                 scope.spawn(|| loop {
                     let i = next.fetch_add(1, Ordering::Relaxed);
-                    let Some((variant, loaded)) = self.runs.get(i) else { break };
-                    let log = out_dir.join(format!("{}.mcap", variant.stem));
+                    let Some((variant, loaded)) = runs.get(i) else { break };
+                    let log = Self::log_path(out_dir, variant);
                     let result = run_scene(loaded, &log, options, &mut Silent);
                     let outcome = VariantOutcome { variant: variant.clone(), log, result };
                     done(&outcome);
@@ -161,7 +235,7 @@ impl Sweep {
                 });
             }
         });
-        Ok(outcomes.into_inner().expect("not poisoned").into_iter().map(|o| o.expect("every variant ran")).collect())
+        outcomes.into_inner().expect("not poisoned").into_iter().map(|o| o.expect("every variant ran")).collect()
     }
 }
 
@@ -188,5 +262,19 @@ mod tests {
         let same_tail = ["material.a.G=1,2".parse().unwrap(), "material.b.G=3".parse().unwrap()];
         assert_eq!(variants("s", &same_tail).unwrap()[0].label, "material.a.G=1, material.b.G=3");
         assert!(matches!(variants("s", &[axes[0].clone(), axes[0].clone()]), Err(SweepError::RepeatedKey(_))));
+        assert_eq!(v.iter().map(|v| v.index).collect::<Vec<_>>(), [0, 1, 2, 3, 4, 5]);
+    }
+
+    #[test]
+    fn shards_split_the_grid_without_gaps_or_repeats() {
+        let shard = |s: &str| s.parse::<Shard>();
+        assert_eq!(shard("1/3").unwrap().indices(7), [1, 4]);
+        assert_eq!(shard("0/3").unwrap().indices(7), [0, 3, 6]);
+        let mut all: Vec<usize> = (0..4).flat_map(|k| Shard { k, n: 4 }.indices(10)).collect();
+        all.sort_unstable();
+        assert_eq!(all, (0..10).collect::<Vec<_>>());
+        for bad in ["3/3", "1", "a/2", "1/0", "-1/2"] {
+            assert!(shard(bad).is_err(), "{bad}");
+        }
     }
 }
