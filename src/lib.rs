@@ -19,3 +19,4 @@ pub mod solver;
 pub mod output;
 pub mod run;
 pub mod sweep;
+pub mod accuracy;

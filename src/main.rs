@@ -111,6 +111,34 @@ enum Command {
         #[arg(long, value_name = "B,C,D", value_parser = parse_trace)]
         trace: Option<[String; 3]>,
     },
+    /// Run time against error for a known-answer scene over a grid of settings (scene keys, and
+    /// `backend` and `precision`): a table, a CSV and a PNG with the Pareto front marked.
+    Accuracy {
+        scene: PathBuf,
+        /// A scene key (or `backend`, `precision`) and its values, as for `sweep`.
+        #[arg(long = "over", value_name = "KEY=V1,V2,...", required = true)]
+        over: Vec<SweepAxis>,
+        /// Overrides applied to every variant before its own.
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        sets: Vec<String>,
+        /// The known answer to measure against (default: the scene's name).
+        #[arg(long, value_name = "NAME")]
+        measure: Option<String>,
+        /// Directory for the logs, `accuracy.csv` and `accuracy.png` (default: `<scene name>_accuracy`).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Runs per variant; the median wall time is reported.
+        #[arg(long, default_value_t = 1)]
+        repeat: usize,
+        /// The error to reach: the cheapest variant within it is named.
+        #[arg(long, default_value_t = 0.01)]
+        target: f64,
+        #[command(flatten)]
+        backend: BackendArgs,
+        /// Print the rows as JSON instead of a table.
+        #[arg(long)]
+        json: bool,
+    },
     /// Plot run logs into PNGs (energies, solver, probes); several logs are overlaid.
     Plot {
         #[arg(required = true)]
@@ -464,6 +492,47 @@ fn slurm_command(sweep: &Sweep, out: &std::path::Path, script: &std::path::Path,
 
 /// The summary table (or JSON) and the overlaid plots of a sweep directory; fails when a variant
 /// is missing or did not finish.
+struct AccuracyArgs {
+    scene: PathBuf,
+    over: Vec<SweepAxis>,
+    sets: Vec<String>,
+    measure: Option<String>,
+    out: Option<PathBuf>,
+    repeat: usize,
+    target: f64,
+    backend: BackendRequest,
+    json: bool,
+}
+
+fn accuracy_command(args: AccuracyArgs) -> Result<ExitCode> {
+    use bifirst::accuracy::{cheapest_within, convergence_slopes, csv, pareto_png, table, Study};
+    let study = Study::plan(&args.scene, args.measure.as_deref(), &args.sets, &args.over, &args.backend)?;
+    let out = args.out.unwrap_or_else(|| PathBuf::from(format!("{}_accuracy", study.name)));
+    let count = study.variant_count();
+    eprintln!("bifirst {}: accuracy of `{}` against `{}`, {count} variants one at a time ({} runs each), into {}", env!("CARGO_PKG_VERSION"), study.name, study.measure, args.repeat.max(1), out.display());
+    let interrupt = interrupt_flags()?.0;
+    let rows = study.run(&out, args.repeat, Some(interrupt), |r| eprintln!("[{}/{count}] {}: {} in {:.3} s, error {:.3e}", r.index + 1, r.label, r.status, r.wall_s, r.error))?;
+    let csv_path = out.join("accuracy.csv");
+    std::fs::write(&csv_path, csv(&study.axes, &rows)).map_err(|e| anyhow::anyhow!("cannot write `{}`: {e}", csv_path.display()))?;
+    let png = out.join("accuracy.png");
+    let measure = if study.measure == study.name { String::new() } else { format!(" (measure {})", study.measure) };
+    pareto_png(&png, &format!("{}{measure}: wall time against error", study.name), &rows, args.target)?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&rows)?);
+    } else {
+        print!("{}", table(&rows));
+        for (key, between, slope) in convergence_slopes(&study.axes, &rows) {
+            println!("order along {key}, {between}: d log(error) / d log(value) = {slope:.2}");
+        }
+        match cheapest_within(&rows, args.target) {
+            Some(r) => println!("cheapest within {:.1e}: variant {} ({}), {:.3} s, error {:.3e}", args.target, r.index, r.label, r.wall_s, r.error),
+            None => println!("no variant reached an error of {:.1e}", args.target),
+        }
+    }
+    eprintln!("table: {}\nplot: {}", csv_path.display(), png.display());
+    Ok(if rows.len() == count && rows.iter().all(|r| r.status == "finished") { ExitCode::SUCCESS } else { ExitCode::FAILURE })
+}
+
 fn print_report(mut report: Report, json: bool, trace: Option<[String; 3]>) -> Result<ExitCode> {
     if json {
         println!("{}", serde_json::to_string_pretty(&report)?);
@@ -563,6 +632,9 @@ fn main() -> ExitCode {
             sweep_command(SweepArgs { scene, over, sets, out, jobs, trace, backend: backend.into(), json, shard, index, list, slurm, sbatch, threads: cli.threads })
         }
         Command::SweepReport { dir, json, trace } => report(&dir).map_err(anyhow::Error::from).and_then(|r| print_report(r, json, trace)),
+        Command::Accuracy { scene, over, sets, measure, out, repeat, target, backend, json } => {
+            accuracy_command(AccuracyArgs { scene, over, sets, measure, out, repeat, target, backend: backend.into(), json })
+        }
         Command::Plot { runs, out, trace } => plot_command(runs, out, trace),
         Command::Summary { runs, json } => summary_command(runs, json),
         Command::Check { scene, sets } => load_scene(&scene, &sets).map_err(anyhow::Error::from).and_then(|loaded| {

@@ -118,6 +118,9 @@ pub trait Monitor {
     fn backend(&mut self, _description: &str) {}
     fn started(&mut self, _total_steps: usize) {}
     fn step(&mut self, _report: &StepReport, _total_steps: usize) {}
+    /// The state at the start and after every finished step (the known-answer measures of
+    /// `bifirst accuracy` read it).
+    fn state(&mut self, _sim: &Simulation) {}
     fn warning(&mut self, _message: &str) {}
 }
 
@@ -392,6 +395,7 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
     let every = loaded.scene.output.every;
     let total = sim.step_count();
     monitor.started(total);
+    monitor.state(&sim);
     logger.state(&sim)?;
     logger.frames(&sim, false)?;
     let mut totals = Totals::default();
@@ -479,6 +483,7 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
             logger.state(&sim)?;
         }
         logger.frames(&sim, sim.finished())?;
+        monitor.state(&sim);
         monitor.step(&report, total);
     };
     let contour = |sim: &Simulation| match &options.contour {

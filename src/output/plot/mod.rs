@@ -12,7 +12,7 @@ use std::path::{Path, PathBuf};
 
 /// DejaVu Sans (licence beside this file): the bitmap backend draws text with a font it is given.
 const FONT: &[u8] = include_bytes!("DejaVuSans.ttf");
-pub(super) const FAMILY: &str = "sans-serif";
+pub(crate) const FAMILY: &str = "sans-serif";
 
 const COLORS: [RGBColor; 10] = [
     RGBColor(31, 119, 180),
@@ -56,7 +56,7 @@ impl Panel {
     }
 }
 
-pub(super) fn register_font() {
+pub(crate) fn register_font() {
     static ONCE: std::sync::Once = std::sync::Once::new();
     ONCE.call_once(|| {
         // The bundled font is valid TrueType; a failure here would show as missing text only.
