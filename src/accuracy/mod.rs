@@ -174,13 +174,19 @@ fn median(values: &[f64]) -> f64 {
     }
 }
 
+/// Errors that agree to this relative difference are equal: the CPU and a GPU in f64 or f32
+/// give the same answer to round-off, and the faster of the two should win.
+const SAME_ERROR: f64 = 1e-6;
+
 /// Marks the finished rows that no other finished row beats on both time and error.
 pub fn mark_front(rows: &mut [Row]) {
     let eligible = |r: &Row| r.status == "finished" && r.error.is_finite();
     let points: Vec<Option<(f64, f64)>> = rows.iter().map(|r| eligible(r).then_some((r.wall_s, r.error))).collect();
+    let at_most = |a: f64, b: f64| a <= b + SAME_ERROR * b.abs();
+    let below = |a: f64, b: f64| a < b - SAME_ERROR * b.abs();
     for (i, row) in rows.iter_mut().enumerate() {
         let Some((t, e)) = points[i] else { continue };
-        row.pareto = !points.iter().enumerate().any(|(j, p)| j != i && p.is_some_and(|(tj, ej)| tj <= t && ej <= e && (tj < t || ej < e)));
+        row.pareto = !points.iter().enumerate().any(|(j, p)| j != i && p.is_some_and(|(tj, ej)| tj <= t && at_most(ej, e) && (tj < t || below(ej, e))));
     }
 }
 
@@ -278,9 +284,13 @@ mod tests {
 
     #[test]
     fn the_front_keeps_what_nothing_beats_on_both_time_and_error() {
-        let mut rows = vec![row(1.0, 0.1, "finished"), row(2.0, 0.01, "finished"), row(3.0, 0.05, "finished"), row(0.5, 1e-9, "failed"), row(2.0, 0.01, "finished")];
+        let mut rows = vec![row(1.0, 0.1, "finished"), row(2.0, 0.01, "finished"), row(3.0, 0.05, "finished"), row(0.5, 1e-9, "failed"), row(2.0, 0.01, "finished"), row(4.0, 0.01 * (1.0 - 1e-9), "finished")];
         mark_front(&mut rows);
-        assert_eq!(rows.iter().map(|r| r.pareto).collect::<Vec<_>>(), [true, true, false, false, true], "a tie stays on the front; a failed run never is");
+        assert_eq!(
+            rows.iter().map(|r| r.pareto).collect::<Vec<_>>(),
+            [true, true, false, false, true, false],
+            "a tie stays on the front; a failed run never is; the same error to round-off at more cost is off it"
+        );
         assert_eq!(cheapest_within(&rows, 0.02).map(|r| r.wall_s), Some(2.0));
         assert!(cheapest_within(&rows, 1e-3).is_none());
     }

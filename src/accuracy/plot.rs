@@ -18,6 +18,17 @@ fn log_range(values: impl Iterator<Item = f64>) -> std::ops::Range<f64> {
     (lo / pad)..(hi * pad).max(lo * pad * pad)
 }
 
+/// A tick label at 1, 2 and 5 times a power of ten, none elsewhere (log axes get many ticks).
+fn nice(v: &f64) -> String {
+    let exponent = v.log10().floor();
+    let mantissa = v / 10f64.powf(exponent);
+    if [1.0, 2.0, 5.0, 10.0].iter().any(|m| (mantissa - m).abs() < 1e-6 * m) {
+        format!("{v:.0e}")
+    } else {
+        String::new()
+    }
+}
+
 /// Draws every finished row as a point (the front filled and joined, the others hollow), each
 /// labelled with its variant (or its index when there are many), and `target` as a dashed level.
 pub fn pareto_png(path: &Path, title: &str, rows: &[Row], target: f64) -> Result<(), PlotError> {
@@ -31,6 +42,7 @@ pub fn pareto_png(path: &Path, title: &str, rows: &[Row], target: f64) -> Result
     let mut chart = ChartBuilder::on(&root)
         .caption(title, (FAMILY, 20))
         .margin(16)
+        .margin_right(150)
         .x_label_area_size(45)
         .y_label_area_size(80)
         .build_cartesian_2d(x.clone().log_scale(), y.clone().log_scale())
@@ -40,10 +52,10 @@ pub fn pareto_png(path: &Path, title: &str, rows: &[Row], target: f64) -> Result
         .x_desc("wall time per run (s)")
         .y_desc("error (largest relative error of the measure)")
         .label_style((FAMILY, 13))
-        .x_labels(12)
-        .y_labels(12)
-        .x_label_formatter(&|v| format!("{v:.2e}"))
-        .y_label_formatter(&|v| format!("{v:.0e}"))
+        .x_labels(40)
+        .y_labels(40)
+        .x_label_formatter(&nice)
+        .y_label_formatter(&nice)
         .draw()
         .map_err(|e| draw_err(&e))?;
     let (front_color, other_color) = (RGBColor(214, 39, 40), RGBColor(31, 119, 180));
