@@ -34,8 +34,18 @@ struct Cli {
 enum Command {
     /// Run a scene and write its MCAP run log.
     Run {
-        scene: PathBuf,
-        /// Output MCAP file (default: the scene's `output.mcap`, else `<scene name>.mcap`).
+        /// The scene file (not with `--restart`, which takes the logged run's scene).
+        #[arg(required_unless_present = "restart", conflicts_with = "restart")]
+        scene: Option<PathBuf>,
+        /// Continue the run logged in this MCAP from its last state (`/state`); `--set` changes
+        /// the logged scene (`time.end`, `time.dt`, solver settings; not the meshes).
+        #[arg(long, value_name = "RUN.mcap")]
+        restart: Option<PathBuf>,
+        /// With `--restart`: the last state at or before this time instead of the last one.
+        #[arg(long, value_name = "T", requires = "restart")]
+        at: Option<f64>,
+        /// Output MCAP file (default: the scene's `output.mcap`, else `<scene name>.mcap`; with
+        /// `--restart`, `<RUN>_restart.mcap`).
         #[arg(long)]
         out: Option<PathBuf>,
         /// Override a scene value before validation, e.g. `--set time.dt=0.005` (TOML literal).
@@ -337,7 +347,9 @@ fn parse_precision(s: &str) -> Result<Precision, String> {
 
 struct RunArgs {
     backend: BackendRequest,
-    scene: PathBuf,
+    scene: Option<PathBuf>,
+    restart: Option<PathBuf>,
+    at: Option<f64>,
     out: Option<PathBuf>,
     sets: Vec<String>,
     vtu: Option<PathBuf>,
@@ -347,13 +359,27 @@ struct RunArgs {
 }
 
 fn run(args: RunArgs) -> Result<ExitCode> {
-    let loaded = load_scene(&args.scene, &args.sets)?;
-    let out = args.out.or_else(|| loaded.scene.output.mcap.clone()).unwrap_or_else(|| PathBuf::from(format!("{}.mcap", loaded.name)));
+    let (loaded, state, out) = match (&args.restart, &args.scene) {
+        (Some(log), _) => {
+            let (loaded, state) = bifirst::run::restart_from(log, args.at, &args.sets)?;
+            let out = args.out.clone().unwrap_or_else(|| log.with_file_name(format!("{}_restart.mcap", log.file_stem().map_or("run".into(), |s| s.to_string_lossy()))));
+            if !args.quiet {
+                eprintln!("restart: from t = {:.6e} (step {}) of {}", state.t, state.step, log.display());
+            }
+            (loaded, Some(state), out)
+        }
+        (None, Some(scene)) => {
+            let loaded = load_scene(scene, &args.sets)?;
+            let out = args.out.clone().or_else(|| loaded.scene.output.mcap.clone()).unwrap_or_else(|| PathBuf::from(format!("{}.mcap", loaded.name)));
+            (loaded, None, out)
+        }
+        (None, None) => unreachable!("clap requires a scene or --restart"),
+    };
     if !args.quiet {
         eprintln!("bifirst {}: scene `{}`", env!("CARGO_PKG_VERSION"), loaded.name);
     }
     let (interrupt, hangup) = interrupt_flags()?;
-    let options = RunOptions { vtu: args.vtu, interrupt: Some(interrupt), backend: args.backend, contour: args.contour };
+    let options = RunOptions { vtu: args.vtu, interrupt: Some(interrupt), backend: args.backend, contour: args.contour, restart: state };
     let mut progress = Progress { quiet: args.quiet, bar: None, last_line: Instant::now(), last_fraction: 0.0 };
     let result = run_scene(&loaded, &out, &options, &mut progress);
     if let Some(bar) = &progress.bar {
@@ -438,7 +464,7 @@ fn sweep_command(args: SweepArgs) -> Result<ExitCode> {
     let jobs = args.jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())).clamp(1, runs.len().max(1));
     let share = if whole { String::new() } else { format!(" ({} of them here)", runs.len()) };
     eprintln!("bifirst {}: sweep of `{}`, {count} variants{share}, {jobs} at a time, into {}", env!("CARGO_PKG_VERSION"), sweep.name, out.display());
-    let options = RunOptions { vtu: None, interrupt: Some(interrupt_flags()?.0), backend: args.backend, contour: None };
+    let options = RunOptions { vtu: None, interrupt: Some(interrupt_flags()?.0), backend: args.backend, contour: None, restart: None };
     let finished = AtomicUsize::new(0);
     let outcomes = Sweep::run(&runs, &out, &options, jobs, |o| {
         let n = finished.fetch_add(1, Ordering::Relaxed) + 1;
@@ -627,7 +653,7 @@ fn main() -> ExitCode {
         }
     }
     let result = match cli.command {
-        Command::Run { scene, out, sets, vtu, contour, quiet, json, backend } => run(RunArgs { backend: backend.into(), scene, out, sets, vtu, contour, quiet, json }),
+        Command::Run { scene, restart, at, out, sets, vtu, contour, quiet, json, backend } => run(RunArgs { backend: backend.into(), scene, restart, at, out, sets, vtu, contour, quiet, json }),
         Command::Sweep { scene, over, sets, out, jobs, trace, backend, json, shard, index, list, slurm, sbatch } => {
             sweep_command(SweepArgs { scene, over, sets, out, jobs, trace, backend: backend.into(), json, shard, index, list, slurm, sbatch, threads: cli.threads })
         }
@@ -641,13 +667,30 @@ fn main() -> ExitCode {
             let sim = bifirst::solver::build_simulation(&loaded)?;
             let elements: usize = sim.bodies.iter().map(|b| b.mesh.element_count()).sum();
             let dofs: usize = sim.bodies.iter().map(|b| b.dofs.free_count).sum();
-            println!("{}: valid, {}D, {} bodies, {} elements, {} free dofs, {} steps", loaded.name, sim.dim, sim.bodies.len(), elements, dofs, sim.step_count());
+            let n = |count: usize, one: &str, many: &str| bifirst::output::counted(count, one, many);
+            println!(
+                "{}: valid, {}D, {}, {}, {} free dofs, {}",
+                loaded.name,
+                sim.dim,
+                n(sim.bodies.len(), "body", "bodies"),
+                n(elements, "element", "elements"),
+                dofs,
+                n(sim.step_count(), "step", "steps")
+            );
             // The largest bodies' factorisations: the fill decides the cost of a Newton iteration.
             let mut bodies: Vec<_> = sim.bodies.iter().collect();
             bodies.sort_by_key(|b| std::cmp::Reverse(b.dofs.free_count));
             for b in bodies.iter().take(3) {
                 let (ordering, entries) = b.factor_report();
                 println!("  body `{}`: {} free dofs, factor with {} ordering: {} entries", b.name, b.dofs.free_count, ordering.name(), entries);
+                let sets: Vec<String> = b.mesh.node_sets.iter().map(|(name, nodes)| format!("{name} ({})", nodes.len())).collect();
+                println!("    node sets: {}", if sets.is_empty() { "none".to_string() } else { sets.join(", ") });
+            }
+            if bodies.len() > 3 {
+                println!("  ... and {} more", n(bodies.len() - 3, "body", "bodies"));
+            }
+            for (name, bc) in &loaded.scene.boundary {
+                println!("  boundary `{name}`: node set `{}` of body `{}`", bc.nodes, bc.body);
             }
             Ok(ExitCode::SUCCESS)
         }),

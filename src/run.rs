@@ -9,7 +9,7 @@ use crate::output::{schemas, OutputError, RunLog, VtuSeries};
 use crate::backend::{Backend, BackendError, BackendRequest};
 use crate::precision::Real;
 use crate::scene::{LoadedScene, OutputSpec, SceneError};
-use crate::solver::{build_simulation, Energies, PhaseTimes, RunFailure, Simulation, StepFailure, StepReport};
+use crate::solver::{build_simulation, Energies, PhaseTimes, RunFailure, SavedState, Simulation, StepFailure, StepReport};
 use serde_json::{json, Value};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -27,6 +27,8 @@ pub enum RunError {
     Backend(#[from] BackendError),
     #[error(transparent)]
     Plot(#[from] PlotError),
+    #[error("cannot restart from that state: {0}")]
+    Restore(#[from] crate::solver::RestoreError),
     /// The run stopped early; the log holds everything up to the last finished step.
     #[error("the run stopped: {reason}. The log `{}` holds everything up to t = {:.6e}.", .summary.output.display(), .summary.t_end)]
     Stopped { reason: Stop, summary: RunSummary },
@@ -67,6 +69,8 @@ pub struct RunOptions {
     pub backend: BackendRequest,
     /// A PNG of the von Mises contours at the end of the run (2D scenes).
     pub contour: Option<PathBuf>,
+    /// Continue from this state (a `/state` message of an earlier run) instead of t = 0.
+    pub restart: Option<SavedState>,
 }
 
 /// What a run did, printed at its end.
@@ -145,6 +149,9 @@ struct Logger {
     /// Last step whose state channels / frames are in the outputs.
     state_step: Option<usize>,
     frame_step: Option<usize>,
+    /// `/state` every this many steps (0: only the last finished step), and the step last saved.
+    saved_every: usize,
+    saved_step: Option<usize>,
 }
 
 impl Logger {
@@ -209,7 +216,8 @@ impl Logger {
         log.metadata("bifirst.run", meta)?;
         let view = (scene_every > 0).then(|| View::new(sim));
         let vtu_every = OutputSpec::frame_interval(output.vtu_every, total);
-        Ok(Self { log, dim, view, scene_every, vtu, vtu_every, state_step: None, frame_step: None })
+        log.add_channel("/state", "bifirst.SavedState", &schemas::saved_state())?;
+        Ok(Self { log, dim, view, scene_every, vtu, vtu_every, state_step: None, frame_step: None, saved_every: output.state_every, saved_step: None })
     }
 
     /// State channels: energy, bodies, probes, reactions at the current time.
@@ -255,6 +263,18 @@ impl Logger {
     }
 
     /// The 3D view and the VTU frame when their cadence says so, or when `last`.
+    /// `/state`, the full state a run can continue from: at the scene's cadence, and (`last`)
+    /// at the last finished step of the run, however it ends.
+    fn saved(&mut self, sim: &Simulation, last: bool) -> Result<(), OutputError> {
+        let due = self.saved_every > 0 && sim.step % self.saved_every == 0 && sim.step > sim.first_step.1;
+        if self.saved_step == Some(sim.step) || !(last || due) {
+            return Ok(());
+        }
+        self.saved_step = Some(sim.step);
+        let state = serde_json::to_value(sim.saved_state()).expect("a state serializes");
+        self.log.write("/state", sim.t, &state)
+    }
+
     fn frames(&mut self, sim: &Simulation, last: bool) -> Result<(), OutputError> {
         if self.frame_step == Some(sim.step) {
             return Ok(());
@@ -370,20 +390,23 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
     if let (Some(path), 3) = (&options.contour, sim.dim) {
         return Err(PlotError::Draw { path: path.clone(), message: "contour plots are drawn for 2D scenes; use --vtu and ParaView for 3D".into() }.into());
     }
-    sim.start();
+    match &options.restart {
+        Some(state) => sim.restore(state)?,
+        None => sim.start(),
+    }
     sim.interrupt = options.interrupt.clone();
     let mut logger = Logger::new(out, loaded, &sim, options, &backend)?;
     let free_dofs: usize = sim.bodies.iter().map(|b| b.dofs.free_count).sum();
     let start = format!(
-        "bifirst {}: scene `{}` ({}), {} bodies, {free_dofs} free dofs, {} steps of dt = {:e}, backend {}, {} threads",
+        "bifirst {}: scene `{}` ({}), {}, {free_dofs} free dofs, {} of dt = {:e}, backend {}, {}",
         env!("CARGO_PKG_VERSION"),
         loaded.name,
         loaded.path.display(),
-        sim.bodies.len(),
-        sim.step_count(),
+        crate::output::counted(sim.bodies.len(), "body", "bodies"),
+        crate::output::counted(sim.step_count(), "step", "steps"),
         sim.dt,
         backend.describe(),
-        rayon::current_num_threads()
+        crate::output::counted(rayon::current_num_threads(), "thread", "threads")
     );
     logger.line(0.0, Level::Info, &start)?;
     if let Some(notice) = &resolved.notice {
@@ -483,6 +506,7 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
             logger.state(&sim)?;
         }
         logger.frames(&sim, sim.finished())?;
+        logger.saved(&sim, sim.finished())?;
         monitor.state(&sim);
         monitor.step(&report, total);
     };
@@ -507,6 +531,7 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
             // The last finished step goes into every output, then the reason for stopping.
             logger.state(&sim)?;
             logger.frames(&sim, true)?;
+            logger.saved(&sim, true)?;
             let level = if matches!(stop, Stop::Interrupted) { Level::Warning } else { Level::Error };
             let message = stop.to_string();
             logger.line(sim.t, level, &format!("the run stopped at t = {:.6e}: {message}", sim.t))?;
@@ -520,4 +545,43 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
             Err(RunError::Stopped { reason: stop, summary })
         }
     }
+}
+
+/// Why a run cannot continue from a log.
+#[derive(Debug, thiserror::Error)]
+pub enum RestartError {
+    #[error(transparent)]
+    Read(#[from] crate::output::ReadError),
+    #[error("`{0}` holds no `/state` to continue from (written by bifirst since run --restart exists)")]
+    NoState(PathBuf),
+    #[error("`{path}` holds no state at or before t = {at} (the first is at t = {first})")]
+    NoStateAt { path: PathBuf, at: Real, first: Real },
+    #[error("`{0}` does not record its scene (metadata `bifirst.run`)")]
+    NoScene(PathBuf),
+    #[error("`{path}`: a `/state` message does not read back: {message}")]
+    BadState { path: PathBuf, message: String },
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+}
+
+/// The scene of the run logged in `log` (its resolved scene, then `sets`) and the state to
+/// continue from: the last, or the last at or before `at`.
+pub fn restart_from(log: &Path, at: Option<Real>, sets: &[String]) -> Result<(LoadedScene, SavedState), RestartError> {
+    let record = crate::output::read_run(log)?;
+    let states = record.messages("/state");
+    let chosen = match at {
+        None => states.last(),
+        Some(at) => states.iter().rev().find(|s| s["t"].as_f64().is_some_and(|t| t <= at + 1e-9 * at.abs().max(1.0))),
+    };
+    let chosen = match (chosen, states.first()) {
+        (Some(s), _) => s,
+        (None, None) => return Err(RestartError::NoState(log.into())),
+        (None, Some(first)) => return Err(RestartError::NoStateAt { path: log.into(), at: at.unwrap_or_default(), first: first["t"].as_f64().unwrap_or(f64::NAN) }),
+    };
+    let state: SavedState = serde_json::from_value(chosen.clone()).map_err(|e| RestartError::BadState { path: log.into(), message: e.to_string() })?;
+    let meta = record.metadata.get("bifirst.run").ok_or_else(|| RestartError::NoScene(log.into()))?;
+    let (Some(scene), Some(file)) = (meta.get("scene"), meta.get("scene_file")) else { return Err(RestartError::NoScene(log.into())) };
+    // Mesh files are named relative to the original scene file.
+    let loaded = crate::scene::parse_scene(Path::new(file), scene.clone(), sets)?;
+    Ok((loaded, state))
 }

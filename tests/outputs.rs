@@ -198,15 +198,18 @@ fn foxglove_messages_validate_against_the_official_schemas() {
     let entity = |entities: &[Value], id: &str| entities.iter().find(|e| e["id"] == id).unwrap_or_else(|| panic!("entity {id}")).clone();
     let two = last(&runs[0]);
     let block = entity(&two, "body/block");
-    assert_eq!(block["lines"][0]["type"], 2);
-    let points = block["lines"][0]["points"].as_array().unwrap().len();
-    assert_eq!(points, 2 * 24, "the 24 boundary segments of the 8x4 block");
-    assert_eq!(block["lines"][0]["colors"].as_array().unwrap().len(), points);
+    // One line list per colour level, each node once in it, the segments as index pairs.
+    let levels = block["lines"].as_array().unwrap();
+    assert!(levels.iter().all(|l| l["type"] == 2 && l["colors"].as_array().unwrap().is_empty()), "one colour per level");
+    let segments: usize = levels.iter().map(|l| l["indices"].as_array().unwrap().len() / 2).sum();
+    assert_eq!(segments, 24, "the 24 boundary segments of the 8x4 block");
+    let points: usize = levels.iter().map(|l| l["points"].as_array().unwrap().len()).sum();
+    assert!((24..48).contains(&points), "the 24 boundary nodes, shared by the segments of a level ({points} points)");
     assert!(!entity(&two, "contact_forces")["arrows"].as_array().unwrap().is_empty());
     assert_eq!(entity(&two, "obstacle/floor")["lines"][0]["points"].as_array().unwrap().len(), 2);
     let three = last(&runs[1]);
     let top = entity(&three, "body/upper");
-    assert_eq!(top["triangles"][0]["points"].as_array().unwrap().len() % 3, 0);
+    assert!(top["triangles"].as_array().unwrap().iter().all(|l| l["indices"].as_array().unwrap().len() % 3 == 0), "whole triangles");
     assert!(!entity(&three, "contact_forces")["arrows"].as_array().unwrap().is_empty());
     assert_eq!(entity(&three, "obstacle/floor")["triangles"][0]["points"].as_array().unwrap().len(), 6);
     let boxed = last(&runs[2]);

@@ -119,7 +119,7 @@ impl Study {
         let mut rows = Vec::new();
         for (variant, loaded, request) in &self.runs {
             let log = out_dir.join(format!("{}.mcap", variant.stem));
-            let options = RunOptions { vtu: None, interrupt: interrupt.clone(), backend: request.clone(), contour: None };
+            let options = RunOptions { vtu: None, interrupt: interrupt.clone(), backend: request.clone(), contour: None, restart: None };
             let mut walls = Vec::new();
             let mut first = None;
             for _ in 0..repeat.max(1) {

@@ -24,7 +24,7 @@ use crate::precision::Real;
 use geometry::Vec3;
 
 /// The other side of a contact point.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize)]
 pub enum Master {
     /// A facet of a deformable body.
     Body(u32),

@@ -12,3 +12,8 @@ pub mod vtu;
 pub use mcap_log::{OutputError, RunLog};
 pub use read::{read_run, ReadError, RunRecord};
 pub use vtu::VtuSeries;
+
+/// `n` and the noun in the number it calls for: "1 body", "3 bodies".
+pub fn counted(n: usize, one: &str, many: &str) -> String {
+    format!("{n} {}", if n == 1 { one } else { many })
+}

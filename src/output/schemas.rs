@@ -112,6 +112,40 @@ pub fn contact() -> Value {
     )
 }
 
+/// The full state of a finished step, what `bifirst run --restart` continues from.
+pub fn saved_state() -> Value {
+    let numbers = json!({"type": "array", "items": {"type": "number"}});
+    let body = object(
+        "bifirst.SavedBody",
+        &[
+            ("name", json!({"type": "string"})),
+            ("u", numbers.clone()),
+            ("v", numbers.clone()),
+            ("f_int", numbers.clone()),
+            ("strain", number()),
+            ("reactions", numbers.clone()),
+            ("factor", json!({"description": "values of the factorisation kept for the next step, with its c1, or null", "oneOf": [{"type": "null"}, object("bifirst.SavedFactor", &[("c1", number()), ("values", numbers.clone())])]})),
+        ],
+    );
+    let master = json!({"description": "`{\"Body\": b}` or `{\"Obstacle\": {\"obstacle\": o, \"face\": f}}`", "type": "object"});
+    let reaction = object("bifirst.SavedReaction", &[("slave_body", integer()), ("slave_node", integer()), ("master", master), ("r", vector(3)), ("rho", number())]);
+    object(
+        "bifirst.SavedState",
+        &[
+            ("t", number()),
+            ("step", integer()),
+            ("initial_energy", number()),
+            ("external_work", number()),
+            ("friction_dissipation", number()),
+            ("numerical_dissipation", number()),
+            ("contact_correction", number()),
+            ("bodies", json!({"type": "array", "items": body})),
+            ("contact", json!({"type": "array", "items": reaction})),
+            ("obstacle_reactions", json!({"type": "array", "items": vector(3)})),
+        ],
+    )
+}
+
 /// The run's totals, written once when it ends (however it ends).
 pub fn summary() -> Value {
     let energies = ["kinetic", "strain", "potential", "external_work", "friction_dissipation", "numerical_dissipation", "contact_correction", "total", "energy_balance_error"];

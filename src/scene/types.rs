@@ -254,11 +254,14 @@ pub struct OutputSpec {
     pub vtu: Option<PathBuf>,
     /// Write a VTU frame every this many steps. When absent, about 100 frames per run.
     pub vtu_every: Option<usize>,
+    /// Write the full state (`/state`, what `run --restart` continues from) every this many
+    /// steps; 0: only at the last finished step, which is always written.
+    pub state_every: usize,
 }
 
 impl Default for OutputSpec {
     fn default() -> Self {
-        Self { mcap: None, every: 1, scene_every: None, vtu: None, vtu_every: None }
+        Self { mcap: None, every: 1, scene_every: None, vtu: None, vtu_every: None, state_every: 0 }
     }
 }
 

@@ -519,6 +519,25 @@ impl Body {
         result
     }
 
+    /// The coefficient `c1` and the values `K̄` of the factorisation kept for the next step, if
+    /// any (what a restart must factorise again to repeat the run).
+    pub fn kept_factor(&self) -> Option<(Real, &[Real])> {
+        let c1 = self.factor_c1.filter(|_| self.reuse_factorization && !self.tangent_current)?;
+        Some((c1, &self.values))
+    }
+
+    /// Factorises the saved `K̄` (from [`Body::kept_factor`]) as the kept factorisation.
+    pub fn restore_factor(&mut self, c1: Real, values: &[Real]) -> Result<(), String> {
+        if values.len() != self.values.len() {
+            return Err(format!("{} values for a pattern of {}", values.len(), self.values.len()));
+        }
+        self.values.copy_from_slice(values);
+        self.tangent_current = false;
+        self.solver.factorize(&self.values).map_err(|e| e.to_string())?;
+        self.factor_c1 = Some(c1);
+        Ok(())
+    }
+
     /// The fill-reducing ordering of the factorisation and the entries of its factor.
     pub fn factor_report(&self) -> (super::ordering::Ordering, usize) {
         (self.solver.ordering(), self.solver.factor_entries())

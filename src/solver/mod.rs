@@ -6,9 +6,11 @@ pub mod coupling;
 pub mod group;
 pub mod linear;
 pub mod ordering;
+mod restart;
 mod setup;
 
 pub use body::{Body, StepFailure};
+pub use restart::{RestoreError, SavedBody, SavedFactor, SavedReaction, SavedState};
 pub use setup::build_simulation;
 
 use crate::contact::detect::{detect, thin_second_pass};
@@ -184,12 +186,18 @@ pub struct Simulation {
     /// iteration or cut-back ([`StepFailure::Interrupted`]), so that a stop takes effect within
     /// one iteration, not after a step that may never finish.
     pub interrupt: Option<Arc<AtomicBool>>,
+    /// Time and step the run starts from: (0, 0), or a restored state's.
+    pub first_step: (Real, usize),
+    /// The warm start of a restored state, until its first step is done.
+    restored_warm_start: Option<HashMap<(u32, u32, Master), ([Real; 3], Real)>>,
 }
 
 impl Simulation {
-    /// Number of steps to reach `end` (the last one is shortened if `end` is not a multiple).
+    /// Number of steps to reach `end` (the last one is shortened if `end` is not a multiple),
+    /// counted from t = 0, or from a restored state with the steps before it.
     pub fn step_count(&self) -> usize {
-        ((self.end / self.dt) - 1e-9).ceil().max(1.0) as usize
+        let (t0, step0) = self.first_step;
+        step0 + (((self.end - t0) / self.dt) - 1e-9).ceil().max(1.0) as usize
     }
 
     pub fn finished(&self) -> bool {
@@ -212,6 +220,7 @@ impl Simulation {
         match result {
             Ok(()) => {
                 self.step += 1;
+                self.restored_warm_start = None;
                 report.t = self.t;
                 Ok(report)
             }
@@ -264,7 +273,7 @@ impl Simulation {
         if let (true, Some(model)) = (thin, &self.contact) {
             thin_second_pass(model, &node_positions(&self.bodies, |b| &b.state.u), &mut points);
         }
-        let warm: HashMap<(u32, u32, Master), ([Real; 3], Real)> = self.contact_points.iter().map(|c| (c.key(), (c.r, c.rho))).collect();
+        let warm = self.warm_start();
         report.wall.contact += started.elapsed().as_secs_f64();
         let settings = self.contact.as_ref().map(|c| c.settings.clone());
         let gravity = self.gravity;

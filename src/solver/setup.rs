@@ -252,6 +252,8 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
         contact_points: Vec::new(),
         world: None,
         interrupt: None,
+        first_step: (0.0, 0),
+        restored_warm_start: None,
     })
 }
 

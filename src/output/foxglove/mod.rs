@@ -42,6 +42,12 @@ fn point(x: Vec3) -> Value {
     json!({"x": x[0], "y": x[1], "z": x[2]})
 }
 
+/// A vertex of a body's boundary, in single precision: what the 3D panel draws with, and
+/// 8 significant digits in the log instead of 17.
+fn vertex(x: Vec3) -> Value {
+    json!({"x": x[0] as f32, "y": x[1] as f32, "z": x[2] as f32})
+}
+
 fn color(c: [f32; 4]) -> Value {
     json!({"r": c[0], "g": c[1], "b": c[2], "a": c[3]})
 }
@@ -85,6 +91,10 @@ fn triangles(points: &[Vec3], colors: &[[f32; 4]], solid: [f32; 4]) -> Value {
         "colors": colors.iter().map(|&c| color(c)).collect::<Vec<_>>(), "indices": [],
     })
 }
+
+/// Colour levels of a body's boundary in the view: facets are grouped by level, one primitive
+/// of one colour per level, instead of a colour for every vertex.
+pub const COLOR_LEVELS: usize = 32;
 
 /// Colour of `s` in [0, 1] on a viridis-like map (dark blue, teal, green, yellow).
 pub fn colormap(s: Real) -> [f32; 4] {
@@ -153,30 +163,53 @@ impl View {
         json!({"deletions": [], "entities": entities})
     }
 
-    /// The deformed boundary, each facet coloured by its element's von Mises stress.
+    /// The deformed boundary, each facet coloured by its element's von Mises stress on
+    /// [`COLOR_LEVELS`] levels: one primitive per level used, each node once in it and the
+    /// facets as indices (a node is shared by two segments in 2D, about six triangles in 3D).
     fn body(&self, t: Real, body: &Body, surface: &Surface, fields: &[CellFields]) -> Value {
         let scale_max = self.von_mises_max.max(Real::MIN_POSITIVE);
-        let (mut points, mut colors) = (Vec::new(), Vec::new());
+        #[derive(Clone, Default)]
+        struct Level {
+            index_of: std::collections::HashMap<u32, usize>,
+            points: Vec<Value>,
+            indices: Vec<usize>,
+        }
+        let mut levels = vec![Level::default(); COLOR_LEVELS];
         for f in 0..surface.facet_count() {
-            let c = colormap(fields[surface.owners[f] as usize].von_mises / scale_max);
-            let x: Vec<Vec3> = surface.facet(f).iter().map(|&n| body.position(n as usize)).collect();
-            let corners: &[usize] = match x.len() {
+            let s = fields[surface.owners[f] as usize].von_mises / scale_max;
+            let level = &mut levels[(s.clamp(0.0, 1.0) * (COLOR_LEVELS - 1) as Real).round() as usize];
+            let nodes = surface.facet(f);
+            let corners: &[usize] = match nodes.len() {
                 2 => &[0, 1],
                 3 => &[0, 1, 2],
                 _ => &[0, 1, 2, 0, 2, 3],
             };
             for &k in corners {
-                points.push(x[k]);
-                colors.push(c);
+                let n = nodes[k];
+                let next = level.points.len();
+                let i = *level.index_of.entry(n).or_insert(next);
+                if i == next {
+                    level.points.push(vertex(body.position(n as usize)));
+                }
+                level.indices.push(i);
             }
         }
-        let metadata = [("von_mises_max", format!("{:e}", self.von_mises_max)), ("colormap", "viridis: 0 to von_mises_max".to_string())];
+        let primitives: Vec<Value> = levels
+            .into_iter()
+            .enumerate()
+            .filter(|(_, l)| !l.points.is_empty())
+            .map(|(k, l)| {
+                let c = color(colormap(k as Real / (COLOR_LEVELS - 1) as Real));
+                if self.dim == 2 {
+                    json!({"type": 2, "pose": pose([0.0; 3], IDENTITY), "thickness": 2.0, "scale_invariant": true, "points": l.points, "color": c, "colors": [], "indices": l.indices})
+                } else {
+                    json!({"pose": pose([0.0; 3], IDENTITY), "points": l.points, "color": c, "colors": [], "indices": l.indices})
+                }
+            })
+            .collect();
+        let metadata = [("von_mises_max", format!("{:e}", self.von_mises_max)), ("colormap", format!("viridis: 0 to von_mises_max in {COLOR_LEVELS} levels"))];
         let mut e = entity(t, &format!("body/{}", body.name), &metadata);
-        if self.dim == 2 {
-            e.insert("lines".into(), json!([lines(2, &points, &colors, GREY)]));
-        } else {
-            e.insert("triangles".into(), json!([triangles(&points, &colors, GREY)]));
-        }
+        e.insert(if self.dim == 2 { "lines" } else { "triangles" }.into(), Value::Array(primitives));
         Value::Object(e)
     }
 

@@ -25,7 +25,8 @@ fn obstacle_lines(o: &Obstacle, t: Real, lo: [Real; 2], hi: [Real; 2]) -> Vec<Ve
     match &o.shape {
         Shape::Plane { point, normal } => {
             let (p, tangent) = (at(point), (-normal[1], normal[0]));
-            let reach = (hi[0] - lo[0]).hypot(hi[1] - lo[1]);
+            // Long enough to cross the view from any point in it; clipped below.
+            let reach = 2.0 * (hi[0] - lo[0]).hypot(hi[1] - lo[1]) + (p.0 - lo[0]).abs().max((p.1 - lo[1]).abs());
             vec![vec![(p.0 - reach * tangent.0, p.1 - reach * tangent.1), (p.0 + reach * tangent.0, p.1 + reach * tangent.1)]]
         }
         Shape::Box { min, max } => {
@@ -39,6 +40,28 @@ fn obstacle_lines(o: &Obstacle, t: Real, lo: [Real; 2], hi: [Real; 2]) -> Vec<Ve
         }
         Shape::Polyline(points) => vec![points.iter().map(at).collect()],
     }
+}
+
+/// The part of the segment `a`-`b` inside the rectangle `[lo, hi]` (Liang-Barsky), if any:
+/// plotters would draw what lies outside the view along its border.
+fn clip(a: (f64, f64), b: (f64, f64), lo: [Real; 2], hi: [Real; 2]) -> Option<((f64, f64), (f64, f64))> {
+    let (dx, dy) = (b.0 - a.0, b.1 - a.1);
+    let (mut t0, mut t1) = (0.0f64, 1.0f64);
+    for (p, q) in [(-dx, a.0 - lo[0]), (dx, hi[0] - a.0), (-dy, a.1 - lo[1]), (dy, hi[1] - a.1)] {
+        if p == 0.0 {
+            if q < 0.0 {
+                return None;
+            }
+        } else {
+            let t = q / p;
+            if p < 0.0 {
+                t0 = t0.max(t);
+            } else {
+                t1 = t1.min(t);
+            }
+        }
+    }
+    (t0 < t1).then(|| ((a.0 + t0 * dx, a.1 + t0 * dy), (a.0 + t1 * dx, a.1 + t1 * dy)))
 }
 
 /// Writes the contours of the current state of a 2D simulation to `path`; `fields` are the
@@ -71,11 +94,11 @@ pub fn contour_png(sim: &Simulation, fields: &[Vec<CellFields>], title: &str, pa
     let mut chart = ChartBuilder::on(&left)
         .caption(title, (FAMILY, 22))
         .margin(14)
-        .x_label_area_size(36)
-        .y_label_area_size(60)
+        .x_label_area_size(46)
+        .y_label_area_size(70)
         .build_cartesian_2d(lo[0]..hi[0], lo[1]..hi[1])
         .map_err(|e| draw_err(&e))?;
-    chart.configure_mesh().disable_mesh().label_style((FAMILY, 13)).draw().map_err(|e| draw_err(&e))?;
+    chart.configure_mesh().disable_mesh().x_desc("x").y_desc("y").label_style((FAMILY, 13)).draw().map_err(|e| draw_err(&e))?;
     for (b, body_fields) in sim.bodies.iter().zip(fields) {
         let polygons = (0..b.mesh.element_count()).map(|e| {
             let corners: Vec<(f64, f64)> = b.mesh.element(e).iter().map(|&n| b.position(n as usize)).map(|x| (x[0], x[1])).collect();
@@ -90,7 +113,8 @@ pub fn contour_png(sim: &Simulation, fields: &[Vec<CellFields>], title: &str, pa
         }
         for o in &contact.obstacles {
             for line in obstacle_lines(o, sim.t, lo, hi) {
-                chart.draw_series(std::iter::once(PathElement::new(line, OBSTACLE.stroke_width(3)))).map_err(|e| draw_err(&e))?;
+                let visible = line.windows(2).filter_map(|w| clip(w[0], w[1], lo, hi));
+                chart.draw_series(visible.map(|(a, b)| PathElement::new(vec![a, b], OBSTACLE.stroke_width(3)))).map_err(|e| draw_err(&e))?;
             }
         }
     }
@@ -112,4 +136,17 @@ pub fn contour_png(sim: &Simulation, fields: &[Vec<CellFields>], title: &str, pa
     }))
     .map_err(|e| draw_err(&e))?;
     root.present().map_err(|e| draw_err(&e))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::clip;
+
+    #[test]
+    fn obstacle_lines_are_clipped_to_the_view() {
+        let (lo, hi) = ([0.0, 0.0], [1.0, 1.0]);
+        assert_eq!(clip((-1.0, 0.5), (2.0, 0.5), lo, hi), Some(((0.0, 0.5), (1.0, 0.5))));
+        assert_eq!(clip((5.0, -1.0), (5.0, 2.0), lo, hi), None, "a wall right of the view is not drawn on its border");
+        assert_eq!(clip((0.2, 0.2), (0.4, 0.6), lo, hi), Some(((0.2, 0.2), (0.4, 0.6))));
+    }
 }

@@ -97,14 +97,43 @@ fn tick_format(r: &std::ops::Range<f64>) -> impl Fn(&f64) -> String {
     }
 }
 
-/// Draws panels in a grid of `columns` into `path`.
+/// Height of one row of the legend strip under the title.
+const LEGEND_ROW: u32 = 24;
+
+/// Draws panels in a grid of `columns` into `path`; with several runs, a legend strip under the
+/// title names them once, outside the panels, so that no data is hidden behind it.
 fn figure(path: &Path, title: &str, names: &[String], panels: &[Panel], columns: usize) -> Result<(), PlotError> {
     register_font();
     let draw_err = |e: &dyn std::fmt::Display| PlotError::Draw { path: path.into(), message: e.to_string() };
     let rows = panels.len().div_ceil(columns);
-    let root = BitMapBackend::new(path, (560 * columns as u32, 380 * rows as u32 + 50)).into_drawing_area();
+    let width = 560 * columns as u32;
+    // Legend entries flow left to right, wrapping at the figure's width.
+    let entry_width = |name: &String| 40 + 8 * name.chars().count() as u32;
+    let mut legend_rows: Vec<Vec<usize>> = vec![Vec::new()];
+    let mut used = 0;
+    for (i, name) in names.iter().enumerate().filter(|_| names.len() > 1) {
+        if used + entry_width(name) > width - 40 && !legend_rows.last().expect("one row").is_empty() {
+            legend_rows.push(Vec::new());
+            used = 0;
+        }
+        used += entry_width(name);
+        legend_rows.last_mut().expect("one row").push(i);
+    }
+    let legend_height = if names.len() > 1 { LEGEND_ROW * legend_rows.len() as u32 + 8 } else { 0 };
+    let root = BitMapBackend::new(path, (width, 380 * rows as u32 + 50 + legend_height)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| draw_err(&e))?;
-    let body = root.titled(title, (FAMILY, 26)).map_err(|e| draw_err(&e))?;
+    let titled = root.titled(title, (FAMILY, 26)).map_err(|e| draw_err(&e))?;
+    let (legend, body) = titled.split_vertically(legend_height);
+    for (r, row) in legend_rows.iter().enumerate() {
+        let y = (r as u32 * LEGEND_ROW + LEGEND_ROW / 2) as i32;
+        let mut x = 20i32;
+        for &i in row {
+            let color = COLORS[i % COLORS.len()];
+            legend.draw(&PathElement::new(vec![(x, y), (x + 24, y)], color.stroke_width(3))).map_err(|e| draw_err(&e))?;
+            legend.draw(&Text::new(names[i].clone(), (x + 30, y - 8), (FAMILY, 14).into_font().color(&BLACK))).map_err(|e| draw_err(&e))?;
+            x += entry_width(&names[i]) as i32;
+        }
+    }
     for (area, panel) in body.split_evenly((rows, columns)).iter().zip(panels) {
         let x = range(panel.lines.iter().flatten().map(|p| p.0));
         let y = range(panel.lines.iter().flatten().map(|p| p.1));
@@ -125,20 +154,10 @@ fn figure(path: &Path, title: &str, names: &[String], panels: &[Panel], columns:
             .x_label_formatter(&x_format)
             .draw()
             .map_err(|e| draw_err(&e))?;
-        for (i, (line, name)) in panel.lines.iter().zip(names).enumerate() {
+        for (i, line) in panel.lines.iter().enumerate() {
             let color = COLORS[i % COLORS.len()];
             // One pixel wide: plotters' wide lines spike on near-vertical segments.
-            let series = chart.draw_series(LineSeries::new(line.iter().copied(), color)).map_err(|e| draw_err(&e))?;
-            series.label(name.as_str()).legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
-        }
-        if names.len() > 1 {
-            chart
-                .configure_series_labels()
-                .label_font((FAMILY, 13))
-                .background_style(WHITE.mix(0.8))
-                .border_style(BLACK)
-                .draw()
-                .map_err(|e| draw_err(&e))?;
+            chart.draw_series(LineSeries::new(line.iter().copied(), color)).map_err(|e| draw_err(&e))?;
         }
     }
     root.present().map_err(|e| draw_err(&e))

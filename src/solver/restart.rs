@@ -1,0 +1,153 @@
+//! The state a run continues from (`bifirst run --restart`): everything a step reads from the
+//! steps before it, so that a restarted run repeats the uninterrupted one to round-off.
+
+use super::Simulation;
+use crate::contact::Master;
+use crate::precision::Real;
+use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
+
+/// A finished step's state: time, step, every body's state, the energy accumulators, the
+/// contact reactions and rho (the next step's warm start) and the kept factorisations.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SavedState {
+    pub t: Real,
+    pub step: usize,
+    pub initial_energy: Real,
+    pub external_work: Real,
+    pub friction_dissipation: Real,
+    pub numerical_dissipation: Real,
+    pub contact_correction: Real,
+    pub bodies: Vec<SavedBody>,
+    pub contact: Vec<SavedReaction>,
+    pub obstacle_reactions: Vec<[Real; 3]>,
+}
+
+/// One body's state, by name.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SavedBody {
+    pub name: String,
+    pub u: Vec<Real>,
+    pub v: Vec<Real>,
+    pub f_int: Vec<Real>,
+    pub strain: Real,
+    /// Reactions of the prescribed dofs.
+    pub reactions: Vec<Real>,
+    /// The effective stiffness of the factorisation the body keeps across steps, if any.
+    pub factor: Option<SavedFactor>,
+}
+
+/// The values `K̄ = ξ K + c1 M` a kept factorisation was made from: factorised again on restart,
+/// they give the factor the uninterrupted run would have reused.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SavedFactor {
+    pub c1: Real,
+    pub values: Vec<Real>,
+}
+
+/// A contact point's reaction and rho, under the point's identity across steps.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct SavedReaction {
+    pub slave_body: u32,
+    pub slave_node: u32,
+    pub master: Master,
+    pub r: [Real; 3],
+    pub rho: Real,
+}
+
+/// Why a saved state does not fit a scene.
+#[derive(Debug, thiserror::Error)]
+pub enum RestoreError {
+    #[error("the state has {saved} bodies, the scene {scene}")]
+    BodyCount { saved: usize, scene: usize },
+    #[error("body `{name}`: the state has {saved} dofs, the scene's mesh {scene} (the mesh must not change on restart)")]
+    Dofs { name: String, saved: usize, scene: usize },
+    #[error("the state's body {index} is `{saved}`, the scene's `{scene}`")]
+    Name { index: usize, saved: String, scene: String },
+    #[error("time.end = {end} is not after the state's t = {t}; continue with --set time.end=...")]
+    Ended { end: Real, t: Real },
+    #[error("body `{name}`: the saved factorisation does not fit ({message})")]
+    Factor { name: String, message: String },
+}
+
+impl Simulation {
+    /// The state after the last finished step.
+    pub fn saved_state(&self) -> SavedState {
+        SavedState {
+            t: self.t,
+            step: self.step,
+            initial_energy: self.initial_energy,
+            external_work: self.external_work,
+            friction_dissipation: self.friction_dissipation,
+            numerical_dissipation: self.numerical_dissipation,
+            contact_correction: self.contact_correction,
+            bodies: self
+                .bodies
+                .iter()
+                .map(|b| SavedBody {
+                    name: b.name.clone(),
+                    u: b.state.u.clone(),
+                    v: b.state.v.clone(),
+                    f_int: b.state.f_int.clone(),
+                    strain: b.state.strain,
+                    reactions: b.reactions.clone(),
+                    factor: b.kept_factor().map(|(c1, values)| SavedFactor { c1, values: values.to_vec() }),
+                })
+                .collect(),
+            contact: {
+                let mut points: Vec<SavedReaction> = self.warm_start().into_iter().map(|((slave_body, slave_node, master), (r, rho))| SavedReaction { slave_body, slave_node, master, r, rho }).collect();
+                points.sort_by_key(|c| (c.slave_body, c.slave_node, c.master));
+                points
+            },
+            obstacle_reactions: self.obstacle_reactions.clone(),
+        }
+    }
+
+    /// Continues from `saved` instead of t = 0 (in place of [`Simulation::start`]).
+    pub fn restore(&mut self, saved: &SavedState) -> Result<(), RestoreError> {
+        if saved.bodies.len() != self.bodies.len() {
+            return Err(RestoreError::BodyCount { saved: saved.bodies.len(), scene: self.bodies.len() });
+        }
+        if self.end <= saved.t {
+            return Err(RestoreError::Ended { end: self.end, t: saved.t });
+        }
+        for (index, (b, s)) in self.bodies.iter().zip(&saved.bodies).enumerate() {
+            if b.name != s.name {
+                return Err(RestoreError::Name { index, saved: s.name.clone(), scene: b.name.clone() });
+            }
+            let n = b.state.u.len();
+            if [s.u.len(), s.v.len(), s.f_int.len()].iter().any(|&len| len != n) || s.reactions.len() != b.reactions.len() {
+                return Err(RestoreError::Dofs { name: b.name.clone(), saved: s.u.len(), scene: n });
+            }
+        }
+        for (b, s) in self.bodies.iter_mut().zip(&saved.bodies) {
+            b.state.u.clone_from(&s.u);
+            b.state.v.clone_from(&s.v);
+            b.state.f_int.clone_from(&s.f_int);
+            b.state.strain = s.strain;
+            b.reactions.clone_from(&s.reactions);
+            if let Some(f) = &s.factor {
+                b.restore_factor(f.c1, &f.values).map_err(|message| RestoreError::Factor { name: b.name.clone(), message })?;
+            }
+        }
+        self.t = saved.t;
+        self.step = saved.step;
+        self.first_step = (saved.t, saved.step);
+        self.initial_energy = saved.initial_energy;
+        self.external_work = saved.external_work;
+        self.friction_dissipation = saved.friction_dissipation;
+        self.numerical_dissipation = saved.numerical_dissipation;
+        self.contact_correction = saved.contact_correction;
+        self.obstacle_reactions.clone_from(&saved.obstacle_reactions);
+        self.restored_warm_start = Some(saved.contact.iter().map(|c| ((c.slave_body, c.slave_node, c.master), (c.r, c.rho))).collect());
+        Ok(())
+    }
+
+    /// The reactions and rho the next step starts its Uzawa sweeps from, by point identity.
+    pub(super) fn warm_start(&self) -> HashMap<(u32, u32, Master), ([Real; 3], Real)> {
+        match &self.restored_warm_start {
+            Some(warm) => warm.clone(),
+            None => self.contact_points.iter().map(|c| (c.key(), (c.r, c.rho))).collect(),
+        }
+    }
+}
