@@ -5,12 +5,12 @@
 use crate::element::CellFields;
 use crate::output::foxglove::{self, Level, View};
 use crate::output::plot::{contour_png, PlotError};
+use crate::output::messages::{AngularMomentum, BodyMessage, ContactMessage, EnergyMessage, ProbeMessage, ReactionMessage, RunMessage, SolverMessage};
 use crate::output::{schemas, OutputError, RunLog, VtuSeries};
 use crate::backend::{Backend, BackendError, BackendRequest};
 use crate::precision::Real;
 use crate::scene::{LoadedScene, OutputSpec, SceneError};
 use crate::solver::{build_simulation, Energies, PhaseTimes, RunFailure, SavedState, Simulation, StepFailure, StepReport};
-use serde_json::{json, Value};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
@@ -73,11 +73,13 @@ pub struct RunOptions {
     pub restart: Option<SavedState>,
 }
 
-/// What a run did, printed at its end.
-#[derive(Debug, Clone, serde::Serialize)]
+/// What a run did, printed at its end and logged on `/summary`.
+#[derive(Debug, Clone, serde::Serialize, schemars::JsonSchema)]
+#[schemars(title = "bifirst.Summary")]
 pub struct RunSummary {
     pub scene: String,
     /// `finished`, `failed` or `interrupted`.
+    #[schemars(extend("enum" = ["finished", "failed", "interrupted"]))]
     pub status: String,
     /// Why the run stopped early.
     pub message: Option<String>,
@@ -132,10 +134,6 @@ pub trait Monitor {
 pub struct Silent;
 impl Monitor for Silent {}
 
-fn vec_of(v: &[Real; 3], dim: usize) -> Value {
-    json!(v[..dim])
-}
-
 /// Commit the build came from, when it was built from a git checkout (see `src/build.rs`).
 pub const GIT_REVISION: Option<&str> = option_env!("BIFIRST_GIT_REVISION");
 
@@ -186,15 +184,15 @@ impl Logger {
                 log.add_channel(&format!("/reaction/{}", o.name), "bifirst.Reaction", &schemas::reaction(dim))?;
             }
         }
-        let run = json!({
-            "version": env!("CARGO_PKG_VERSION"),
-            "git_revision": GIT_REVISION,
-            "scene_name": loaded.name,
-            "scene": loaded.resolved_toml,
-            "backend": backend.name(),
-            "precision": backend.precision(),
-            "adapter": backend.adapter(),
-        });
+        let run = RunMessage {
+            version: env!("CARGO_PKG_VERSION").to_string(),
+            git_revision: GIT_REVISION.map(String::from),
+            scene_name: loaded.name.clone(),
+            scene: loaded.resolved_toml.clone(),
+            backend: backend.name().to_string(),
+            precision: backend.precision().to_string(),
+            adapter: backend.adapter(),
+        };
         log.write("/run", 0.0, &run)?;
         log.attach("scene.toml", "application/toml", loaded.resolved_toml.as_bytes())?;
         let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
@@ -227,36 +225,31 @@ impl Logger {
         }
         self.state_step = Some(sim.step);
         let (t, dim) = (sim.t, self.dim);
-        let e = sim.energies();
-        let mut energy = serde_json::to_value(e).expect("serializes");
-        energy["t"] = json!(t);
-        self.log.write("/energy", t, &energy)?;
+        self.log.write("/energy", t, &EnergyMessage { t, energies: sim.energies() })?;
         for b in &sim.bodies {
             let m = b.metrics();
-            let angular = if dim == 2 { json!(m.angular_momentum[2]) } else { json!(m.angular_momentum) };
-            let msg = json!({
-                "t": t, "mass": m.mass, "center_of_mass": vec_of(&m.center_of_mass, dim),
-                "linear_momentum": vec_of(&m.linear_momentum, dim), "angular_momentum": angular, "kinetic": m.kinetic,
-            });
+            let angular_momentum = if dim == 2 { AngularMomentum::Plane(m.angular_momentum[2]) } else { AngularMomentum::Space(m.angular_momentum) };
+            let msg = BodyMessage { t, mass: m.mass, center_of_mass: m.center_of_mass[..dim].to_vec(), linear_momentum: m.linear_momentum[..dim].to_vec(), angular_momentum, kinetic: m.kinetic };
             self.log.write(&format!("/body/{}", b.name), t, &msg)?;
         }
         for p in &sim.probes {
             let b = &sim.bodies[p.body];
             let n = p.node;
-            let u = &b.state.u[n * dim..(n + 1) * dim];
-            let v = &b.state.v[n * dim..(n + 1) * dim];
-            let msg = json!({
-                "t": t, "position": vec_of(&b.position(n), dim), "displacement": u, "velocity": v,
-                "von_mises": b.von_mises(&p.elements),
-            });
+            let msg = ProbeMessage {
+                t,
+                position: b.position(n)[..dim].to_vec(),
+                displacement: b.state.u[n * dim..(n + 1) * dim].to_vec(),
+                velocity: b.state.v[n * dim..(n + 1) * dim].to_vec(),
+                von_mises: b.von_mises(&p.elements),
+            };
             self.log.write(&format!("/probe/{}", p.name), t, &msg)?;
         }
         for (s, r) in sim.sets.iter().zip(sim.reactions()) {
-            self.log.write(&format!("/reaction/{}", s.name), t, &json!({"t": t, "force": vec_of(&r, dim)}))?;
+            self.log.write(&format!("/reaction/{}", s.name), t, &ReactionMessage { t, force: r[..dim].to_vec() })?;
         }
         if let Some(c) = &sim.contact {
             for (o, r) in c.obstacles.iter().zip(&sim.obstacle_reactions) {
-                self.log.write(&format!("/reaction/{}", o.name), t, &json!({"t": t, "force": vec_of(r, dim)}))?;
+                self.log.write(&format!("/reaction/{}", o.name), t, &ReactionMessage { t, force: r[..dim].to_vec() })?;
             }
         }
         Ok(())
@@ -271,8 +264,7 @@ impl Logger {
             return Ok(());
         }
         self.saved_step = Some(sim.step);
-        let state = serde_json::to_value(sim.saved_state()).expect("a state serializes");
-        self.log.write("/state", sim.t, &state)
+        self.log.write("/state", sim.t, &sim.saved_state())
     }
 
     fn frames(&mut self, sim: &Simulation, last: bool) -> Result<(), OutputError> {
@@ -302,23 +294,32 @@ impl Logger {
         if sim.contact.is_none() {
             return Ok(());
         }
-        let mut msg = serde_json::to_value(r.contact).expect("serializes");
-        msg["t"] = json!(sim.t);
-        self.log.write("/contact", sim.t, &msg)
+        self.log.write("/contact", sim.t, &ContactMessage { t: sim.t, stats: r.contact })
     }
 
     fn solver(&mut self, r: &StepReport, t: Real, status: &str, message: Option<String>) -> Result<(), OutputError> {
-        let msg = json!({
-            "t": t, "step": r.step, "dt": r.dt, "newton_iterations": r.newton_iterations, "uzawa_iterations": r.uzawa_iterations,
-            "bodies_iterated": r.bodies_iterated, "factorizations": r.factorizations, "residual_norm": r.residual_norm, "cutbacks": r.cutbacks, "wall_s": r.wall, "bytes_moved": r.bytes_moved, "device_submits": r.device_submits,
-            "status": status, "message": message,
-        });
+        let msg = SolverMessage {
+            t,
+            step: r.step,
+            dt: r.dt,
+            newton_iterations: r.newton_iterations,
+            uzawa_iterations: r.uzawa_iterations,
+            bodies_iterated: r.bodies_iterated,
+            factorizations: r.factorizations,
+            residual_norm: r.residual_norm,
+            cutbacks: r.cutbacks,
+            wall_s: r.wall,
+            bytes_moved: r.bytes_moved,
+            device_submits: r.device_submits,
+            status: status.to_string(),
+            message,
+        };
         self.log.write("/solver", t, &msg)
     }
 
     /// The run's totals on `/summary`, its last message.
     fn summary(&mut self, summary: &RunSummary, t: Real) -> Result<(), OutputError> {
-        self.log.write("/summary", t, &serde_json::to_value(summary).expect("serializes"))
+        self.log.write("/summary", t, summary)
     }
 
     /// A step's events (cut-backs) to the monitor and, as warnings, to `/log`.

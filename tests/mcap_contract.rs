@@ -150,3 +150,26 @@ fn contact_scenes_log_the_contact_channel_and_obstacle_reactions() {
     // Without contact in the scene there is no /contact channel.
     assert!(!run("uniaxial_blatz_ko", &["time.end=0.02"], "contract_no_contact").topics.contains_key("/contact"));
 }
+
+/// The channels' schemas are derived from the types the run writes (schemars); every message of
+/// a 2D and a 3D run with contact, and the saved state, validates against its channel's schema.
+#[test]
+fn every_message_validates_against_the_schema_derived_from_its_type() {
+    for (scene, sets) in [("sliding_block", ["time.end=0.02", "output.state_every=5"]), ("stack_3d", ["time.end=0.02", "output.state_every=1"])] {
+        let log = run(scene, &sets, &format!("derived_{scene}"));
+        let mut schemas = boon::Schemas::new();
+        let mut compiler = boon::Compiler::new();
+        let mut checked = 0;
+        for (topic, (name, schema)) in log.schemas.iter().filter(|(_, (name, _))| name.starts_with("bifirst.")) {
+            assert_eq!(schema["title"], name.as_str(), "{topic}: the schema is titled by its name");
+            let url = format!("file:///{}.json", topic.trim_start_matches('/').replace('/', "_"));
+            compiler.add_resource(&url, schema.clone()).unwrap();
+            let id = compiler.compile(&url, &mut schemas).unwrap_or_else(|e| panic!("{topic}: {e:#}"));
+            for m in &log.topics[topic] {
+                schemas.validate(m, id).unwrap_or_else(|e| panic!("{scene} {topic}: {e:#}"));
+                checked += 1;
+            }
+        }
+        assert!(log.topics.contains_key("/state") && checked > 10, "{scene}: {checked} messages checked");
+    }
+}

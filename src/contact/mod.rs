@@ -24,7 +24,7 @@ use crate::precision::Real;
 use geometry::Vec3;
 
 /// The other side of a contact point.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
 pub enum Master {
     /// A facet of a deformable body.
     Body(u32),
@@ -125,7 +125,7 @@ pub struct ContactModel {
 }
 
 /// Contact totals of one step (the `/contact` channel).
-#[derive(Debug, Clone, Copy, Default, serde::Serialize)]
+#[derive(Debug, Clone, Copy, Default, serde::Serialize, schemars::JsonSchema)]
 pub struct ContactStats {
     pub active: usize,
     pub sticking: usize,

@@ -96,7 +96,7 @@ impl RunLog {
     }
 
     /// Writes one message on a registered channel at simulated time `t`.
-    pub fn write(&mut self, topic: &str, t: Real, message: &Value) -> Result<(), OutputError> {
+    pub fn write(&mut self, topic: &str, t: Real, message: &impl serde::Serialize) -> Result<(), OutputError> {
         let channel_id = *self.channels.get(topic).unwrap_or_else(|| panic!("channel {topic} not registered"));
         let data = serde_json::to_vec(message).expect("message serializes");
         let sequence = self.sequence;

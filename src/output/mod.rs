@@ -3,6 +3,7 @@
 
 pub mod foxglove;
 pub mod mcap_log;
+pub mod messages;
 pub mod plot;
 pub mod read;
 pub mod schemas;

@@ -26,7 +26,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 /// Wall-clock seconds spent per phase.
-#[derive(Debug, Clone, Copy, Default, serde::Serialize)]
+#[derive(Debug, Clone, Copy, Default, serde::Serialize, schemars::JsonSchema)]
 pub struct PhaseTimes {
     /// Element kernels (on a GPU: the device passes, all kernels, from submission to the mapped
     /// read-back).
@@ -111,7 +111,7 @@ pub struct RunFailure {
 }
 
 /// Energies of the whole system at the current time.
-#[derive(Debug, Clone, Copy, Default, serde::Serialize)]
+#[derive(Debug, Clone, Copy, Default, serde::Serialize, schemars::JsonSchema)]
 pub struct Energies {
     pub kinetic: Real,
     pub strain: Real,

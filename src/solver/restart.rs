@@ -9,7 +9,8 @@ use std::collections::HashMap;
 
 /// A finished step's state: time, step, every body's state, the energy accumulators, the
 /// contact reactions and rho (the next step's warm start) and the kept factorisations.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+#[schemars(title = "bifirst.SavedState")]
 pub struct SavedState {
     pub t: Real,
     pub step: usize,
@@ -24,7 +25,7 @@ pub struct SavedState {
 }
 
 /// One body's state, by name.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct SavedBody {
     pub name: String,
     pub u: Vec<Real>,
@@ -39,14 +40,14 @@ pub struct SavedBody {
 
 /// The values `K̄ = ξ K + c1 M` a kept factorisation was made from: factorised again on restart,
 /// they give the factor the uninterrupted run would have reused.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct SavedFactor {
     pub c1: Real,
     pub values: Vec<Real>,
 }
 
 /// A contact point's reaction and rho, under the point's identity across steps.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct SavedReaction {
     pub slave_body: u32,
     pub slave_node: u32,

@@ -1,0 +1,114 @@
+//! The run log's own channels as Rust types: what the run writes, and, derived from the same
+//! types by schemars, the JSON schema each channel declares ([`super::schemas`]). One source of
+//! truth; `tests/mcap_contract.rs` checks the two against doc/mcap.md and each other.
+
+use crate::contact::ContactStats;
+use crate::precision::Real;
+use crate::solver::{Energies, PhaseTimes};
+use schemars::JsonSchema;
+use serde::Serialize;
+
+/// `/run`: once, at t = 0.
+#[derive(Debug, Serialize, JsonSchema)]
+#[schemars(title = "bifirst.Run")]
+pub struct RunMessage {
+    pub version: String,
+    /// The commit the binary was built from, when known.
+    pub git_revision: Option<String>,
+    pub scene_name: String,
+    /// The resolved scene after `--set`, with defaults, as TOML.
+    pub scene: String,
+    /// `cpu` or `gpu`, after `--backend auto` has chosen.
+    pub backend: String,
+    /// `f64` or `f32`: the kernels' precision.
+    pub precision: String,
+    /// The GPU adapter, or null on the CPU.
+    pub adapter: Option<String>,
+}
+
+/// `/energy`: the initial state and each logged step.
+#[derive(Debug, Serialize, JsonSchema)]
+#[schemars(title = "bifirst.Energy")]
+pub struct EnergyMessage {
+    pub t: Real,
+    #[serde(flatten)]
+    pub energies: Energies,
+}
+
+/// `/solver`: each logged step.
+#[derive(Debug, Serialize, JsonSchema)]
+#[schemars(title = "bifirst.Solver")]
+pub struct SolverMessage {
+    pub t: Real,
+    /// 1-based.
+    pub step: usize,
+    /// The scene's time step.
+    pub dt: Real,
+    /// Of the slowest group of contact-coupled bodies, summed over cut-back sub-steps.
+    pub newton_iterations: usize,
+    /// Uzawa sweeps, summed over Newton iterations and groups.
+    pub uzawa_iterations: usize,
+    /// Body evaluations in the step, summed over Newton iterations (bodies that converged
+    /// leave the loop).
+    pub bodies_iterated: usize,
+    pub factorizations: usize,
+    pub residual_norm: Real,
+    pub cutbacks: usize,
+    pub wall_s: PhaseTimes,
+    /// Bytes between host and GPU in the step (0 on the CPU).
+    pub bytes_moved: u64,
+    /// GPU queue submits in the step, one per device pass over all bodies (0 on the CPU).
+    pub device_submits: u64,
+    #[schemars(extend("enum" = ["converged", "failed", "interrupted"]))]
+    pub status: String,
+    /// Why the run stopped, or null.
+    pub message: Option<String>,
+}
+
+/// The angular momentum about the origin: the scalar z component in 2D, a vector in 3D.
+#[derive(Debug, Serialize, JsonSchema)]
+#[serde(untagged)]
+pub enum AngularMomentum {
+    Plane(Real),
+    Space([Real; 3]),
+}
+
+/// `/body/<name>`: the initial state and each logged step.
+#[derive(Debug, Serialize, JsonSchema)]
+#[schemars(title = "bifirst.Body")]
+pub struct BodyMessage {
+    pub t: Real,
+    pub mass: Real,
+    pub center_of_mass: Vec<Real>,
+    pub linear_momentum: Vec<Real>,
+    pub angular_momentum: AngularMomentum,
+    pub kinetic: Real,
+}
+
+/// `/probe/<name>`: the probe's node at the initial state and each logged step.
+#[derive(Debug, Serialize, JsonSchema)]
+#[schemars(title = "bifirst.Probe")]
+pub struct ProbeMessage {
+    pub t: Real,
+    pub position: Vec<Real>,
+    pub displacement: Vec<Real>,
+    pub velocity: Vec<Real>,
+    pub von_mises: Real,
+}
+
+/// `/reaction/<set or obstacle>`: the net reaction on the bodies.
+#[derive(Debug, Serialize, JsonSchema)]
+#[schemars(title = "bifirst.Reaction")]
+pub struct ReactionMessage {
+    pub t: Real,
+    pub force: Vec<Real>,
+}
+
+/// `/contact`: each logged step of a scene with contact.
+#[derive(Debug, Serialize, JsonSchema)]
+#[schemars(title = "bifirst.Contact")]
+pub struct ContactMessage {
+    pub t: Real,
+    #[serde(flatten)]
+    pub stats: ContactStats,
+}
