@@ -193,7 +193,7 @@ impl Logger {
             precision: backend.precision().to_string(),
             adapter: backend.adapter(),
         };
-        log.write("/run", 0.0, &run)?;
+        log.write("/run", sim.t, &run)?;
         log.attach("scene.toml", "application/toml", loaded.resolved_toml.as_bytes())?;
         let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
         let meta: BTreeMap<String, String> = [
@@ -409,12 +409,16 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
         backend.describe(),
         crate::output::counted(rayon::current_num_threads(), "thread", "threads")
     );
-    logger.line(0.0, Level::Info, &start)?;
+    // A restarted run's log begins at its state's time.
+    logger.line(sim.t, Level::Info, &start)?;
     if let Some(notice) = &resolved.notice {
-        logger.line(0.0, Level::Warning, notice)?;
+        logger.line(sim.t, Level::Warning, notice)?;
     }
     if let Some(reason) = &resolved.reason {
-        logger.line(0.0, Level::Info, reason)?;
+        logger.line(sim.t, Level::Info, reason)?;
+    }
+    if let Some(state) = &options.restart {
+        logger.line(sim.t, Level::Info, &format!("continued from a saved state at t = {:.6e} (step {})", state.t, state.step))?;
     }
     let every = loaded.scene.output.every;
     let total = sim.step_count();
