@@ -485,3 +485,18 @@ fn a_closed_stdout_ends_a_command_quietly() {
     assert!(!stderr.contains("panicked"), "{stderr}");
     assert_eq!(out.status.signal(), Some(13), "ended by SIGPIPE: {:?}", out.status);
 }
+
+/// Caught in review: the summary of a log without `/summary` (a killed run) reported 0 steps
+/// creating energy whatever the run did. They are now counted from `/energy` by the run's own
+/// rule, which gives the run's count when every step is logged.
+#[test]
+fn an_incomplete_log_counts_the_steps_that_created_energy_as_the_run_did() {
+    let fast = common_run::run("bar_impact", &["body.bar.initial_velocity=[-25.0, 0.0]", "time.end=0.01", "output.scene_every=0"], "energy_gain_fast_bar");
+    let finished = bifirst::output::summary::summarize(&fast.record).unwrap();
+    assert!(finished.energy_gain_steps > 0, "at 50 times its speed the bar impact creates energy in some steps");
+    let mut cut = fast.record.clone();
+    cut.topics.remove("/summary");
+    let incomplete = bifirst::output::summary::summarize(&cut).unwrap();
+    assert_eq!(incomplete.status, "incomplete");
+    assert_eq!(incomplete.energy_gain_steps, finished.energy_gain_steps);
+}

@@ -1,6 +1,7 @@
 //! `bifirst summary`: the totals of one or more run logs as a table (or JSON).
 
 use super::read::{ReadError, RunRecord};
+use crate::run::ENERGY_GAIN_TOLERANCE;
 use serde_json::Value;
 
 const PHASES: [&str; 6] = ["elements", "assembly", "transfer", "factorization", "solve", "contact"];
@@ -73,6 +74,20 @@ fn count(v: &Value) -> u64 {
     v.as_u64().unwrap_or(0)
 }
 
+/// The logged steps that created energy, by the run's own rule ([`ENERGY_GAIN_TOLERANCE`] of
+/// `max(|E(0)|, |E|, |W_ext|)`); with `output.every` > 1, each logged interval counts as a step.
+fn energy_gain_steps(energy: &[Value]) -> u64 {
+    let Some(first) = energy.first() else { return 0 };
+    let e0 = number(&first["total"]).abs();
+    energy
+        .windows(2)
+        .filter(|w| {
+            let scale = [e0, number(&w[1]["total"]).abs(), number(&w[1]["external_work"]).abs()].into_iter().fold(f64::MIN_POSITIVE, f64::max);
+            (number(&w[0]["numerical_dissipation"]) - number(&w[1]["numerical_dissipation"])) / scale > ENERGY_GAIN_TOLERANCE
+        })
+        .count() as u64
+}
+
 /// Sums the logged steps when the run has no `/summary` (a killed process).
 fn from_steps(record: &RunRecord) -> (Value, &'static str) {
     let solver = record.messages("/solver");
@@ -94,6 +109,7 @@ fn from_steps(record: &RunRecord) -> (Value, &'static str) {
         "max_penetration": record.series("/contact", "max_penetration").into_iter().fold(0.0, f64::max),
         "max_overlap": record.series("/contact", "max_overlap").into_iter().fold(0.0, f64::max),
         "max_overlap_ratio": record.series("/contact", "max_overlap_ratio").into_iter().fold(0.0, f64::max),
+        "energy_gain_steps": energy_gain_steps(record.messages("/energy")),
         "wall_by_phase": wall,
         "message": Value::Null,
     });
