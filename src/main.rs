@@ -149,6 +149,19 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Draw or export a state a run logged (`/state`): the last, or the last at or before `--at`.
+    State {
+        run: PathBuf,
+        /// The last state at or before this time.
+        #[arg(long, value_name = "T")]
+        at: Option<f64>,
+        /// Draw the von Mises contours of that state into this PNG (2D scenes).
+        #[arg(long, value_name = "FILE.png")]
+        contour: Option<PathBuf>,
+        /// Write that state as VTU files (and `.pvd` series) for ParaView into this directory.
+        #[arg(long, value_name = "DIR")]
+        vtu: Option<PathBuf>,
+    },
     /// Plot run logs into PNGs (energies, solver, probes); several logs are overlaid.
     Plot {
         #[arg(required = true)]
@@ -614,6 +627,31 @@ fn read_status(failed: bool) -> ExitCode {
     }
 }
 
+fn state_command(run: PathBuf, at: Option<f64>, contour: Option<PathBuf>, vtu: Option<PathBuf>) -> Result<ExitCode> {
+    let (loaded, sim) = bifirst::run::simulation_at(&run, at)?;
+    let energies = sim.energies();
+    println!(
+        "{}: state at t = {:.6e} (step {}), {}; energy: kinetic {:.6e}, strain {:.6e}, total {:.6e}",
+        run.display(),
+        sim.t,
+        sim.step,
+        bifirst::output::counted(sim.bodies.len(), "body", "bodies"),
+        energies.kinetic,
+        energies.strain,
+        energies.total
+    );
+    let fields: Vec<_> = sim.bodies.iter().map(|b| b.cell_fields()).collect();
+    if let Some(path) = contour {
+        plot::contour_png(&sim, &fields, &format!("{}: von Mises stress at t = {:.4}", loaded.name, sim.t), &path)?;
+        println!("{}", path.display());
+    }
+    if let Some(dir) = vtu {
+        bifirst::output::VtuSeries::create(&dir, &sim)?.write_frame(&sim, &fields)?;
+        println!("{}", dir.display());
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
 fn plot_command(runs: Vec<PathBuf>, out: Option<PathBuf>, trace: Option<[String; 3]>) -> Result<ExitCode> {
     let (records, failed) = read_runs(&runs, read_run)?;
     let out = out.unwrap_or_else(|| runs[0].with_file_name(format!("{}_plots", runs[0].file_stem().map_or("run".into(), |s| s.to_string_lossy()))));
@@ -661,6 +699,7 @@ fn main() -> ExitCode {
         Command::Accuracy { scene, over, sets, measure, out, repeat, target, backend, json } => {
             accuracy_command(AccuracyArgs { scene, over, sets, measure, out, repeat, target, backend: backend.into(), json })
         }
+        Command::State { run, at, contour, vtu } => state_command(run, at, contour, vtu),
         Command::Plot { runs, out, trace } => plot_command(runs, out, trace),
         Command::Summary { runs, json } => summary_command(runs, json),
         Command::Check { scene, sets } => load_scene(&scene, &sets).map_err(anyhow::Error::from).and_then(|loaded| {

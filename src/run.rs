@@ -259,7 +259,8 @@ impl Logger {
     /// `/state`, the full state a run can continue from: at the scene's cadence, and (`last`)
     /// at the last finished step of the run, however it ends.
     fn saved(&mut self, sim: &Simulation, last: bool) -> Result<(), OutputError> {
-        let due = self.saved_every > 0 && sim.step % self.saved_every == 0 && sim.step > sim.first_step.1;
+        // With a cadence, the initial state too (a restarted run's is in the log it came from).
+        let due = self.saved_every > 0 && sim.step % self.saved_every == 0 && (sim.step > sim.first_step.1 || sim.step == 0);
         if self.saved_step == Some(sim.step) || !(last || due) {
             return Ok(());
         }
@@ -426,6 +427,7 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
     monitor.state(&sim);
     logger.state(&sim)?;
     logger.frames(&sim, false)?;
+    logger.saved(&sim, false)?;
     let mut totals = Totals::default();
     let summary = |sim: &Simulation, totals: &Totals, stop: Option<&Stop>| RunSummary {
         scene: loaded.name.clone(),
@@ -567,6 +569,17 @@ pub enum RestartError {
     BadState { path: PathBuf, message: String },
     #[error(transparent)]
     Scene(#[from] SceneError),
+    #[error("the logged state does not fit its scene: {0}")]
+    Restore(#[from] crate::solver::RestoreError),
+}
+
+/// The simulation of the run logged in `log` at its last state (or the last at or before `at`):
+/// to draw or export a state long after the run (`bifirst state`).
+pub fn simulation_at(log: &Path, at: Option<Real>) -> Result<(LoadedScene, Simulation), RestartError> {
+    let (loaded, state) = restart_from(log, at, &[])?;
+    let mut sim = build_simulation(&loaded)?;
+    sim.load_state(&state)?;
+    Ok((loaded, sim))
 }
 
 /// The scene of the run logged in `log` (its resolved scene, then `sets`) and the state to

@@ -61,8 +61,8 @@ fn an_interrupted_run_continued_from_its_log_ends_where_the_uninterrupted_one_do
         other => panic!("the run must stop at step 13: {other:?}"),
     }
     let saved = states(&cut);
-    assert_eq!(saved.iter().map(|s| s.step).collect::<Vec<_>>(), [5, 10, 13], "the cadence, then the last finished step");
-    assert!(!saved[2].contact.is_empty(), "the blocks are in contact at step 13: their reactions are kept");
+    assert_eq!(saved.iter().map(|s| s.step).collect::<Vec<_>>(), [0, 5, 10, 13], "the cadence from the start, then the last finished step");
+    assert!(!saved[3].contact.is_empty(), "the blocks are in contact at step 13: their reactions are kept");
 
     let (reloaded, state) = restart_from(&cut, None, &[]).expect("the log holds a state");
     let continued = temp_path("restart_continued.mcap");
@@ -76,12 +76,25 @@ fn an_interrupted_run_continued_from_its_log_ends_where_the_uninterrupted_one_do
     assert!(difference <= 1e-12, "end states differ by {difference:e} (relative)");
     assert!((end_whole.friction_dissipation - end_continued.friction_dissipation).abs() <= 1e-12 * end_whole.friction_dissipation.abs(), "the energy accumulators carry over");
 
+    // The state the restarted run starts from is not written again; the cadence goes on.
+    assert_eq!(states(&continued).iter().map(|s| s.step).collect::<Vec<_>>(), [15, 20]);
+
     // A chosen state: the one at or before t = 0.1 (step 10), continued to the same end.
     let (reloaded, state) = restart_from(&cut, Some(0.1), &[]).unwrap();
     assert_eq!(state.step, 10);
     let again = temp_path("restart_again.mcap");
     run_scene(&reloaded, &again, &RunOptions { restart: Some(state), ..Default::default() }, &mut Silent).unwrap();
     assert!(relative_difference(end_whole, states(&again).last().unwrap()) <= 1e-12);
+
+    // Any logged state can be drawn and exported long after the run (`bifirst state`).
+    let png = temp_path("restart_state.png");
+    let vtu = temp_path("restart_state_vtu");
+    let o = Command::new(env!("CARGO_BIN_EXE_bifirst")).arg("state").arg(&cut).args(["--at", "0.05", "--vtu"]).arg(&vtu).output().unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(String::from_utf8_lossy(&o.stdout).contains("state at t = 5.000000e-2 (step 5), 2 bodies"), "{}", String::from_utf8_lossy(&o.stdout));
+    assert!(vtu.join("striker.pvd").is_file() && vtu.join("base").join("base_000000.vtu").is_file());
+    let o = Command::new(env!("CARGO_BIN_EXE_bifirst")).arg("state").arg(&cut).arg("--contour").arg(&png).output().unwrap();
+    assert_eq!(o.status.code(), Some(2), "contours are 2D only: {}", String::from_utf8_lossy(&o.stderr));
 }
 
 #[test]

@@ -104,13 +104,26 @@ impl Simulation {
         }
     }
 
-    /// Continues from `saved` instead of t = 0 (in place of [`Simulation::start`]).
+    /// Continues from `saved` instead of t = 0 (in place of [`Simulation::start`]), with the
+    /// factorisations the run kept.
     pub fn restore(&mut self, saved: &SavedState) -> Result<(), RestoreError> {
-        if saved.bodies.len() != self.bodies.len() {
-            return Err(RestoreError::BodyCount { saved: saved.bodies.len(), scene: self.bodies.len() });
-        }
         if self.end <= saved.t {
             return Err(RestoreError::Ended { end: self.end, t: saved.t });
+        }
+        self.load_state(saved)?;
+        for (b, s) in self.bodies.iter_mut().zip(&saved.bodies) {
+            if let Some(f) = &s.factor {
+                b.restore_factor(f.c1, &f.values).map_err(|message| RestoreError::Factor { name: b.name.clone(), message })?;
+            }
+        }
+        Ok(())
+    }
+
+    /// Puts the bodies, time, step, energies and reactions of `saved` in place: enough to draw
+    /// or export that state; [`Simulation::restore`] also brings back the factorisations.
+    pub fn load_state(&mut self, saved: &SavedState) -> Result<(), RestoreError> {
+        if saved.bodies.len() != self.bodies.len() {
+            return Err(RestoreError::BodyCount { saved: saved.bodies.len(), scene: self.bodies.len() });
         }
         for (index, (b, s)) in self.bodies.iter().zip(&saved.bodies).enumerate() {
             if b.name != s.name {
@@ -127,9 +140,6 @@ impl Simulation {
             b.state.f_int.clone_from(&s.f_int);
             b.state.strain = s.strain;
             b.reactions.clone_from(&s.reactions);
-            if let Some(f) = &s.factor {
-                b.restore_factor(f.c1, &f.values).map_err(|message| RestoreError::Factor { name: b.name.clone(), message })?;
-            }
         }
         self.t = saved.t;
         self.step = saved.step;
