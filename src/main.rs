@@ -1,4 +1,5 @@
-//! The `bifirst` command line: run, sweep, check, plot, summary, bench and info.
+//! The `bifirst` command line: run (and restart), sweep (whole, sharded, as a Slurm array), sweep-report,
+//! accuracy, state, check, plot, summary, bench and info.
 
 use anyhow::Result;
 use bifirst::backend::{BackendChoice, BackendRequest};
