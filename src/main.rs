@@ -393,7 +393,12 @@ fn run(args: RunArgs) -> Result<ExitCode> {
         eprintln!("bifirst {}: scene `{}`", env!("CARGO_PKG_VERSION"), loaded.name);
     }
     let (interrupt, hangup) = interrupt_flags()?;
-    let options = RunOptions { vtu: args.vtu, interrupt: Some(interrupt), backend: args.backend, contour: args.contour, restart: state };
+    // A restarted run's VTU frames go beside the first run's, not over them.
+    let vtu = match (&state, args.vtu) {
+        (Some(_), None) => loaded.scene.output.vtu.as_ref().map(|dir| PathBuf::from(format!("{}_restart", dir.display()))),
+        (_, vtu) => vtu,
+    };
+    let options = RunOptions { vtu, interrupt: Some(interrupt), backend: args.backend, contour: args.contour, restart: state };
     let mut progress = Progress { quiet: args.quiet, bar: None, last_line: Instant::now(), last_fraction: 0.0 };
     let result = run_scene(&loaded, &out, &options, &mut progress);
     if let Some(bar) = &progress.bar {
