@@ -88,3 +88,25 @@ fn backend_and_precision_are_axes_and_unknown_scenes_are_refused() {
     assert_eq!(rows.len(), 2, "{stdout}");
     assert!(column(&rows, "linear momentum drift error")[0] < 1e-10, "{stdout}");
 }
+
+/// A variant whose run fails is a row with its status and reason, off the front, and fails the
+/// command; the convergence order skips it.
+#[test]
+fn a_variant_that_fails_is_reported_and_kept_off_the_front() {
+    let out = out_dir("accuracy_failing");
+    let _ = std::fs::remove_dir_all(&out);
+    let o = Command::new(env!("CARGO_BIN_EXE_bifirst"))
+        .args(["accuracy", "scenes/sliding_block.toml", "--over", "solver.max_iterations=1,25", "--set", "solver.max_cutbacks=0", "--set", "time.end=0.05", "--backend", "cpu", "--out"])
+        .arg(&out)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert_eq!(o.status.code(), Some(1), "{stdout}");
+    assert!(stdout.contains("variant 0 (max_iterations=1): step 1 at t = 0.000000e0 failed"), "{stdout}");
+    assert!(!stdout.contains("order along"), "no order from a failed run: {stdout}");
+    let csv = std::fs::read_to_string(out.join("accuracy.csv")).unwrap();
+    let rows: Vec<&str> = csv.lines().collect();
+    assert!(rows[1].contains(",failed,") && rows[1].contains(",false,"), "the failed variant is off the front: {csv}");
+    assert!(rows[2].contains(",finished,") && rows[2].contains(",true,"), "{csv}");
+}

@@ -58,8 +58,10 @@ pub struct Row {
     pub values: Vec<String>,
     pub backend: String,
     pub precision: String,
-    /// `finished`, else why the run stopped; only finished runs are on the front.
+    /// `finished`, `failed` or `interrupted`; only finished runs are on the front.
     pub status: String,
+    /// Why a run stopped early.
+    pub message: Option<String>,
     pub steps: usize,
     /// Median wall time over the repeats (the whole run: set-up, steps and log).
     pub wall_s: f64,
@@ -125,15 +127,15 @@ impl Study {
             for _ in 0..repeat.max(1) {
                 let mut measure = known_answer(&self.measure, loaded)?;
                 let result = run_scene(loaded, &log, &options, &mut Observer(measure.as_mut()));
-                let (summary, status) = match result {
-                    Ok(s) => (s, "finished".to_string()),
-                    Err(RunError::Stopped { reason, summary }) => (summary, reason.to_string()),
+                let (summary, message) = match result {
+                    Ok(s) => (s, None),
+                    Err(RunError::Stopped { reason, summary }) => (summary, Some(reason.to_string())),
                     Err(e) => return Err(AccuracyError::Run { label: variant.label.clone(), source: Box::new(e) }),
                 };
                 walls.push(summary.wall_s);
-                first.get_or_insert((summary, status, measure.errors()));
+                first.get_or_insert((summary, message, measure.errors()));
             }
-            let (summary, status, errors) = first.expect("one run or more");
+            let (summary, message, errors) = first.expect("one run or more");
             let error = errors.iter().map(|e| e.error).fold(0.0, f64::max);
             let values = self.axes.iter().map(|a| variant.sets.iter().find_map(|s| s.strip_prefix(&format!("{}=", a.key))).unwrap_or_default().to_string()).collect();
             let row = Row {
@@ -142,7 +144,8 @@ impl Study {
                 values,
                 backend: summary.backend.clone(),
                 precision: summary.precision.clone(),
-                status,
+                status: summary.status.clone(),
+                message,
                 steps: summary.steps,
                 wall_s: median(&walls),
                 wall_runs: walls,
@@ -219,7 +222,7 @@ pub fn convergence_slopes(axes: &[SweepAxis], rows: &[Row]) -> Vec<(String, Stri
             let position = axis.values.iter().position(|v| *v == row.values[a]);
             let Some(next_value) = position.and_then(|p| axis.values.get(p + 1)) else { continue };
             let next = rows[i + 1..].iter().find(|r| r.values[a] == *next_value && r.values.iter().enumerate().all(|(k, v)| k == a || *v == row.values[k]));
-            let Some(next) = next else { continue };
+            let Some(next) = next.filter(|n| n.status == "finished" && row.status == "finished") else { continue };
             let (v0, v1) = (numeric(&row.values[a]).unwrap_or(f64::NAN), numeric(next_value).unwrap_or(f64::NAN));
             let slope = (next.error / row.error).ln() / (v1 / v0).ln();
             let others: Vec<String> = row.values.iter().enumerate().filter(|(k, _)| *k != a).map(|(k, v)| format!("{}={v}", axes[k].key)).collect();
@@ -262,16 +265,22 @@ pub fn table(rows: &[Row]) -> String {
     header.extend(["error".into(), "front".into()]);
     let mut lines = vec![header];
     for r in rows {
-        let mut cells = vec![r.index.to_string(), r.label.clone(), format!("{} {}", r.backend, r.precision), r.status.chars().take(40).collect(), r.steps.to_string(), format!("{:.3}", r.wall_s)];
+        let mut cells = vec![r.index.to_string(), r.label.clone(), format!("{} {}", r.backend, r.precision), r.status.clone(), r.steps.to_string(), format!("{:.3}", r.wall_s)];
         cells.extend(r.errors.iter().map(|e| format!("{:.3e}", e.error)));
         cells.extend([format!("{:.3e}", r.error), if r.pareto { "*".into() } else { String::new() }]);
         lines.push(cells);
     }
     let widths: Vec<usize> = (0..lines[0].len()).map(|c| lines.iter().map(|l| l.get(c).map_or(0, |s| s.chars().count())).max().unwrap_or(0)).collect();
-    lines
+    let mut out: String = lines
         .iter()
         .map(|l| l.iter().zip(&widths).enumerate().map(|(c, (s, w))| if c == 1 || c == 3 { format!("{s:<w$}") } else { format!("{s:>w$}") }).collect::<Vec<_>>().join("  ").trim_end().to_string() + "\n")
-        .collect()
+        .collect();
+    for r in rows {
+        if let Some(message) = &r.message {
+            out += &format!("variant {} ({}): {message}\n", r.index, r.label);
+        }
+    }
+    out
 }
 
 #[cfg(test)]
@@ -279,7 +288,7 @@ mod tests {
     use super::*;
 
     fn row(wall_s: f64, error: f64, status: &str) -> Row {
-        Row { index: 0, label: String::new(), values: vec![], backend: "cpu".into(), precision: "f64".into(), status: status.into(), steps: 1, wall_s, wall_runs: vec![wall_s], errors: vec![], error, pareto: false, log: PathBuf::new() }
+        Row { index: 0, label: String::new(), values: vec![], backend: "cpu".into(), precision: "f64".into(), status: status.into(), message: None, steps: 1, wall_s, wall_runs: vec![wall_s], errors: vec![], error, pareto: false, log: PathBuf::new() }
     }
 
     #[test]
