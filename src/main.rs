@@ -535,8 +535,6 @@ fn slurm_command(sweep: &Sweep, out: &std::path::Path, script: &std::path::Path,
     Ok(ExitCode::SUCCESS)
 }
 
-/// The summary table (or JSON) and the overlaid plots of a sweep directory; fails when a variant
-/// is missing or did not finish.
 struct AccuracyArgs {
     scene: PathBuf,
     over: Vec<SweepAxis>,
@@ -578,6 +576,8 @@ fn accuracy_command(args: AccuracyArgs) -> Result<ExitCode> {
     Ok(if rows.len() == count && rows.iter().all(|r| r.status == "finished") { ExitCode::SUCCESS } else { ExitCode::FAILURE })
 }
 
+/// The summary table (or JSON) and the overlaid plots of a sweep directory; fails when a variant
+/// is missing or did not finish.
 fn print_report(mut report: Report, json: bool, trace: Option<[String; 3]>) -> Result<ExitCode> {
     if json {
         println!("{}", serde_json::to_string_pretty(&report)?);

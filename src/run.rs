@@ -189,6 +189,7 @@ impl Logger {
             git_revision: GIT_REVISION.map(String::from),
             scene_name: loaded.name.clone(),
             scene: loaded.resolved_toml.clone(),
+            scene_file: loaded.path.display().to_string(),
             backend: backend.name().to_string(),
             precision: backend.precision().to_string(),
             adapter: backend.adapter(),
@@ -369,11 +370,12 @@ pub const ENERGY_GAIN_TOLERANCE: Real = 1e-4;
 /// Energy-gain warnings written to `/log` before they are only counted.
 const ENERGY_GAIN_LINES: usize = 10;
 
-/// The energy the last step created relative to the energy scale (`max(|E(0)|, |E|, |W_ext|)`),
-/// when beyond [`ENERGY_GAIN_TOLERANCE`]; `e` are the energies after it and `dissipated` the
-/// numerical dissipation before it.
-fn energy_gain(sim: &Simulation, e: &Energies, dissipated: Real) -> Option<Real> {
-    let scale = [sim.initial_energy, e.total, e.external_work].iter().map(|x| x.abs()).fold(Real::MIN_POSITIVE, Real::max);
+/// The energy a step created relative to the energy scale (`max(|E(0)|, |E|, |W_ext|)`), when
+/// beyond [`ENERGY_GAIN_TOLERANCE`]: `initial` is `E(0)`, `e` the energies after the step and
+/// `dissipated` the numerical dissipation before it. The run counts its steps with it, and the
+/// summary of a log without `/summary` its logged intervals.
+pub fn energy_gain(initial: Real, e: &Energies, dissipated: Real) -> Option<Real> {
+    let scale = [initial, e.total, e.external_work].iter().map(|x| x.abs()).fold(Real::MIN_POSITIVE, Real::max);
     let gain = (dissipated - e.numerical_dissipation) / scale;
     (gain > ENERGY_GAIN_TOLERANCE).then_some(gain)
 }
@@ -497,7 +499,7 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
         if !energies.total.is_finite() {
             break Some((Stop::NotFinite { step: sim.step, t: sim.t }, report));
         }
-        if let Some(gain) = energy_gain(&sim, &energies, dissipated) {
+        if let Some(gain) = energy_gain(sim.initial_energy, &energies, dissipated) {
             totals.energy_gain_steps += 1;
             totals.max_energy_gain = totals.max_energy_gain.max(gain);
             if totals.energy_gain_steps <= ENERGY_GAIN_LINES {
@@ -563,7 +565,7 @@ pub enum RestartError {
     NoState(PathBuf),
     #[error("`{path}` holds no state at or before t = {at} (the first is at t = {first})")]
     NoStateAt { path: PathBuf, at: Real, first: Real },
-    #[error("`{0}` does not record its scene (metadata `bifirst.run`)")]
+    #[error("`{0}` does not record its scene and scene file (`/run`)")]
     NoScene(PathBuf),
     #[error("`{path}`: a `/state` message does not read back: {message}")]
     BadState { path: PathBuf, message: String },
@@ -585,7 +587,8 @@ pub fn simulation_at(log: &Path, at: Option<Real>) -> Result<(LoadedScene, Simul
 /// The scene of the run logged in `log` (its resolved scene, then `sets`) and the state to
 /// continue from: the last, or the last at or before `at`.
 pub fn restart_from(log: &Path, at: Option<Real>, sets: &[String]) -> Result<(LoadedScene, SavedState), RestartError> {
-    let record = crate::output::read_run(log)?;
+    // `/run` is the log's first message, so a log cut short by a crash still names its scene.
+    let record = crate::output::read_run_topics(log, |topic| topic == "/run" || topic == "/state")?;
     let states = record.messages("/state");
     let chosen = match at {
         None => states.last(),
@@ -597,9 +600,9 @@ pub fn restart_from(log: &Path, at: Option<Real>, sets: &[String]) -> Result<(Lo
         (None, Some(first)) => return Err(RestartError::NoStateAt { path: log.into(), at: at.unwrap_or_default(), first: first["t"].as_f64().unwrap_or(f64::NAN) }),
     };
     let state: SavedState = serde_json::from_value(chosen.clone()).map_err(|e| RestartError::BadState { path: log.into(), message: e.to_string() })?;
-    let meta = record.metadata.get("bifirst.run").ok_or_else(|| RestartError::NoScene(log.into()))?;
-    let (Some(scene), Some(file)) = (meta.get("scene"), meta.get("scene_file")) else { return Err(RestartError::NoScene(log.into())) };
+    let run = record.messages("/run").first().ok_or_else(|| RestartError::NoScene(log.into()))?;
+    let (Some(scene), Some(file)) = (run["scene"].as_str(), run["scene_file"].as_str()) else { return Err(RestartError::NoScene(log.into())) };
     // Mesh files are named relative to the original scene file.
-    let loaded = crate::scene::parse_scene(Path::new(file), scene.clone(), sets)?;
+    let loaded = crate::scene::parse_scene(Path::new(file), scene.to_string(), sets)?;
     Ok((loaded, state))
 }

@@ -141,3 +141,30 @@ fn a_failed_run_continues_from_its_last_good_state_with_a_smaller_step() {
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("the mesh must not change on restart"), "{}", String::from_utf8_lossy(&o.stderr));
 }
+
+/// Found in review: a restart read its scene from the log's metadata, which only a finished log
+/// has, so a run killed by a crash (no summary section, no last state) could not continue from
+/// its cadence states. The scene now comes from `/run`, the log's first message.
+#[test]
+fn a_killed_run_continues_from_its_last_cadence_state() {
+    let killed = temp_path("restart_killed.mcap");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_bifirst"))
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .args(["run", "scenes/bar_impact.toml", "--backend", "cpu", "--quiet", "--set", "time.end=100.0", "--set", "output.state_every=20", "--out"])
+        .arg(&killed)
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_secs(3));
+    child.kill().unwrap();
+    child.wait().unwrap();
+    let record = bifirst::output::read_run(&killed).unwrap();
+    assert!(!record.has_summary && record.metadata.is_empty(), "a killed log has no summary section");
+    let (_, state) = restart_from(&killed, None, &[]).expect("the scene and a state are in the cut log");
+    assert!(state.step > 0 && state.step % 20 == 0, "a cadence state: step {}", state.step);
+    // 20 more steps of dt = 5e-5, the last one shortened.
+    let end = state.t + 19.5 * 5e-5;
+    let (loaded, state) = restart_from(&killed, None, &[format!("time.end={end}")]).unwrap();
+    let continued = temp_path("restart_killed_continued.mcap");
+    let summary = run_scene(&loaded, &continued, &RunOptions { restart: Some(state.clone()), ..Default::default() }, &mut Silent).expect("continues");
+    assert_eq!(summary.steps, state.step + 20);
+}

@@ -18,6 +18,8 @@ pub struct RunMessage {
     pub scene_name: String,
     /// The resolved scene after `--set`, with defaults, as TOML.
     pub scene: String,
+    /// The scene file it was read from (mesh files are named relative to it).
+    pub scene_file: String,
     /// `cpu` or `gpu`, after `--backend auto` has chosen.
     pub backend: String,
     /// `f64` or `f32`: the kernels' precision.

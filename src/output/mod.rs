@@ -11,7 +11,7 @@ pub mod summary;
 pub mod vtu;
 
 pub use mcap_log::{OutputError, RunLog};
-pub use read::{read_run, ReadError, RunRecord};
+pub use read::{read_run, read_run_topics, ReadError, RunRecord};
 pub use vtu::VtuSeries;
 
 /// `n` and the noun in the number it calls for: "1 body", "3 bodies".

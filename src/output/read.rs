@@ -72,6 +72,12 @@ impl RunRecord {
 /// crashed machine) is read as far as it goes: every message of its complete chunks, up to the
 /// first record the cut left unfinished.
 pub fn read_run(path: &Path) -> Result<RunRecord, ReadError> {
+    read_run_topics(path, |_| true)
+}
+
+/// [`read_run`] keeping only the messages of the topics `keep` accepts (the others are not
+/// decoded: a restart needs `/run` and `/state`, not every body's every step).
+pub fn read_run_topics(path: &Path, keep: impl Fn(&str) -> bool) -> Result<RunRecord, ReadError> {
     let bytes = std::fs::read(path).map_err(|source| ReadError::Io { path: path.into(), source })?;
     let mcap_err = |e: mcap::McapError| ReadError::Mcap { path: path.into(), message: e.to_string() };
     // A finished log ends with its footer; only then is a broken record an error.
@@ -85,6 +91,9 @@ pub fn read_run(path: &Path) -> Result<RunRecord, ReadError> {
             Err(e) => return Err(mcap_err(e)),
         };
         let topic = message.channel.topic.clone();
+        if !keep(&topic) {
+            continue;
+        }
         if let Some(schema) = &message.channel.schema {
             schemas.entry(topic.clone()).or_insert_with(|| ChannelSchema {
                 name: schema.name.clone(),

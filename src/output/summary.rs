@@ -1,7 +1,8 @@
 //! `bifirst summary`: the totals of one or more run logs as a table (or JSON).
 
 use super::read::{ReadError, RunRecord};
-use crate::run::ENERGY_GAIN_TOLERANCE;
+use crate::run::energy_gain;
+use crate::solver::Energies;
 use serde_json::Value;
 
 const PHASES: [&str; 6] = ["elements", "assembly", "transfer", "factorization", "solve", "contact"];
@@ -74,16 +75,16 @@ fn count(v: &Value) -> u64 {
     v.as_u64().unwrap_or(0)
 }
 
-/// The logged steps that created energy, by the run's own rule ([`ENERGY_GAIN_TOLERANCE`] of
-/// `max(|E(0)|, |E|, |W_ext|)`); with `output.every` > 1, each logged interval counts as a step.
+/// The logged steps that created energy, by the run's own rule ([`energy_gain`]); with
+/// `output.every` > 1, each logged interval counts as a step.
 fn energy_gain_steps(energy: &[Value]) -> u64 {
     let Some(first) = energy.first() else { return 0 };
-    let e0 = number(&first["total"]).abs();
+    let e0 = number(&first["total"]);
     energy
         .windows(2)
         .filter(|w| {
-            let scale = [e0, number(&w[1]["total"]).abs(), number(&w[1]["external_work"]).abs()].into_iter().fold(f64::MIN_POSITIVE, f64::max);
-            (number(&w[0]["numerical_dissipation"]) - number(&w[1]["numerical_dissipation"])) / scale > ENERGY_GAIN_TOLERANCE
+            let after = Energies { total: number(&w[1]["total"]), external_work: number(&w[1]["external_work"]), numerical_dissipation: number(&w[1]["numerical_dissipation"]), ..Default::default() };
+            energy_gain(e0, &after, number(&w[0]["numerical_dissipation"])).is_some()
         })
         .count() as u64
 }

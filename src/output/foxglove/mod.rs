@@ -76,20 +76,23 @@ fn entity(t: Real, id: &str, metadata: &[(&str, String)]) -> serde_json::Map<Str
     e
 }
 
-/// `LINE_LIST` (2) or `LINE_LOOP` (1) / `LINE_STRIP` (0), a fixed 2 px wide on screen.
-fn lines(kind: u8, points: &[Vec3], colors: &[[f32; 4]], solid: [f32; 4]) -> Value {
+/// `LINE_LIST` (2) or `LINE_LOOP` (1) / `LINE_STRIP` (0) of one colour, a fixed 2 px wide on
+/// screen; `indices` into `points` (empty: the points in order).
+fn lines(kind: u8, points: Vec<Value>, indices: Vec<usize>, solid: [f32; 4]) -> Value {
     json!({
         "type": kind, "pose": pose([0.0; 3], IDENTITY), "thickness": 2.0, "scale_invariant": true,
-        "points": points.iter().map(|&p| point(p)).collect::<Vec<_>>(), "color": color(solid),
-        "colors": colors.iter().map(|&c| color(c)).collect::<Vec<_>>(), "indices": [],
+        "points": points, "color": color(solid), "colors": [], "indices": indices,
     })
 }
 
-fn triangles(points: &[Vec3], colors: &[[f32; 4]], solid: [f32; 4]) -> Value {
-    json!({
-        "pose": pose([0.0; 3], IDENTITY), "points": points.iter().map(|&p| point(p)).collect::<Vec<_>>(), "color": color(solid),
-        "colors": colors.iter().map(|&c| color(c)).collect::<Vec<_>>(), "indices": [],
-    })
+/// A triangle list of one colour; `indices` as for [`lines`].
+fn triangles(points: Vec<Value>, indices: Vec<usize>, solid: [f32; 4]) -> Value {
+    json!({"pose": pose([0.0; 3], IDENTITY), "points": points, "color": color(solid), "colors": [], "indices": indices})
+}
+
+/// Points of an obstacle, in full precision.
+fn points(x: &[Vec3]) -> Vec<Value> {
+    x.iter().map(|&p| point(p)).collect()
 }
 
 /// Colour levels of a body's boundary in the view: facets are grouped by level, one primitive
@@ -199,11 +202,11 @@ impl View {
             .enumerate()
             .filter(|(_, l)| !l.points.is_empty())
             .map(|(k, l)| {
-                let c = color(colormap(k as Real / (COLOR_LEVELS - 1) as Real));
+                let c = colormap(k as Real / (COLOR_LEVELS - 1) as Real);
                 if self.dim == 2 {
-                    json!({"type": 2, "pose": pose([0.0; 3], IDENTITY), "thickness": 2.0, "scale_invariant": true, "points": l.points, "color": c, "colors": [], "indices": l.indices})
+                    lines(2, l.points, l.indices, c)
                 } else {
-                    json!({"pose": pose([0.0; 3], IDENTITY), "points": l.points, "color": c, "colors": [], "indices": l.indices})
+                    triangles(l.points, l.indices, c)
                 }
             })
             .collect();
@@ -254,27 +257,27 @@ impl View {
                 let [_, t1, t2] = frame(n, None, self.dim);
                 let c = |a: Real, b: Real| moved([0, 1, 2].map(|i| foot[i] + self.extent * (a * t1[i] + b * t2[i])));
                 if self.dim == 2 {
-                    e.insert("lines".into(), json!([lines(0, &[c(-1.0, 0.0), c(1.0, 0.0)], &[], GREY)]));
+                    e.insert("lines".into(), json!([lines(0, points(&[c(-1.0, 0.0), c(1.0, 0.0)]), vec![], GREY)]));
                 } else {
                     let square = [c(-1.0, -1.0), c(1.0, -1.0), c(1.0, 1.0), c(-1.0, -1.0), c(1.0, 1.0), c(-1.0, 1.0)];
-                    e.insert("triangles".into(), json!([triangles(&square, &[], GREY)]));
+                    e.insert("triangles".into(), json!([triangles(points(&square), vec![], GREY)]));
                 }
             }
             Shape::Box { min, max } => {
                 let corner = |k: usize| moved([0, 1, 2].map(|i| if k >> i & 1 == 1 { max[i] } else { min[i] }));
                 if self.dim == 2 {
-                    e.insert("lines".into(), json!([lines(1, &[corner(0), corner(1), corner(3), corner(2)], &[], GREY)]));
+                    e.insert("lines".into(), json!([lines(1, points(&[corner(0), corner(1), corner(3), corner(2)]), vec![], GREY)]));
                 } else {
                     // The 12 edges: corners that differ in one bit.
                     let edges: Vec<Vec3> = (0..8).flat_map(|k| (0..3).filter(move |i| k >> i & 1 == 0).flat_map(move |i| [k, k | 1 << i])).map(corner).collect();
-                    e.insert("lines".into(), json!([lines(2, &edges, &[], GREY)]));
+                    e.insert("lines".into(), json!([lines(2, points(&edges), vec![], GREY)]));
                 }
             }
-            Shape::Polygon(points) => {
-                e.insert("lines".into(), json!([lines(1, &points.iter().map(|&p| moved(p)).collect::<Vec<_>>(), &[], GREY)]));
+            Shape::Polygon(corners) => {
+                e.insert("lines".into(), json!([lines(1, corners.iter().map(|&p| point(moved(p))).collect(), vec![], GREY)]));
             }
-            Shape::Polyline(points) => {
-                e.insert("lines".into(), json!([lines(0, &points.iter().map(|&p| moved(p)).collect::<Vec<_>>(), &[], GREY)]));
+            Shape::Polyline(corners) => {
+                e.insert("lines".into(), json!([lines(0, corners.iter().map(|&p| point(moved(p))).collect(), vec![], GREY)]));
             }
         }
         Value::Object(e)
