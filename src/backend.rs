@@ -2,6 +2,8 @@
 //! or on the CPU. The rest of the engine asks [`Backend::apply`] to place each body's kernels
 //! and does not care where they went.
 
+use crate::contact::uzawa::Sweep;
+use crate::contact::Settings;
 use crate::gpu::{self, Gpu, GpuError, GpuWorld};
 use crate::precision::{Precision, PRECISION_NAME};
 use crate::solver::Simulation;
@@ -31,13 +33,48 @@ impl std::str::FromStr for BackendChoice {
     }
 }
 
-/// The backend request of a run: choice, adapter name (a case-insensitive substring) and
-/// precision (default: f64 when the adapter has it).
+/// Where the Uzawa sweeps run when the bodies are on a GPU (`bifirst run --uzawa`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum UzawaPlacement {
+    /// On the device when a Newton round's contact set is large enough to gain
+    /// ([`uzawa_on_device`]).
+    #[default]
+    Auto,
+    /// On the device whenever it can run them (Gauss-Seidel sweeps in f64).
+    Gpu,
+    Cpu,
+}
+
+impl UzawaPlacement {
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Auto => "auto",
+            Self::Gpu => "gpu",
+            Self::Cpu => "cpu",
+        }
+    }
+}
+
+impl std::str::FromStr for UzawaPlacement {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "auto" => Ok(Self::Auto),
+            "gpu" => Ok(Self::Gpu),
+            "cpu" => Ok(Self::Cpu),
+            _ => Err(format!("unknown Uzawa placement `{s}` (auto, gpu or cpu)")),
+        }
+    }
+}
+
+/// The backend request of a run: choice, adapter name (a case-insensitive substring),
+/// precision (default: f64 when the adapter has it) and where the Uzawa sweeps run.
 #[derive(Debug, Clone, Default)]
 pub struct BackendRequest {
     pub choice: BackendChoice,
     pub adapter: Option<String>,
     pub precision: Option<Precision>,
+    pub uzawa: UzawaPlacement,
 }
 
 impl BackendRequest {
@@ -56,6 +93,9 @@ impl BackendRequest {
         if let Some(precision) = self.precision {
             args.extend(["--precision".to_string(), precision.name().to_string()]);
         }
+        if self.uzawa != UzawaPlacement::Auto {
+            args.extend(["--uzawa".to_string(), self.uzawa.name().to_string()]);
+        }
         args
     }
 }
@@ -68,13 +108,15 @@ pub enum BackendError {
     CpuPrecision,
     #[error("--adapter needs a GPU backend (auto or gpu)")]
     CpuAdapter,
+    #[error("--uzawa gpu needs a GPU backend")]
+    CpuUzawa,
 }
 
 /// Where the kernels run.
 #[derive(Clone)]
 pub enum Backend {
     Cpu,
-    Gpu(Arc<Gpu>),
+    Gpu(Arc<Gpu>, UzawaPlacement),
 }
 
 /// Why `auto` runs on the CPU on a machine with a hardware GPU. Measured on an NVIDIA H100
@@ -83,6 +125,11 @@ pub enum Backend {
 /// love_laursen and a 54 000-dof block, because the factorisations, solves and contact stay on
 /// the CPU and the device passes add a fixed cost per Newton iteration.
 pub const AUTO_REASON_GPU: &str = "was measured slower than the CPU backend on every scene (doc/benchmarks.md); `--backend gpu` runs on it";
+
+/// `--uzawa auto` on a hardware adapter: the fewest contact points of a Newton round, and the
+/// fewest per colour on average, for the device's sweeps.
+pub const AUTO_UZAWA_POINTS: usize = 1000;
+pub const AUTO_UZAWA_POINTS_PER_COLOUR: usize = 64;
 
 /// The backend a request resolved to, with what the user should be told about the choice.
 pub struct Resolved {
@@ -101,12 +148,13 @@ impl Backend {
             let notice = gpu.adapter.software().then(|| {
                 format!("no hardware GPU: the GPU kernels run on the software adapter {} (slow; use --backend cpu for speed)", gpu.adapter.name)
             });
-            Resolved { backend: Backend::Gpu(Arc::new(gpu)), notice, reason: None }
+            Resolved { backend: Backend::Gpu(Arc::new(gpu), request.uzawa), notice, reason: None }
         };
         let cpu = |reason: String| Ok(Resolved { backend: Backend::Cpu, notice: None, reason: Some(format!("backend auto: {reason}; running on the CPU")) });
         match request.choice {
             BackendChoice::Cpu if request.precision == Some(Precision::F32) => Err(BackendError::CpuPrecision),
             BackendChoice::Cpu if request.adapter.is_some() => Err(BackendError::CpuAdapter),
+            BackendChoice::Cpu if request.uzawa == UzawaPlacement::Gpu => Err(BackendError::CpuUzawa),
             BackendChoice::Cpu => Ok(Resolved { backend: Backend::Cpu, notice: None, reason: None }),
             BackendChoice::Gpu => Ok(on_gpu(gpu::open(request.adapter.as_deref(), request.precision)?)),
             // An adapter named by the user is taken whatever it is.
@@ -122,7 +170,7 @@ impl Backend {
     pub fn name(&self) -> &'static str {
         match self {
             Backend::Cpu => "cpu",
-            Backend::Gpu(_) => "gpu",
+            Backend::Gpu(..) => "gpu",
         }
     }
 
@@ -130,7 +178,7 @@ impl Backend {
     pub fn precision(&self) -> &'static str {
         match self {
             Backend::Cpu => PRECISION_NAME,
-            Backend::Gpu(gpu) => gpu.precision.name(),
+            Backend::Gpu(gpu, _) => gpu.precision.name(),
         }
     }
 
@@ -138,7 +186,7 @@ impl Backend {
     pub fn adapter(&self) -> Option<String> {
         match self {
             Backend::Cpu => None,
-            Backend::Gpu(gpu) => Some(gpu.adapter.line()),
+            Backend::Gpu(gpu, _) => Some(gpu.adapter.line()),
         }
     }
 
@@ -146,17 +194,36 @@ impl Backend {
     pub fn describe(&self) -> String {
         match self {
             Backend::Cpu => format!("cpu ({PRECISION_NAME})"),
-            Backend::Gpu(gpu) => format!("gpu on {} in {}", gpu.adapter.line(), gpu.precision.name()),
+            Backend::Gpu(gpu, _) => format!("gpu on {} in {}", gpu.adapter.line(), gpu.precision.name()),
         }
     }
 
     /// Places every body's element and assembly kernels (the CPU twins are the default): on a
     /// GPU, all bodies go into one device world.
     pub fn apply(&self, sim: &mut Simulation) -> Result<(), GpuError> {
-        if let Backend::Gpu(gpu) = self {
+        if let Backend::Gpu(gpu, uzawa) = self {
             let bodies: Vec<_> = sim.bodies.iter().map(|b| b.world_body()).collect();
-            sim.world = Some(GpuWorld::new(gpu.clone(), &bodies)?);
+            let mut world = GpuWorld::new(gpu.clone(), &bodies)?;
+            world.uzawa = *uzawa;
+            sim.world = Some(world);
         }
         Ok(())
+    }
+}
+
+/// Whether a Newton round's contact problems, `points` points in at most `colours` colours,
+/// take their Uzawa sweeps on the device of `world`. Only Gauss-Seidel sweeps in f64 can: the
+/// device has no Jacobi kernel, and in f32 the iterations cannot reach the contact tolerance.
+/// `auto` takes the device when a colour holds on average at least
+/// [`AUTO_UZAWA_POINTS_PER_COLOUR`] points and the round at least [`AUTO_UZAWA_POINTS`], on a
+/// hardware adapter only (measured, doc/benchmarks.md, "Contact on the device").
+pub fn uzawa_on_device(world: &GpuWorld, settings: &Settings, points: usize, colours: usize) -> bool {
+    if settings.sweep != Sweep::GaussSeidel || world.precision() != Precision::F64 {
+        return false;
+    }
+    match world.uzawa {
+        UzawaPlacement::Gpu => true,
+        UzawaPlacement::Cpu => false,
+        UzawaPlacement::Auto => !world.software() && points >= AUTO_UZAWA_POINTS && points >= AUTO_UZAWA_POINTS_PER_COLOUR * colours,
     }
 }

@@ -2,7 +2,7 @@
 //! accuracy, state, check, plot, summary, bench and info.
 
 use anyhow::Result;
-use bifirst::backend::{BackendChoice, BackendRequest};
+use bifirst::backend::{BackendChoice, BackendRequest, UzawaPlacement};
 use bifirst::bench::{bench_devices, run_bench, BenchOptions};
 use bifirst::output::plot::{self, PlotOptions};
 use bifirst::output::{read_run, summary};
@@ -217,9 +217,9 @@ enum Command {
 /// Where a run's kernels go (`run` and `sweep`).
 #[derive(clap::Args)]
 struct BackendArgs {
-    /// Where the element and assembly kernels run: `auto` takes a hardware GPU when the scene
-    /// is large enough to gain (a body of 50 000 dofs or more), else the CPU; `gpu` takes a
-    /// hardware GPU, else a software adapter (lavapipe, slow: CI's GPU path), with a notice.
+    /// Where the element and assembly kernels run: `auto` runs on the CPU, which was measured
+    /// faster on every scene (`bifirst info` says why), unless `--adapter` names one; `gpu` takes
+    /// a hardware GPU, else a software adapter (lavapipe, slow: CI's GPU path), with a notice.
     #[arg(long, default_value = "auto", value_parser = parse_backend)]
     backend: BackendChoice,
     /// A GPU adapter by name (case-insensitive substring; `bifirst info` lists them).
@@ -228,11 +228,16 @@ struct BackendArgs {
     /// GPU kernel precision, f32 or f64 (default: f64 when the adapter has it).
     #[arg(long, value_parser = parse_precision)]
     precision: Option<Precision>,
+    /// With the kernels on a GPU, where the Uzawa sweeps of the contact problems run: `auto`
+    /// takes the device for large contact sets on a hardware GPU, `gpu` whenever it can
+    /// (Gauss-Seidel in f64), `cpu` never.
+    #[arg(long, default_value = "auto", value_parser = parse_uzawa)]
+    uzawa: UzawaPlacement,
 }
 
 impl From<BackendArgs> for BackendRequest {
     fn from(a: BackendArgs) -> Self {
-        BackendRequest { choice: a.backend, adapter: a.adapter, precision: a.precision }
+        BackendRequest { choice: a.backend, adapter: a.adapter, precision: a.precision, uzawa: a.uzawa }
     }
 }
 
@@ -352,6 +357,10 @@ fn bench_command(options: BenchOptions, backend: BackendChoice, adapter: Option<
 }
 
 fn parse_backend(s: &str) -> Result<BackendChoice, String> {
+    s.parse()
+}
+
+fn parse_uzawa(s: &str) -> Result<UzawaPlacement, String> {
     s.parse()
 }
 
@@ -745,7 +754,7 @@ fn main() -> ExitCode {
             println!("build: {} profile, rustc target {}-{}", if cfg!(debug_assertions) { "debug" } else { "release" }, std::env::consts::ARCH, std::env::consts::OS);
             println!("solver precision: {} (factorisation, time stepping, contact)", bifirst::precision::PRECISION_NAME);
             println!("WGSL kernels: {}", bifirst::gpu::shaders::SHADERS.iter().map(|(name, _)| *name).collect::<Vec<_>>().join(", "));
-            println!("  `run --backend gpu` runs the element, assembly and energy kernels on the adapter; the contact loop stays on the CPU");
+            println!("  `run --backend gpu` runs the element, assembly and energy kernels on the adapter, and the Uzawa sweeps of large contact sets (`--uzawa`); factorisations, solves and contact detection stay on the CPU");
             println!("  `run --backend auto` runs on the CPU: a hardware GPU {}", bifirst::backend::AUTO_REASON_GPU);
             println!("worker threads: {} (--threads)", rayon::current_num_threads());
             let adapters = bifirst::gpu::describe_adapters();

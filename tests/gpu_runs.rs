@@ -58,7 +58,7 @@ fn gpu_available(test: &str) -> bool {
 }
 
 fn options(choice: BackendChoice, precision: Option<Precision>) -> RunOptions {
-    RunOptions { backend: BackendRequest { choice, adapter: None, precision }, ..Default::default() }
+    RunOptions { backend: BackendRequest { choice, adapter: None, precision, ..Default::default() }, ..Default::default() }
 }
 
 /// Runs `path` on the CPU and on the GPU in both precisions; checks every step's energies.

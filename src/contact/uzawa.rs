@@ -2,7 +2,12 @@
 //! every point, solved by Uzawa iterations. Two sweeps: Gauss-Seidel (each point takes its
 //! predictor/corrector steps with the latest reactions of the others, as in Jean's NSCD; robust
 //! when a stiff body couples its contact points strongly) and Jacobi (every point steps from the
-//! same iterate: parallel, as on the GPU, but slow when the coupling is strong).
+//! same iterate: parallel, but slow when the coupling is strong).
+//!
+//! Gauss-Seidel visits the points colour by colour ([`Colours`]): no two points of a colour share
+//! a body, so their steps do not see each other and a colour can run in parallel, on the CPU's
+//! threads or as one dispatch of the `uzawa_sweep` kernel, with the iterates of a sequential
+//! sweep in that order.
 //!
 //! `W` (the Delassus operator `H K̄⁻¹ Hᵀ / (θ dt)` in contact frames) is stored by blocks: one
 //! `3 x 3` block for each pair of points that share a body.
@@ -10,6 +15,7 @@
 use super::geometry::norm;
 use super::law::uzawa_step;
 use crate::precision::Real;
+use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Block-sparse Delassus operator.
@@ -78,8 +84,120 @@ pub enum Sweep {
 }
 
 /// Local Uzawa steps per point and Gauss-Seidel visit: enough to settle the point against the
-/// others' current reactions.
-const LOCAL_STEPS: usize = 25;
+/// others' current reactions (`LOCAL_STEPS` of the `uzawa_sweep` kernel).
+pub const LOCAL_STEPS: usize = 25;
+
+/// A point's local steps stop once a step moves its reaction by less than this share of the
+/// Uzawa tolerance (relative to `max(|r|, floor)`).
+pub const SETTLE: Real = 1e-3;
+
+/// Points of a colour below which a colour is swept on one thread (the threads' start-up would
+/// cost more than the steps).
+const PARALLEL_COLOUR: usize = 256;
+
+/// The points of a contact problem in colours: no two points of a colour share a body (their
+/// block of `W` is zero), so their Gauss-Seidel steps are independent.
+#[derive(Debug, Clone, Default)]
+pub struct Colours {
+    /// The points, colour by colour, each colour in point order.
+    pub order: Vec<u32>,
+    /// Colour `c` is `order[starts[c]..starts[c + 1]]`.
+    pub starts: Vec<u32>,
+}
+
+impl Colours {
+    /// Greedy colouring in point order: each point takes the lowest colour that no point of its
+    /// row of `W` has taken.
+    pub fn of(w: &Delassus) -> Self {
+        let n = w.rows.len();
+        let mut colour = vec![u32::MAX; n];
+        // `seen[c] == i + 1`: colour c is taken by a neighbour of point i.
+        let mut seen: Vec<usize> = Vec::new();
+        let mut count = 0u32;
+        for i in 0..n {
+            for &(j, _) in &w.rows[i] {
+                let c = colour[j as usize];
+                if c != u32::MAX {
+                    seen[c as usize] = i + 1;
+                }
+            }
+            let c = (0..count).find(|&c| seen[c as usize] != i + 1).unwrap_or(count);
+            if c == count {
+                count += 1;
+                seen.push(0);
+            }
+            colour[i] = c;
+        }
+        let mut starts = vec![0u32; count as usize + 1];
+        for &c in &colour {
+            starts[c as usize + 1] += 1;
+        }
+        for c in 0..count as usize {
+            starts[c + 1] += starts[c];
+        }
+        let mut next = starts.clone();
+        let mut order = vec![0u32; n];
+        for (i, &c) in colour.iter().enumerate() {
+            order[next[c as usize] as usize] = i as u32;
+            next[c as usize] += 1;
+        }
+        Self { order, starts }
+    }
+
+    pub fn count(&self) -> usize {
+        self.starts.len().saturating_sub(1)
+    }
+
+    /// The points of colour `c`.
+    pub fn colour(&self, c: usize) -> &[u32] {
+        &self.order[self.starts[c] as usize..self.starts[c + 1] as usize]
+    }
+}
+
+/// The Gauss-Seidel visit of point `i`: up to [`LOCAL_STEPS`] predictor/corrector steps against
+/// the others' reactions in `r`, until a step moves the reaction by at most
+/// `settle max(|r_i|, floor)`. The body of the `uzawa_sweep` kernel.
+pub fn gauss_seidel_point(w: &Delassus, l: &Local, i: usize, r: &[[Real; 3]], settle: Real, floor: Real) -> [Real; 3] {
+    let (wr, own) = w.others_times(i, r);
+    let base = [l.v_free[0] + wr[0] + l.shift, l.v_free[1] + wr[1], l.v_free[2] + wr[2]];
+    let mut ri = r[i];
+    for _ in 0..LOCAL_STEPS {
+        let mut v = base;
+        if let Some(b) = own {
+            add_block_times(&mut v, &w.blocks[b as usize], &ri);
+        }
+        let stepped = uzawa_step(ri, v, l.mu, l.rho).0;
+        let moved = norm([stepped[0] - ri[0], stepped[1] - ri[1], stepped[2] - ri[2]]);
+        ri = stepped;
+        if moved <= settle * norm(ri).max(floor) {
+            break;
+        }
+    }
+    ri
+}
+
+/// One colour of a Gauss-Seidel sweep (the CPU twin of the `uzawa_sweep` kernel, one dispatch):
+/// every point of `points` visited against the same `r`, which is then updated; the changes go
+/// into `dr`. A large colour is visited on the thread pool.
+#[allow(clippy::too_many_arguments)]
+pub fn uzawa_sweep(w: &Delassus, local: &[Local], points: &[u32], r: &mut [[Real; 3]], dr: &mut [[Real; 3]], settle: Real, floor: Real) {
+    let mut update = |i: usize, next: [Real; 3], r: &mut [[Real; 3]]| {
+        dr[i] = [next[0] - r[i][0], next[1] - r[i][1], next[2] - r[i][2]];
+        r[i] = next;
+    };
+    if points.len() < PARALLEL_COLOUR {
+        // In place: no point of the colour reads another's reaction.
+        for &i in points {
+            let next = gauss_seidel_point(w, &local[i as usize], i as usize, r, settle, floor);
+            update(i as usize, next, r);
+        }
+        return;
+    }
+    let stepped: Vec<[Real; 3]> = points.par_iter().with_min_len(PARALLEL_COLOUR / 4).map(|&i| gauss_seidel_point(w, &local[i as usize], i as usize, r, settle, floor)).collect();
+    for (&i, next) in points.iter().zip(stepped) {
+        update(i as usize, next, r);
+    }
+}
 
 /// Per-point data of the local problem.
 #[derive(Debug, Clone, Copy)]
@@ -138,21 +256,49 @@ impl NodalMap {
     }
 }
 
-/// Uzawa iterations from the reactions in `r` until the estimated distance to the fixed point,
-/// in nodal forces, is below `tolerance * max(largest nodal force, floor)`, or `max_iterations`,
-/// or until `stop` is set (an interrupt: then not converged).
+/// The stopping rule of the Uzawa iterations, judged after every sweep on the largest change
+/// of a nodal force (see [`NodalMap`]).
 ///
 /// The sweep contracts linearly with a factor `q` that can be close to 1 when the points are
 /// strongly coupled (a stiff body), so a small change is not a small error: the error is
 /// estimated as `change q / (1 - q)`, with `q` the ratio of the last two changes.
+#[derive(Debug, Clone, Copy)]
+pub struct Judge {
+    tolerance: Real,
+    floor: Real,
+    previous: Real,
+}
+
+impl Judge {
+    pub fn new(tolerance: Real, floor: Real) -> Self {
+        Self { tolerance, floor, previous: Real::INFINITY }
+    }
+
+    /// The outcome after sweep `iteration`, whose largest nodal-force change is `change` and
+    /// largest nodal force `size`.
+    pub fn after(&mut self, iteration: usize, change: Real, size: Real) -> Outcome {
+        let (tolerance, scale) = (self.tolerance, size.max(self.floor).max(Real::MIN_POSITIVE));
+        let q = change / self.previous;
+        self.previous = change;
+        let error = if q < 1.0 { change * q / (1.0 - q) } else { Real::INFINITY };
+        // Far below the tolerance the ratio is round-off; a change that small is converged.
+        let converged = change <= 1e-3 * tolerance * scale || (change <= tolerance * scale && error <= tolerance * scale);
+        Outcome { iterations: iteration, converged, change: change / scale }
+    }
+}
+
+/// Uzawa iterations from the reactions in `r` until the estimated distance to the fixed point,
+/// in nodal forces, is below `tolerance * max(largest nodal force, floor)` ([`Judge`]), or
+/// `max_iterations`, or until `stop` is set (an interrupt: then not converged). Gauss-Seidel
+/// sweeps visit the points by `colours`.
 #[allow(clippy::too_many_arguments)]
-pub fn solve(w: &Delassus, local: &[Local], nodal: &NodalMap, r: &mut [[Real; 3]], sweep: Sweep, tolerance: Real, floor: Real, max_iterations: usize, stop: Option<&AtomicBool>) -> Outcome {
+pub fn solve(w: &Delassus, colours: &Colours, local: &[Local], nodal: &NodalMap, r: &mut [[Real; 3]], sweep: Sweep, tolerance: Real, floor: Real, max_iterations: usize, stop: Option<&AtomicBool>) -> Outcome {
     let n = local.len();
     let mut next = vec![[0.0; 3]; n];
     let mut dr = vec![[0.0; 3]; n];
     let mut scratch = Vec::new();
     let mut outcome = Outcome::default();
-    let mut previous = Real::INFINITY;
+    let mut judge = Judge::new(tolerance, floor);
     for it in 1..=max_iterations {
         if stop.is_some_and(|s| s.load(Ordering::Relaxed)) {
             break;
@@ -171,38 +317,14 @@ pub fn solve(w: &Delassus, local: &[Local], nodal: &NodalMap, r: &mut [[Real; 3]
                 r.copy_from_slice(&next);
             }
             Sweep::GaussSeidel => {
-                for i in 0..n {
-                    let l = &local[i];
-                    let (wr, own) = w.others_times(i, r);
-                    let base = [l.v_free[0] + wr[0] + l.shift, l.v_free[1] + wr[1], l.v_free[2] + wr[2]];
-                    let start = r[i];
-                    let mut ri = start;
-                    for _ in 0..LOCAL_STEPS {
-                        let mut v = base;
-                        if let Some(b) = own {
-                            add_block_times(&mut v, &w.blocks[b as usize], &ri);
-                        }
-                        let stepped = uzawa_step(ri, v, l.mu, l.rho).0;
-                        let moved = norm([stepped[0] - ri[0], stepped[1] - ri[1], stepped[2] - ri[2]]);
-                        ri = stepped;
-                        if moved <= 1e-3 * tolerance * norm(ri).max(floor) {
-                            break;
-                        }
-                    }
-                    r[i] = ri;
-                    dr[i] = [ri[0] - start[0], ri[1] - start[1], ri[2] - start[2]];
+                for c in 0..colours.count() {
+                    uzawa_sweep(w, local, colours.colour(c), r, &mut dr, SETTLE * tolerance, floor);
                 }
             }
         }
         let (change, size) = nodal.change(&dr, r, &mut scratch);
-        let scale = size.max(floor).max(Real::MIN_POSITIVE);
-        let q = change / previous;
-        previous = change;
-        let error = if q < 1.0 { change * q / (1.0 - q) } else { Real::INFINITY };
-        outcome = Outcome { iterations: it, converged: false, change: change / scale };
-        // Far below the tolerance the ratio is round-off; a change that small is converged.
-        if change <= 1e-3 * tolerance * scale || (change <= tolerance * scale && error <= tolerance * scale) {
-            outcome.converged = true;
+        outcome = judge.after(it, change, size);
+        if outcome.converged {
             break;
         }
     }

@@ -1,6 +1,7 @@
 //! The WGSL sources of `shaders/`, compiled into the binary, and how a kernel's module is
 //! composed: the precision prelude, the batch layout (`include/batch.wgsl`) for the kernels that
-//! run over a batch of bodies, then for element kernels the element constants and the shared
+//! run over a batch of bodies, the contact law (`include/contact_law.wgsl`) for the Uzawa
+//! kernels, then for element kernels the element constants and the shared
 //! includes of `shaders/include/`, then the kernel.
 
 use crate::mesh::ElementKind;
@@ -15,11 +16,13 @@ pub const SHADERS: &[(&str, &str)] = &[
     ("peak_copy", include_str!("../../shaders/peak_copy.wgsl")),
     ("peak_fma", include_str!("../../shaders/peak_fma.wgsl")),
     ("uzawa_step", include_str!("../../shaders/uzawa_step.wgsl")),
+    ("uzawa_sweep", include_str!("../../shaders/uzawa_sweep.wgsl")),
 ];
 
 /// The shared includes of `shaders/include/`.
 pub const INCLUDES: &[(&str, &str)] = &[
     ("batch", include_str!("../../shaders/include/batch.wgsl")),
+    ("contact_law", include_str!("../../shaders/include/contact_law.wgsl")),
     ("element", include_str!("../../shaders/include/element.wgsl")),
     ("ln_f32", include_str!("../../shaders/include/ln_f32.wgsl")),
     ("ln_f64", include_str!("../../shaders/include/ln_f64.wgsl")),
@@ -52,6 +55,11 @@ pub fn is_element_kernel(kernel: &str) -> bool {
     kernel.starts_with("element_")
 }
 
+/// Whether a kernel steps contact points with the law of `include/contact_law.wgsl`.
+pub fn is_contact_kernel(kernel: &str) -> bool {
+    kernel.starts_with("uzawa_")
+}
+
 /// Whether a kernel runs over the members of a batch (`shaders/include/batch.wgsl`).
 pub fn is_batch_kernel(kernel: &str) -> bool {
     is_element_kernel(kernel) || kernel.starts_with("assemble_")
@@ -67,6 +75,9 @@ pub fn source(kernel: &str, precision: Precision, variant: Option<ElementVariant
     let mut module = precision.wgsl_prelude();
     if is_batch_kernel(kernel) {
         module += include("batch")?;
+    }
+    if is_contact_kernel(kernel) {
+        module += include("contact_law")?;
     }
     match (is_element_kernel(kernel), variant) {
         (false, _) => {}

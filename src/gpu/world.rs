@@ -9,14 +9,18 @@
 //! residuals of the evaluated bodies, and the stiffness values only of the bodies whose tangent
 //! was asked for (those that refactorise).
 
+use super::uzawa_sweep::{UzawaProblem, UzawaSweeps};
 use super::types::{Active, Coefficients, DofOut, DofStep, MaterialParams, MemberRange, MODE_FORCES, MODE_TANGENT};
 use super::{ElementVariant, Gpu, GpuError};
 use crate::assembly::{element_out_stride, GatherMap, StiffnessPattern};
+use crate::backend::UzawaPlacement;
+use crate::contact::uzawa::Outcome;
 use crate::element::ReferenceGeometry;
 use crate::material::Model;
 use crate::mesh::Mesh;
 use crate::precision::{Precision, Real};
 use crate::solver::PhaseTimes;
+use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 use std::time::Instant;
 use wgpu::util::DeviceExt;
@@ -225,6 +229,10 @@ pub struct GpuWorld {
     readback: Buffer,
     traffic: Traffic,
     submits: u64,
+    /// The Uzawa sweeps, made when contact first runs on the device.
+    contact: Option<UzawaSweeps>,
+    /// Where the Uzawa sweeps run (set by the backend).
+    pub uzawa: UzawaPlacement,
 }
 
 fn buffer(gpu: &Gpu, label: &str, bytes: usize, usage: BufferUsages) -> Buffer {
@@ -287,11 +295,16 @@ impl GpuWorld {
             batches.push(batch);
         }
         let readback = buffer(&gpu, "readback", readback_bytes, BufferUsages::MAP_READ | BufferUsages::COPY_DST);
-        Ok(Self { gpu, batches, place, coefficients, readback, traffic, submits: 0 })
+        Ok(Self { gpu, batches, place, coefficients, readback, traffic, submits: 0, contact: None, uzawa: UzawaPlacement::default() })
     }
 
     pub fn precision(&self) -> Precision {
         self.gpu.precision
+    }
+
+    /// Whether the device is a software adapter (lavapipe).
+    pub fn software(&self) -> bool {
+        self.gpu.adapter.software()
     }
 
     /// Bytes moved since the last call (the upload of the bodies' data counts in the first).
@@ -299,9 +312,26 @@ impl GpuWorld {
         std::mem::take(&mut self.traffic)
     }
 
-    /// Queue submits so far: one per [`GpuWorld::evaluate`] and per [`GpuWorld::element_energies`].
+    /// Queue submits so far: one per [`GpuWorld::evaluate`] and per [`GpuWorld::element_energies`],
+    /// and one per chunk of Uzawa sweeps ([`GpuWorld::solve_contact`]).
     pub fn submits(&self) -> u64 {
-        self.submits
+        self.submits + self.contact.as_ref().map_or(0, |c| c.submits)
+    }
+
+    /// The contact problems of a Newton round, solved by Gauss-Seidel sweeps on the device
+    /// ([`UzawaSweeps::solve`]); the time counts as `contact`.
+    pub fn solve_contact(&mut self, problems: &mut [UzawaProblem], stop: Option<&AtomicBool>, times: &mut PhaseTimes) -> Result<Vec<Outcome>, GpuError> {
+        let started = Instant::now();
+        if self.contact.is_none() {
+            self.contact = Some(UzawaSweeps::new(self.gpu.clone())?);
+        }
+        let sweeps = self.contact.as_mut().expect("made above");
+        let (up, down) = sweeps.traffic;
+        let outcomes = sweeps.solve(problems, stop);
+        self.traffic.up += sweeps.traffic.0 - up;
+        self.traffic.down += sweeps.traffic.1 - down;
+        times.contact += started.elapsed().as_secs_f64();
+        outcomes
     }
 
     fn upload(&mut self, buffer: &Buffer, offset: u64, bytes: &[u8]) {

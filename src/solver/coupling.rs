@@ -8,8 +8,9 @@
 
 use super::body::{Body, StepParams};
 use super::PhaseTimes;
-use crate::contact::uzawa::{self, Delassus, Local, NodalMap, Outcome};
+use crate::contact::uzawa::{self, Colours, Delassus, Local, NodalMap, Outcome};
 use crate::contact::{uzawa_step, ContactPoint, Settings, Status};
+use crate::gpu::uzawa_sweep::UzawaProblem;
 use crate::precision::Real;
 use std::collections::HashMap;
 use std::sync::atomic::AtomicBool;
@@ -25,6 +26,8 @@ const COLUMN_BATCH: usize = 64;
 pub struct ContactStep {
     pub points: Vec<ContactPoint>,
     pub delassus: Delassus,
+    /// The order of the Gauss-Seidel sweeps (from the pattern of `delassus`).
+    pub colours: Colours,
     /// Per body: the points with a node on it, and for each of them the block index of every
     /// pair (row-major over that list).
     per_body: Vec<(Vec<u32>, Vec<u32>)>,
@@ -105,6 +108,7 @@ impl ContactStep {
             h.push(entries);
         }
         delassus.blocks = vec![[0.0; 9]; index.len()];
+        let colours = Colours::of(&delassus);
         // Reactions and step lengths carry over from the last step for the points found again.
         let previous: Vec<([Real; 3], Real)> = points.iter().map(|c| warm.get(&c.key()).copied().unwrap_or(([0.0; 3], 0.0))).collect();
         let r = previous.iter().map(|p| p.0).collect();
@@ -120,7 +124,7 @@ impl ContactStep {
             nodal.terms.push(terms.collect());
         }
         nodal.nodes = slots.len();
-        Self { points, delassus, per_body, h, r, local, nodal, dim, velocity_scale, floor, delassus_current: false }
+        Self { points, delassus, colours, per_body, h, r, local, nodal, dim, velocity_scale, floor, delassus_current: false }
     }
 
     pub fn is_empty(&self) -> bool {
@@ -174,16 +178,15 @@ impl ContactStep {
         worst / size.max(self.floor).max(Real::MIN_POSITIVE)
     }
 
-    /// One Newton increment of every body with the reactions solved on the linearised contact
-    /// problem. `refactorized`: some body has a new factorisation since the last increment, so
-    /// the Delassus blocks are rebuilt (they are kept otherwise). Returns the Uzawa outcome and
-    /// the relative change of the contact forces.
-    pub fn newton_increment(&mut self, bodies: &mut [Body], p: &StepParams, settings: &Settings, refactorized: bool, stop: Option<&AtomicBool>, times: &mut PhaseTimes) -> (Outcome, Real) {
+    /// The linearised contact problem of a Newton increment: the free velocities (the trial
+    /// velocity plus the contact-free increment) and, when `refactorized` (some body has a new
+    /// factorisation since the last increment) or not built yet for this step, the Delassus
+    /// blocks.
+    pub fn prepare(&mut self, bodies: &mut [Body], p: &StepParams, settings: &Settings, refactorized: bool, times: &mut PhaseTimes) {
         let dim = self.dim;
         let theta_dt = p.theta * p.dt;
         let started = std::time::Instant::now();
         let solve_before = times.solve;
-        // Free velocities: the trial velocity plus the contact-free increment.
         let mut x0: Vec<Vec<Real>> = Vec::with_capacity(bodies.len());
         for body in bodies.iter_mut() {
             let mut rhs = vec![0.0; body.dofs.free_count];
@@ -206,8 +209,37 @@ impl ContactStep {
         if refactorized || !self.delassus_current {
             self.build_delassus(bodies, theta_dt, settings, times);
         }
-        let floor = self.floor;
-        let outcome = uzawa::solve(&self.delassus, &self.local, &self.nodal, &mut self.r, settings.sweep, INNER_TOLERANCE * settings.tolerance, floor, settings.max_iterations, stop);
+        // The back-substitutions are counted as solves, the rest as contact.
+        times.contact += started.elapsed().as_secs_f64() - (times.solve - solve_before);
+    }
+
+    /// The Uzawa iterations of the prepared problem on the CPU.
+    pub fn solve_on_cpu(&mut self, settings: &Settings, stop: Option<&AtomicBool>, times: &mut PhaseTimes) -> Outcome {
+        let started = std::time::Instant::now();
+        let outcome = uzawa::solve(&self.delassus, &self.colours, &self.local, &self.nodal, &mut self.r, settings.sweep, INNER_TOLERANCE * settings.tolerance, self.floor, settings.max_iterations, stop);
+        times.contact += started.elapsed().as_secs_f64();
+        outcome
+    }
+
+    /// The prepared problem as the device's Uzawa sweeps take it (Gauss-Seidel only).
+    pub fn problem(&mut self, settings: &Settings) -> UzawaProblem<'_> {
+        UzawaProblem {
+            w: &self.delassus,
+            colours: &self.colours,
+            local: &self.local,
+            nodal: &self.nodal,
+            r: &mut self.r,
+            tolerance: INNER_TOLERANCE * settings.tolerance,
+            floor: self.floor,
+            max_iterations: settings.max_iterations,
+        }
+    }
+
+    /// Applies the solved reactions: each body's contact forces and Newton increment
+    /// `Δu = K̄⁻¹(-g + Hᵀ r)`. Returns the relative change of the contact forces.
+    pub fn apply(&mut self, bodies: &mut [Body], times: &mut PhaseTimes) -> Real {
+        let started = std::time::Instant::now();
+        let solve_before = times.solve;
         // The change is judged on the nodal forces H^T r: with redundant constraints (two passes
         // over matching nodes) r itself is not unique, but H^T r is.
         let before: Vec<Vec<Real>> = bodies.iter().map(|b| b.contact_force.clone()).collect();
@@ -222,9 +254,8 @@ impl ContactStep {
         for body in bodies.iter_mut() {
             body.newton_step(times);
         }
-        // The back-substitutions are counted as solves, the rest as contact.
         times.contact += started.elapsed().as_secs_f64() - (times.solve - solve_before);
-        (outcome, change / size.max(floor).max(Real::MIN_POSITIVE))
+        change / size.max(self.floor).max(Real::MIN_POSITIVE)
     }
 
     /// The Delassus blocks `W = H K̄⁻¹ Hᵀ / (θ dt)` by back-substitution with each body's

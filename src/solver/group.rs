@@ -7,6 +7,7 @@
 use super::body::{coefficients, Body, StepFailure, StepParams};
 use super::coupling::ContactStep;
 use super::PhaseTimes;
+use crate::contact::uzawa::Outcome;
 use crate::contact::{ContactPoint, Master, Settings};
 use crate::gpu::{ElementFailure, Evaluation, GpuWorld};
 use crate::precision::{Precision, Real};
@@ -228,9 +229,19 @@ impl Group {
         Ok(false)
     }
 
-    /// One Newton increment: the factorisations that are due, then the increment of every body,
-    /// through the contact coupling when the group has contact points.
+    /// One Newton increment on the CPU: [`Group::begin_increment`], the contact problem's Uzawa
+    /// iterations, [`Group::end_increment`].
     fn increment(&mut self, c: &Context) -> Result<(), StepFailure> {
+        if self.begin_increment(c)? {
+            let outcome = self.contact.solve_on_cpu(c.settings.expect("contact settings"), c.interrupt, &mut self.newton.report.wall);
+            self.end_increment(c, outcome)?;
+        }
+        Ok(())
+    }
+
+    /// The factorisations that are due, then either the increment of every body (no contact
+    /// points) or the contact problem prepared: `true` when it waits to be solved.
+    fn begin_increment(&mut self, c: &Context) -> Result<bool, StepFailure> {
         if c.interrupt.is_some_and(|f| f.load(Ordering::SeqCst)) {
             return Err(StepFailure::Interrupted);
         }
@@ -245,17 +256,26 @@ impl Group {
             for body in bodies.iter_mut() {
                 body.newton_step(&mut state.report.wall);
             }
-        } else {
-            let (outcome, change) = contact.newton_increment(bodies, p, c.settings.expect("contact settings"), refactorized, c.interrupt, &mut state.report.wall);
-            if c.interrupt.is_some_and(|f| f.load(Ordering::SeqCst)) {
-                return Err(StepFailure::Interrupted);
-            }
-            state.report.uzawa_iterations += outcome.iterations;
-            state.uzawa_ran = true;
-            state.uzawa_converged = outcome.converged;
-            state.uzawa_stalls = if outcome.converged { 0 } else { state.uzawa_stalls + 1 };
-            state.last_change = Some(change);
+            state.report.iterations += 1;
+            return Ok(false);
         }
+        contact.prepare(bodies, p, c.settings.expect("contact settings"), refactorized, &mut state.report.wall);
+        Ok(true)
+    }
+
+    /// The increment after the contact problem is solved: the reactions applied, the bodies
+    /// incremented.
+    fn end_increment(&mut self, c: &Context, outcome: Outcome) -> Result<(), StepFailure> {
+        if c.interrupt.is_some_and(|f| f.load(Ordering::SeqCst)) {
+            return Err(StepFailure::Interrupted);
+        }
+        let state = &mut self.newton;
+        let change = self.contact.apply(&mut self.bodies, &mut state.report.wall);
+        state.report.uzawa_iterations += outcome.iterations;
+        state.uzawa_ran = true;
+        state.uzawa_converged = outcome.converged;
+        state.uzawa_stalls = if outcome.converged { 0 } else { state.uzawa_stalls + 1 };
+        state.last_change = Some(change);
         state.report.iterations += 1;
         Ok(())
     }
@@ -323,15 +343,70 @@ fn newton_in_lockstep(groups: &mut [Group], world: &mut GpuWorld, c: &Context, t
         }
         let p = c.p;
         let tangents = device_pass(groups, &continuing, world, p, true, &|b: &Body| b.needs_tangent(p), times);
-        let incremented: Vec<Option<Result<(), StepFailure>>> =
-            groups.par_iter_mut().zip(tangents).zip(&continuing).map(|((g, tangents), &go)| go.then(|| tangents.and_then(|()| g.increment(c)))).collect();
-        for (k, result) in incremented.into_iter().enumerate() {
+        let begun: Vec<Option<Result<bool, StepFailure>>> =
+            groups.par_iter_mut().zip(tangents).zip(&continuing).map(|((g, tangents), &go)| go.then(|| tangents.and_then(|()| g.begin_increment(c)))).collect();
+        let mut waiting = vec![false; groups.len()];
+        for (k, result) in begun.into_iter().enumerate() {
+            match result {
+                Some(Err(e)) => outcome[k] = Some(Err(e)),
+                Some(Ok(true)) => waiting[k] = true,
+                _ => {}
+            }
+        }
+        let solved = solve_contact(groups, &waiting, world, c, times);
+        let ended: Vec<Option<Result<(), StepFailure>>> =
+            groups.par_iter_mut().zip(solved).zip(&waiting).map(|((g, solved), &wait)| wait.then(|| solved.and_then(|o| g.end_increment(c, o)))).collect();
+        for (k, result) in ended.into_iter().enumerate() {
             if let Some(Err(e)) = result {
                 outcome[k] = Some(Err(e));
             }
         }
     }
     outcome.into_iter().map(|o| o.expect("every group has an outcome")).collect()
+}
+
+/// The Uzawa iterations of the `waiting` groups' contact problems: on the device, all in one
+/// solve, where [`crate::backend::uzawa_on_device`] says so, else each group's on the CPU, in
+/// parallel. A device error fails every waiting group.
+fn solve_contact(groups: &mut [Group], waiting: &[bool], world: &mut GpuWorld, c: &Context, times: &mut PhaseTimes) -> Vec<Result<Outcome, StepFailure>> {
+    let mut results: Vec<Result<Outcome, StepFailure>> = groups.iter().map(|_| Ok(Outcome::default())).collect();
+    let Some(settings) = c.settings else { return results };
+    let chosen = || groups.iter().zip(waiting).filter(|(_, &w)| w).map(|(g, _)| g);
+    let points: usize = chosen().map(|g| g.contact.points.len()).sum();
+    let colours = chosen().map(|g| g.contact.colours.count()).max().unwrap_or(0);
+    if points == 0 {
+        return results;
+    }
+    if !crate::backend::uzawa_on_device(world, settings, points, colours) {
+        return groups
+            .par_iter_mut()
+            .zip(waiting)
+            .map(|(g, &w)| Ok(if w { g.contact.solve_on_cpu(settings, c.interrupt, &mut g.newton.report.wall) } else { Outcome::default() }))
+            .collect();
+    }
+    let mut problems = Vec::new();
+    let mut owners = Vec::new();
+    for (k, (g, &w)) in groups.iter_mut().zip(waiting).enumerate() {
+        if w {
+            problems.push(g.contact.problem(settings));
+            owners.push(k);
+        }
+    }
+    match world.solve_contact(&mut problems, c.interrupt, times) {
+        Ok(outcomes) => {
+            for (k, o) in owners.into_iter().zip(outcomes) {
+                results[k] = Ok(o);
+            }
+        }
+        Err(e) => {
+            drop(problems);
+            for k in owners {
+                let names: Vec<&str> = groups[k].bodies.iter().map(|b| b.name.as_str()).collect();
+                results[k] = Err(StepFailure::Device { body: names.join("`, `"), error: e.to_string() });
+            }
+        }
+    }
+    results
 }
 
 /// One device pass over the bodies of the `live` groups that `wanted` selects: the tangent and

@@ -1,0 +1,301 @@
+//! The `uzawa_sweep` kernel (`shaders/uzawa_sweep.wgsl`): the Gauss-Seidel Uzawa iterations of
+//! a Newton round on the device, for every group's contact problem at once. CPU twin:
+//! [`crate::contact::uzawa::uzawa_sweep`]; [`crate::contact::uzawa::solve`] is the whole
+//! iteration this one repeats.
+//!
+//! The problems are independent (their points share no body), so colour `c` of the round is
+//! colour `c` of every problem, and a sweep is one dispatch per colour. Sweeps go to the device
+//! in chunks, one submit each; after every sweep the reactions are copied to the read-back
+//! buffer, so that the host judges each problem after each sweep with the CPU's rule
+//! ([`Judge`]) and takes the reactions of the sweep where it converged: the same iterates and
+//! iteration counts as on the CPU, with one submit per chunk instead of one per sweep.
+
+use super::world::{from_device, to_device};
+use super::{Gpu, GpuError};
+use crate::contact::uzawa::{Colours, Delassus, Judge, Local, NodalMap, Outcome, SETTLE};
+use crate::precision::Real;
+use bytemuck::{Pod, Zeroable};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use wgpu::{BindGroup, Buffer, BufferUsages};
+
+const KERNEL: &str = "uzawa_sweep";
+const WORKGROUP: u32 = 64;
+const MAX_GROUPS_PER_ROW: u32 = 65_535;
+/// Sweeps in the first chunk of a solve; each further chunk doubles, up to [`LAST_CHUNK`]: a
+/// warm-started problem often converges in a few sweeps, a hard one needs hundreds.
+const FIRST_CHUNK: usize = 4;
+const LAST_CHUNK: usize = 64;
+
+/// A contact point's data for the kernel (`struct UzawaLocal` in the shader).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct UzawaLocal<R> {
+    pub v_free: [R; 3],
+    pub shift: R,
+    pub mu: R,
+    pub rho: R,
+    pub floor: R,
+    pub settle: R,
+}
+
+// SAFETY: `repr(C)` with fields all of type `R`: no padding, and any bit pattern of `R` (f32 or
+// f64) is valid.
+unsafe impl<R: Pod> Zeroable for UzawaLocal<R> {}
+unsafe impl<R: Pod> Pod for UzawaLocal<R> {}
+
+/// The points of one colour (`struct ColourRange` in the shader).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
+pub struct ColourRange {
+    pub start: u32,
+    pub count: u32,
+}
+
+/// One group's contact problem, as [`crate::contact::uzawa::solve`] takes it.
+pub struct UzawaProblem<'a> {
+    pub w: &'a Delassus,
+    pub colours: &'a Colours,
+    pub local: &'a [Local],
+    pub nodal: &'a NodalMap,
+    /// In: the reactions to start from; out: those of the sweep that ended the iterations.
+    pub r: &'a mut [[Real; 3]],
+    pub tolerance: Real,
+    pub floor: Real,
+    pub max_iterations: usize,
+}
+
+/// Device buffers, grown as rounds need more.
+struct Buffers {
+    points: usize,
+    blocks: usize,
+    entries: usize,
+    colours: usize,
+    /// Bytes of the read-back buffer.
+    staging_bytes: u64,
+    block: Buffer,
+    row_start: Buffer,
+    row_entries: Buffer,
+    locals: Buffer,
+    order: Buffer,
+    live: Buffer,
+    r: Buffer,
+    ranges: Buffer,
+    staging: Buffer,
+    /// One per colour: the same buffers with that colour's range.
+    bind_groups: Vec<BindGroup>,
+}
+
+/// The pipeline and buffers of the device's Uzawa sweeps.
+pub struct UzawaSweeps {
+    gpu: Arc<Gpu>,
+    pipeline: wgpu::ComputePipeline,
+    buffers: Option<Buffers>,
+    /// Stride of the colour ranges in their uniform buffer (the device's offset alignment).
+    range_stride: u64,
+    pub submits: u64,
+    /// Bytes up and down so far.
+    pub traffic: (u64, u64),
+}
+
+/// The round's problems in one set of arrays.
+#[derive(Default)]
+struct Merged {
+    blocks: Vec<Real>,
+    row_start: Vec<u32>,
+    row_entries: Vec<[u32; 2]>,
+    locals: Vec<UzawaLocal<Real>>,
+    order: Vec<u32>,
+    ranges: Vec<ColourRange>,
+    r: Vec<Real>,
+    /// Each problem's first point.
+    offsets: Vec<usize>,
+}
+
+impl Merged {
+    fn of(problems: &[UzawaProblem]) -> Self {
+        let mut m = Merged { row_start: vec![0], ..Default::default() };
+        for p in problems {
+            let (point0, block0) = (m.locals.len() as u32, (m.blocks.len() / 9) as u32);
+            m.offsets.push(point0 as usize);
+            m.blocks.extend(p.w.blocks.iter().flatten());
+            for row in &p.w.rows {
+                m.row_entries.extend(row.iter().map(|&(j, b)| [point0 + j, block0 + b]));
+                m.row_start.push(m.row_entries.len() as u32);
+            }
+            let settle = SETTLE * p.tolerance;
+            m.locals.extend(p.local.iter().map(|l| UzawaLocal { v_free: l.v_free, shift: l.shift, mu: l.mu, rho: l.rho, floor: p.floor, settle }));
+            m.r.extend(p.r.iter().flatten());
+        }
+        let colours = problems.iter().map(|p| p.colours.count()).max().unwrap_or(0);
+        for c in 0..colours {
+            let start = m.order.len() as u32;
+            for (p, &offset) in problems.iter().zip(&m.offsets) {
+                if c < p.colours.count() {
+                    m.order.extend(p.colours.colour(c).iter().map(|&i| offset as u32 + i));
+                }
+            }
+            m.ranges.push(ColourRange { start, count: m.order.len() as u32 - start });
+        }
+        m
+    }
+}
+
+fn storage(gpu: &Gpu, label: &str, bytes: usize, extra: BufferUsages) -> Buffer {
+    gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some(label), size: bytes.max(16).div_ceil(16) as u64 * 16, usage: BufferUsages::STORAGE | BufferUsages::COPY_DST | extra, mapped_at_creation: false })
+}
+
+impl UzawaSweeps {
+    pub fn new(gpu: Arc<Gpu>) -> Result<Self, GpuError> {
+        let pipeline = gpu.pipeline(KERNEL, None)?;
+        let range_stride = (gpu.device.limits().min_uniform_buffer_offset_alignment as u64).max(std::mem::size_of::<ColourRange>() as u64);
+        Ok(Self { gpu, pipeline, buffers: None, range_stride, submits: 0, traffic: (0, 0) })
+    }
+
+    /// Makes sure the buffers hold the round (growing them by half again what it needs) and
+    /// that there is a bind group per colour.
+    fn reserve(&mut self, m: &Merged, chunk: usize) {
+        let real = self.gpu.precision.size();
+        let (points, blocks, entries, colours) = (m.locals.len(), m.blocks.len() / 9, m.row_entries.len(), m.ranges.len());
+        let staging_bytes = (chunk * points * 3 * real) as u64;
+        let fits = self.buffers.as_ref().is_some_and(|b| b.points >= points && b.blocks >= blocks && b.entries >= entries && b.colours >= colours && b.staging_bytes >= staging_bytes);
+        if fits {
+            return;
+        }
+        let grow = |n: usize, old: Option<usize>| old.unwrap_or(0).max(n + n / 2).max(1);
+        let old = self.buffers.as_ref();
+        let (points, blocks, entries, colours) =
+            (grow(points, old.map(|b| b.points)), grow(blocks, old.map(|b| b.blocks)), grow(entries, old.map(|b| b.entries)), grow(colours, old.map(|b| b.colours)));
+        let staging_bytes = (LAST_CHUNK * points * 3 * real) as u64;
+        let gpu = &self.gpu;
+        let none = BufferUsages::empty();
+        let block = storage(gpu, "uzawa blocks", blocks * 9 * real, none);
+        let row_start = storage(gpu, "uzawa row starts", (points + 1) * 4, none);
+        let row_entries = storage(gpu, "uzawa row entries", entries * 8, none);
+        let locals = storage(gpu, "uzawa points", points * std::mem::size_of::<UzawaLocal<f64>>() / 8 * real, none);
+        let order = storage(gpu, "uzawa colour order", points * 4, none);
+        let live = storage(gpu, "uzawa live", points * 4, none);
+        let r = storage(gpu, "uzawa reactions", points * 3 * real, BufferUsages::COPY_SRC);
+        let ranges = gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some("uzawa colours"), size: colours as u64 * self.range_stride, usage: BufferUsages::UNIFORM | BufferUsages::COPY_DST, mapped_at_creation: false });
+        let staging = gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some("uzawa read-back"), size: staging_bytes, usage: BufferUsages::MAP_READ | BufferUsages::COPY_DST, mapped_at_creation: false });
+        let layout = self.pipeline.get_bind_group_layout(0);
+        let bind_groups = (0..colours)
+            .map(|c| {
+                let whole = [&block, &row_start, &row_entries, &locals, &order, &live, &r];
+                let mut entries: Vec<wgpu::BindGroupEntry> = whole.iter().enumerate().map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() }).collect();
+                let range = wgpu::BufferBinding { buffer: &ranges, offset: c as u64 * self.range_stride, size: wgpu::BufferSize::new(std::mem::size_of::<ColourRange>() as u64) };
+                entries.push(wgpu::BindGroupEntry { binding: 7, resource: wgpu::BindingResource::Buffer(range) });
+                gpu.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(KERNEL), layout: &layout, entries: &entries })
+            })
+            .collect();
+        self.buffers = Some(Buffers { points, blocks, entries, colours, staging_bytes, block, row_start, row_entries, locals, order, live, r, ranges, staging, bind_groups });
+    }
+
+    fn upload(&mut self, buffer: &Buffer, offset: u64, bytes: &[u8]) {
+        if !bytes.is_empty() {
+            self.traffic.0 += bytes.len() as u64;
+            self.gpu.queue.write_buffer(buffer, offset, bytes);
+        }
+    }
+
+    /// Solves every problem with Gauss-Seidel sweeps on the device until each converges by the
+    /// CPU's rule, reaches its `max_iterations`, or `stop` is set; each problem's `r` gets the
+    /// reactions of its last sweep. The outcomes are in the problems' order.
+    pub fn solve(&mut self, problems: &mut [UzawaProblem], stop: Option<&AtomicBool>) -> Result<Vec<Outcome>, GpuError> {
+        let precision = self.gpu.precision;
+        let m = Merged::of(problems);
+        let n = m.locals.len();
+        let mut outcomes = vec![Outcome::default(); problems.len()];
+        if n == 0 {
+            return Ok(outcomes);
+        }
+        self.reserve(&m, FIRST_CHUNK);
+        let b = self.buffers.take().expect("reserved");
+        let locals: Vec<Real> = bytemuck::cast_slice(&m.locals).to_vec();
+        self.upload(&b.block, 0, &to_device(precision, &m.blocks));
+        self.upload(&b.row_start, 0, bytemuck::cast_slice(&m.row_start));
+        self.upload(&b.row_entries, 0, bytemuck::cast_slice(&m.row_entries));
+        self.upload(&b.locals, 0, &to_device(precision, &locals));
+        self.upload(&b.order, 0, bytemuck::cast_slice(&m.order));
+        self.upload(&b.live, 0, bytemuck::cast_slice(&vec![1u32; n]));
+        self.upload(&b.r, 0, &to_device(precision, &m.r));
+        for (c, range) in m.ranges.iter().enumerate() {
+            self.upload(&b.ranges, c as u64 * self.range_stride, bytemuck::bytes_of(range));
+        }
+        let result = self.iterate(&b, &m, problems, &mut outcomes, stop);
+        self.buffers = Some(b);
+        result.map(|()| outcomes)
+    }
+
+    /// The chunks of sweeps and the host's judgement after each sweep.
+    fn iterate(&mut self, b: &Buffers, m: &Merged, problems: &mut [UzawaProblem], outcomes: &mut [Outcome], stop: Option<&AtomicBool>) -> Result<(), GpuError> {
+        let precision = self.gpu.precision;
+        let real = precision.size();
+        let n = m.locals.len();
+        let point_bytes = (n * 3 * real) as u64;
+        let ends: Vec<usize> = m.offsets.iter().skip(1).copied().chain([n]).collect();
+        let mut judges: Vec<Judge> = problems.iter().map(|p| Judge::new(p.tolerance, p.floor)).collect();
+        let mut live: Vec<bool> = problems.iter().map(|p| p.max_iterations > 0 && !p.r.is_empty()).collect();
+        let mut previous = m.r.clone();
+        let (mut swept, mut chunk) = (0usize, FIRST_CHUNK);
+        let mut scratch = Vec::new();
+        let mut dr: Vec<[Real; 3]> = Vec::new();
+        let most = problems.iter().map(|p| p.max_iterations).max().unwrap_or(0);
+        while live.iter().any(|&l| l) && !stop.is_some_and(|s| s.load(Ordering::Relaxed)) {
+            let sweeps = chunk.min(most - swept).min((b.staging_bytes / point_bytes) as usize).max(1);
+            let mut encoder = self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(KERNEL) });
+            for s in 0..sweeps {
+                {
+                    let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(KERNEL), timestamp_writes: None });
+                    pass.set_pipeline(&self.pipeline);
+                    for (range, group) in m.ranges.iter().zip(&b.bind_groups) {
+                        let groups = range.count.div_ceil(WORKGROUP);
+                        pass.set_bind_group(0, group, &[]);
+                        pass.dispatch_workgroups(groups.min(MAX_GROUPS_PER_ROW), groups.div_ceil(MAX_GROUPS_PER_ROW), 1);
+                    }
+                }
+                encoder.copy_buffer_to_buffer(&b.r, 0, &b.staging, s as u64 * point_bytes, point_bytes);
+            }
+            self.gpu.queue.submit([encoder.finish()]);
+            self.submits += 1;
+            let bytes = self.gpu.read_range(KERNEL, &b.staging, sweeps as u64 * point_bytes)?;
+            self.traffic.1 += bytes.len() as u64;
+            let snapshots = from_device(precision, &bytes);
+            let mut finished = false;
+            for s in 0..sweeps {
+                let now = &snapshots[s * 3 * n..(s + 1) * 3 * n];
+                let iteration = swept + s + 1;
+                for (k, p) in problems.iter_mut().enumerate() {
+                    if !live[k] {
+                        continue;
+                    }
+                    let (start, end) = (m.offsets[k], ends[k]);
+                    dr.clear();
+                    dr.extend((start..end).map(|i| [0, 1, 2].map(|a| now[3 * i + a] - previous[3 * i + a])));
+                    let r: &[[Real; 3]] = bytemuck::cast_slice(&now[3 * start..3 * end]);
+                    let (change, size) = p.nodal.change(&dr, r, &mut scratch);
+                    outcomes[k] = judges[k].after(iteration, change, size);
+                    if outcomes[k].converged || iteration == p.max_iterations {
+                        p.r.copy_from_slice(r);
+                        live[k] = false;
+                        finished = true;
+                    }
+                }
+                previous.copy_from_slice(now);
+            }
+            swept += sweeps;
+            chunk = (2 * chunk).min(LAST_CHUNK);
+            for (k, p) in problems.iter_mut().enumerate() {
+                if live[k] {
+                    // Where the device stands, should the next chunk not come.
+                    p.r.copy_from_slice(bytemuck::cast_slice(&previous[3 * m.offsets[k]..3 * ends[k]]));
+                }
+            }
+            if finished && live.iter().any(|&l| l) {
+                let flags: Vec<u32> = (0..problems.len()).flat_map(|k| std::iter::repeat_n(live[k] as u32, ends[k] - m.offsets[k])).collect();
+                self.upload(&b.live, 0, bytemuck::cast_slice(&flags));
+            }
+        }
+        Ok(())
+    }
+}
