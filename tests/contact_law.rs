@@ -6,6 +6,8 @@
 mod random;
 #[path = "common/run.rs"]
 mod common_run;
+#[path = "common/contact_problem.rs"]
+mod contact_problem;
 use bifirst::contact::{project_on_cone, uzawa_step, Status};
 use bifirst::scene::load_scene;
 use bifirst::solver::build_simulation;
@@ -123,4 +125,55 @@ fn converged_contact_points_satisfy_coulomb_law() {
         }
     }
     assert!(sliding > 100 && sticking > 10, "both states occur ({sliding} sliding, {sticking} sticking)");
+}
+
+#[test]
+fn colours_partition_the_points_and_no_colour_shares_a_body() {
+    let p = contact_problem::random_problem(7, 400, 1500);
+    let mut seen = vec![0; p.local.len()];
+    for c in 0..p.colours.count() {
+        let colour = p.colours.colour(c);
+        assert!(!colour.is_empty(), "colour {c} is empty");
+        let members: std::collections::HashSet<u32> = colour.iter().copied().collect();
+        for &i in colour {
+            seen[i as usize] += 1;
+            for &(j, _) in &p.w.rows[i as usize] {
+                assert!(j == i || !members.contains(&j), "points {i} and {j} share a body and colour {c}");
+            }
+        }
+    }
+    assert!(seen.iter().all(|&n| n == 1), "every point in exactly one colour");
+    let widest = p.w.rows.iter().map(Vec::len).max().unwrap();
+    assert!(p.colours.count() <= widest, "greedy colouring needs at most a row's length of colours: {} > {widest}", p.colours.count());
+}
+
+#[test]
+fn coloured_gauss_seidel_is_the_sequential_sweep_in_colour_order() {
+    use bifirst::contact::uzawa::{gauss_seidel_point, solve, Sweep, SETTLE};
+    // Enough points that the first colours are swept on the thread pool (256 and more).
+    let p = contact_problem::random_problem(11, 3000, 3000);
+    assert!(p.colours.colour(0).len() >= 256, "colour 0 has {} points", p.colours.colour(0).len());
+    let (tolerance, floor, sweeps) = (0.0, 1e-3, 6);
+    let mut reference = p.r.clone();
+    for _ in 0..sweeps {
+        for &i in &p.colours.order {
+            reference[i as usize] = gauss_seidel_point(&p.w, &p.local[i as usize], i as usize, &reference, SETTLE * tolerance, floor);
+        }
+    }
+    let mut r = p.r.clone();
+    let outcome = solve(&p.w, &p.colours, &p.local, &p.nodal, &mut r, Sweep::GaussSeidel, tolerance, floor, sweeps, None);
+    assert_eq!((outcome.iterations, outcome.converged), (sweeps, false));
+    assert_eq!(r, reference, "bit for bit");
+    // And the sweeps converge to reactions that satisfy the law at every point.
+    let mut r = p.r.clone();
+    let outcome = solve(&p.w, &p.colours, &p.local, &p.nodal, &mut r, Sweep::GaussSeidel, 1e-10, floor, 500, None);
+    assert!(outcome.converged, "{outcome:?}");
+    let mut worst = 0.0f64;
+    for (i, l) in p.local.iter().enumerate() {
+        let wr = p.w.row_times(i, &r);
+        let v = [l.v_free[0] + wr[0] + l.shift, l.v_free[1] + wr[1], l.v_free[2] + wr[2]];
+        let (next, _) = uzawa_step(r[i], v, l.mu, l.rho);
+        worst = worst.max((0..3).map(|k| (next[k] - r[i][k]).abs()).fold(0.0, f64::max));
+    }
+    assert!(worst < 1e-8, "law residual {worst:.3e} after {} sweeps", outcome.iterations);
 }

@@ -3,6 +3,8 @@
 
 #[path = "common/random.rs"]
 mod random;
+#[path = "common/contact_problem.rs"]
+mod contact_problem;
 
 use bifirst::assembly::{element_out_stride, DofMap, GatherMap, StiffnessPattern};
 use bifirst::contact::Status;
@@ -87,6 +89,22 @@ fn check_all_real_struct(kernel: &str, variant: Option<ElementVariant>, name: &s
         assert_eq!(members, expected, "{name} in {}", precision.name());
         assert_eq!(span as usize, size, "{name} size in {}", precision.name());
         assert_eq!(size, fields.len() * real as usize, "{name}: the Rust struct has no padding");
+    }
+}
+
+#[test]
+fn uzawa_sweep_structs_match_the_shader_layout() {
+    use bifirst::gpu::uzawa_sweep::{ColourRange, UzawaLocal};
+    use std::mem::size_of;
+    let fields = ["v_free_n", "v_free_t1", "v_free_t2", "shift", "mu", "rho", "floor", "settle"];
+    check_all_real_struct("uzawa_sweep", None, "UzawaLocal", &fields, [size_of::<UzawaLocal<f32>>(), size_of::<UzawaLocal<f64>>()]);
+    let l = UzawaLocal::<f64> { v_free: [1.0, 2.0, 3.0], shift: 4.0, mu: 5.0, rho: 6.0, floor: 7.0, settle: 8.0 };
+    assert_eq!(bytemuck::cast::<_, [f64; 8]>(l), [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0], "field order");
+    for precision in PRECISIONS {
+        let module = validate("uzawa_sweep", precision, None).unwrap();
+        let (members, span) = naga_layout(&module, "ColourRange");
+        assert_eq!(members, [("start".to_string(), 0), ("count".to_string(), 4)]);
+        assert_eq!(span as usize, size_of::<ColourRange>());
     }
 }
 
@@ -200,6 +218,49 @@ fn uzawa_step_kernel_matches_its_cpu_twin() {
         let statuses: std::collections::BTreeSet<u32> = on_gpu.iter().map(|p| p.status as u32).collect();
         assert_eq!(statuses.into_iter().collect::<Vec<_>>(), [0, 1, 2], "every regime is exercised");
     }
+}
+
+#[test]
+fn uzawa_sweep_kernel_matches_its_cpu_twin() {
+    // Three problems in one device solve, as the groups of a Newton round: one that never
+    // converges (tolerance 0) and stops after 3 sweeps, inside the first chunk, so that the next
+    // chunk sweeps the others only; two that
+    // converge. Each must end with the CPU's iteration count and outcome, and reactions within
+    // 1e-12 of the CPU's, relative to the problem's largest reaction. f64 only: runs take the
+    // device's sweeps in f64 only.
+    use bifirst::contact::uzawa::{solve, Sweep};
+    use bifirst::gpu::uzawa_sweep::{UzawaProblem, UzawaSweeps};
+    let Some(gpu) = gpu_or_skip("uzawa_sweep_kernel_matches_its_cpu_twin", Precision::F64) else { return };
+    let mut sweeps = UzawaSweeps::new(Arc::new(gpu)).expect("pipeline");
+    let problems = [contact_problem::random_problem(1, 2000, 2500), contact_problem::random_problem(2, 40, 60), contact_problem::random_problem(3, 300, 500)];
+    let settings = [(0.0, 3), (1e-10, 500), (1e-14, 500)];
+    let floor = 1e-3;
+    let mut on_cpu = Vec::new();
+    for (p, &(tolerance, max)) in problems.iter().zip(&settings) {
+        let mut r = p.r.clone();
+        let outcome = solve(&p.w, &p.colours, &p.local, &p.nodal, &mut r, Sweep::GaussSeidel, tolerance, floor, max, None);
+        on_cpu.push((outcome, r));
+    }
+    for _ in 0..2 {
+        // Twice: the second solve reuses the buffers.
+        let mut reactions: Vec<Vec<[f64; 3]>> = problems.iter().map(|p| p.r.clone()).collect();
+        let mut list: Vec<UzawaProblem> = problems
+            .iter()
+            .zip(&settings)
+            .zip(&mut reactions)
+            .map(|((p, &(tolerance, max_iterations)), r)| UzawaProblem { w: &p.w, colours: &p.colours, local: &p.local, nodal: &p.nodal, r, tolerance, floor, max_iterations })
+            .collect();
+        let outcomes = sweeps.solve(&mut list, None).expect("device sweeps");
+        for (k, ((outcome, r), (cpu_outcome, cpu_r))) in outcomes.iter().zip(&reactions).zip(&on_cpu).enumerate() {
+            assert_eq!((outcome.iterations, outcome.converged), (cpu_outcome.iterations, cpu_outcome.converged), "problem {k}");
+            let scale = cpu_r.iter().flatten().fold(1e-300, |m: f64, x| m.max(x.abs()));
+            let worst = r.iter().flatten().zip(cpu_r.iter().flatten()).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max) / scale;
+            eprintln!("problem {k}: {} points, {} colours, {} sweeps, converged {}, max relative difference {worst:.2e}", r.len(), problems[k].colours.count(), outcome.iterations, outcome.converged);
+            assert!(worst <= 1e-12, "problem {k}: {worst:.3e}");
+        }
+    }
+    assert!(on_cpu[1].0.converged && on_cpu[2].0.converged && on_cpu[1].0.iterations > 1);
+    assert!(sweeps.submits < on_cpu.iter().map(|(o, _)| o.iterations as u64).sum::<u64>(), "chunks of sweeps, not a submit per sweep");
 }
 
 fn model_of(material: &str) -> Model {

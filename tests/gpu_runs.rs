@@ -5,7 +5,7 @@
 #[path = "common/run.rs"]
 mod common;
 
-use bifirst::backend::{BackendChoice, BackendRequest};
+use bifirst::backend::{BackendChoice, BackendRequest, UzawaPlacement};
 use bifirst::precision::Precision;
 use bifirst::run::RunOptions;
 use common::{run_with, scene_path, temp_path, Log};
@@ -138,4 +138,64 @@ fn grains_on_the_gpu_take_a_fixed_number_of_submits_per_newton_iteration() {
         assert!(worst <= 1e-9, "{count} grains: energies differ by {worst:.3e}");
     }
     assert!(evaluations[1] > 3 * evaluations[0], "more grains, more body evaluations: {evaluations:?}");
+}
+
+#[test]
+fn contact_on_the_device_repeats_the_cpu_sweeps() {
+    // Grains pressed together by the moving wall form groups of several grains, whose contact
+    // problems the device solves together, colour by colour. Its sweeps are those of the CPU in
+    // the same order, judged by the same rule after each sweep: the same Uzawa and Newton
+    // iteration counts, and the same energies. `auto` keeps them on the CPU on a software
+    // adapter.
+    let test = "contact_on_the_device_repeats_the_cpu_sweeps";
+    if !gpu_available(test) {
+        return;
+    }
+    let path = scene_path("grains_many");
+    let sets = ["packing.count=30", "time.end=0.3", "output.every=1", "output.scene_every=0"];
+    let with = |uzawa: UzawaPlacement| {
+        let mut o = options(BackendChoice::Gpu, Some(Precision::F64));
+        o.backend.uzawa = uzawa;
+        run_with(&path, &sets, &format!("{test}_{}", uzawa.name()), &o)
+    };
+    let (host, device, auto) = (with(UzawaPlacement::Cpu), with(UzawaPlacement::Gpu), with(UzawaPlacement::Auto));
+    let field = |log: &Log, name: &str| log.topics["/summary"][0][name].as_u64().unwrap_or_else(|| panic!("{name}"));
+    for name in ["newton_iterations", "uzawa_iterations", "factorizations", "cutbacks"] {
+        assert_eq!(field(&device, name), field(&host, name), "{name}");
+    }
+    assert!(host.series("/contact", "active").iter().any(|&a| a > 5.0), "the grains touch");
+    let worst = energy_difference(&host, &device);
+    let (extra, sweeps) = (field(&device, "device_submits") - field(&host, "device_submits"), field(&device, "uzawa_iterations"));
+    eprintln!("{sweeps} Uzawa sweeps in {extra} device submits; energies differ by {worst:.2e}");
+    assert!(worst <= 1e-9, "energies differ by {worst:.3e}");
+    assert!(extra > 0 && extra < sweeps, "the sweeps ran on the device in chunks: {extra} submits for {sweeps} sweeps");
+    assert_eq!(field(&auto, "device_submits"), field(&host, "device_submits"), "auto: the CPU's sweeps on a software adapter");
+}
+
+#[test]
+fn the_sliding_block_keeps_its_known_answer_with_contact_on_the_device() {
+    // The stopping distance and friction dissipation against their closed forms, through
+    // `bifirst accuracy`: the same errors with the sweeps on the device as on the CPU.
+    let test = "the_sliding_block_keeps_its_known_answer_with_contact_on_the_device";
+    if !gpu_available(test) {
+        return;
+    }
+    let error = |uzawa: &str| {
+        let out = temp_path(&format!("{test}_{uzawa}"));
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_bifirst"))
+            .args(["accuracy", "scenes/sliding_block.toml", "--over", "time.dt=0.004", "--set", "body.block.mesh.divisions=[4,2]", "--backend", "gpu", "--uzawa", uzawa, "--out"])
+            .arg(&out)
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let csv = std::fs::read_to_string(out.join("accuracy.csv")).unwrap();
+        let rows: Vec<Vec<&str>> = csv.lines().map(|l| l.split(',').collect()).collect();
+        let c = rows[0].iter().position(|h| *h == "error").expect("an error column");
+        rows[1][c].parse::<f64>().unwrap()
+    };
+    let (host, device) = (error("cpu"), error("gpu"));
+    eprintln!("sliding block error: {host:.6e} (CPU sweeps), {device:.6e} (device sweeps)");
+    assert!(host < 1e-2, "within 1 % of the closed form: {host:.3e}");
+    assert!((device - host).abs() <= 1e-9 * host, "{device:.9e} vs {host:.9e}");
 }
