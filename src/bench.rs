@@ -6,7 +6,9 @@ use crate::assembly::{element_out_stride, DofMap, GatherMap, StiffnessPattern};
 use crate::cpu;
 use crate::element::ReferenceGeometry;
 use crate::gpu::types::{Coefficients, DofOut, DofStep};
+use crate::contact::uzawa::{self, Colours, Delassus, Local, NodalMap, Sweep};
 use crate::gpu::uzawa_step::{UzawaPoint, UzawaStepKernel};
+use crate::gpu::uzawa_sweep::{UzawaProblem, UzawaSweeps};
 use crate::gpu::peak::{measure as measure_peaks, Peaks, FMA_FLOPS_PER_VALUE};
 use crate::gpu::{Evaluation, Gpu, GpuError, GpuWorld, WorldKernel};
 use crate::material::{BlatzKo, Lvf, Model, NeoHookean};
@@ -110,7 +112,7 @@ pub struct BenchRow {
     pub kernel: String,
     pub element: String,
     pub material: String,
-    /// Elements, or contact points for `uzawa_step`.
+    /// Elements, or contact points for `uzawa_step` and `uzawa_sweep`.
     pub items: usize,
     /// `cpu f64`, `gpu f64` or `gpu f32`.
     pub backend: String,
@@ -298,6 +300,9 @@ pub fn run_bench(options: &BenchOptions, gpus: &[Arc<Gpu>], mut row: impl FnMut(
     if wanted(options, "uzawa_step") {
         uzawa_rows(options, gpus, &mut row)?;
     }
+    if wanted(options, "uzawa_sweep") {
+        uzawa_sweep_rows(options, gpus, &mut row)?;
+    }
     Ok(())
 }
 
@@ -389,11 +394,8 @@ fn peak_rows(options: &BenchOptions, gpus: &[Arc<Gpu>], row: &mut impl FnMut(Ben
 /// Contact points over every regime of the law (separated, sticking, sliding, frictionless),
 /// from a fixed linear congruential sequence.
 pub fn bench_contact_points(n: usize) -> Vec<UzawaPoint<Real>> {
-    let mut state: u64 = 0x2545_f491_4f6c_dd1d;
-    let mut next = move || {
-        state = state.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
-        (state >> 11) as Real / (1u64 << 53) as Real * 2.0 - 1.0
-    };
+    let mut uniform = sequence(0);
+    let mut next = move || uniform() * 2.0 - 1.0;
     (0..n)
         .map(|i| {
             let mu = if i % 4 == 0 { 0.0 } else { (next() + 1.0) * 0.6 };
@@ -433,6 +435,125 @@ fn uzawa_rows(options: &BenchOptions, gpus: &[Arc<Gpu>], row: &mut impl FnMut(Be
                 (0..3).map(|k| (g.r[k] - c.r[k]).abs()).fold(0.0, Real::max) / scale.max(1e-12)
             })
             .fold(0.0, Real::max);
+        row(make(format!("gpu {}", gpu.precision.name()), t, traffic, error));
+    }
+    Ok(())
+}
+
+/// A fixed linear congruential sequence of reals in [0, 1).
+fn sequence(seed: u64) -> impl FnMut() -> Real {
+    let mut state: u64 = 0x2545_f491_4f6c_dd1d ^ seed.wrapping_mul(0x9e37_79b9_7f4a_7c15);
+    move || {
+        state = state.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
+        (state >> 11) as Real / (1u64 << 53) as Real
+    }
+}
+
+/// A contact problem like a grain packing's, for the Uzawa sweeps.
+pub struct ContactProblem {
+    pub w: Delassus,
+    pub colours: Colours,
+    pub local: Vec<Local>,
+    pub nodal: NodalMap,
+    /// Warm-start reactions.
+    pub r: Vec<[Real; 3]>,
+}
+
+/// `points` contact points on `bodies` bodies: each touches one body (an obstacle contact) or,
+/// with probability 0.6, two (a contact between grains), and every pair of points on a body has
+/// a block of W. W is symmetric with dominant diagonal blocks, so that Gauss-Seidel converges;
+/// the free velocities mostly close the gaps, with every friction regime.
+pub fn bench_contact_problem(seed: u64, bodies: usize, points: usize) -> ContactProblem {
+    let mut next = sequence(seed);
+    let mut pick = |n: usize| ((next() * n as Real) as usize).min(n - 1);
+    let touching: Vec<Vec<usize>> = (0..points)
+        .map(|_| {
+            let (a, b, pair) = (pick(bodies), pick(bodies), pick(10) < 6);
+            if b != a && pair { vec![a, b] } else { vec![a] }
+        })
+        .collect();
+    let mut next = sequence(seed + 1);
+    let mut within = |lo: Real, hi: Real| lo + (hi - lo) * next();
+    let mut lists: Vec<Vec<usize>> = vec![Vec::new(); bodies];
+    for (i, t) in touching.iter().enumerate() {
+        for &b in t {
+            lists[b].push(i);
+        }
+    }
+    let mut w = Delassus { rows: vec![Vec::new(); points], blocks: Vec::new() };
+    let mut index: std::collections::HashMap<(usize, usize), usize> = std::collections::HashMap::new();
+    let mut block = |w: &mut Delassus, l: usize, k: usize| -> usize {
+        *index.entry((l, k)).or_insert_with(|| {
+            w.rows[l].push((k as u32, w.blocks.len() as u32));
+            w.blocks.push([0.0; 9]);
+            w.blocks.len() - 1
+        })
+    };
+    for list in &lists {
+        for (x, &l) in list.iter().enumerate() {
+            let own = block(&mut w, l, l);
+            for a in 0..3 {
+                w.blocks[own][4 * a] += within(0.5, 1.5);
+            }
+            for &k in &list[x + 1..] {
+                let m: [Real; 9] = std::array::from_fn(|_| within(-0.03, 0.03));
+                let (lk, kl) = (block(&mut w, l, k), block(&mut w, k, l));
+                for a in 0..3 {
+                    for c in 0..3 {
+                        w.blocks[lk][3 * a + c] += m[3 * a + c];
+                        w.blocks[kl][3 * c + a] += m[3 * a + c];
+                    }
+                }
+            }
+        }
+    }
+    let colours = Colours::of(&w);
+    let local = (0..points)
+        .map(|i| {
+            let mu = [0.0, 0.3, 0.6][((within(0.0, 3.0)) as usize).min(2)];
+            let v_free = [within(-1.0, 0.4), within(-1.0, 1.0), within(-1.0, 1.0)];
+            Local { v_free, shift: within(-0.01, 0.01), mu, rho: w.rho(i, 3, Sweep::GaussSeidel) }
+        })
+        .collect();
+    let r = (0..points).map(|_| if within(0.0, 1.0) < 0.5 { [within(0.0, 0.5), within(-0.1, 0.1), 0.0] } else { [0.0; 3] }).collect();
+    // Each point's own node, and a node of its second body with the opposite sign.
+    let terms = touching.iter().enumerate().map(|(i, t)| if t.len() == 2 { vec![(i as u32, 1.0), ((points + i) as u32, -1.0)] } else { vec![(i as u32, 1.0)] }).collect();
+    let identity = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+    let nodal = NodalMap { terms, frames: vec![identity; points], nodes: 2 * points };
+    ContactProblem { w, colours, local, nodal, r }
+}
+
+/// Sweeps per call of the `uzawa_sweep` rows.
+pub const BENCH_SWEEPS: usize = 8;
+
+/// `uzawa_sweep`: [`BENCH_SWEEPS`] Gauss-Seidel sweeps (colour by colour) of a grain-like
+/// problem of `4 x elements` points on a quarter as many bodies, on the CPU (the thread pool
+/// within large colours) and on each GPU in f64.
+fn uzawa_sweep_rows(options: &BenchOptions, gpus: &[Arc<Gpu>], row: &mut impl FnMut(BenchRow)) -> Result<(), GpuError> {
+    let n = 4 * options.elements;
+    let p = bench_contact_problem(1, (n / 4).max(1), n);
+    let make = |backend: String, timing: Timing, traffic: u64, error: f64| BenchRow::new("uzawa_sweep", "-", "-", n, backend, timing, traffic, error);
+    let mut reference = p.r.clone();
+    let t = time_calls(options.min_time, || {
+        reference.copy_from_slice(&p.r);
+        uzawa::solve(&p.w, &p.colours, &p.local, &p.nodal, &mut reference, Sweep::GaussSeidel, 0.0, 1e-3, BENCH_SWEEPS, None);
+    });
+    row(make("cpu f64".into(), t, 0, 0.0));
+    for gpu in gpus.iter().filter(|g| g.precision == Precision::F64) {
+        let mut sweeps = UzawaSweeps::new(gpu.clone())?;
+        let mut r = p.r.clone();
+        let mut result = Ok(());
+        let t = time_calls(options.min_time, || {
+            r.copy_from_slice(&p.r);
+            let mut problem = [UzawaProblem { w: &p.w, colours: &p.colours, local: &p.local, nodal: &p.nodal, r: &mut r, tolerance: 0.0, floor: 1e-3, max_iterations: BENCH_SWEEPS }];
+            if let Err(e) = sweeps.solve(&mut problem, None) {
+                result = Err(e);
+            }
+        });
+        result?;
+        let scale = reference.iter().flatten().fold(Real::MIN_POSITIVE, |m, x| m.max(x.abs()));
+        let error = r.iter().flatten().zip(reference.iter().flatten()).map(|(a, b)| (a - b).abs()).fold(0.0, Real::max) / scale;
+        let traffic = sweeps.traffic.0 + sweeps.traffic.1;
         row(make(format!("gpu {}", gpu.precision.name()), t, traffic, error));
     }
     Ok(())

@@ -12,8 +12,9 @@ fn rows(args: &[&str]) -> Vec<Value> {
 #[test]
 fn bench_reports_every_kernel_on_the_cpu() {
     let rows = rows(&["--backend", "cpu"]);
-    // 4 elements x 3 materials x 3 kernel groups, uzawa_step, and the two peak kernels.
-    assert_eq!(rows.len(), 4 * 3 * 3 + 1 + 2);
+    // 4 elements x 3 materials x 3 kernel groups, uzawa_step, uzawa_sweep, and the two peak
+    // kernels.
+    assert_eq!(rows.len(), 4 * 3 * 3 + 2 + 2);
     for r in &rows {
         assert_eq!(r["backend"], "cpu f64");
         assert!(r["items"].as_u64().unwrap() > 0 && r["seconds_per_call"].as_f64().unwrap() > 0.0, "{r}");
@@ -21,8 +22,8 @@ fn bench_reports_every_kernel_on_the_cpu() {
         assert_eq!(r["bytes_per_call"], 0);
     }
     let only = self::rows(&["--backend", "cpu", "--kernel", "uzawa"]);
-    assert_eq!(only.len(), 1);
-    assert_eq!(only[0]["kernel"], "uzawa_step");
+    let kernels: Vec<&str> = only.iter().map(|r| r["kernel"].as_str().unwrap()).collect();
+    assert_eq!(kernels, ["uzawa_step", "uzawa_sweep"]);
 }
 
 #[test]
@@ -40,6 +41,11 @@ fn bench_on_a_gpu_reports_errors_within_the_parity_tolerances() {
         assert!(r["max_relative_error"].as_f64().unwrap() <= tolerance, "{r}");
         assert_eq!(r["bytes_per_call"], 0, "the kernel alone moves nothing between host and device: {r}");
     }
+    // The device's sweeps repeat the CPU's, in f64 only.
+    let sweeps = self::rows(&["--backend", "gpu", "--kernel", "uzawa_sweep"]);
+    let backends: Vec<&str> = sweeps.iter().map(|r| r["backend"].as_str().unwrap()).collect();
+    assert_eq!(backends, ["cpu f64", "gpu f64"]);
+    assert!(sweeps[1]["max_relative_error"].as_f64().unwrap() <= 1e-12 && sweeps[1]["bytes_per_call"].as_u64().unwrap() > 0, "{:?}", sweeps[1]);
     // A whole device pass moves the displacements up and the results down.
     let rows = self::rows(&["--backend", "gpu", "--kernel", "evaluate"]);
     assert!(!rows.is_empty() && rows.iter().all(|r| r["bytes_per_call"].as_u64().unwrap() > 0), "{rows:?}");

@@ -6,8 +6,6 @@
 mod random;
 #[path = "common/run.rs"]
 mod common_run;
-#[path = "common/contact_problem.rs"]
-mod contact_problem;
 use bifirst::contact::{project_on_cone, uzawa_step, Status};
 use bifirst::scene::load_scene;
 use bifirst::solver::build_simulation;
@@ -129,7 +127,7 @@ fn converged_contact_points_satisfy_coulomb_law() {
 
 #[test]
 fn colours_partition_the_points_and_no_colour_shares_a_body() {
-    let p = contact_problem::random_problem(7, 400, 1500);
+    let p = bifirst::bench::bench_contact_problem(7, 400, 1500);
     let mut seen = vec![0; p.local.len()];
     for c in 0..p.colours.count() {
         let colour = p.colours.colour(c);
@@ -151,7 +149,7 @@ fn colours_partition_the_points_and_no_colour_shares_a_body() {
 fn coloured_gauss_seidel_is_the_sequential_sweep_in_colour_order() {
     use bifirst::contact::uzawa::{gauss_seidel_point, solve, Sweep, SETTLE};
     // Enough points that the first colours are swept on the thread pool (256 and more).
-    let p = contact_problem::random_problem(11, 3000, 3000);
+    let p = bifirst::bench::bench_contact_problem(11, 3000, 3000);
     assert!(p.colours.colour(0).len() >= 256, "colour 0 has {} points", p.colours.colour(0).len());
     let (tolerance, floor, sweeps) = (0.0, 1e-3, 6);
     let mut reference = p.r.clone();

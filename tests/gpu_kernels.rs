@@ -3,8 +3,6 @@
 
 #[path = "common/random.rs"]
 mod random;
-#[path = "common/contact_problem.rs"]
-mod contact_problem;
 
 use bifirst::assembly::{element_out_stride, DofMap, GatherMap, StiffnessPattern};
 use bifirst::contact::Status;
@@ -232,7 +230,7 @@ fn uzawa_sweep_kernel_matches_its_cpu_twin() {
     use bifirst::gpu::uzawa_sweep::{UzawaProblem, UzawaSweeps};
     let Some(gpu) = gpu_or_skip("uzawa_sweep_kernel_matches_its_cpu_twin", Precision::F64) else { return };
     let mut sweeps = UzawaSweeps::new(Arc::new(gpu)).expect("pipeline");
-    let problems = [contact_problem::random_problem(1, 2000, 2500), contact_problem::random_problem(2, 40, 60), contact_problem::random_problem(3, 300, 500)];
+    let problems = [bifirst::bench::bench_contact_problem(1, 2000, 2500), bifirst::bench::bench_contact_problem(2, 40, 60), bifirst::bench::bench_contact_problem(3, 300, 500)];
     let settings = [(0.0, 3), (1e-10, 500), (1e-14, 500)];
     let floor = 1e-3;
     let mut on_cpu = Vec::new();
