@@ -9,10 +9,12 @@
 //! | `assemble_csr` | [`assemble_csr`] |
 //! | `assemble_residual` | [`assemble_residual`] |
 //! | `uzawa_step` | [`uzawa_step`] |
+//! | `uzawa_sweep` | [`uzawa_sweep`] |
 //! | `peak_copy` | [`peak_copy`] |
 //! | `peak_fma` | [`peak_fma`] |
 
 pub use crate::contact::law::uzawa_step;
+pub use crate::contact::uzawa::uzawa_sweep;
 pub use crate::element::{element_energy, element_force_tangent};
 
 use crate::assembly::element_out_stride;
