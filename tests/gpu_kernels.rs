@@ -227,7 +227,7 @@ fn uzawa_sweep_kernel_matches_its_cpu_twin() {
     // 1e-12 of the CPU's, relative to the problem's largest reaction. f64 only: runs take the
     // device's sweeps in f64 only.
     use bifirst::contact::uzawa::{solve, Sweep};
-    use bifirst::gpu::uzawa_sweep::{UzawaProblem, UzawaSweeps};
+    use bifirst::gpu::uzawa_sweep::{delassus_version, UzawaProblem, UzawaSweeps};
     let Some(gpu) = gpu_or_skip("uzawa_sweep_kernel_matches_its_cpu_twin", Precision::F64) else { return };
     let mut sweeps = UzawaSweeps::new(Arc::new(gpu)).expect("pipeline");
     let problems = [bifirst::bench::bench_contact_problem(1, 2000, 2500), bifirst::bench::bench_contact_problem(2, 40, 60), bifirst::bench::bench_contact_problem(3, 300, 500)];
@@ -239,16 +239,21 @@ fn uzawa_sweep_kernel_matches_its_cpu_twin() {
         let outcome = solve(&p.w, &p.colours, &p.local, &p.nodal, &mut r, Sweep::GaussSeidel, tolerance, floor, max, None);
         on_cpu.push((outcome, r));
     }
+    let versions: Vec<u64> = problems.iter().map(|_| delassus_version()).collect();
+    let mut uploads = Vec::new();
     for _ in 0..2 {
-        // Twice: the second solve reuses the buffers.
+        // Twice: the second solve finds W on the device.
         let mut reactions: Vec<Vec<[f64; 3]>> = problems.iter().map(|p| p.r.clone()).collect();
         let mut list: Vec<UzawaProblem> = problems
             .iter()
             .zip(&settings)
             .zip(&mut reactions)
-            .map(|((p, &(tolerance, max_iterations)), r)| UzawaProblem { w: &p.w, colours: &p.colours, local: &p.local, nodal: &p.nodal, r, tolerance, floor, max_iterations })
+            .zip(&versions)
+            .map(|(((p, &(tolerance, max_iterations)), r), &version)| UzawaProblem { w: &p.w, colours: &p.colours, local: &p.local, nodal: &p.nodal, r, tolerance, floor, max_iterations, version })
             .collect();
-        let outcomes = sweeps.solve(&mut list, None).expect("device sweeps");
+        let uploaded = sweeps.traffic.0;
+        let outcomes = sweeps.solve(&mut list, None).expect("device sweeps").expect("the problems fit the device");
+        uploads.push(sweeps.traffic.0 - uploaded);
         for (k, ((outcome, r), (cpu_outcome, cpu_r))) in outcomes.iter().zip(&reactions).zip(&on_cpu).enumerate() {
             assert_eq!((outcome.iterations, outcome.converged), (cpu_outcome.iterations, cpu_outcome.converged), "problem {k}");
             let scale = cpu_r.iter().flatten().fold(1e-300, |m: f64, x| m.max(x.abs()));
@@ -258,6 +263,7 @@ fn uzawa_sweep_kernel_matches_its_cpu_twin() {
         }
     }
     assert!(on_cpu[1].0.converged && on_cpu[2].0.converged && on_cpu[1].0.iterations > 1);
+    assert!(uploads[1] < uploads[0] / 2, "W stays on the device while its version does: {uploads:?} bytes up");
     assert!(sweeps.submits < on_cpu.iter().map(|(o, _)| o.iterations as u64).sum::<u64>(), "chunks of sweeps, not a submit per sweep");
 }
 

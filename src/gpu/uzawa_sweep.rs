@@ -15,7 +15,7 @@ use super::{Gpu, GpuError};
 use crate::contact::uzawa::{Colours, Delassus, Judge, Local, NodalMap, Outcome, SETTLE};
 use crate::precision::Real;
 use bytemuck::{Pod, Zeroable};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::Arc;
 use wgpu::{BindGroup, Buffer, BufferUsages};
 
@@ -63,16 +63,79 @@ pub struct UzawaProblem<'a> {
     pub tolerance: Real,
     pub floor: Real,
     pub max_iterations: usize,
+    /// Changes whenever `w` or its pattern does ([`delassus_version`]): while the problems of
+    /// a round keep theirs, W stays on the device.
+    pub version: u64,
+}
+
+static VERSIONS: AtomicU64 = AtomicU64::new(1);
+
+/// A number no other Delassus operator of the process has had: taken whenever one is built.
+pub fn delassus_version() -> u64 {
+    VERSIONS.fetch_add(1, Ordering::Relaxed)
+}
+
+/// The round's problems in one set of arrays: W (its blocks and rows) and the colour order,
+/// which change only when a problem's Delassus operator does.
+#[derive(Default)]
+struct Layout {
+    /// Each problem's version and points: the layout serves a round with the same key.
+    key: Vec<(u64, usize)>,
+    blocks: Vec<Real>,
+    row_start: Vec<u32>,
+    row_entries: Vec<[u32; 2]>,
+    order: Vec<u32>,
+    ranges: Vec<ColourRange>,
+    /// Each problem's first point, and the end.
+    offsets: Vec<usize>,
+}
+
+fn key_of(problems: &[UzawaProblem]) -> Vec<(u64, usize)> {
+    problems.iter().map(|p| (p.version, p.local.len())).collect()
+}
+
+impl Layout {
+    fn of(problems: &[UzawaProblem]) -> Self {
+        let mut m = Layout { key: key_of(problems), row_start: vec![0], offsets: vec![0], ..Default::default() };
+        for p in problems {
+            let (point0, block0) = (*m.offsets.last().expect("starts at 0") as u32, (m.blocks.len() / 9) as u32);
+            m.blocks.extend(p.w.blocks.iter().flatten());
+            for row in &p.w.rows {
+                m.row_entries.extend(row.iter().map(|&(j, b)| [point0 + j, block0 + b]));
+                m.row_start.push(m.row_entries.len() as u32);
+            }
+            m.offsets.push(point0 as usize + p.local.len());
+        }
+        let colours = problems.iter().map(|p| p.colours.count()).max().unwrap_or(0);
+        for c in 0..colours {
+            let start = m.order.len() as u32;
+            for (p, &offset) in problems.iter().zip(&m.offsets) {
+                if c < p.colours.count() {
+                    m.order.extend(p.colours.colour(c).iter().map(|&i| offset as u32 + i));
+                }
+            }
+            m.ranges.push(ColourRange { start, count: m.order.len() as u32 - start });
+        }
+        m
+    }
+
+    fn points(&self) -> usize {
+        *self.offsets.last().expect("starts at 0")
+    }
+
+    fn range(&self, k: usize) -> std::ops::Range<usize> {
+        self.offsets[k]..self.offsets[k + 1]
+    }
 }
 
 /// Device buffers, grown as rounds need more.
 struct Buffers {
+    /// Capacities: points, blocks, row entries, colours, sweeps the read-back holds.
     points: usize,
     blocks: usize,
     entries: usize,
     colours: usize,
-    /// Bytes of the read-back buffer.
-    staging_bytes: u64,
+    snapshots: usize,
     block: Buffer,
     row_start: Buffer,
     row_entries: Buffer,
@@ -91,54 +154,13 @@ pub struct UzawaSweeps {
     gpu: Arc<Gpu>,
     pipeline: wgpu::ComputePipeline,
     buffers: Option<Buffers>,
+    /// What the device holds of the last round.
+    layout: Layout,
     /// Stride of the colour ranges in their uniform buffer (the device's offset alignment).
     range_stride: u64,
     pub submits: u64,
     /// Bytes up and down so far.
     pub traffic: (u64, u64),
-}
-
-/// The round's problems in one set of arrays.
-#[derive(Default)]
-struct Merged {
-    blocks: Vec<Real>,
-    row_start: Vec<u32>,
-    row_entries: Vec<[u32; 2]>,
-    locals: Vec<UzawaLocal<Real>>,
-    order: Vec<u32>,
-    ranges: Vec<ColourRange>,
-    r: Vec<Real>,
-    /// Each problem's first point.
-    offsets: Vec<usize>,
-}
-
-impl Merged {
-    fn of(problems: &[UzawaProblem]) -> Self {
-        let mut m = Merged { row_start: vec![0], ..Default::default() };
-        for p in problems {
-            let (point0, block0) = (m.locals.len() as u32, (m.blocks.len() / 9) as u32);
-            m.offsets.push(point0 as usize);
-            m.blocks.extend(p.w.blocks.iter().flatten());
-            for row in &p.w.rows {
-                m.row_entries.extend(row.iter().map(|&(j, b)| [point0 + j, block0 + b]));
-                m.row_start.push(m.row_entries.len() as u32);
-            }
-            let settle = SETTLE * p.tolerance;
-            m.locals.extend(p.local.iter().map(|l| UzawaLocal { v_free: l.v_free, shift: l.shift, mu: l.mu, rho: l.rho, floor: p.floor, settle }));
-            m.r.extend(p.r.iter().flatten());
-        }
-        let colours = problems.iter().map(|p| p.colours.count()).max().unwrap_or(0);
-        for c in 0..colours {
-            let start = m.order.len() as u32;
-            for (p, &offset) in problems.iter().zip(&m.offsets) {
-                if c < p.colours.count() {
-                    m.order.extend(p.colours.colour(c).iter().map(|&i| offset as u32 + i));
-                }
-            }
-            m.ranges.push(ColourRange { start, count: m.order.len() as u32 - start });
-        }
-        m
-    }
 }
 
 fn storage(gpu: &Gpu, label: &str, bytes: usize, extra: BufferUsages) -> Buffer {
@@ -149,35 +171,49 @@ impl UzawaSweeps {
     pub fn new(gpu: Arc<Gpu>) -> Result<Self, GpuError> {
         let pipeline = gpu.pipeline(KERNEL, None)?;
         let range_stride = (gpu.device.limits().min_uniform_buffer_offset_alignment as u64).max(std::mem::size_of::<ColourRange>() as u64);
-        Ok(Self { gpu, pipeline, buffers: None, range_stride, submits: 0, traffic: (0, 0) })
+        Ok(Self { gpu, pipeline, buffers: None, layout: Layout::default(), range_stride, submits: 0, traffic: (0, 0) })
     }
 
-    /// Makes sure the buffers hold the round (growing them by half again what it needs) and
-    /// that there is a bind group per colour.
-    fn reserve(&mut self, m: &Merged, chunk: usize) {
+    /// The most items of `bytes` each that one buffer of the device can bind.
+    fn most(&self, bytes: usize) -> usize {
+        let limits = self.gpu.device.limits();
+        (limits.max_storage_buffer_binding_size.min(limits.max_buffer_size) / bytes as u64) as usize
+    }
+
+    /// Makes sure the buffers hold the round (growing them by half again what it needs, within
+    /// the device's limits) and that there is a bind group per colour; whether they are new
+    /// (and hold nothing yet), or `None` when the round is too large for the device's buffers.
+    fn reserve(&mut self, m: &Layout) -> Option<bool> {
         let real = self.gpu.precision.size();
-        let (points, blocks, entries, colours) = (m.locals.len(), m.blocks.len() / 9, m.row_entries.len(), m.ranges.len());
-        let staging_bytes = (chunk * points * 3 * real) as u64;
-        let fits = self.buffers.as_ref().is_some_and(|b| b.points >= points && b.blocks >= blocks && b.entries >= entries && b.colours >= colours && b.staging_bytes >= staging_bytes);
-        if fits {
-            return;
+        let local_bytes = std::mem::size_of::<UzawaLocal<f64>>() / 8 * real;
+        let (points, blocks, entries, colours) = (m.points(), m.blocks.len() / 9, m.row_entries.len(), m.ranges.len());
+        let limits = [self.most(local_bytes).min(self.most(3 * real)), self.most(9 * real), self.most(8)];
+        let uniform_limit = (self.gpu.device.limits().max_buffer_size / self.range_stride) as usize;
+        if points > limits[0] || blocks > limits[1] || entries > limits[2] || colours > uniform_limit {
+            return None;
         }
-        let grow = |n: usize, old: Option<usize>| old.unwrap_or(0).max(n + n / 2).max(1);
+        if self.buffers.as_ref().is_some_and(|b| b.points >= points && b.blocks >= blocks && b.entries >= entries && b.colours >= colours) {
+            return Some(false);
+        }
+        let grow = |n: usize, old: Option<usize>, limit: usize| old.unwrap_or(0).max(n + n / 2).clamp(1, limit.max(1));
         let old = self.buffers.as_ref();
-        let (points, blocks, entries, colours) =
-            (grow(points, old.map(|b| b.points)), grow(blocks, old.map(|b| b.blocks)), grow(entries, old.map(|b| b.entries)), grow(colours, old.map(|b| b.colours)));
-        let staging_bytes = (LAST_CHUNK * points * 3 * real) as u64;
+        let points = grow(points, old.map(|b| b.points), limits[0]);
+        let blocks = grow(blocks, old.map(|b| b.blocks), limits[1]);
+        let entries = grow(entries, old.map(|b| b.entries), limits[2]);
+        let colours = grow(colours, old.map(|b| b.colours), uniform_limit);
+        let point_bytes = (points * 3 * real) as u64;
+        let snapshots = ((self.gpu.device.limits().max_buffer_size / point_bytes) as usize).clamp(1, LAST_CHUNK);
         let gpu = &self.gpu;
         let none = BufferUsages::empty();
         let block = storage(gpu, "uzawa blocks", blocks * 9 * real, none);
         let row_start = storage(gpu, "uzawa row starts", (points + 1) * 4, none);
         let row_entries = storage(gpu, "uzawa row entries", entries * 8, none);
-        let locals = storage(gpu, "uzawa points", points * std::mem::size_of::<UzawaLocal<f64>>() / 8 * real, none);
+        let locals = storage(gpu, "uzawa points", points * local_bytes, none);
         let order = storage(gpu, "uzawa colour order", points * 4, none);
         let live = storage(gpu, "uzawa live", points * 4, none);
         let r = storage(gpu, "uzawa reactions", points * 3 * real, BufferUsages::COPY_SRC);
         let ranges = gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some("uzawa colours"), size: colours as u64 * self.range_stride, usage: BufferUsages::UNIFORM | BufferUsages::COPY_DST, mapped_at_creation: false });
-        let staging = gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some("uzawa read-back"), size: staging_bytes, usage: BufferUsages::MAP_READ | BufferUsages::COPY_DST, mapped_at_creation: false });
+        let staging = gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some("uzawa read-back"), size: snapshots as u64 * point_bytes, usage: BufferUsages::MAP_READ | BufferUsages::COPY_DST, mapped_at_creation: false });
         let layout = self.pipeline.get_bind_group_layout(0);
         let bind_groups = (0..colours)
             .map(|c| {
@@ -188,7 +224,8 @@ impl UzawaSweeps {
                 gpu.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(KERNEL), layout: &layout, entries: &entries })
             })
             .collect();
-        self.buffers = Some(Buffers { points, blocks, entries, colours, staging_bytes, block, row_start, row_entries, locals, order, live, r, ranges, staging, bind_groups });
+        self.buffers = Some(Buffers { points, blocks, entries, colours, snapshots, block, row_start, row_entries, locals, order, live, r, ranges, staging, bind_groups });
+        Some(true)
     }
 
     fn upload(&mut self, buffer: &Buffer, offset: u64, bytes: &[u8]) {
@@ -200,49 +237,59 @@ impl UzawaSweeps {
 
     /// Solves every problem with Gauss-Seidel sweeps on the device until each converges by the
     /// CPU's rule, reaches its `max_iterations`, or `stop` is set; each problem's `r` gets the
-    /// reactions of its last sweep. The outcomes are in the problems' order.
-    pub fn solve(&mut self, problems: &mut [UzawaProblem], stop: Option<&AtomicBool>) -> Result<Vec<Outcome>, GpuError> {
+    /// reactions of its last sweep. The outcomes are in the problems' order; `None` (nothing
+    /// done) when the round is too large for the device's buffers.
+    pub fn solve(&mut self, problems: &mut [UzawaProblem], stop: Option<&AtomicBool>) -> Result<Option<Vec<Outcome>>, GpuError> {
         let precision = self.gpu.precision;
-        let m = Merged::of(problems);
-        let n = m.locals.len();
         let mut outcomes = vec![Outcome::default(); problems.len()];
-        if n == 0 {
-            return Ok(outcomes);
+        if problems.iter().all(|p| p.local.is_empty()) {
+            return Ok(Some(outcomes));
         }
-        self.reserve(&m, FIRST_CHUNK);
+        let resident = self.layout.key == key_of(problems);
+        let layout = if resident { std::mem::take(&mut self.layout) } else { Layout::of(problems) };
+        let Some(reallocated) = self.reserve(&layout) else {
+            return Ok(None);
+        };
         let b = self.buffers.take().expect("reserved");
-        let locals: Vec<Real> = bytemuck::cast_slice(&m.locals).to_vec();
-        self.upload(&b.block, 0, &to_device(precision, &m.blocks));
-        self.upload(&b.row_start, 0, bytemuck::cast_slice(&m.row_start));
-        self.upload(&b.row_entries, 0, bytemuck::cast_slice(&m.row_entries));
-        self.upload(&b.locals, 0, &to_device(precision, &locals));
-        self.upload(&b.order, 0, bytemuck::cast_slice(&m.order));
-        self.upload(&b.live, 0, bytemuck::cast_slice(&vec![1u32; n]));
-        self.upload(&b.r, 0, &to_device(precision, &m.r));
-        for (c, range) in m.ranges.iter().enumerate() {
-            self.upload(&b.ranges, c as u64 * self.range_stride, bytemuck::bytes_of(range));
+        if !resident || reallocated {
+            self.upload(&b.block, 0, &to_device(precision, &layout.blocks));
+            self.upload(&b.row_start, 0, bytemuck::cast_slice(&layout.row_start));
+            self.upload(&b.row_entries, 0, bytemuck::cast_slice(&layout.row_entries));
+            self.upload(&b.order, 0, bytemuck::cast_slice(&layout.order));
+            for (c, range) in layout.ranges.iter().enumerate() {
+                self.upload(&b.ranges, c as u64 * self.range_stride, bytemuck::bytes_of(range));
+            }
         }
-        let result = self.iterate(&b, &m, problems, &mut outcomes, stop);
+        let locals: Vec<UzawaLocal<Real>> = problems
+            .iter()
+            .flat_map(|p| {
+                let settle = SETTLE * p.tolerance;
+                p.local.iter().map(move |l| UzawaLocal { v_free: l.v_free, shift: l.shift, mu: l.mu, rho: l.rho, floor: p.floor, settle })
+            })
+            .collect();
+        let start: Vec<Real> = problems.iter().flat_map(|p| p.r.iter().flatten().copied()).collect();
+        self.upload(&b.locals, 0, &to_device(precision, bytemuck::cast_slice(&locals)));
+        self.upload(&b.live, 0, bytemuck::cast_slice(&vec![1u32; layout.points()]));
+        self.upload(&b.r, 0, &to_device(precision, &start));
+        let result = self.iterate(&b, &layout, start, problems, &mut outcomes, stop);
         self.buffers = Some(b);
-        result.map(|()| outcomes)
+        self.layout = layout;
+        result.map(|()| Some(outcomes))
     }
 
-    /// The chunks of sweeps and the host's judgement after each sweep.
-    fn iterate(&mut self, b: &Buffers, m: &Merged, problems: &mut [UzawaProblem], outcomes: &mut [Outcome], stop: Option<&AtomicBool>) -> Result<(), GpuError> {
+    /// The chunks of sweeps and the host's judgement after each sweep, from the reactions
+    /// `previous`.
+    fn iterate(&mut self, b: &Buffers, m: &Layout, mut previous: Vec<Real>, problems: &mut [UzawaProblem], outcomes: &mut [Outcome], stop: Option<&AtomicBool>) -> Result<(), GpuError> {
         let precision = self.gpu.precision;
-        let real = precision.size();
-        let n = m.locals.len();
-        let point_bytes = (n * 3 * real) as u64;
-        let ends: Vec<usize> = m.offsets.iter().skip(1).copied().chain([n]).collect();
+        let n = m.points();
+        let point_bytes = (n * 3 * precision.size()) as u64;
         let mut judges: Vec<Judge> = problems.iter().map(|p| Judge::new(p.tolerance, p.floor)).collect();
         let mut live: Vec<bool> = problems.iter().map(|p| p.max_iterations > 0 && !p.r.is_empty()).collect();
-        let mut previous = m.r.clone();
         let (mut swept, mut chunk) = (0usize, FIRST_CHUNK);
-        let mut scratch = Vec::new();
-        let mut dr: Vec<[Real; 3]> = Vec::new();
+        let (mut scratch, mut dr) = (Vec::new(), Vec::new());
         let most = problems.iter().map(|p| p.max_iterations).max().unwrap_or(0);
         while live.iter().any(|&l| l) && !stop.is_some_and(|s| s.load(Ordering::Relaxed)) {
-            let sweeps = chunk.min(most - swept).min((b.staging_bytes / point_bytes) as usize).max(1);
+            let sweeps = chunk.min(most - swept).min(b.snapshots);
             let mut encoder = self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(KERNEL) });
             for s in 0..sweeps {
                 {
@@ -262,17 +309,16 @@ impl UzawaSweeps {
             self.traffic.1 += bytes.len() as u64;
             let snapshots = from_device(precision, &bytes);
             let mut finished = false;
-            for s in 0..sweeps {
-                let now = &snapshots[s * 3 * n..(s + 1) * 3 * n];
+            for (s, now) in snapshots.chunks(3 * n).enumerate() {
                 let iteration = swept + s + 1;
                 for (k, p) in problems.iter_mut().enumerate() {
                     if !live[k] {
                         continue;
                     }
-                    let (start, end) = (m.offsets[k], ends[k]);
+                    let range = m.range(k);
                     dr.clear();
-                    dr.extend((start..end).map(|i| [0, 1, 2].map(|a| now[3 * i + a] - previous[3 * i + a])));
-                    let r: &[[Real; 3]] = bytemuck::cast_slice(&now[3 * start..3 * end]);
+                    dr.extend(range.clone().map(|i| [0, 1, 2].map(|a| now[3 * i + a] - previous[3 * i + a])));
+                    let r: &[[Real; 3]] = bytemuck::cast_slice(&now[3 * range.start..3 * range.end]);
                     let (change, size) = p.nodal.change(&dr, r, &mut scratch);
                     outcomes[k] = judges[k].after(iteration, change, size);
                     if outcomes[k].converged || iteration == p.max_iterations {
@@ -288,11 +334,12 @@ impl UzawaSweeps {
             for (k, p) in problems.iter_mut().enumerate() {
                 if live[k] {
                     // Where the device stands, should the next chunk not come.
-                    p.r.copy_from_slice(bytemuck::cast_slice(&previous[3 * m.offsets[k]..3 * ends[k]]));
+                    let range = m.range(k);
+                    p.r.copy_from_slice(bytemuck::cast_slice(&previous[3 * range.start..3 * range.end]));
                 }
             }
             if finished && live.iter().any(|&l| l) {
-                let flags: Vec<u32> = (0..problems.len()).flat_map(|k| std::iter::repeat_n(live[k] as u32, ends[k] - m.offsets[k])).collect();
+                let flags: Vec<u32> = (0..problems.len()).flat_map(|k| std::iter::repeat_n(live[k] as u32, m.range(k).len())).collect();
                 self.upload(&b.live, 0, bytemuck::cast_slice(&flags));
             }
         }

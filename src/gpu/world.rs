@@ -319,8 +319,9 @@ impl GpuWorld {
     }
 
     /// The contact problems of a Newton round, solved by Gauss-Seidel sweeps on the device
-    /// ([`UzawaSweeps::solve`]); the time counts as `contact`.
-    pub fn solve_contact(&mut self, problems: &mut [UzawaProblem], stop: Option<&AtomicBool>, times: &mut PhaseTimes) -> Result<Vec<Outcome>, GpuError> {
+    /// ([`UzawaSweeps::solve`]; `None` when they do not fit its buffers); the time counts as
+    /// `contact`.
+    pub fn solve_contact(&mut self, problems: &mut [UzawaProblem], stop: Option<&AtomicBool>, times: &mut PhaseTimes) -> Result<Option<Vec<Outcome>>, GpuError> {
         let started = Instant::now();
         if self.contact.is_none() {
             self.contact = Some(UzawaSweeps::new(self.gpu.clone())?);

@@ -10,7 +10,7 @@ use super::body::{Body, StepParams};
 use super::PhaseTimes;
 use crate::contact::uzawa::{self, Colours, Delassus, Local, NodalMap, Outcome};
 use crate::contact::{uzawa_step, ContactPoint, Settings, Status};
-use crate::gpu::uzawa_sweep::UzawaProblem;
+use crate::gpu::uzawa_sweep::{delassus_version, UzawaProblem};
 use crate::precision::Real;
 use std::collections::HashMap;
 use std::sync::atomic::AtomicBool;
@@ -46,6 +46,8 @@ pub struct ContactStep {
     /// Whether `delassus` (and each point's rho) was built with the bodies' current
     /// factorisations: while no body refactorises, `W` does not change within a step.
     delassus_current: bool,
+    /// Taken anew whenever `delassus` is built ([`delassus_version`]).
+    delassus_version: u64,
 }
 
 impl ContactStep {
@@ -124,7 +126,7 @@ impl ContactStep {
             nodal.terms.push(terms.collect());
         }
         nodal.nodes = slots.len();
-        Self { points, delassus, colours, per_body, h, r, local, nodal, dim, velocity_scale, floor, delassus_current: false }
+        Self { points, delassus, colours, per_body, h, r, local, nodal, dim, velocity_scale, floor, delassus_current: false, delassus_version: 0 }
     }
 
     pub fn is_empty(&self) -> bool {
@@ -232,6 +234,7 @@ impl ContactStep {
             tolerance: INNER_TOLERANCE * settings.tolerance,
             floor: self.floor,
             max_iterations: settings.max_iterations,
+            version: self.delassus_version,
         }
     }
 
@@ -298,6 +301,7 @@ impl ContactStep {
         }
         self.floor = self.velocity_scale * self.local.iter().map(|l| l.rho).fold(0.0, Real::max);
         self.delassus_current = true;
+        self.delassus_version = delassus_version();
     }
 
     /// Records the end-of-step velocity, status and linearised end gap of every point.

@@ -366,8 +366,9 @@ fn newton_in_lockstep(groups: &mut [Group], world: &mut GpuWorld, c: &Context, t
 }
 
 /// The Uzawa iterations of the `waiting` groups' contact problems: on the device, all in one
-/// solve, where [`crate::backend::uzawa_on_device`] says so, else each group's on the CPU, in
-/// parallel. A device error fails every waiting group.
+/// solve, where [`crate::backend::uzawa_on_device`] says so (and they fit the device's
+/// buffers), else each group's on the CPU, in parallel. A device error fails every waiting
+/// group.
 fn solve_contact(groups: &mut [Group], waiting: &[bool], world: &mut GpuWorld, c: &Context, times: &mut PhaseTimes) -> Vec<Result<Outcome, StepFailure>> {
     let mut results: Vec<Result<Outcome, StepFailure>> = groups.iter().map(|_| Ok(Outcome::default())).collect();
     let Some(settings) = c.settings else { return results };
@@ -393,9 +394,17 @@ fn solve_contact(groups: &mut [Group], waiting: &[bool], world: &mut GpuWorld, c
         }
     }
     match world.solve_contact(&mut problems, c.interrupt, times) {
-        Ok(outcomes) => {
+        Ok(Some(outcomes)) => {
             for (k, o) in owners.into_iter().zip(outcomes) {
                 results[k] = Ok(o);
+            }
+        }
+        Ok(None) => {
+            // Too large for the device's buffers: the CPU's sweeps.
+            drop(problems);
+            for k in owners {
+                let g = &mut groups[k];
+                results[k] = Ok(g.contact.solve_on_cpu(settings, c.interrupt, &mut g.newton.report.wall));
             }
         }
         Err(e) => {
