@@ -194,8 +194,21 @@ impl Backend {
     pub fn describe(&self) -> String {
         match self {
             Backend::Cpu => format!("cpu ({PRECISION_NAME})"),
-            Backend::Gpu(gpu, _) => format!("gpu on {} in {}", gpu.adapter.line(), gpu.precision.name()),
+            Backend::Gpu(gpu, uzawa) => format!("gpu on {} in {}, Uzawa sweeps {}", gpu.adapter.line(), gpu.precision.name(), uzawa.name()),
         }
+    }
+
+    /// Why `--uzawa gpu` cannot put a scene's sweeps on the device (they stay on the CPU).
+    pub fn uzawa_notice(&self, sweep: Option<Sweep>) -> Option<String> {
+        let Backend::Gpu(gpu, UzawaPlacement::Gpu) = self else { return None };
+        let why = if gpu.precision != Precision::F64 {
+            "in f32 they could not reach the contact tolerance"
+        } else if sweep == Some(Sweep::Jacobi) {
+            "the scene asks for Jacobi sweeps (contact.sweep)"
+        } else {
+            return None;
+        };
+        Some(format!("--uzawa gpu: the device's Uzawa sweeps are Gauss-Seidel in f64 and {why}; they run on the CPU"))
     }
 
     /// Places every body's element and assembly kernels (the CPU twins are the default): on a

@@ -123,10 +123,10 @@ enum Command {
         trace: Option<[String; 3]>,
     },
     /// Run time against error for a known-answer scene over a grid of settings (scene keys, and
-    /// `backend` and `precision`): a table, a CSV and a PNG with the Pareto front marked.
+    /// `backend`, `precision` and `uzawa`): a table, a CSV and a PNG with the Pareto front marked.
     Accuracy {
         scene: PathBuf,
-        /// A scene key (or `backend`, `precision`) and its values, as for `sweep`.
+        /// A scene key (or `backend`, `precision`, `uzawa`) and its values, as for `sweep`.
         #[arg(long = "over", value_name = "KEY=V1,V2,...", required = true)]
         over: Vec<SweepAxis>,
         /// Overrides applied to every variant before its own.

@@ -389,6 +389,10 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
         monitor.warning(notice);
     }
     let backend = resolved.backend;
+    let uzawa_notice = backend.uzawa_notice(sim.contact.as_ref().map(|c| c.settings.sweep));
+    if let Some(notice) = &uzawa_notice {
+        monitor.warning(notice);
+    }
     monitor.backend(&backend.describe());
     backend.apply(&mut sim).map_err(BackendError::from)?;
     if let (Some(path), 3) = (&options.contour, sim.dim) {
@@ -414,7 +418,7 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
     );
     // A restarted run's log begins at its state's time.
     logger.line(sim.t, Level::Info, &start)?;
-    if let Some(notice) = &resolved.notice {
+    for notice in resolved.notice.iter().chain(&uzawa_notice) {
         logger.line(sim.t, Level::Warning, notice)?;
     }
     if let Some(reason) = &resolved.reason {

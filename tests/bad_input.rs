@@ -230,7 +230,9 @@ fn backend_requests_that_cannot_be_met() {
         (&["--backend", "auto", "--adapter", "no-such-adapter"][..], "no GPU adapter named like `no-such-adapter`"),
         (&["--backend", "cpu", "--precision", "f32"][..], "the CPU backend runs in f64 only"),
         (&["--backend", "cpu", "--adapter", "llvmpipe"][..], "--adapter needs a GPU backend"),
+        (&["--backend", "cpu", "--uzawa", "gpu"][..], "--uzawa gpu needs a GPU backend"),
         (&["--backend", "tpu"][..], "unknown backend `tpu`"),
+        (&["--uzawa", "fpga"][..], "unknown Uzawa placement `fpga`"),
         (&["--precision", "f16"][..], "unknown precision `f16`"),
     ] {
         let out = Command::new(env!("CARGO_BIN_EXE_bifirst"))

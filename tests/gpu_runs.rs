@@ -170,31 +170,37 @@ fn contact_on_the_device_repeats_the_cpu_sweeps() {
     assert!(worst <= 1e-9, "energies differ by {worst:.3e}");
     assert!(extra > 0 && extra < sweeps, "the sweeps ran on the device in chunks: {extra} submits for {sweeps} sweeps");
     assert_eq!(field(&auto, "device_submits"), field(&host, "device_submits"), "auto: the CPU's sweeps on a software adapter");
+    // In f32 the sweeps stay on the CPU, and the log says why.
+    let mut o = options(BackendChoice::Gpu, Some(Precision::F32));
+    o.backend.uzawa = UzawaPlacement::Gpu;
+    let f32_run = run_with(&path, &["packing.count=6", "time.end=0.02"], &format!("{test}_f32"), &o);
+    let warned = f32_run.topics["/log"].iter().any(|m| m["message"].as_str().is_some_and(|t| t.contains("--uzawa gpu") && t.contains("run on the CPU")));
+    assert!(warned, "the log says the sweeps stayed on the CPU");
 }
 
 #[test]
 fn the_sliding_block_keeps_its_known_answer_with_contact_on_the_device() {
     // The stopping distance and friction dissipation against their closed forms, through
-    // `bifirst accuracy`: the same errors with the sweeps on the device as on the CPU.
+    // `bifirst accuracy` with `uzawa` as an axis: the same errors with the sweeps on the device
+    // as on the CPU.
     let test = "the_sliding_block_keeps_its_known_answer_with_contact_on_the_device";
     if !gpu_available(test) {
         return;
     }
-    let error = |uzawa: &str| {
-        let out = temp_path(&format!("{test}_{uzawa}"));
-        let o = std::process::Command::new(env!("CARGO_BIN_EXE_bifirst"))
-            .args(["accuracy", "scenes/sliding_block.toml", "--over", "time.dt=0.004", "--set", "body.block.mesh.divisions=[4,2]", "--backend", "gpu", "--uzawa", uzawa, "--out"])
-            .arg(&out)
-            .current_dir(env!("CARGO_MANIFEST_DIR"))
-            .output()
-            .unwrap();
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-        let csv = std::fs::read_to_string(out.join("accuracy.csv")).unwrap();
-        let rows: Vec<Vec<&str>> = csv.lines().map(|l| l.split(',').collect()).collect();
-        let c = rows[0].iter().position(|h| *h == "error").expect("an error column");
-        rows[1][c].parse::<f64>().unwrap()
-    };
-    let (host, device) = (error("cpu"), error("gpu"));
+    let out = temp_path(test);
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_bifirst"))
+        .args(["accuracy", "scenes/sliding_block.toml", "--over", "uzawa=cpu,gpu", "--set", "time.dt=0.004", "--set", "body.block.mesh.divisions=[4,2]", "--backend", "gpu", "--out"])
+        .arg(&out)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let csv = std::fs::read_to_string(out.join("accuracy.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = csv.lines().map(|l| l.split(',').collect()).collect();
+    let column = |name: &str| rows[0].iter().position(|h| *h == name).unwrap_or_else(|| panic!("column {name} in {:?}", rows[0]));
+    let (label, error) = (column("uzawa"), column("error"));
+    assert_eq!(rows.iter().skip(1).map(|r| r[label]).collect::<Vec<_>>(), ["cpu", "gpu"]);
+    let (host, device): (f64, f64) = (rows[1][error].parse().unwrap(), rows[2][error].parse().unwrap());
     eprintln!("sliding block error: {host:.6e} (CPU sweeps), {device:.6e} (device sweeps)");
     assert!(host < 1e-2, "within 1 % of the closed form: {host:.3e}");
     assert!((device - host).abs() <= 1e-9 * host, "{device:.9e} vs {host:.9e}");

@@ -1,8 +1,8 @@
 //! `bifirst accuracy`: run time against error. A known-answer scene is run over a grid of
-//! settings (scene keys such as `time.dt` or mesh divisions, and `backend` and `precision`), one
-//! variant after the other so that the timings do not compete; each run's error against its
-//! closed form comes from the scene's measure ([`known_answers`]), and the variants that no other
-//! beats on both time and error make the Pareto front.
+//! settings (scene keys such as `time.dt` or mesh divisions, and `backend`, `precision` and
+//! `uzawa`), one variant after the other so that the timings do not compete; each run's error
+//! against its closed form comes from the scene's measure ([`known_answers`]), and the variants
+//! that no other beats on both time and error make the Pareto front.
 
 mod known_answers;
 mod plot;
@@ -100,6 +100,7 @@ impl Study {
                 match key {
                     "backend" => request.choice = value.parse().map_err(bad)?,
                     "precision" => request.precision = Some(value.parse().map_err(bad)?),
+                    "uzawa" => request.uzawa = value.parse().map_err(bad)?,
                     _ => scene_sets.push(set.clone()),
                 }
             }
