@@ -127,7 +127,9 @@ pub enum Backend {
 pub const AUTO_REASON_GPU: &str = "was measured slower than the CPU backend on every scene (doc/benchmarks.md); `--backend gpu` runs on it";
 
 /// `--uzawa auto` on a hardware adapter: the fewest contact points of a Newton round, and the
-/// fewest per colour on average, for the device's sweeps.
+/// fewest per colour on average, for the device's sweeps. Estimated, not yet measured on
+/// hardware: a device pass costs ~0.3 ms of submit and fence wait on an H100, a point-sweep
+/// 1.3 to 5 µs on the CPU (doc/benchmarks.md, "Contact on the device").
 pub const AUTO_UZAWA_POINTS: usize = 1000;
 pub const AUTO_UZAWA_POINTS_PER_COLOUR: usize = 64;
 
@@ -227,9 +229,9 @@ impl Backend {
 /// Whether a Newton round's contact problems, `points` points in at most `colours` colours,
 /// take their Uzawa sweeps on the device of `world`. Only Gauss-Seidel sweeps in f64 can: the
 /// device has no Jacobi kernel, and in f32 the iterations cannot reach the contact tolerance.
-/// `auto` takes the device when a colour holds on average at least
-/// [`AUTO_UZAWA_POINTS_PER_COLOUR`] points and the round at least [`AUTO_UZAWA_POINTS`], on a
-/// hardware adapter only (measured, doc/benchmarks.md, "Contact on the device").
+/// `auto` never takes a software adapter (lavapipe was measured 1.8x to 11x slower than the
+/// CPU's sweeps at every size), and takes a hardware one when a colour holds on average at least
+/// [`AUTO_UZAWA_POINTS_PER_COLOUR`] points and the round at least [`AUTO_UZAWA_POINTS`].
 pub fn uzawa_on_device(world: &GpuWorld, settings: &Settings, points: usize, colours: usize) -> bool {
     if settings.sweep != Sweep::GaussSeidel || world.precision() != Precision::F64 {
         return false;

@@ -370,52 +370,39 @@ fn newton_in_lockstep(groups: &mut [Group], world: &mut GpuWorld, c: &Context, t
 /// buffers), else each group's on the CPU, in parallel. A device error fails every waiting
 /// group.
 fn solve_contact(groups: &mut [Group], waiting: &[bool], world: &mut GpuWorld, c: &Context, times: &mut PhaseTimes) -> Vec<Result<Outcome, StepFailure>> {
-    let mut results: Vec<Result<Outcome, StepFailure>> = groups.iter().map(|_| Ok(Outcome::default())).collect();
-    let Some(settings) = c.settings else { return results };
+    let Some(settings) = c.settings else { return groups.iter().map(|_| Ok(Outcome::default())).collect() };
     let chosen = || groups.iter().zip(waiting).filter(|(_, &w)| w).map(|(g, _)| g);
     let points: usize = chosen().map(|g| g.contact.points.len()).sum();
     let colours = chosen().map(|g| g.contact.colours.count()).max().unwrap_or(0);
-    if points == 0 {
-        return results;
-    }
-    if !crate::backend::uzawa_on_device(world, settings, points, colours) {
-        return groups
-            .par_iter_mut()
-            .zip(waiting)
-            .map(|(g, &w)| Ok(if w { g.contact.solve_on_cpu(settings, c.interrupt, &mut g.newton.report.wall) } else { Outcome::default() }))
-            .collect();
-    }
-    let mut problems = Vec::new();
-    let mut owners = Vec::new();
-    for (k, (g, &w)) in groups.iter_mut().zip(waiting).enumerate() {
-        if w {
-            problems.push(g.contact.problem(settings));
-            owners.push(k);
-        }
-    }
-    match world.solve_contact(&mut problems, c.interrupt, times) {
-        Ok(Some(outcomes)) => {
-            for (k, o) in owners.into_iter().zip(outcomes) {
-                results[k] = Ok(o);
+    if points > 0 && crate::backend::uzawa_on_device(world, settings, points, colours) {
+        let owners: Vec<usize> = (0..groups.len()).filter(|&k| waiting[k]).collect();
+        let mut problems: Vec<_> = groups.iter_mut().zip(waiting).filter(|(_, &w)| w).map(|(g, _)| g.contact.problem(settings)).collect();
+        let solved = world.solve_contact(&mut problems, c.interrupt, times);
+        drop(problems);
+        let mut results: Vec<Result<Outcome, StepFailure>> = groups.iter().map(|_| Ok(Outcome::default())).collect();
+        match solved {
+            Ok(Some(outcomes)) => {
+                for (k, o) in owners.into_iter().zip(outcomes) {
+                    results[k] = Ok(o);
+                }
+                return results;
             }
-        }
-        Ok(None) => {
+            Err(e) => {
+                for k in owners {
+                    let names: Vec<&str> = groups[k].bodies.iter().map(|b| b.name.as_str()).collect();
+                    results[k] = Err(StepFailure::Device { body: names.join("`, `"), error: e.to_string() });
+                }
+                return results;
+            }
             // Too large for the device's buffers: the CPU's sweeps.
-            drop(problems);
-            for k in owners {
-                let g = &mut groups[k];
-                results[k] = Ok(g.contact.solve_on_cpu(settings, c.interrupt, &mut g.newton.report.wall));
-            }
-        }
-        Err(e) => {
-            drop(problems);
-            for k in owners {
-                let names: Vec<&str> = groups[k].bodies.iter().map(|b| b.name.as_str()).collect();
-                results[k] = Err(StepFailure::Device { body: names.join("`, `"), error: e.to_string() });
-            }
+            Ok(None) => {}
         }
     }
-    results
+    groups
+        .par_iter_mut()
+        .zip(waiting)
+        .map(|(g, &w)| Ok(if w { g.contact.solve_on_cpu(settings, c.interrupt, &mut g.newton.report.wall) } else { Outcome::default() }))
+        .collect()
 }
 
 /// One device pass over the bodies of the `live` groups that `wanted` selects: the tangent and
