@@ -6,9 +6,9 @@ use crate::assembly::{element_out_stride, DofMap, GatherMap, StiffnessPattern};
 use crate::cpu;
 use crate::element::ReferenceGeometry;
 use crate::gpu::types::{Coefficients, DofOut, DofStep};
-use crate::contact::uzawa::{self, Colours, Delassus, Local, NodalMap, Sweep};
+use crate::contact::uzawa::{self, Colours, Delassus, Local, NodalMap, Problem, Sweep};
 use crate::gpu::uzawa_step::{UzawaPoint, UzawaStepKernel};
-use crate::gpu::uzawa_sweep::{delassus_version, UzawaProblem, UzawaSweeps};
+use crate::gpu::uzawa_sweep::UzawaSweeps;
 use crate::gpu::peak::{measure as measure_peaks, Peaks, FMA_FLOPS_PER_VALUE};
 use crate::gpu::{Evaluation, Gpu, GpuError, GpuWorld, WorldKernel};
 use crate::material::{BlatzKo, Lvf, Model, NeoHookean};
@@ -459,6 +459,13 @@ pub struct ContactProblem {
     pub r: Vec<[Real; 3]>,
 }
 
+impl ContactProblem {
+    /// The problem starting from the reactions `r` (a copy of `self.r`) with this stopping rule.
+    pub fn with<'a>(&'a self, r: &'a mut [[Real; 3]], tolerance: Real, floor: Real, max_iterations: usize) -> Problem<'a> {
+        Problem { w: &self.w, colours: &self.colours, local: &self.local, nodal: &self.nodal, r, tolerance, floor, max_iterations }
+    }
+}
+
 /// `points` contact points on `bodies` bodies: each touches one body (an obstacle contact) or,
 /// with probability 0.6, two (a contact between grains), and every pair of points on a body has
 /// a block of W. W is symmetric with dominant diagonal blocks, so that Gauss-Seidel converges;
@@ -480,7 +487,7 @@ pub fn bench_contact_problem(seed: u64, bodies: usize, points: usize) -> Contact
             lists[b].push(i);
         }
     }
-    let mut w = Delassus { rows: vec![Vec::new(); points], blocks: Vec::new() };
+    let mut w = Delassus { rows: vec![Vec::new(); points], ..Default::default() };
     let mut index: std::collections::HashMap<(usize, usize), usize> = std::collections::HashMap::new();
     let mut block = |w: &mut Delassus, l: usize, k: usize| -> usize {
         *index.entry((l, k)).or_insert_with(|| {
@@ -507,6 +514,7 @@ pub fn bench_contact_problem(seed: u64, bodies: usize, points: usize) -> Contact
             }
         }
     }
+    w.stamp();
     let colours = Colours::of(&w);
     let local = (0..points)
         .map(|i| {
@@ -536,27 +544,25 @@ fn uzawa_sweep_rows(options: &BenchOptions, gpus: &[Arc<Gpu>], row: &mut impl Fn
     let mut reference = p.r.clone();
     let t = time_calls(options.min_time, || {
         reference.copy_from_slice(&p.r);
-        uzawa::solve(&p.w, &p.colours, &p.local, &p.nodal, &mut reference, Sweep::GaussSeidel, 0.0, 1e-3, BENCH_SWEEPS, None);
+        uzawa::solve(&mut p.with(&mut reference, 0.0, 1e-3, BENCH_SWEEPS), Sweep::GaussSeidel, None);
     });
     row(make("cpu f64".into(), t, 0, 0.0));
     for gpu in gpus.iter().filter(|g| g.precision == Precision::F64) {
         let mut sweeps = UzawaSweeps::new(gpu.clone())?;
-        // One version for every call: after the first (untimed) call W stays on the device, as
-        // within a step whose bodies keep their factorisations.
-        let version = delassus_version();
+        // W keeps its version: after the first (untimed) call it stays on the device, as within
+        // a step whose bodies keep their factorisations.
         let mut r = p.r.clone();
         let mut result = Ok(());
         let t = time_calls(options.min_time, || {
             r.copy_from_slice(&p.r);
-            let mut problem = [UzawaProblem { w: &p.w, colours: &p.colours, local: &p.local, nodal: &p.nodal, r: &mut r, tolerance: 0.0, floor: 1e-3, max_iterations: BENCH_SWEEPS, version }];
-            if let Err(e) = sweeps.solve(&mut problem, None) {
+            if let Err(e) = sweeps.solve(&mut [p.with(&mut r, 0.0, 1e-3, BENCH_SWEEPS)], None) {
                 result = Err(e);
             }
         });
         result?;
         let scale = reference.iter().flatten().fold(Real::MIN_POSITIVE, |m, x| m.max(x.abs()));
         let error = r.iter().flatten().zip(reference.iter().flatten()).map(|(a, b)| (a - b).abs()).fold(0.0, Real::max) / scale;
-        let traffic = sweeps.traffic.0 + sweeps.traffic.1;
+        let traffic = sweeps.traffic.total();
         row(make(format!("gpu {}", gpu.precision.name()), t, traffic, error));
     }
     Ok(())

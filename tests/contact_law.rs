@@ -159,12 +159,12 @@ fn coloured_gauss_seidel_is_the_sequential_sweep_in_colour_order() {
         }
     }
     let mut r = p.r.clone();
-    let outcome = solve(&p.w, &p.colours, &p.local, &p.nodal, &mut r, Sweep::GaussSeidel, tolerance, floor, sweeps, None);
+    let outcome = solve(&mut p.with(&mut r, tolerance, floor, sweeps), Sweep::GaussSeidel, None);
     assert_eq!((outcome.iterations, outcome.converged), (sweeps, false));
     assert_eq!(r, reference, "bit for bit");
     // And the sweeps converge to reactions that satisfy the law at every point.
     let mut r = p.r.clone();
-    let outcome = solve(&p.w, &p.colours, &p.local, &p.nodal, &mut r, Sweep::GaussSeidel, 1e-10, floor, 500, None);
+    let outcome = solve(&mut p.with(&mut r, 1e-10, floor, 500), Sweep::GaussSeidel, None);
     assert!(outcome.converged, "{outcome:?}");
     let mut worst = 0.0f64;
     for (i, l) in p.local.iter().enumerate() {

@@ -222,12 +222,11 @@ fn uzawa_step_kernel_matches_its_cpu_twin() {
 fn uzawa_sweep_kernel_matches_its_cpu_twin() {
     // Three problems in one device solve, as the groups of a Newton round: one that never
     // converges (tolerance 0) and stops after 3 sweeps, inside the first chunk, so that the next
-    // chunk sweeps the others only; two that
-    // converge. Each must end with the CPU's iteration count and outcome, and reactions within
-    // 1e-12 of the CPU's, relative to the problem's largest reaction. f64 only: runs take the
-    // device's sweeps in f64 only.
+    // chunk sweeps the others only; two that converge. Each must end with the CPU's iteration
+    // count and outcome, and reactions within 1e-12 of the CPU's, relative to the problem's
+    // largest reaction. f64 only: runs take the device's sweeps in f64 only.
     use bifirst::contact::uzawa::{solve, Sweep};
-    use bifirst::gpu::uzawa_sweep::{delassus_version, UzawaProblem, UzawaSweeps};
+    use bifirst::gpu::uzawa_sweep::UzawaSweeps;
     let Some(gpu) = gpu_or_skip("uzawa_sweep_kernel_matches_its_cpu_twin", Precision::F64) else { return };
     let mut sweeps = UzawaSweeps::new(Arc::new(gpu)).expect("pipeline");
     let problems = [bifirst::bench::bench_contact_problem(1, 2000, 2500), bifirst::bench::bench_contact_problem(2, 40, 60), bifirst::bench::bench_contact_problem(3, 300, 500)];
@@ -236,24 +235,17 @@ fn uzawa_sweep_kernel_matches_its_cpu_twin() {
     let mut on_cpu = Vec::new();
     for (p, &(tolerance, max)) in problems.iter().zip(&settings) {
         let mut r = p.r.clone();
-        let outcome = solve(&p.w, &p.colours, &p.local, &p.nodal, &mut r, Sweep::GaussSeidel, tolerance, floor, max, None);
+        let outcome = solve(&mut p.with(&mut r, tolerance, floor, max), Sweep::GaussSeidel, None);
         on_cpu.push((outcome, r));
     }
-    let versions: Vec<u64> = problems.iter().map(|_| delassus_version()).collect();
     let mut uploads = Vec::new();
     for _ in 0..2 {
         // Twice: the second solve finds W on the device.
         let mut reactions: Vec<Vec<[f64; 3]>> = problems.iter().map(|p| p.r.clone()).collect();
-        let mut list: Vec<UzawaProblem> = problems
-            .iter()
-            .zip(&settings)
-            .zip(&mut reactions)
-            .zip(&versions)
-            .map(|(((p, &(tolerance, max_iterations)), r), &version)| UzawaProblem { w: &p.w, colours: &p.colours, local: &p.local, nodal: &p.nodal, r, tolerance, floor, max_iterations, version })
-            .collect();
-        let uploaded = sweeps.traffic.0;
+        let mut list: Vec<_> = problems.iter().zip(&settings).zip(&mut reactions).map(|((p, &(tolerance, max)), r)| p.with(r, tolerance, floor, max)).collect();
+        let uploaded = sweeps.traffic.up;
         let outcomes = sweeps.solve(&mut list, None).expect("device sweeps").expect("the problems fit the device");
-        uploads.push(sweeps.traffic.0 - uploaded);
+        uploads.push(sweeps.traffic.up - uploaded);
         for (k, ((outcome, r), (cpu_outcome, cpu_r))) in outcomes.iter().zip(&reactions).zip(&on_cpu).enumerate() {
             assert_eq!((outcome.iterations, outcome.converged), (cpu_outcome.iterations, cpu_outcome.converged), "problem {k}");
             let scale = cpu_r.iter().flatten().fold(1e-300, |m: f64, x| m.max(x.abs()));

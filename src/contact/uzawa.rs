@@ -16,7 +16,7 @@ use super::geometry::norm;
 use super::law::uzawa_step;
 use crate::precision::Real;
 use rayon::prelude::*;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 
 /// Block-sparse Delassus operator.
 #[derive(Debug, Clone, Default)]
@@ -25,11 +25,17 @@ pub struct Delassus {
     pub rows: Vec<Vec<(u32, u32)>>,
     /// `3 x 3` blocks, row-major, in contact frames.
     pub blocks: Vec<[Real; 9]>,
+    /// A number no other operator of the process has had, taken by [`Delassus::stamp`] once its
+    /// blocks are written: while it stays, the device keeps its copy of W.
+    pub version: u64,
 }
 
+static VERSIONS: AtomicU64 = AtomicU64::new(1);
+
 impl Delassus {
-    pub fn block_mut(&mut self, index: u32) -> &mut [Real; 9] {
-        &mut self.blocks[index as usize]
+    /// Marks the blocks as new (a fresh [`Delassus::version`]).
+    pub fn stamp(&mut self) {
+        self.version = VERSIONS.fetch_add(1, Ordering::Relaxed);
     }
 
     /// `W r` for point `i`.
@@ -287,12 +293,27 @@ impl Judge {
     }
 }
 
-/// Uzawa iterations from the reactions in `r` until the estimated distance to the fixed point,
-/// in nodal forces, is below `tolerance * max(largest nodal force, floor)` ([`Judge`]), or
-/// `max_iterations`, or until `stop` is set (an interrupt: then not converged). Gauss-Seidel
+/// One contact problem of a Newton iteration with its stopping rule: what [`solve`] and the
+/// device's sweeps (`gpu::uzawa_sweep`) take.
+pub struct Problem<'a> {
+    pub w: &'a Delassus,
+    /// The order of the Gauss-Seidel sweeps.
+    pub colours: &'a Colours,
+    pub local: &'a [Local],
+    pub nodal: &'a NodalMap,
+    /// In: the reactions to start from; out: those of the sweep that ended the iterations.
+    pub r: &'a mut [[Real; 3]],
+    pub tolerance: Real,
+    pub floor: Real,
+    pub max_iterations: usize,
+}
+
+/// Uzawa iterations from the reactions in `p.r` until the estimated distance to the fixed
+/// point, in nodal forces, is below `tolerance * max(largest nodal force, floor)` ([`Judge`]),
+/// or `max_iterations`, or until `stop` is set (an interrupt: then not converged). Gauss-Seidel
 /// sweeps visit the points by `colours`.
-#[allow(clippy::too_many_arguments)]
-pub fn solve(w: &Delassus, colours: &Colours, local: &[Local], nodal: &NodalMap, r: &mut [[Real; 3]], sweep: Sweep, tolerance: Real, floor: Real, max_iterations: usize, stop: Option<&AtomicBool>) -> Outcome {
+pub fn solve(p: &mut Problem, sweep: Sweep, stop: Option<&AtomicBool>) -> Outcome {
+    let Problem { w, colours, local, nodal, ref mut r, tolerance, floor, max_iterations } = *p;
     let n = local.len();
     let mut next = vec![[0.0; 3]; n];
     let mut dr = vec![[0.0; 3]; n];

@@ -15,3 +15,12 @@ pub mod world;
 pub use world::{ElementFailure, Evaluation, GpuWorld, Traffic, WorldBody, WorldKernel};
 pub use context::{describe_adapters, hardware_adapter, open, AdapterReport, Gpu, GpuError};
 pub use shaders::ElementVariant;
+
+/// Workgroups per row of a dispatch: a grid of more workgroups than one dimension allows is laid
+/// out in rows of this many (`MAX_ROW` of `batch.wgsl`; the kernels index by row).
+const MAX_ROW: usize = 65_535;
+
+/// The `(x, y)` workgroup counts that cover `groups` workgroups in rows of at most [`MAX_ROW`].
+pub fn dispatch_rows(groups: usize) -> (u32, u32) {
+    (groups.min(MAX_ROW) as u32, groups.div_ceil(MAX_ROW) as u32)
+}

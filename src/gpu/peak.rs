@@ -11,7 +11,6 @@ use wgpu::util::DeviceExt;
 use wgpu::{BufferUsages, ComputePipeline};
 
 const WORKGROUP: usize = 256;
-const MAX_ROW: usize = 65_535;
 
 /// Measured peaks of a device in its precision.
 #[derive(Debug, Clone, Copy, serde::Serialize)]
@@ -49,7 +48,8 @@ impl Probe {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("peak"), timestamp_writes: None });
             pass.set_pipeline(&self.pipeline);
             pass.set_bind_group(0, &bind_group, &[]);
-            pass.dispatch_workgroups(groups.min(MAX_ROW) as u32, groups.div_ceil(MAX_ROW) as u32, 1);
+            let (x, y) = super::dispatch_rows(groups);
+            pass.dispatch_workgroups(x, y, 1);
         };
         let wait = || gpu.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Kernel { kernel: "peak".into(), message: e.to_string() });
         // One call to warm up, then `calls` in one submit: the launch cost is spread over them.

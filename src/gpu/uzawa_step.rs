@@ -8,8 +8,7 @@ use bytemuck::{Pod, Zeroable};
 use wgpu::util::DeviceExt;
 
 const KERNEL: &str = "uzawa_step";
-const WORKGROUP: u32 = 64;
-const MAX_GROUPS_PER_ROW: u32 = 65_535;
+const WORKGROUP: usize = 64;
 
 /// A contact point as the kernel reads and writes it (`struct UzawaPoint` in the shader), in
 /// the contact frame: `r` in/out, `status` out.
@@ -85,8 +84,7 @@ impl UzawaStepKernel {
             layout: &self.pipeline.get_bind_group_layout(0),
             entries: &[wgpu::BindGroupEntry { binding: 0, resource: storage.as_entire_binding() }],
         });
-        let groups = (points.len() as u32).div_ceil(WORKGROUP);
-        let (x, y) = (groups.min(MAX_GROUPS_PER_ROW), groups.div_ceil(MAX_GROUPS_PER_ROW));
+        let (x, y) = super::dispatch_rows(points.len().div_ceil(WORKGROUP));
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(KERNEL) });
         {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(KERNEL), timestamp_writes: None });

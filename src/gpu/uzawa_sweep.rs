@@ -1,6 +1,6 @@
 //! The `uzawa_sweep` kernel (`shaders/uzawa_sweep.wgsl`): the Gauss-Seidel Uzawa iterations of
-//! a Newton round on the device, for every group's contact problem at once. CPU twin:
-//! [`crate::contact::uzawa::uzawa_sweep`]; [`crate::contact::uzawa::solve`] is the whole
+//! a Newton round on the device, for every group's contact problem ([`Problem`]) at once. CPU
+//! twin: [`crate::contact::uzawa::uzawa_sweep`]; [`crate::contact::uzawa::solve`] is the whole
 //! iteration this one repeats.
 //!
 //! The problems are independent (their points share no body), so colour `c` of the round is
@@ -10,18 +10,17 @@
 //! ([`Judge`]) and takes the reactions of the sweep where it converged: the same iterates and
 //! iteration counts as on the CPU, with one submit per chunk instead of one per sweep.
 
-use super::world::{from_device, to_device};
+use super::world::{buffer, from_device, to_device, Traffic};
 use super::{Gpu, GpuError};
-use crate::contact::uzawa::{Colours, Delassus, Judge, Local, NodalMap, Outcome, SETTLE};
+use crate::contact::uzawa::{Judge, Outcome, Problem, SETTLE};
 use crate::precision::Real;
 use bytemuck::{Pod, Zeroable};
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use wgpu::{BindGroup, Buffer, BufferUsages};
 
 const KERNEL: &str = "uzawa_sweep";
 const WORKGROUP: u32 = 64;
-const MAX_GROUPS_PER_ROW: u32 = 65_535;
 /// Sweeps in the first chunk of a solve; each further chunk doubles, up to [`LAST_CHUNK`]: a
 /// warm-started problem often converges in a few sweeps, a hard one needs hundreds.
 const FIRST_CHUNK: usize = 4;
@@ -52,34 +51,11 @@ pub struct ColourRange {
     pub count: u32,
 }
 
-/// One group's contact problem, as [`crate::contact::uzawa::solve`] takes it.
-pub struct UzawaProblem<'a> {
-    pub w: &'a Delassus,
-    pub colours: &'a Colours,
-    pub local: &'a [Local],
-    pub nodal: &'a NodalMap,
-    /// In: the reactions to start from; out: those of the sweep that ended the iterations.
-    pub r: &'a mut [[Real; 3]],
-    pub tolerance: Real,
-    pub floor: Real,
-    pub max_iterations: usize,
-    /// Changes whenever `w` or its pattern does ([`delassus_version`]): while the problems of
-    /// a round keep theirs, W stays on the device.
-    pub version: u64,
-}
-
-static VERSIONS: AtomicU64 = AtomicU64::new(1);
-
-/// A number no other Delassus operator of the process has had: taken whenever one is built.
-pub fn delassus_version() -> u64 {
-    VERSIONS.fetch_add(1, Ordering::Relaxed)
-}
-
 /// The round's problems in one set of arrays: W (its blocks and rows) and the colour order,
 /// which change only when a problem's Delassus operator does.
 #[derive(Default)]
 struct Layout {
-    /// Each problem's version and points: the layout serves a round with the same key.
+    /// Each problem's W version and points: the layout serves a round with the same key.
     key: Vec<(u64, usize)>,
     blocks: Vec<Real>,
     row_start: Vec<u32>,
@@ -90,12 +66,12 @@ struct Layout {
     offsets: Vec<usize>,
 }
 
-fn key_of(problems: &[UzawaProblem]) -> Vec<(u64, usize)> {
-    problems.iter().map(|p| (p.version, p.local.len())).collect()
+fn key_of(problems: &[Problem]) -> Vec<(u64, usize)> {
+    problems.iter().map(|p| (p.w.version, p.local.len())).collect()
 }
 
 impl Layout {
-    fn of(problems: &[UzawaProblem]) -> Self {
+    fn of(problems: &[Problem]) -> Self {
         let mut m = Layout { key: key_of(problems), row_start: vec![0], offsets: vec![0], ..Default::default() };
         for p in problems {
             let (point0, block0) = (*m.offsets.last().expect("starts at 0") as u32, (m.blocks.len() / 9) as u32);
@@ -159,19 +135,19 @@ pub struct UzawaSweeps {
     /// Stride of the colour ranges in their uniform buffer (the device's offset alignment).
     range_stride: u64,
     pub submits: u64,
-    /// Bytes up and down so far.
-    pub traffic: (u64, u64),
+    /// Bytes moved so far.
+    pub traffic: Traffic,
 }
 
 fn storage(gpu: &Gpu, label: &str, bytes: usize, extra: BufferUsages) -> Buffer {
-    gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some(label), size: bytes.max(16).div_ceil(16) as u64 * 16, usage: BufferUsages::STORAGE | BufferUsages::COPY_DST | extra, mapped_at_creation: false })
+    buffer(gpu, label, bytes, BufferUsages::STORAGE | BufferUsages::COPY_DST | extra)
 }
 
 impl UzawaSweeps {
     pub fn new(gpu: Arc<Gpu>) -> Result<Self, GpuError> {
         let pipeline = gpu.pipeline(KERNEL, None)?;
         let range_stride = (gpu.device.limits().min_uniform_buffer_offset_alignment as u64).max(std::mem::size_of::<ColourRange>() as u64);
-        Ok(Self { gpu, pipeline, buffers: None, layout: Layout::default(), range_stride, submits: 0, traffic: (0, 0) })
+        Ok(Self { gpu, pipeline, buffers: None, layout: Layout::default(), range_stride, submits: 0, traffic: Traffic::default() })
     }
 
     /// The most items of `bytes` each that one buffer of the device can bind.
@@ -212,8 +188,8 @@ impl UzawaSweeps {
         let order = storage(gpu, "uzawa colour order", points * 4, none);
         let live = storage(gpu, "uzawa live", points * 4, none);
         let r = storage(gpu, "uzawa reactions", points * 3 * real, BufferUsages::COPY_SRC);
-        let ranges = gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some("uzawa colours"), size: colours as u64 * self.range_stride, usage: BufferUsages::UNIFORM | BufferUsages::COPY_DST, mapped_at_creation: false });
-        let staging = gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some("uzawa read-back"), size: snapshots as u64 * point_bytes, usage: BufferUsages::MAP_READ | BufferUsages::COPY_DST, mapped_at_creation: false });
+        let ranges = buffer(gpu, "uzawa colours", colours * self.range_stride as usize, BufferUsages::UNIFORM | BufferUsages::COPY_DST);
+        let staging = buffer(gpu, "uzawa read-back", snapshots * point_bytes as usize, BufferUsages::MAP_READ | BufferUsages::COPY_DST);
         let layout = self.pipeline.get_bind_group_layout(0);
         let bind_groups = (0..colours)
             .map(|c| {
@@ -230,7 +206,7 @@ impl UzawaSweeps {
 
     fn upload(&mut self, buffer: &Buffer, offset: u64, bytes: &[u8]) {
         if !bytes.is_empty() {
-            self.traffic.0 += bytes.len() as u64;
+            self.traffic.up += bytes.len() as u64;
             self.gpu.queue.write_buffer(buffer, offset, bytes);
         }
     }
@@ -239,7 +215,7 @@ impl UzawaSweeps {
     /// CPU's rule, reaches its `max_iterations`, or `stop` is set; each problem's `r` gets the
     /// reactions of its last sweep. The outcomes are in the problems' order; `None` (nothing
     /// done) when the round is too large for the device's buffers.
-    pub fn solve(&mut self, problems: &mut [UzawaProblem], stop: Option<&AtomicBool>) -> Result<Option<Vec<Outcome>>, GpuError> {
+    pub fn solve(&mut self, problems: &mut [Problem], stop: Option<&AtomicBool>) -> Result<Option<Vec<Outcome>>, GpuError> {
         let precision = self.gpu.precision;
         let mut outcomes = vec![Outcome::default(); problems.len()];
         if problems.iter().all(|p| p.local.is_empty()) {
@@ -279,7 +255,7 @@ impl UzawaSweeps {
 
     /// The chunks of sweeps and the host's judgement after each sweep, from the reactions
     /// `previous`.
-    fn iterate(&mut self, b: &Buffers, m: &Layout, mut previous: Vec<Real>, problems: &mut [UzawaProblem], outcomes: &mut [Outcome], stop: Option<&AtomicBool>) -> Result<(), GpuError> {
+    fn iterate(&mut self, b: &Buffers, m: &Layout, mut previous: Vec<Real>, problems: &mut [Problem], outcomes: &mut [Outcome], stop: Option<&AtomicBool>) -> Result<(), GpuError> {
         let precision = self.gpu.precision;
         let n = m.points();
         let point_bytes = (n * 3 * precision.size()) as u64;
@@ -296,9 +272,9 @@ impl UzawaSweeps {
                     let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(KERNEL), timestamp_writes: None });
                     pass.set_pipeline(&self.pipeline);
                     for (range, group) in m.ranges.iter().zip(&b.bind_groups) {
-                        let groups = range.count.div_ceil(WORKGROUP);
+                        let (x, y) = super::dispatch_rows(range.count.div_ceil(WORKGROUP) as usize);
                         pass.set_bind_group(0, group, &[]);
-                        pass.dispatch_workgroups(groups.min(MAX_GROUPS_PER_ROW), groups.div_ceil(MAX_GROUPS_PER_ROW), 1);
+                        pass.dispatch_workgroups(x, y, 1);
                     }
                 }
                 encoder.copy_buffer_to_buffer(&b.r, 0, &b.staging, s as u64 * point_bytes, point_bytes);
@@ -306,7 +282,7 @@ impl UzawaSweeps {
             self.gpu.queue.submit([encoder.finish()]);
             self.submits += 1;
             let bytes = self.gpu.read_range(KERNEL, &b.staging, sweeps as u64 * point_bytes)?;
-            self.traffic.1 += bytes.len() as u64;
+            self.traffic.down += bytes.len() as u64;
             let snapshots = from_device(precision, &bytes);
             let mut finished = false;
             for (s, now) in snapshots.chunks(3 * n).enumerate() {

@@ -9,12 +9,12 @@
 //! residuals of the evaluated bodies, and the stiffness values only of the bodies whose tangent
 //! was asked for (those that refactorise).
 
-use super::uzawa_sweep::{UzawaProblem, UzawaSweeps};
+use super::uzawa_sweep::UzawaSweeps;
 use super::types::{Active, Coefficients, DofOut, DofStep, MaterialParams, MemberRange, MODE_FORCES, MODE_TANGENT};
 use super::{ElementVariant, Gpu, GpuError};
 use crate::assembly::{element_out_stride, GatherMap, StiffnessPattern};
 use crate::backend::UzawaPlacement;
-use crate::contact::uzawa::Outcome;
+use crate::contact::uzawa::{Outcome, Problem};
 use crate::element::ReferenceGeometry;
 use crate::material::Model;
 use crate::mesh::Mesh;
@@ -31,8 +31,6 @@ const WORKGROUP: usize = 64;
 /// Invocations per workgroup of the tangent entry point (`TANGENT_WORKGROUP`): one per
 /// quadrature point of its elements.
 const TANGENT_WORKGROUP: usize = 32;
-/// Workgroups per row of a dispatch (`MAX_ROW` of `batch.wgsl`).
-const MAX_ROW: usize = 65_535;
 /// `failure` entries per member: the lowest inverted element, the lowest non-finite one.
 const NO_FAILURE: u32 = u32::MAX;
 
@@ -102,7 +100,8 @@ impl Pass {
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes: None });
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &self.bind_group, &[]);
-        pass.dispatch_workgroups(chunks.min(MAX_ROW) as u32, chunks.div_ceil(MAX_ROW) as u32, active as u32);
+        let (x, y) = super::dispatch_rows(chunks);
+        pass.dispatch_workgroups(x, y, active as u32);
     }
 }
 
@@ -235,7 +234,7 @@ pub struct GpuWorld {
     pub uzawa: UzawaPlacement,
 }
 
-fn buffer(gpu: &Gpu, label: &str, bytes: usize, usage: BufferUsages) -> Buffer {
+pub(super) fn buffer(gpu: &Gpu, label: &str, bytes: usize, usage: BufferUsages) -> Buffer {
     // wgpu binds no empty buffer; copies need multiples of 4 bytes.
     gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some(label), size: (bytes.max(8).div_ceil(8) * 8) as u64, usage, mapped_at_creation: false })
 }
@@ -321,16 +320,16 @@ impl GpuWorld {
     /// The contact problems of a Newton round, solved by Gauss-Seidel sweeps on the device
     /// ([`UzawaSweeps::solve`]; `None` when they do not fit its buffers); the time counts as
     /// `contact`.
-    pub fn solve_contact(&mut self, problems: &mut [UzawaProblem], stop: Option<&AtomicBool>, times: &mut PhaseTimes) -> Result<Option<Vec<Outcome>>, GpuError> {
+    pub fn solve_contact(&mut self, problems: &mut [Problem], stop: Option<&AtomicBool>, times: &mut PhaseTimes) -> Result<Option<Vec<Outcome>>, GpuError> {
         let started = Instant::now();
         if self.contact.is_none() {
             self.contact = Some(UzawaSweeps::new(self.gpu.clone())?);
         }
         let sweeps = self.contact.as_mut().expect("made above");
-        let (up, down) = sweeps.traffic;
         let outcomes = sweeps.solve(problems, stop);
-        self.traffic.up += sweeps.traffic.0 - up;
-        self.traffic.down += sweeps.traffic.1 - down;
+        let moved = std::mem::take(&mut sweeps.traffic);
+        self.traffic.up += moved.up;
+        self.traffic.down += moved.down;
         times.contact += started.elapsed().as_secs_f64();
         outcomes
     }

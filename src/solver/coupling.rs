@@ -8,9 +8,8 @@
 
 use super::body::{Body, StepParams};
 use super::PhaseTimes;
-use crate::contact::uzawa::{self, Colours, Delassus, Local, NodalMap, Outcome};
+use crate::contact::uzawa::{self, Colours, Delassus, Local, NodalMap, Outcome, Problem};
 use crate::contact::{uzawa_step, ContactPoint, Settings, Status};
-use crate::gpu::uzawa_sweep::{delassus_version, UzawaProblem};
 use crate::precision::Real;
 use std::collections::HashMap;
 use std::sync::atomic::AtomicBool;
@@ -46,8 +45,6 @@ pub struct ContactStep {
     /// Whether `delassus` (and each point's rho) was built with the bodies' current
     /// factorisations: while no body refactorises, `W` does not change within a step.
     delassus_current: bool,
-    /// Taken anew whenever `delassus` is built ([`delassus_version`]).
-    delassus_version: u64,
 }
 
 impl ContactStep {
@@ -70,7 +67,7 @@ impl ContactStep {
                 }
             }
         }
-        let mut delassus = Delassus { rows: vec![Vec::new(); points.len()], blocks: Vec::new() };
+        let mut delassus = Delassus { rows: vec![Vec::new(); points.len()], ..Default::default() };
         let mut index: HashMap<(u32, u32), u32> = HashMap::new();
         let mut per_body = Vec::with_capacity(bodies.len());
         let mut h = Vec::with_capacity(bodies.len());
@@ -126,7 +123,7 @@ impl ContactStep {
             nodal.terms.push(terms.collect());
         }
         nodal.nodes = slots.len();
-        Self { points, delassus, colours, per_body, h, r, local, nodal, dim, velocity_scale, floor, delassus_current: false, delassus_version: 0 }
+        Self { points, delassus, colours, per_body, h, r, local, nodal, dim, velocity_scale, floor, delassus_current: false }
     }
 
     pub fn is_empty(&self) -> bool {
@@ -218,14 +215,14 @@ impl ContactStep {
     /// The Uzawa iterations of the prepared problem on the CPU.
     pub fn solve_on_cpu(&mut self, settings: &Settings, stop: Option<&AtomicBool>, times: &mut PhaseTimes) -> Outcome {
         let started = std::time::Instant::now();
-        let outcome = uzawa::solve(&self.delassus, &self.colours, &self.local, &self.nodal, &mut self.r, settings.sweep, INNER_TOLERANCE * settings.tolerance, self.floor, settings.max_iterations, stop);
+        let outcome = uzawa::solve(&mut self.problem(settings), settings.sweep, stop);
         times.contact += started.elapsed().as_secs_f64();
         outcome
     }
 
-    /// The prepared problem as the device's Uzawa sweeps take it (Gauss-Seidel only).
-    pub fn problem(&mut self, settings: &Settings) -> UzawaProblem<'_> {
-        UzawaProblem {
+    /// The prepared problem, as [`uzawa::solve`] and the device's sweeps take it.
+    pub fn problem(&mut self, settings: &Settings) -> Problem<'_> {
+        Problem {
             w: &self.delassus,
             colours: &self.colours,
             local: &self.local,
@@ -234,7 +231,6 @@ impl ContactStep {
             tolerance: INNER_TOLERANCE * settings.tolerance,
             floor: self.floor,
             max_iterations: settings.max_iterations,
-            version: self.delassus_version,
         }
     }
 
@@ -301,7 +297,7 @@ impl ContactStep {
         }
         self.floor = self.velocity_scale * self.local.iter().map(|l| l.rho).fold(0.0, Real::max);
         self.delassus_current = true;
-        self.delassus_version = delassus_version();
+        self.delassus.stamp();
     }
 
     /// Records the end-of-step velocity, status and linearised end gap of every point.
