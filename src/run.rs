@@ -256,7 +256,6 @@ impl Logger {
         Ok(())
     }
 
-    /// The 3D view and the VTU frame when their cadence says so, or when `last`.
     /// `/state`, the full state a run can continue from: at the scene's cadence, and (`last`)
     /// at the last finished step of the run, however it ends.
     fn saved(&mut self, sim: &Simulation, last: bool) -> Result<(), OutputError> {
@@ -269,6 +268,7 @@ impl Logger {
         self.log.write("/state", sim.t, &sim.saved_state())
     }
 
+    /// The 3D view and the VTU frame when their cadence says so, or when `last`.
     fn frames(&mut self, sim: &Simulation, last: bool) -> Result<(), OutputError> {
         if self.frame_step == Some(sim.step) {
             return Ok(());
