@@ -173,6 +173,12 @@ fn blockwise_error(a: &[Real], b: &[Real], stride: usize) -> f64 {
         .fold(0.0, Real::max)
 }
 
+// The element rows' kernel names: `--kernel` matches a part of these, the whole name included.
+const FORCE_TANGENT: &str = "element_force_tangent";
+const ASSEMBLY: &str = "assemble_csr+assemble_residual";
+const EVALUATE: &str = "evaluate (all kernels, transfers)";
+const ENERGY: &str = "element_energy";
+
 fn wanted(options: &BenchOptions, kernel: &str) -> bool {
     options.kernel.as_ref().is_none_or(|k| kernel.contains(k.as_str()))
 }
@@ -210,7 +216,7 @@ fn element_energies(case: &BenchCase) -> Vec<Real> {
 /// Runs the benchmark; `gpus` are the devices to compare with the CPU (f64 and/or f32).
 pub fn run_bench(options: &BenchOptions, gpus: &[Arc<Gpu>], mut row: impl FnMut(BenchRow)) -> Result<(), GpuError> {
     let peaks = peak_rows(options, gpus, &mut row)?;
-    let element_kernels = ["element_force_tangent", "assemble", "evaluate", "energy"].iter().any(|k| wanted(options, k));
+    let element_kernels = [FORCE_TANGENT, ASSEMBLY, EVALUATE, ENERGY].iter().any(|k| wanted(options, k));
     for kind in KINDS.into_iter().filter(|_| element_kernels) {
         for model in bench_models() {
             let case = BenchCase::new(kind, model, options.elements);
@@ -221,20 +227,20 @@ pub fn run_bench(options: &BenchOptions, gpus: &[Arc<Gpu>], mut row: impl FnMut(
             // The CPU twins, and the reference.
             let mut reference = Reference { results: vec![0.0; case.results_len()], values: vec![0.0; case.pattern.nnz()], dof_out: vec![DofOut::default(); case.u.len()], energy: 0.0 };
             let t = time_calls(options.min_time, || case.cpu_elements(&mut reference.results));
-            if wanted(options, "element_force_tangent") {
-                row(make("element_force_tangent", "cpu f64".into(), t, 0, 0.0));
+            if wanted(options, FORCE_TANGENT) {
+                row(make(FORCE_TANGENT, "cpu f64".into(), t, 0, 0.0));
             }
             let g = &case.gather;
             let t = time_calls(options.min_time, || {
                 cpu::assemble_csr(&reference.results, &g.csr_start, &g.csr, case.coefficients, &mut reference.values);
                 cpu::assemble_residual(&reference.results, &g.dof_start, &g.dof, case.coefficients, &case.u, &case.step, &mut reference.dof_out);
             });
-            if wanted(options, "assemble") {
-                row(make("assemble_csr+assemble_residual", "cpu f64".into(), t, 0, 0.0));
+            if wanted(options, ASSEMBLY) {
+                row(make(ASSEMBLY, "cpu f64".into(), t, 0, 0.0));
             }
             let t = time_calls(options.min_time, || reference.energy = element_energies(&case).iter().sum());
-            if wanted(options, "energy") {
-                row(make("element_energy", "cpu f64".into(), t, 0, 0.0));
+            if wanted(options, ENERGY) {
+                row(make(ENERGY, "cpu f64".into(), t, 0, 0.0));
             }
             for (gpu, peaks) in gpus.iter().zip(&peaks) {
                 let backend = format!("gpu {}", gpu.precision.name());
@@ -259,40 +265,40 @@ pub fn run_bench(options: &BenchOptions, gpus: &[Arc<Gpu>], mut row: impl FnMut(
                 // device, so the kernel rows below time the kernels alone (nothing moves).
                 case.evaluate_on(&mut world, true, &mut values, &mut dof_out)?;
                 world.take_traffic();
-                if wanted(options, "element_force_tangent") {
+                if wanted(options, FORCE_TANGENT) {
                     let results = world.element_results(0)?;
                     world.take_traffic();
                     let error = blockwise_error(&results, &reference.results, stride);
                     let mut result = Ok(());
                     let t = time_calls(options.min_time, || result = world.replay(WorldKernel::ForceTangent));
                     result?;
-                    row(make("element_force_tangent", backend.clone(), t, 0, error).with_roofline(kernel_cost(Costed::ForceTangent, &case, real), peaks));
+                    row(make(FORCE_TANGENT, backend.clone(), t, 0, error).with_roofline(kernel_cost(Costed::ForceTangent, &case, real), peaks));
                 }
-                if wanted(options, "assemble") {
+                if wanted(options, ASSEMBLY) {
                     let residual: Vec<Real> = dof_out.iter().map(|d| d.g).collect();
                     let expected: Vec<Real> = reference.dof_out.iter().map(|d| d.g).collect();
                     let error = blockwise_error(&values, &reference.values, values.len().max(1)).max(blockwise_error(&residual, &expected, residual.len().max(1)));
                     let mut result = Ok(());
                     let t = time_calls(options.min_time, || result = world.replay(WorldKernel::Assembly));
                     result?;
-                    row(make("assemble_csr+assemble_residual", backend.clone(), t, 0, error).with_roofline(kernel_cost(Costed::Assembly, &case, real), peaks));
+                    row(make(ASSEMBLY, backend.clone(), t, 0, error).with_roofline(kernel_cost(Costed::Assembly, &case, real), peaks));
                 }
-                if wanted(options, "evaluate") {
+                if wanted(options, EVALUATE) {
                     // What a refactorising Newton iteration costs the device: upload, kernels,
                     // read-back of the stiffness values and residual.
                     let mut result = Ok(());
                     let t = time_calls(options.min_time, || result = case.evaluate_on(&mut world, true, &mut values, &mut dof_out));
                     result?;
                     let traffic = world.take_traffic().total();
-                    row(make("evaluate (all kernels, transfers)", backend.clone(), t, traffic, 0.0));
+                    row(make(EVALUATE, backend.clone(), t, traffic, 0.0));
                 }
-                if wanted(options, "energy") {
+                if wanted(options, ENERGY) {
                     let mut energies = Ok(Vec::new());
                     let t = time_calls(options.min_time, || energies = world.element_energies(&[(0, &case.u[..])], &mut PhaseTimes::default()));
                     let energy: Real = energies?[0].iter().sum();
                     let traffic = world.take_traffic().total();
                     let error = (energy - reference.energy).abs() / reference.energy.abs();
-                    row(make("element_energy", backend.clone(), t, traffic, error).with_roofline(kernel_cost(Costed::Energy, &case, real), peaks));
+                    row(make(ENERGY, backend.clone(), t, traffic, error).with_roofline(kernel_cost(Costed::Energy, &case, real), peaks));
                 }
             }
         }
@@ -358,11 +364,11 @@ fn kernel_cost(kernel: Costed, case: &BenchCase, real: usize) -> (f64, f64) {
 /// The rows of the peak kernels (`peak_copy`, `peak_fma`) on the CPU and on each device, and
 /// each device's peaks for the roofline columns of the other rows.
 fn peak_rows(options: &BenchOptions, gpus: &[Arc<Gpu>], row: &mut impl FnMut(BenchRow)) -> Result<Vec<Peaks>, GpuError> {
-    let shown = wanted(options, "peak");
+    let (copy_shown, fma_shown) = (wanted(options, "peak_copy"), wanted(options, "peak_fma"));
     let make = |kernel: &str, items: usize, backend: String, seconds: f64| {
         BenchRow::new(kernel, "-", "-", items, backend, Timing { per_call: seconds, calls: 1 }, 0, 0.0)
     };
-    if shown {
+    if copy_shown || fma_shown {
         // The CPU twins on every thread, on 2^24 values.
         let n = 1 << 24;
         let source = vec![1.0; n];
@@ -371,18 +377,24 @@ fn peak_rows(options: &BenchOptions, gpus: &[Arc<Gpu>], row: &mut impl FnMut(Ben
         let bytes = 2.0 * (n * 8) as f64;
         let flops = FMA_FLOPS_PER_VALUE * (n / 16) as f64;
         let cpu_peaks = |copy: f64, fma: f64| Peaks { bytes_per_second: copy, flops_per_second: fma, copy_values: n, copy_seconds: 0.0, fma_values: n / 16, fma_seconds: 0.0 };
-        row(make("peak_copy", n, "cpu f64".into(), t.per_call).with_roofline((bytes, 0.0), &cpu_peaks(bytes / t.per_call, f64::INFINITY)));
+        if copy_shown {
+            row(make("peak_copy", n, "cpu f64".into(), t.per_call).with_roofline((bytes, 0.0), &cpu_peaks(bytes / t.per_call, f64::INFINITY)));
+        }
         let mut values = vec![1.0; n / 16];
         let t = time_calls(options.min_time, || cpu::peak_fma(&mut values));
-        row(make("peak_fma", n / 16, "cpu f64".into(), t.per_call).with_roofline((0.0, flops), &cpu_peaks(f64::INFINITY, flops / t.per_call)));
+        if fma_shown {
+            row(make("peak_fma", n / 16, "cpu f64".into(), t.per_call).with_roofline((0.0, flops), &cpu_peaks(f64::INFINITY, flops / t.per_call)));
+        }
     }
     let mut all = Vec::with_capacity(gpus.len());
     for gpu in gpus {
         let peaks = measure_peaks(gpu, 0.02)?;
-        if shown {
-            let backend = format!("gpu {}", gpu.precision.name());
+        let backend = format!("gpu {}", gpu.precision.name());
+        if copy_shown {
             let copy_bytes = 2.0 * (peaks.copy_values * gpu.precision.size()) as f64;
             row(make("peak_copy", peaks.copy_values, backend.clone(), peaks.copy_seconds).with_roofline((copy_bytes, 0.0), &peaks));
+        }
+        if fma_shown {
             let fma_flops = FMA_FLOPS_PER_VALUE * peaks.fma_values as f64;
             row(make("peak_fma", peaks.fma_values, backend, peaks.fma_seconds).with_roofline((0.0, fma_flops), &peaks));
         }

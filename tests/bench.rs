@@ -26,6 +26,17 @@ fn bench_reports_every_kernel_on_the_cpu() {
     assert_eq!(kernels, ["uzawa_step", "uzawa_sweep"]);
 }
 
+/// `--kernel element_energy` printed nothing: the filter was matched against shortened names
+/// ("energy"), so a row's full name selected none of its rows.
+#[test]
+fn bench_kernel_filter_takes_a_rows_full_name() {
+    for (filter, rows_expected) in [("element_energy", 4 * 3), ("assemble_csr+assemble_residual", 4 * 3), ("element_force_tangent", 4 * 3), ("peak_fma", 1), ("peak_copy", 1)] {
+        let rows = self::rows(&["--backend", "cpu", "--kernel", filter]);
+        assert_eq!(rows.len(), rows_expected, "--kernel {filter}");
+        assert!(rows.iter().all(|r| r["kernel"] == filter), "--kernel {filter}: {rows:?}");
+    }
+}
+
 #[test]
 fn bench_on_a_gpu_reports_errors_within_the_parity_tolerances() {
     if let Err(e) = bifirst::gpu::open(None, None) {

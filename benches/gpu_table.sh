@@ -1,0 +1,143 @@
+#!/usr/bin/env bash
+# The GPU measurement of issue 14 (doc/benchmarks.md, "GPU pipeline") in one command, for a
+# machine with a GPU: the four scenes of its table on the CPU and GPU backends, back to back,
+# repeated, medians; the grains again with the contact sweeps on the device; the kernels'
+# throughput and roofline (`bench`); the contact sweeps' device/CPU ratio by size, from which
+# `--uzawa auto`'s thresholds (backend::AUTO_UZAWA_*) are read.
+#
+#   benches/gpu_table.sh [BINARY] [REPETITIONS] [OUTDIR]
+#
+# Prints Markdown tables; OUTDIR (default: a temporary folder) keeps every run's `--json`
+# summary and bench's JSON rows. QUICK=1 runs small sizes, to try the script on lavapipe (a
+# minute on 2 cores); BENCH_ELEMENTS (default 1000000) sizes the kernel benchmark, whose every
+# kernel is stopped after BENCH_LIMIT seconds (default 150).
+set -uo pipefail
+bin=$(realpath "${1:-target/release/bifirst}")
+reps=${2:-3}
+out=${3:-$(mktemp -d)}
+mkdir -p "$out"
+cd "$(dirname "$0")/.."
+
+if [ "${QUICK:-0}" = 1 ]; then
+  grains=(--set packing.count=100 --set time.end=0.05)
+  stack=(--set time.end=0.1)
+  love=(--set contact.friction=0.5 --set time.end=0.05)
+  flight=(--set 'body.block.mesh.divisions=[8,4,4]' --set time.end=0.004)
+  elements=${BENCH_ELEMENTS:-4096} bench_time=0.2 sweep_sizes="64 256 1024"
+else
+  grains=(--set packing.count=1000 --set time.end=0.2)
+  stack=()
+  love=(--set contact.friction=0.5)
+  flight=(--set 'body.block.mesh.divisions=[40,20,20]' --set time.end=0.02)
+  elements=${BENCH_ELEMENTS:-1000000} bench_time=0 sweep_sizes="64 256 1024 4096 16384 65536"
+fi
+limit=${BENCH_LIMIT:-150}
+
+run() { # label backend scene [arguments...]: one run, its summary appended to runs.jsonl
+  local label=$1 backend=$2 scene=$3
+  shift 3
+  if "$bin" run "scenes/$scene.toml" "$@" --backend "$backend" --quiet --json --out "$out/run.mcap" >"$out/run.json" 2>"$out/run.err"; then
+    python3 -c 'import json,sys; d=json.load(open(sys.argv[1])); d["label"]=sys.argv[2]; d["mode"]=sys.argv[3]; print(json.dumps(d))' \
+      "$out/run.json" "$label" "$backend$UZAWA_LABEL" >>"$out/runs.jsonl"
+  else
+    echo "run failed: $label $backend: $(tail -n 3 "$out/run.err")" >&2
+  fi
+}
+
+"$bin" info >&2 || true
+: >"$out/runs.jsonl"
+for r in $(seq "$reps"); do
+  echo "repetition $r of $reps" >&2
+  for backend in cpu gpu; do
+    UZAWA_LABEL=""
+    run "grains_many" "$backend" grains_many "${grains[@]}" --set output.scene_every=10
+    run "stack_3d" "$backend" stack_3d "${stack[@]}"
+    run "love_laursen, mu = 0.5" "$backend" love_laursen "${love[@]}"
+    run "free_flight_3d" "$backend" free_flight_3d "${flight[@]}"
+  done
+  UZAWA_LABEL=" --uzawa gpu"
+  run "grains_many" gpu grains_many "${grains[@]}" --set output.scene_every=10 --uzawa gpu
+done
+
+: >"$out/bench.jsonl"
+for kernel in peak element_force_tangent assemble evaluate element_energy; do
+  timeout "$limit" "$bin" bench --elements "$elements" --time "$bench_time" --kernel "$kernel" --backend gpu --json >>"$out/bench.jsonl" \
+    || echo "bench --kernel $kernel stopped (exit $?) after ${limit} s; the rows it finished are kept" >&2
+done
+: >"$out/sweeps.jsonl"
+for e in $sweep_sizes; do
+  timeout "$limit" "$bin" bench --elements "$e" --time 1 --kernel uzawa_sweep --backend gpu --json >>"$out/sweeps.jsonl" \
+    || echo "bench --kernel uzawa_sweep --elements $e stopped (exit $?)" >&2
+done
+
+python3 - "$out" <<'PY'
+import json, statistics, sys
+from collections import defaultdict
+out = sys.argv[1]
+runs = [json.loads(l) for l in open(f"{out}/runs.jsonl")]
+by = defaultdict(list)
+for r in runs:
+    by[(r["label"], r["mode"])].append(r)
+med = lambda rs, f: statistics.median(f(r) for r in rs)
+adapter = next((r["adapter"] for r in runs if r.get("adapter")), "none")
+print(f"Adapter: {adapter}\n")
+print("| scene | CPU run | GPU run | GPU / CPU | CPU steps | GPU steps | GPU submits | energies (CPU / GPU) |")
+print("| --- | --- | --- | --- | --- | --- | --- | --- |")
+labels = list(dict.fromkeys(r["label"] for r in runs))
+for label in labels:
+    cpu = by.get((label, "cpu"))
+    for mode in ("gpu", "gpu --uzawa gpu"):
+        gpu = by.get((label, mode))
+        if not cpu or not gpu:
+            continue
+        wc, wg = med(cpu, lambda r: r["wall_s"]), med(gpu, lambda r: r["wall_s"])
+        ratio = f"{wc / wg:.2f}x faster" if wg < wc else f"{wg / wc:.2f}x slower"
+        name = label + (" (contact on the device)" if "uzawa" in mode else "")
+        print(f"| {name} | {wc:.2f} s | {wg:.2f} s | {ratio} | {med(cpu, lambda r: r['wall_by_phase']['total']):.2f} s "
+              f"| {med(gpu, lambda r: r['wall_by_phase']['total']):.2f} s | {med(gpu, lambda r: r['device_submits']):.0f} "
+              f"| {cpu[0]['energy']['total']:.10g} / {gpu[0]['energy']['total']:.10g} |")
+print()
+
+def rows(path):
+    for line in open(path):
+        line = line.strip()
+        if line.startswith("{"):
+            yield json.loads(line)
+
+def throughput(r):
+    return f"{r['items_per_second'] / 1e6:.3g} M/s"
+
+bench = list(rows(f"{out}/bench.jsonl"))
+if bench:
+    print("| kernel | element | material | items | CPU f64 | GPU f64 | GPU f32 | GPU f64 %bw / %flop | GPU f32 %bw / %flop |")
+    print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+    cases = defaultdict(dict)
+    for r in bench:
+        cases[(r["kernel"], r["element"], r["material"])][r["backend"]] = r
+    pct = lambda r: "-" if r is None or r.get("peak_bandwidth_fraction") is None else f"{100 * r['peak_bandwidth_fraction']:.1f} / {100 * r['peak_flops_fraction']:.1f}"
+    cell = lambda r: "-" if r is None else throughput(r)
+    for (kernel, element, material), c in cases.items():
+        if kernel.startswith("peak"):
+            continue
+        items = max(r["items"] for r in c.values())
+        g64, g32 = c.get("gpu f64"), c.get("gpu f32")
+        print(f"| {kernel} | {element} | {material} | {items} | {cell(c.get('cpu f64'))} | {cell(g64)} | {cell(g32)} | {pct(g64)} | {pct(g32)} |")
+    print("\n| peak kernel | backend | GB/s | GFLOP/s |\n| --- | --- | --- | --- |")
+    for (kernel, _, _), c in cases.items():
+        if kernel.startswith("peak"):
+            for backend, r in c.items():
+                print(f"| {kernel} | {backend} | {r['gbytes_per_second']:.4g} | {r['gflops_per_second']:.4g} |")
+    print()
+sweeps = list(rows(f"{out}/sweeps.jsonl"))
+if sweeps:
+    print("| points | CPU twin per call | device per call | device / CPU | bytes per call |")
+    print("| --- | --- | --- | --- | --- |")
+    by_items = defaultdict(dict)
+    for r in sweeps:
+        by_items[r["items"]][r["backend"].split()[0]] = r
+    for items, c in sorted(by_items.items()):
+        if "cpu" in c and "gpu" in c:
+            tc, tg = c["cpu"]["seconds_per_call"], c["gpu"]["seconds_per_call"]
+            print(f"| {items} | {1e3 * tc:.3g} ms | {1e3 * tg:.3g} ms | {tg / tc:.2f} | {c['gpu']['bytes_per_call'] / 1e6:.2f} MB |")
+PY
+echo "raw results in $out" >&2
