@@ -6,12 +6,21 @@
 //!   facets is reported in doc/benchmarks.md).
 
 use bifirst::contact::detect::detect;
+use bifirst::contact::pairs::{BodyPairs, Rank};
 use bifirst::contact::{uzawa_step, ContactModel, Settings, Surface, Sweep};
 use bifirst::mesh::{generate, ElementKind};
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use rand::rngs::SmallRng;
 use rand::{Rng, SeedableRng};
 use std::hint::black_box;
+
+/// Two bodies, the upper one (1) the slave on the lower one (0).
+fn upper_on_lower(mu: f64) -> BodyPairs {
+    let rank = Rank { length_scale: 1.0, boundary_nodes: 0 };
+    let mut pairs = BodyPairs::new(vec![rank; 2], None, false);
+    pairs.list(0, 1, mu, Some(1));
+    pairs
+}
 
 fn law(c: &mut Criterion) {
     let mut rng = SmallRng::seed_from_u64(3);
@@ -50,8 +59,7 @@ fn detection(c: &mut Criterion) {
             settings: Settings { tolerance: 1e-8, max_iterations: 1, sweep: Sweep::GaussSeidel },
             surfaces,
             obstacles: Vec::new(),
-            friction: vec![vec![None, None], vec![Some(0.3), None]],
-            second_pass: vec![vec![false; 2]; 2],
+            pairs: upper_on_lower(0.3),
         };
         let positions = vec![lower.nodes.clone(), upper.nodes.clone()];
         let margin = 0.01 / cells as f64;

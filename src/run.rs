@@ -6,11 +6,12 @@ use crate::element::CellFields;
 use crate::output::foxglove::{self, Level, View};
 use crate::output::plot::{contour_png, PlotError};
 use crate::output::messages::{AngularMomentum, BodyMessage, ContactMessage, EnergyMessage, ProbeMessage, ReactionMessage, RunMessage, SolverMessage};
-use crate::output::{schemas, OutputError, RunLog, VtuSeries};
+use crate::output::{encode, schemas, OutputError, RunLog, VtuSeries};
 use crate::backend::{Backend, BackendError, BackendRequest};
 use crate::precision::Real;
 use crate::scene::{LoadedScene, OutputSpec, SceneError};
 use crate::solver::{build_simulation, Energies, PhaseTimes, RunFailure, SavedState, Simulation, StepFailure, StepReport};
+use rayon::prelude::*;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
@@ -227,11 +228,17 @@ impl Logger {
         self.state_step = Some(sim.step);
         let (t, dim) = (sim.t, self.dim);
         self.log.write("/energy", t, &EnergyMessage { t, energies: sim.energies() })?;
-        for b in &sim.bodies {
-            let m = b.metrics();
-            let angular_momentum = if dim == 2 { AngularMomentum::Plane(m.angular_momentum[2]) } else { AngularMomentum::Space(m.angular_momentum) };
-            let msg = BodyMessage { t, mass: m.mass, center_of_mass: m.center_of_mass[..dim].to_vec(), linear_momentum: m.linear_momentum[..dim].to_vec(), angular_momentum, kinetic: m.kinetic };
-            self.log.write(&format!("/body/{}", b.name), t, &msg)?;
+        let bodies: Vec<Vec<u8>> = sim
+            .bodies
+            .par_iter()
+            .map(|b| {
+                let m = b.metrics();
+                let angular_momentum = if dim == 2 { AngularMomentum::Plane(m.angular_momentum[2]) } else { AngularMomentum::Space(m.angular_momentum) };
+                encode(&BodyMessage { t, mass: m.mass, center_of_mass: m.center_of_mass[..dim].to_vec(), linear_momentum: m.linear_momentum[..dim].to_vec(), angular_momentum, kinetic: m.kinetic })
+            })
+            .collect();
+        for (b, data) in sim.bodies.iter().zip(bodies) {
+            self.log.write_encoded(&format!("/body/{}", b.name), t, &data)?;
         }
         for p in &sim.probes {
             let b = &sim.bodies[p.body];
@@ -280,10 +287,10 @@ impl Logger {
             return Ok(());
         }
         self.frame_step = Some(sim.step);
-        let fields: Vec<Vec<CellFields>> = sim.bodies.iter().map(|b| b.cell_fields()).collect();
+        let fields: Vec<Vec<CellFields>> = sim.bodies.par_iter().map(|b| b.cell_fields()).collect();
         if let (true, Some(view)) = (scene, &mut self.view) {
             let update = view.scene_update(sim, &fields);
-            self.log.write("/scene", sim.t, &update)?;
+            self.log.write_encoded("/scene", sim.t, &update)?;
         }
         if let (true, Some(series)) = (vtu, &mut self.vtu) {
             series.write_frame(sim, &fields)?;

@@ -6,10 +6,19 @@
 mod common_run;
 use bifirst::contact::detect::detect;
 use bifirst::contact::geometry::{dot, on_quad, on_segment, sub};
+use bifirst::contact::pairs::{BodyPairs, Rank};
 use bifirst::contact::{ContactModel, Master, Settings, Surface, Sweep};
 use bifirst::mesh::generate::{cuboid, disk, rectangle};
 use bifirst::mesh::{ElementKind, Mesh};
 use bifirst::scene::parse_scene;
+
+/// Two bodies, the upper one (1) the slave on the lower one (0).
+fn upper_on_lower(mu: f64) -> BodyPairs {
+    let rank = Rank { length_scale: 1.0, boundary_nodes: 0 };
+    let mut pairs = BodyPairs::new(vec![rank; 2], None, false);
+    pairs.list(0, 1, mu, Some(1));
+    pairs
+}
 
 fn facet_normal(mesh: &Mesh, facet: &[u32]) -> [f64; 3] {
     let x: Vec<[f64; 3]> = facet.iter().map(|&n| mesh.nodes[n as usize]).collect();
@@ -92,8 +101,7 @@ fn broad_phase_finds_what_brute_force_finds() {
             settings: Settings { tolerance: 1e-8, max_iterations: 10, sweep: Sweep::GaussSeidel },
             surfaces: surfaces.clone(),
             obstacles: Vec::new(),
-            friction: vec![vec![None, None], vec![Some(0.2), None]],
-            second_pass: vec![vec![false; 2]; 2],
+            pairs: upper_on_lower(0.2),
         };
         let positions: Vec<Vec<[f64; 3]>> = meshes.iter().map(|m| m.nodes.clone()).collect();
         let margin = 0.01;

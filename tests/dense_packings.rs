@@ -232,8 +232,8 @@ fn a_pair_can_name_its_slave() {
         let text = format!("{TWO_BLOCKS}\n[contact.pair.blocks]\nbodies = [\"lower\", \"upper\"]\nslave = \"{slave}\"\n");
         let sets = ["body.upper.mesh.origin=[0.2, 0.5]".to_string()];
         let sim = build_simulation(&load_scene(&scene_file(&format!("pair_{slave}"), &text), &sets).unwrap()).unwrap();
-        let friction = sim.contact.expect("contact").friction;
-        (friction[0][1].is_some(), friction[1][0].is_some())
+        let pairs = sim.contact.expect("contact").pairs;
+        (pairs.friction(0, 1).is_some(), pairs.friction(1, 0).is_some())
     };
     assert_eq!(with_pair("lower"), (true, false));
     assert_eq!(with_pair("upper"), (false, true));

@@ -149,12 +149,11 @@ fn obstacles(model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, t: Real,
 }
 
 fn body_pairs(model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, margin: Real, out: &mut Vec<ContactPoint>) {
-    let is_master: Vec<bool> = (0..model.surfaces.len()).map(|m| model.friction.iter().any(|row| row[m].is_some())).collect();
     // Every facet of a master body, with its id packed as (body, facet).
     let mut ids: Vec<(u32, u32)> = Vec::new();
     let mut boxes: Vec<(Vec3, Vec3, Real)> = Vec::new();
     let mut xs: Vec<Vec3> = Vec::with_capacity(4);
-    for (b, surface) in model.surfaces.iter().enumerate().filter(|(b, _)| is_master[*b]) {
+    for (b, surface) in model.surfaces.iter().enumerate().filter(|(b, _)| model.pairs.is_master(*b)) {
         for f in 0..surface.facet_count() {
             xs.clear();
             xs.extend(surface.facet(f).iter().map(|&n| positions[b][n as usize]));
@@ -183,7 +182,7 @@ fn body_pairs(model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, margin:
     let mut best: Vec<Option<(Real, usize, Projection)>> = vec![None; bodies];
     let mut touched: Vec<usize> = Vec::new();
     for (s, surface) in model.surfaces.iter().enumerate() {
-        if model.friction[s].iter().all(Option::is_none) {
+        if !model.pairs.is_slave(s) {
             continue;
         }
         for &node in &surface.nodes {
@@ -191,7 +190,7 @@ fn body_pairs(model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, margin:
             for &id in grid.query(x) {
                 let (m, f) = ids[id as usize];
                 let m = m as usize;
-                if model.friction[s][m].is_none() {
+                if model.pairs.friction(s, m).is_none() {
                     continue;
                 }
                 let facet = model.surfaces[m].facet(f as usize);
@@ -218,13 +217,13 @@ fn body_pairs(model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, margin:
             for m in touched.drain(..) {
                 let Some((gap, f, p)) = best[m].take() else { continue };
                 let facet = model.surfaces[m].facet(f);
-                let mu = model.friction[s][m].expect("pair checked");
+                let mu = model.pairs.friction(s, m).expect("pair checked");
                 let mut c = point(s, node, Master::Body(m as u32), frame(p.normal, Some(p.tangent), dim), gap, mu);
                 for (k, &n) in facet.iter().enumerate() {
                     c.terms[1 + k] = Term { body: m as u32, node: n, coef: -p.weights[k] };
                 }
                 c.term_count = 1 + facet.len();
-                c.second = model.second_pass[s][m];
+                c.second = model.pairs.second(s, m);
                 out.push(c);
             }
         }

@@ -12,6 +12,7 @@ pub mod grid;
 pub mod law;
 pub mod obstacle;
 pub mod overlap;
+pub mod pairs;
 pub mod surface;
 pub mod uzawa;
 
@@ -22,6 +23,7 @@ pub use uzawa::Sweep;
 
 use crate::precision::Real;
 use geometry::Vec3;
+use pairs::BodyPairs;
 
 /// The other side of a contact point.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize, serde::Deserialize, schemars::JsonSchema)]
@@ -116,12 +118,8 @@ pub struct ContactModel {
     pub settings: Settings,
     pub surfaces: Vec<Surface>,
     pub obstacles: Vec<Obstacle>,
-    /// `friction[slave][master]`: the coefficient of a body pair treated with that body as the
-    /// slave, `None` when that pass is not done.
-    pub friction: Vec<Vec<Option<Real>>>,
-    /// `second_pass[slave][master]`: that pass is the second of a two-pass pair; its points are
-    /// dropped where they only repeat a first-pass point ([`detect`]).
-    pub second_pass: Vec<Vec<bool>>,
+    /// The body pairs that can touch: friction and roles of each pass.
+    pub pairs: BodyPairs,
 }
 
 /// Contact totals of one step (the `/contact` channel).

@@ -61,7 +61,7 @@ impl Worst {
 /// its element size. `meshes[b]` gives the connectivity, `positions[b]` the current nodes.
 pub fn overlaps(model: &ContactModel, meshes: &[&Mesh], positions: &[Vec<Vec3>], t: Real) -> Vec<Overlap> {
     let bodies = meshes.len();
-    let can_touch = |a: usize, b: usize| a != b && (model.friction[a][b].is_some() || model.friction[b][a].is_some());
+    let can_touch = |a: usize, b: usize| model.pairs.mu(a, b).is_some();
     // Only a node inside another body's box can be inside that body, and only elements in the
     // box of a body that can touch theirs can hold such a node: in a packing that leaves the
     // rims of the grains (the search cost a quarter of a step with every element).

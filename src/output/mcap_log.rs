@@ -32,6 +32,11 @@ fn log_time(t: Real) -> u64 {
     (t.max(0.0) * 1e9).round() as u64
 }
 
+/// A message as the log stores it (JSON).
+pub fn encode(message: &impl serde::Serialize) -> Vec<u8> {
+    serde_json::to_vec(message).expect("message serializes")
+}
+
 impl RunLog {
     pub fn create(path: &Path) -> Result<Self, OutputError> {
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
@@ -97,12 +102,16 @@ impl RunLog {
 
     /// Writes one message on a registered channel at simulated time `t`.
     pub fn write(&mut self, topic: &str, t: Real, message: &impl serde::Serialize) -> Result<(), OutputError> {
+        self.write_encoded(topic, t, &encode(message))
+    }
+
+    /// Writes one message already [`encode`]d (many are encoded in parallel, written in order).
+    pub fn write_encoded(&mut self, topic: &str, t: Real, data: &[u8]) -> Result<(), OutputError> {
         let channel_id = *self.channels.get(topic).unwrap_or_else(|| panic!("channel {topic} not registered"));
-        let data = serde_json::to_vec(message).expect("message serializes");
         let sequence = self.sequence;
         self.sequence += 1;
         let header = mcap::records::MessageHeader { channel_id, sequence, log_time: log_time(t), publish_time: log_time(t) };
-        let result = self.writer()?.write_to_known_channel(&header, &data);
+        let result = self.writer()?.write_to_known_channel(&header, data);
         result.map_err(|e| self.err(e))
     }
 

@@ -10,7 +10,7 @@ pub mod schemas;
 pub mod summary;
 pub mod vtu;
 
-pub use mcap_log::{OutputError, RunLog};
+pub use mcap_log::{encode, OutputError, RunLog};
 pub use read::{read_run, read_run_topics, ReadError, RunRecord};
 pub use vtu::VtuSeries;
 

@@ -233,7 +233,7 @@ impl Simulation {
             return Err((StepFailure::Interrupted, dt));
         }
         let result = match self.try_step(dt, report, false) {
-            Err(failure @ StepFailure::NotConverged { .. }) if self.contact.as_ref().is_some_and(|c| c.second_pass.iter().flatten().any(|&s| s)) => {
+            Err(failure @ StepFailure::NotConverged { .. }) if self.contact.as_ref().is_some_and(|c| c.pairs.any_second()) => {
                 report.events.push(format!("t = {:.6e}: {failure}; retrying with the second contact pass thinned", self.t));
                 self.try_step(dt, report, true)
             }

@@ -6,6 +6,7 @@ use super::{BoundarySet, Probe, Simulation};
 use crate::contact::obstacle::Shape;
 use super::{body_overlaps, node_positions};
 use crate::contact::overlap::{Host, Overlap};
+use crate::contact::pairs::{BodyPairs, Rank};
 use crate::contact::{ContactModel, Motion, Obstacle, Settings, Surface};
 use crate::element::ReferenceGeometry;
 use crate::material::{BlatzKo, Lvf, Model, NeoHookean};
@@ -15,6 +16,7 @@ use crate::scene::SceneErrorKind::{Invalid, Mesh as MeshError, Reference};
 use crate::scene::LARGEST_INPUT;
 use crate::scene::{AngularVelocity, Axis, Generator, Interpolation, LoadedScene, MaterialSpec, MeshSpec, ModelName, ObstacleShape, SceneError};
 use std::collections::HashMap;
+use rayon::prelude::*;
 
 pub fn model_of(m: &MaterialSpec) -> Model {
     let g = m.G.unwrap_or_default();
@@ -154,8 +156,9 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
         sets.push(BoundarySet { name: name.clone(), body: b });
     }
 
-    let mut bodies = Vec::new();
-    for (b, ((name, mesh, geometry), spec)) in meshes.into_iter().zip(scene.body.values()).enumerate() {
+    // The bodies are independent (a grain packing has thousands): built in parallel, and the
+    // first failing one in the scene's order reported.
+    let built: Vec<Result<Body, SceneError>> = meshes.into_par_iter().zip(scene.body.values().collect::<Vec<_>>()).zip(std::mem::take(&mut prescribed)).map(|(((name, mesh, geometry), spec), prescribed)| {
         let key = format!("body.{name}");
         let material = &scene.material[&spec.material];
         let v0 = spec.initial_velocity.clone().unwrap_or_else(|| vec![0.0; dim]);
@@ -182,11 +185,12 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
             let r = [x[0] - c[0], x[1] - c[1], x[2] - c[2]];
             [v[0] + omega[1] * r[2] - omega[2] * r[1], v[1] + omega[2] * r[0] - omega[0] * r[2], v[2] + omega[0] * r[1] - omega[1] * r[0]]
         };
-        let mut body = Body::new(name.clone(), mesh, geometry, model_of(material), material.density, std::mem::take(&mut prescribed[b]), initial, scene.solver.ordering)
+        let mut body = Body::new(name.clone(), mesh, geometry, model_of(material), material.density, prescribed, initial, scene.solver.ordering)
             .map_err(|e| loaded.error(MeshError, &format!("{key}.mesh"), e.to_string()))?;
         body.reuse_factorization = scene.solver.reuse_factorization;
-        bodies.push(body);
-    }
+        Ok(body)
+    }).collect();
+    let mut bodies = built.into_iter().collect::<Result<Vec<_>, _>>()?;
 
     let mut probes = Vec::new();
     for (name, p) in &scene.probe {
@@ -355,42 +359,14 @@ fn build_contact(loaded: &LoadedScene, bodies: &[Body], dim: usize) -> Result<Op
     let spec = &scene.contact;
     let index: HashMap<&str, usize> = scene.body.keys().enumerate().map(|(i, n)| (n.as_str(), i)).collect();
     let n = bodies.len();
-    let mut pairs: Vec<Vec<Option<Real>>> = vec![vec![None; n]; n];
-    if spec.all_pairs {
-        for a in 0..n {
-            for b in a + 1..n {
-                pairs[a][b] = Some(spec.friction);
-            }
-        }
-    }
-    let mut chosen: HashMap<(usize, usize), usize> = HashMap::new();
-    for pair in spec.pair.values() {
-        let (a, b) = (index[pair.bodies[0].as_str()], index[pair.bodies[1].as_str()]);
-        pairs[a.min(b)][a.max(b)] = Some(pair.friction.unwrap_or(spec.friction));
-        if let Some(slave) = &pair.slave {
-            chosen.insert((a.min(b), a.max(b)), index[slave.as_str()]);
-        }
-    }
     // Slave/master roles: the pair's `slave`, else the finer mesh, then the one with more
     // boundary nodes, then the first in the scene; with two passes, the other way round too.
-    let surfaces: Vec<Surface> = bodies.iter().map(|b| Surface::of(&b.mesh)).collect();
-    let boundary_nodes = |b: usize| surfaces[b].nodes.len();
-    let mut friction: Vec<Vec<Option<Real>>> = vec![vec![None; n]; n];
-    let mut second_pass = vec![vec![false; n]; n];
-    for a in 0..n {
-        for b in a + 1..n {
-            let Some(mu) = pairs[a][b] else { continue };
-            let b_first = match chosen.get(&(a, b)) {
-                Some(&slave) => slave == b,
-                None => bodies[b].length_scale().total_cmp(&bodies[a].length_scale()).then_with(|| boundary_nodes(a).cmp(&boundary_nodes(b))).is_lt(),
-            };
-            let (slave, master) = if b_first { (b, a) } else { (a, b) };
-            friction[slave][master] = Some(mu);
-            if spec.two_pass {
-                friction[master][slave] = Some(mu);
-                second_pass[master][slave] = true;
-            }
-        }
+    let surfaces: Vec<Surface> = bodies.par_iter().map(|b| Surface::of(&b.mesh)).collect();
+    let ranks = bodies.iter().zip(&surfaces).map(|(b, s)| Rank { length_scale: b.length_scale(), boundary_nodes: s.nodes.len() }).collect();
+    let mut pairs = BodyPairs::new(ranks, spec.all_pairs.then_some(spec.friction), spec.two_pass);
+    for pair in spec.pair.values() {
+        let (a, b) = (index[pair.bodies[0].as_str()], index[pair.bodies[1].as_str()]);
+        pairs.list(a, b, pair.friction.unwrap_or(spec.friction), pair.slave.as_ref().map(|slave| index[slave.as_str()]));
     }
     let mut obstacles = Vec::new();
     for (name, o) in &scene.obstacle {
@@ -434,10 +410,9 @@ fn build_contact(loaded: &LoadedScene, bodies: &[Body], dim: usize) -> Result<Op
         };
         obstacles.push(Obstacle { name: name.clone(), shape, faces, mode, friction: o.friction.unwrap_or(spec.friction), motion, bodies: touches });
     }
-    let any_pair = friction.iter().flatten().any(Option::is_some);
-    if obstacles.is_empty() && !any_pair {
+    if obstacles.is_empty() && !pairs.any() {
         return Ok(None);
     }
     let settings = Settings { tolerance: spec.tolerance, max_iterations: spec.max_iterations, sweep: spec.sweep };
-    Ok(Some(ContactModel { settings, surfaces, obstacles, friction, second_pass }))
+    Ok(Some(ContactModel { settings, surfaces, obstacles, pairs }))
 }

@@ -5,9 +5,12 @@
 use crate::contact::geometry::{dot, frame, norm, normalize, scale, sub, Vec3};
 use crate::contact::obstacle::Shape;
 use crate::element::CellFields;
+use crate::output::encode;
 use crate::precision::Real;
 use crate::solver::{Body, Simulation};
 use crate::contact::{Obstacle, Surface};
+use rayon::prelude::*;
+use serde_json::value::{to_raw_value, RawValue};
 use serde_json::{json, Value};
 
 /// `foxglove.SceneUpdate`, JSON schema from `@foxglove/schemas`.
@@ -153,17 +156,26 @@ impl View {
         Self { dim: sim.dim, surfaces, extent, centre, von_mises_max: 0.0, force_max: 0.0 }
     }
 
-    /// The scene at the committed state; `fields` are each body's [`CellFields`].
-    pub fn scene_update(&mut self, sim: &Simulation, fields: &[Vec<CellFields>]) -> Value {
+    /// The scene at the committed state, encoded for the log; `fields` are each body's
+    /// [`CellFields`]. The bodies' entities are built and encoded in parallel (a packing has
+    /// thousands of bodies) and the message holds them verbatim.
+    pub fn scene_update(&mut self, sim: &Simulation, fields: &[Vec<CellFields>]) -> Vec<u8> {
         let t = sim.t;
         let frame_max = fields.iter().flatten().map(|f| f.von_mises).fold(0.0, Real::max);
         self.von_mises_max = self.von_mises_max.max(frame_max);
-        let mut entities: Vec<Value> = sim.bodies.iter().enumerate().map(|(b, body)| self.body(t, body, &self.surfaces[b], &fields[b])).collect();
+        let raw = |entity: Value| to_raw_value(&entity).expect("an entity serializes");
+        let mut entities: Vec<Box<RawValue>> =
+            sim.bodies.par_iter().zip(&self.surfaces).zip(fields).map(|((body, surface), fields)| raw(self.body(t, body, surface, fields))).collect();
         if let Some(contact) = &sim.contact {
-            entities.extend(contact.obstacles.iter().map(|o| self.obstacle(t, o)));
-            entities.push(self.contact_forces(sim));
+            entities.extend(contact.obstacles.iter().map(|o| raw(self.obstacle(t, o))));
+            entities.push(raw(self.contact_forces(sim)));
         }
-        json!({"deletions": [], "entities": entities})
+        #[derive(serde::Serialize)]
+        struct SceneUpdate {
+            deletions: [Value; 0],
+            entities: Vec<Box<RawValue>>,
+        }
+        encode(&SceneUpdate { deletions: [], entities })
     }
 
     /// The deformed boundary, each facet coloured by its element's von Mises stress on
