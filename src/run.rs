@@ -170,19 +170,22 @@ impl Logger {
         if scene_every > 0 {
             log.add_channel("/scene", "foxglove.SceneUpdate", &serde_json::from_str(foxglove::SCENE_UPDATE_SCHEMA).expect("bundled schema is JSON"))?;
         }
+        // One schema for thousands of bodies (it is derived, not a constant).
+        let body_schema = schemas::body(dim);
         for b in &sim.bodies {
-            log.add_channel(&format!("/body/{}", b.name), "bifirst.Body", &schemas::body(dim))?;
+            log.add_channel(&format!("/body/{}", b.name), "bifirst.Body", &body_schema)?;
         }
         for p in &sim.probes {
             log.add_channel(&format!("/probe/{}", p.name), "bifirst.Probe", &schemas::probe(dim))?;
         }
+        let reaction_schema = schemas::reaction(dim);
         for s in &sim.sets {
-            log.add_channel(&format!("/reaction/{}", s.name), "bifirst.Reaction", &schemas::reaction(dim))?;
+            log.add_channel(&format!("/reaction/{}", s.name), "bifirst.Reaction", &reaction_schema)?;
         }
         if let Some(c) = &sim.contact {
             log.add_channel("/contact", "bifirst.Contact", &schemas::contact())?;
             for o in &c.obstacles {
-                log.add_channel(&format!("/reaction/{}", o.name), "bifirst.Reaction", &schemas::reaction(dim))?;
+                log.add_channel(&format!("/reaction/{}", o.name), "bifirst.Reaction", &reaction_schema)?;
             }
         }
         let run = RunMessage {

@@ -62,27 +62,37 @@ impl StiffnessPattern {
         let local_free = |e: usize| -> Vec<Option<u32>> {
             mesh.element(e).iter().flat_map(|&node| (0..dim).map(move |i| node as usize * dim + i)).map(|g| dofs.free[g]).collect()
         };
-        let mut columns: Vec<Vec<u32>> = vec![Vec::new(); n];
-        for e in 0..mesh.element_count() {
-            let f = local_free(e);
-            for r in f.iter().flatten() {
-                for c in f.iter().flatten() {
-                    if r >= c {
-                        columns[*c as usize].push(*r);
+        // Each column's rows, repeated as often as elements share them.
+        let (starts, mut rows) = flattened(n, |emit| {
+            for c in 0..n {
+                emit(c, c as u32); // every free dof has its diagonal (mass), even if isolated
+            }
+            for e in 0..mesh.element_count() {
+                let f = local_free(e);
+                for r in f.iter().flatten() {
+                    for c in f.iter().flatten() {
+                        if r >= c {
+                            emit(*c as usize, *r);
+                        }
                     }
                 }
             }
-        }
+        });
         let mut col_ptr = Vec::with_capacity(n + 1);
-        let mut row_idx = Vec::new();
+        let mut row_idx = Vec::with_capacity(rows.len());
         col_ptr.push(0u32);
-        for (c, col) in columns.iter_mut().enumerate() {
-            col.push(c as u32); // every free dof has its diagonal (mass), even if isolated
+        for c in 0..n {
+            let col = &mut rows[starts[c] as usize..starts[c + 1] as usize];
             col.sort_unstable();
-            col.dedup();
-            row_idx.extend_from_slice(col);
+            let first = row_idx.len();
+            for &r in col.iter() {
+                if row_idx.len() == first || row_idx.last() != Some(&r) {
+                    row_idx.push(r);
+                }
+            }
             col_ptr.push(row_idx.len() as u32);
         }
+        row_idx.shrink_to_fit();
         let position = |r: u32, c: u32| -> u32 {
             let (s, e) = (col_ptr[c as usize] as usize, col_ptr[c as usize + 1] as usize);
             s as u32 + row_idx[s..e].binary_search(&r).expect("entry in pattern") as u32
@@ -144,33 +154,44 @@ impl GatherMap {
     pub fn new(mesh: &Mesh, dim: usize, pattern: &StiffnessPattern) -> Self {
         let ndof = pattern.element_dofs;
         let stride = element_out_stride(ndof);
-        let mut csr_lists: Vec<Vec<u32>> = vec![Vec::new(); pattern.nnz()];
-        let mut dof_lists: Vec<Vec<u32>> = vec![Vec::new(); mesh.nodes.len() * dim];
-        for e in 0..mesh.element_count() {
-            let base = e * stride;
-            for (local, &idx) in pattern.element_scatter(e).iter().enumerate() {
-                if idx != SKIP {
-                    csr_lists[idx as usize].push((base + ndof + packed_index(ndof, local / ndof, local % ndof)) as u32);
+        let (csr_start, csr) = flattened(pattern.nnz(), |emit| {
+            for e in 0..mesh.element_count() {
+                let base = e * stride;
+                for (local, &idx) in pattern.element_scatter(e).iter().enumerate() {
+                    if idx != SKIP {
+                        emit(idx as usize, (base + ndof + packed_index(ndof, local / ndof, local % ndof)) as u32);
+                    }
                 }
             }
-            for (a, &node) in mesh.element(e).iter().enumerate() {
-                for i in 0..dim {
-                    dof_lists[node as usize * dim + i].push((base + a * dim + i) as u32);
+        });
+        let (dof_start, dof) = flattened(mesh.nodes.len() * dim, |emit| {
+            for e in 0..mesh.element_count() {
+                for (a, &node) in mesh.element(e).iter().enumerate() {
+                    for i in 0..dim {
+                        emit(node as usize * dim + i, (e * stride + a * dim + i) as u32);
+                    }
                 }
             }
-        }
-        let flatten = |lists: Vec<Vec<u32>>| {
-            let mut start = Vec::with_capacity(lists.len() + 1);
-            start.push(0u32);
-            let mut flat = Vec::with_capacity(lists.iter().map(Vec::len).sum());
-            for list in lists {
-                flat.extend(list);
-                start.push(flat.len() as u32);
-            }
-            (start, flat)
-        };
-        let (csr_start, csr) = flatten(csr_lists);
-        let (dof_start, dof) = flatten(dof_lists);
+        });
         Self { csr_start, csr, dof_start, dof }
     }
+}
+
+/// The lists of values per target, flattened (start offsets, values): `each` gives the (target,
+/// value) pairs, in the order each list keeps, to the function it is passed. It runs twice,
+/// once to count and once to fill, so that building the lists allocates two vectors, not one
+/// per target (a grain packing has millions of targets).
+fn flattened(targets: usize, each: impl Fn(&mut dyn FnMut(usize, u32))) -> (Vec<u32>, Vec<u32>) {
+    let mut start = vec![0u32; targets + 1];
+    each(&mut |target, _| start[target + 1] += 1);
+    for t in 0..targets {
+        start[t + 1] += start[t];
+    }
+    let mut next = start[..targets].to_vec();
+    let mut flat = vec![0u32; start[targets] as usize];
+    each(&mut |target, value| {
+        flat[next[target] as usize] = value;
+        next[target] += 1;
+    });
+    (start, flat)
 }

@@ -435,10 +435,12 @@ impl Simulation {
             contact_correction: self.contact_correction,
             ..Default::default()
         };
-        for b in &self.bodies {
-            e.kinetic += b.kinetic_energy();
-            e.strain += b.strain_energy();
-            e.potential += b.potential_energy(&self.gravity);
+        // Each body's in parallel, summed in the bodies' order (the same sums on any pool).
+        let bodies: Vec<[Real; 3]> = self.bodies.par_iter().map(|b| [b.kinetic_energy(), b.strain_energy(), b.potential_energy(&self.gravity)]).collect();
+        for [kinetic, strain, potential] in bodies {
+            e.kinetic += kinetic;
+            e.strain += strain;
+            e.potential += potential;
         }
         e.total = e.kinetic + e.strain + e.potential;
         let e0 = self.initial_energy;
