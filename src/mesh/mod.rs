@@ -74,9 +74,13 @@ impl Mesh {
     pub fn element_displacements_into(&self, u: &[Real], e: usize, out: &mut Vec<[Real; 3]>) {
         let dim = self.dim();
         out.clear();
+        // Component by component: a slice copy of 2 or 3 values is a call to memmove, which
+        // was 4 % of a grain run.
         out.extend(self.element(e).iter().map(|&n| {
             let mut d = [0.0; 3];
-            d[..dim].copy_from_slice(&u[n as usize * dim..(n as usize + 1) * dim]);
+            for (i, di) in d.iter_mut().enumerate().take(dim) {
+                *di = u[n as usize * dim + i];
+            }
             d
         }));
     }
