@@ -158,7 +158,9 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
 
     // The bodies are independent (a grain packing has thousands): built in parallel, and the
     // first failing one in the scene's order reported.
-    let built: Vec<Result<Body, SceneError>> = meshes.into_par_iter().zip(scene.body.values().collect::<Vec<_>>()).zip(std::mem::take(&mut prescribed)).map(|(((name, mesh, geometry), spec), prescribed)| {
+    let specs: Vec<_> = scene.body.values().collect();
+    let inputs = meshes.into_par_iter().zip(specs).zip(std::mem::take(&mut prescribed));
+    let built: Vec<Result<Body, SceneError>> = inputs.map(|(((name, mesh, geometry), spec), prescribed)| {
         let key = format!("body.{name}");
         let material = &scene.material[&spec.material];
         let v0 = spec.initial_velocity.clone().unwrap_or_else(|| vec![0.0; dim]);
