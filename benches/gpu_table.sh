@@ -8,9 +8,11 @@
 #   benches/gpu_table.sh [BINARY] [REPETITIONS] [OUTDIR]
 #
 # Prints Markdown tables; OUTDIR (default: a temporary folder) keeps every run's `--json`
-# summary and bench's JSON rows. QUICK=1 runs small sizes, to try the script on lavapipe (a
-# minute on 2 cores); BENCH_ELEMENTS (default 1000000) sizes the kernel benchmark, whose every
-# kernel is stopped after BENCH_LIMIT seconds (default 150).
+# summary and bench's JSON rows. QUICK=1 runs small sizes, to try the script on lavapipe (90 s
+# on 2 cores); BENCH_ELEMENTS (default 1000000) sizes the kernel benchmark, whose every kernel
+# is stopped after BENCH_LIMIT seconds (default 80). SECTIONS (default "runs bench sweeps")
+# picks the parts, so that a device call's 10 minutes can hold them (all three take about 8
+# minutes next to an H100, most of it the kernel benchmark).
 set -uo pipefail
 bin=$(realpath "${1:-target/release/bifirst}")
 reps=${2:-3}
@@ -31,7 +33,8 @@ else
   flight=(--set 'body.block.mesh.divisions=[40,20,20]' --set time.end=0.02)
   elements=${BENCH_ELEMENTS:-1000000} bench_time=0 sweep_sizes="64 256 1024 4096 16384 65536"
 fi
-limit=${BENCH_LIMIT:-150}
+limit=${BENCH_LIMIT:-80}
+sections=" ${SECTIONS:-runs bench sweeps} "
 
 run() { # label backend scene [arguments...]: one run, its summary appended to runs.jsonl
   local label=$1 backend=$2 scene=$3
@@ -46,6 +49,7 @@ run() { # label backend scene [arguments...]: one run, its summary appended to r
 
 "$bin" info >&2 || true
 : >"$out/runs.jsonl"
+[[ $sections == *" runs "* ]] || reps=0
 for r in $(seq "$reps"); do
   echo "repetition $r of $reps" >&2
   for backend in cpu gpu; do
@@ -60,11 +64,14 @@ for r in $(seq "$reps"); do
 done
 
 : >"$out/bench.jsonl"
-for kernel in peak element_force_tangent assemble evaluate element_energy; do
+kernels="peak element_force_tangent assemble evaluate element_energy"
+[[ $sections == *" bench "* ]] || kernels=""
+for kernel in $kernels; do
   timeout "$limit" "$bin" bench --elements "$elements" --time "$bench_time" --kernel "$kernel" --backend gpu --json >>"$out/bench.jsonl" \
     || echo "bench --kernel $kernel stopped (exit $?) after ${limit} s; the rows it finished are kept" >&2
 done
 : >"$out/sweeps.jsonl"
+[[ $sections == *" sweeps "* ]] || sweep_sizes=""
 for e in $sweep_sizes; do
   timeout "$limit" "$bin" bench --elements "$e" --time 1 --kernel uzawa_sweep --backend gpu --json >>"$out/sweeps.jsonl" \
     || echo "bench --kernel uzawa_sweep --elements $e stopped (exit $?)" >&2
