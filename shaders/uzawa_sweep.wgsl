@@ -28,7 +28,6 @@ struct ColourRange {
     count: u32,
 }
 
-const LOCAL_STEPS = 25u;
 const NO_BLOCK = 0xffffffffu;
 const WORKGROUP = 64u;
 

@@ -223,14 +223,15 @@ impl Logger {
         Ok(Self { log, dim, view, scene_every, vtu, vtu_every, state_step: None, frame_step: None, saved_every: output.state_every, saved_step: None })
     }
 
-    /// State channels: energy, bodies, probes, reactions at the current time.
-    fn state(&mut self, sim: &Simulation) -> Result<(), OutputError> {
+    /// State channels: energy (`energies`, the simulation's at this time), bodies, probes,
+    /// reactions at the current time.
+    fn state(&mut self, sim: &Simulation, energies: Energies) -> Result<(), OutputError> {
         if self.state_step == Some(sim.step) {
             return Ok(());
         }
         self.state_step = Some(sim.step);
         let (t, dim) = (sim.t, self.dim);
-        self.log.write("/energy", t, &EnergyMessage { t, energies: sim.energies() })?;
+        self.log.write("/energy", t, &EnergyMessage { t, energies })?;
         let bodies: Vec<Vec<u8>> = sim
             .bodies
             .par_iter()
@@ -441,7 +442,7 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
     let total = sim.step_count();
     monitor.started(total);
     monitor.state(&sim);
-    logger.state(&sim)?;
+    logger.state(&sim, sim.energies())?;
     logger.frames(&sim, false)?;
     logger.saved(&sim, false)?;
     let mut totals = Totals::default();
@@ -526,7 +527,7 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
         if report.step % every == 0 || sim.finished() {
             logger.solver(&report, sim.t, "converged", None)?;
             logger.contact(&sim, &report)?;
-            logger.state(&sim)?;
+            logger.state(&sim, energies)?;
         }
         logger.frames(&sim, sim.finished())?;
         logger.saved(&sim, sim.finished())?;
@@ -552,7 +553,7 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
         }
         Some((stop, report)) => {
             // The last finished step goes into every output, then the reason for stopping.
-            logger.state(&sim)?;
+            logger.state(&sim, sim.energies())?;
             logger.frames(&sim, true)?;
             logger.saved(&sim, true)?;
             let level = if matches!(stop, Stop::Interrupted) { Level::Warning } else { Level::Error };

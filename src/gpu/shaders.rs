@@ -1,7 +1,7 @@
 //! The WGSL sources of `shaders/`, compiled into the binary, and how a kernel's module is
 //! composed: the precision prelude, the batch layout (`include/batch.wgsl`) for the kernels that
-//! run over a batch of bodies, the contact law (`include/contact_law.wgsl`) for the Uzawa
-//! kernels, then for element kernels the element constants and the shared
+//! run over a batch of bodies, the contact law (`include/contact_law.wgsl`) and the CPU's
+//! `LOCAL_STEPS` for the Uzawa kernels, then for element kernels the element constants and the shared
 //! includes of `shaders/include/`, then the kernel.
 
 use crate::mesh::ElementKind;
@@ -77,6 +77,8 @@ pub fn source(kernel: &str, precision: Precision, variant: Option<ElementVariant
         module += include("batch")?;
     }
     if is_contact_kernel(kernel) {
+        // The CPU twin's bound, so that both sweeps stop a point's local steps alike.
+        module += &format!("const LOCAL_STEPS = {}u;\n", crate::contact::uzawa::LOCAL_STEPS);
         module += include("contact_law")?;
     }
     match (is_element_kernel(kernel), variant) {
