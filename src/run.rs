@@ -5,7 +5,7 @@
 use crate::element::CellFields;
 use crate::output::foxglove::{self, Level, View};
 use crate::output::plot::{contour_png, PlotError};
-use crate::output::messages::{AngularMomentum, BodyMessage, ContactMessage, EnergyMessage, ProbeMessage, ReactionMessage, RunMessage, SolverMessage};
+use crate::output::messages::{AngularMomentum, BatchedBodies, BodiesMessage, BodyMessage, ContactMessage, EnergyMessage, ProbeMessage, ReactionMessage, RunMessage, SolverMessage};
 use crate::output::{encode, schemas, OutputError, RunLog, VtuSeries};
 use crate::backend::{Backend, BackendError, BackendRequest};
 use crate::precision::Real;
@@ -138,6 +138,13 @@ impl Monitor for Silent {}
 /// Commit the build came from, when it was built from a git checkout (see `src/build.rs`).
 pub const GIT_REVISION: Option<&str> = option_env!("BIFIRST_GIT_REVISION");
 
+/// Per body of `sim`: logged on `/bodies` rather than a channel of its own (`output.bodies`).
+fn batched_bodies(loaded: &LoadedScene, sim: &Simulation) -> Vec<bool> {
+    let grains: std::collections::HashSet<String> = loaded.scene.packing.iter().flat_map(|p| (0..p.count).map(|i| crate::scene::grain_name(i, p.count))).collect();
+    let grain: Vec<bool> = sim.bodies.iter().map(|b| grains.contains(&b.name)).collect();
+    loaded.scene.output.bodies.batched(&grain)
+}
+
 struct Logger {
     log: RunLog,
     dim: usize,
@@ -151,6 +158,8 @@ struct Logger {
     /// `/state` every this many steps (0: only the last finished step), and the step last saved.
     saved_every: usize,
     saved_step: Option<usize>,
+    /// Per body: on `/bodies` rather than a `/body/<name>` channel of its own.
+    batched: Vec<bool>,
 }
 
 impl Logger {
@@ -170,10 +179,14 @@ impl Logger {
         if scene_every > 0 {
             log.add_channel("/scene", "foxglove.SceneUpdate", &serde_json::from_str(foxglove::SCENE_UPDATE_SCHEMA).expect("bundled schema is JSON"))?;
         }
+        let batched = batched_bodies(loaded, sim);
         // One schema for thousands of bodies (it is derived, not a constant).
         let body_schema = schemas::body(dim);
-        for b in &sim.bodies {
+        for (b, _) in sim.bodies.iter().zip(&batched).filter(|(_, batched)| !**batched) {
             log.add_channel(&format!("/body/{}", b.name), "bifirst.Body", &body_schema)?;
+        }
+        if batched.contains(&true) {
+            log.add_channel("/bodies", "bifirst.Bodies", &schemas::bodies(dim))?;
         }
         for p in &sim.probes {
             log.add_channel(&format!("/probe/{}", p.name), "bifirst.Probe", &schemas::probe(dim))?;
@@ -197,6 +210,10 @@ impl Logger {
             backend: backend.name().to_string(),
             precision: backend.precision().to_string(),
             adapter: backend.adapter(),
+            batched_bodies: batched.contains(&true).then(|| {
+                let (names, mass) = sim.bodies.iter().zip(&batched).filter(|(_, batched)| **batched).map(|(b, _)| (b.name.clone(), b.metrics().mass)).unzip();
+                BatchedBodies { names, mass }
+            }),
         };
         log.write("/run", sim.t, &run)?;
         log.attach("scene.toml", "application/toml", loaded.resolved_toml.as_bytes())?;
@@ -220,7 +237,7 @@ impl Logger {
         let view = (scene_every > 0).then(|| View::new(sim));
         let vtu_every = OutputSpec::frame_interval(output.vtu_every, total);
         log.add_channel("/state", "bifirst.SavedState", &schemas::saved_state())?;
-        Ok(Self { log, dim, view, scene_every, vtu, vtu_every, state_step: None, frame_step: None, saved_every: output.state_every, saved_step: None })
+        Ok(Self { log, dim, view, scene_every, vtu, vtu_every, state_step: None, frame_step: None, saved_every: output.state_every, saved_step: None, batched })
     }
 
     /// State channels: energy (`energies`, the simulation's at this time), bodies, probes,
@@ -232,17 +249,29 @@ impl Logger {
         self.state_step = Some(sim.step);
         let (t, dim) = (sim.t, self.dim);
         self.log.write("/energy", t, &EnergyMessage { t, energies })?;
-        let bodies: Vec<Vec<u8>> = sim
-            .bodies
-            .par_iter()
+        let angular = |l: [Real; 3]| if dim == 2 { AngularMomentum::Plane(l[2]) } else { AngularMomentum::Space(l) };
+        let metrics: Vec<_> = sim.bodies.par_iter().map(|b| b.metrics()).collect();
+        let own: Vec<(usize, Vec<u8>)> = (0..metrics.len())
+            .into_par_iter()
+            .filter(|&b| !self.batched[b])
             .map(|b| {
-                let m = b.metrics();
-                let angular_momentum = if dim == 2 { AngularMomentum::Plane(m.angular_momentum[2]) } else { AngularMomentum::Space(m.angular_momentum) };
-                encode(&BodyMessage { t, mass: m.mass, center_of_mass: m.center_of_mass[..dim].to_vec(), linear_momentum: m.linear_momentum[..dim].to_vec(), angular_momentum, kinetic: m.kinetic })
+                let m = &metrics[b];
+                (b, encode(&BodyMessage { t, mass: m.mass, center_of_mass: m.center_of_mass[..dim].to_vec(), linear_momentum: m.linear_momentum[..dim].to_vec(), angular_momentum: angular(m.angular_momentum), kinetic: m.kinetic }))
             })
             .collect();
-        for (b, data) in sim.bodies.iter().zip(bodies) {
-            self.log.write_encoded(&format!("/body/{}", b.name), t, &data)?;
+        for (b, data) in own {
+            self.log.write_encoded(&format!("/body/{}", sim.bodies[b].name), t, &data)?;
+        }
+        if self.batched.contains(&true) {
+            let batch: Vec<_> = metrics.iter().zip(&self.batched).filter(|(_, batched)| **batched).map(|(m, _)| m).collect();
+            let message = BodiesMessage {
+                t,
+                center_of_mass: batch.iter().map(|m| m.center_of_mass[..dim].to_vec()).collect(),
+                linear_momentum: batch.iter().map(|m| m.linear_momentum[..dim].to_vec()).collect(),
+                angular_momentum: batch.iter().map(|m| angular(m.angular_momentum)).collect(),
+                kinetic: batch.iter().map(|m| m.kinetic).collect(),
+            };
+            self.log.write("/bodies", t, &message)?;
         }
         for p in &sim.probes {
             let b = &sim.bodies[p.body];

@@ -29,7 +29,7 @@ fn run_log_has_every_channel_of_the_contract() {
     let log = run("uniaxial_blatz_ko", &["time.end=0.1"], "contract");
     let steps = 10;
     let expected: &[(&str, &str, &[&str], usize)] = &[
-        ("/run", "bifirst.Run", &["version", "git_revision", "scene_name", "scene", "scene_file", "backend", "precision", "adapter"], 1),
+        ("/run", "bifirst.Run", &["version", "git_revision", "scene_name", "scene", "scene_file", "backend", "precision", "adapter", "batched_bodies"], 1),
         ("/energy", "bifirst.Energy", &["t", "kinetic", "strain", "potential", "external_work", "friction_dissipation", "numerical_dissipation", "contact_correction", "total", "energy_balance_error"], steps + 1),
         (
             "/solver",
@@ -98,6 +98,43 @@ fn run_log_has_every_channel_of_the_contract() {
     assert!(log.topics["/solver"].iter().all(|m| m["status"] == "converged"));
 }
 
+/// A packing's grains share one `/bodies` message per step (`output.bodies = "auto"`), or have a
+/// channel each (`"channels"`): the same numbers, and `summary` reads both logs.
+#[test]
+fn packing_bodies_are_batched_or_per_channel_with_the_same_values() {
+    let sets = ["packing.count=12", "time.end=0.015", "output.scene_every=0", "packing.wall_velocity=40.0"];
+    let batched = run("grains_many", &sets, "bodies_batched");
+    let channels = run("grains_many", &[&sets[..], &["output.bodies=\"channels\""]].concat(), "bodies_channels");
+    assert!(!batched.topics.keys().any(|t| t.starts_with("/body/")) && !channels.topics.contains_key("/bodies"));
+    let names: Vec<String> = batched.topics["/run"][0]["batched_bodies"]["names"].as_array().unwrap().iter().map(|n| n.as_str().unwrap().to_string()).collect();
+    assert_eq!(names.len(), 12);
+    assert!(channels.topics["/run"][0]["batched_bodies"].is_null());
+    let (_, schema) = &batched.schemas["/bodies"];
+    let fields = ["t", "center_of_mass", "linear_momentum", "angular_momentum", "kinetic"];
+    assert_eq!(schema_fields(schema), sorted(&fields));
+    let steps = batched.topics["/solver"].len();
+    assert_eq!(batched.topics["/bodies"].len(), steps + 1, "the initial state and one message per step");
+    for (k, name) in names.iter().enumerate() {
+        let own = &channels.topics[&format!("/body/{name}")];
+        assert_eq!(own.len(), steps + 1);
+        for (one, all) in own.iter().zip(&batched.topics["/bodies"]) {
+            assert_eq!(message_fields(all), sorted(&fields));
+            assert_eq!(one["t"], all["t"]);
+            for field in &fields[1..] {
+                assert_eq!(one[*field], all[*field][k], "{name}.{field}");
+            }
+        }
+        let mass = batched.topics["/run"][0]["batched_bodies"]["mass"][k].as_f64().unwrap();
+        assert_eq!(own[0]["mass"].as_f64(), Some(mass));
+    }
+    // The wall reached the first column: the values are not all zero.
+    assert!(batched.topics["/bodies"].last().unwrap()["kinetic"].as_array().unwrap().iter().any(|k| k.as_f64().unwrap() > 0.0));
+    for log in [&batched, &channels] {
+        let s = bifirst::output::summary::summarize(&log.record).expect("summary reads the log");
+        assert_eq!((s.status.as_str(), s.steps), ("finished", steps as u64));
+    }
+}
+
 #[test]
 fn run_log_vectors_have_two_components_in_2d() {
     let log = run("free_vibration_2d", &["time.end=0.03"], "contract_2d");
@@ -155,8 +192,15 @@ fn contact_scenes_log_the_contact_channel_and_obstacle_reactions() {
 /// a 2D and a 3D run with contact, and the saved state, validates against its channel's schema.
 #[test]
 fn every_message_validates_against_the_schema_derived_from_its_type() {
-    for (scene, sets) in [("sliding_block", ["time.end=0.02", "output.state_every=5"]), ("stack_3d", ["time.end=0.02", "output.state_every=1"])] {
-        let log = run(scene, &sets, &format!("derived_{scene}"));
+    // `/bodies` in 3D (stack_3d's bodies batched) and in 2D (a packing).
+    let cases: [(&str, &[&str]); 3] = [
+        ("sliding_block", &["time.end=0.02", "output.state_every=5"]),
+        ("stack_3d", &["time.end=0.02", "output.state_every=1", "output.bodies=\"batched\""]),
+        ("grains_many", &["time.end=0.01", "packing.count=6", "output.scene_every=0"]),
+    ];
+    for (scene, sets) in cases {
+        let log = run(scene, sets, &format!("derived_{scene}"));
+        assert_eq!(log.topics.contains_key("/bodies"), scene != "sliding_block", "{scene}: /bodies");
         let mut schemas = boon::Schemas::new();
         let mut compiler = boon::Compiler::new();
         let mut checked = 0;

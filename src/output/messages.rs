@@ -26,6 +26,16 @@ pub struct RunMessage {
     pub precision: String,
     /// The GPU adapter, or null on the CPU.
     pub adapter: Option<String>,
+    /// The bodies logged together on `/bodies` (`output.bodies`), or null when every body has
+    /// its own `/body/<name>` channel.
+    pub batched_bodies: Option<BatchedBodies>,
+}
+
+/// The bodies of `/bodies`, in the order of its arrays: written once, in `/run`.
+#[derive(Debug, Serialize, JsonSchema)]
+pub struct BatchedBodies {
+    pub names: Vec<String>,
+    pub mass: Vec<Real>,
 }
 
 /// `/energy`: the initial state and each logged step.
@@ -85,6 +95,19 @@ pub struct BodyMessage {
     pub linear_momentum: Vec<Real>,
     pub angular_momentum: AngularMomentum,
     pub kinetic: Real,
+}
+
+/// `/bodies`: the bodies without a channel of their own (a packing's grains), one array entry
+/// per body in the order of `/run.batched_bodies.names`: the initial state and each logged step.
+/// One message for any number of bodies (an MCAP file holds at most 65 536 channels).
+#[derive(Debug, Serialize, JsonSchema)]
+#[schemars(title = "bifirst.Bodies")]
+pub struct BodiesMessage {
+    pub t: Real,
+    pub center_of_mass: Vec<Vec<Real>>,
+    pub linear_momentum: Vec<Vec<Real>>,
+    pub angular_momentum: Vec<AngularMomentum>,
+    pub kinetic: Vec<Real>,
 }
 
 /// `/probe/<name>`: the probe's node at the initial state and each logged step.

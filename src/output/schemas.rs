@@ -2,7 +2,7 @@
 //! the types the run writes ([`super::messages`], [`RunSummary`], [`SavedState`]). Only what the
 //! types cannot say is added here: the number of components of a vector, which is the scene's.
 
-use super::messages::{BodyMessage, ContactMessage, EnergyMessage, ProbeMessage, ReactionMessage, RunMessage, SolverMessage};
+use super::messages::{BodiesMessage, BodyMessage, ContactMessage, EnergyMessage, ProbeMessage, ReactionMessage, RunMessage, SolverMessage};
 use crate::run::RunSummary;
 use crate::solver::SavedState;
 use schemars::generate::SchemaSettings;
@@ -15,14 +15,27 @@ fn schema_of<T: JsonSchema>() -> Value {
     serde_json::to_value(generator.into_root_schema_for::<T>()).expect("a schema is JSON")
 }
 
+/// `vector` (a schema) an array of exactly `dim` numbers.
+fn sized(vector: &mut Value, dim: usize) {
+    vector["minItems"] = json!(dim);
+    vector["maxItems"] = json!(dim);
+}
+
 /// `schema` with each field of `vectors` an array of exactly `dim` numbers.
 fn with_dim(mut schema: Value, vectors: &[&str], dim: usize) -> Value {
     for field in vectors {
-        let property = &mut schema["properties"][*field];
-        property["minItems"] = json!(dim);
-        property["maxItems"] = json!(dim);
+        sized(&mut schema["properties"][*field], dim);
     }
     schema
+}
+
+/// The form [`super::messages::AngularMomentum`] takes in `dim`: the scalar z component in 2D,
+/// a vector in 3D.
+fn angular_momentum(schema: &mut Value, dim: usize) {
+    let variant = schema["anyOf"].as_array().and_then(|v| v.get(if dim == 2 { 0 } else { 1 })).cloned();
+    if let Some(variant) = variant {
+        *schema = variant;
+    }
 }
 
 pub fn run() -> Value {
@@ -40,11 +53,17 @@ pub fn solver() -> Value {
 /// In 2D the angular momentum is the scalar z component; in 3D a vector.
 pub fn body(dim: usize) -> Value {
     let mut schema = with_dim(schema_of::<BodyMessage>(), &["center_of_mass", "linear_momentum"], dim);
-    let angular = &mut schema["properties"]["angular_momentum"];
-    let variant = angular["anyOf"].as_array().and_then(|v| v.get(if dim == 2 { 0 } else { 1 })).cloned();
-    if let Some(variant) = variant {
-        *angular = variant;
+    angular_momentum(&mut schema["properties"]["angular_momentum"], dim);
+    schema
+}
+
+/// `/bodies`: the fields of [`body`] as arrays over the batched bodies.
+pub fn bodies(dim: usize) -> Value {
+    let mut schema = schema_of::<BodiesMessage>();
+    for field in ["center_of_mass", "linear_momentum"] {
+        sized(&mut schema["properties"][field]["items"], dim);
     }
+    angular_momentum(&mut schema["properties"]["angular_momentum"]["items"], dim);
     schema
 }
 
@@ -81,6 +100,11 @@ mod tests {
         assert_eq!((body["properties"]["linear_momentum"]["minItems"].as_u64(), body["properties"]["linear_momentum"]["maxItems"].as_u64()), (Some(2), Some(2)));
         assert_eq!(body["properties"]["angular_momentum"]["type"], "number");
         assert_eq!(super::body(3)["properties"]["angular_momentum"]["type"], "array");
+        let bodies = bodies(3);
+        assert_eq!(bodies["title"], "bifirst.Bodies");
+        assert_eq!(bodies["properties"]["center_of_mass"]["items"]["maxItems"].as_u64(), Some(3));
+        assert_eq!(bodies["properties"]["angular_momentum"]["items"]["type"], "array");
+        assert_eq!(super::bodies(2)["properties"]["angular_momentum"]["items"]["type"], "number");
         let energy = energy();
         let fields: Vec<&String> = energy["properties"].as_object().unwrap().keys().collect();
         assert!(fields.len() == 10 && fields.iter().any(|f| *f == "t") && fields.iter().any(|f| *f == "energy_balance_error"), "flattened: {fields:?}");

@@ -257,11 +257,47 @@ pub struct OutputSpec {
     /// Write the full state (`/state`, what `run --restart` continues from) every this many
     /// steps; 0: only at the last finished step, which is always written.
     pub state_every: usize,
+    /// Where the bodies' momenta are logged: a `/body/<name>` channel each, or one `/bodies`
+    /// message per step for all of them.
+    pub bodies: BodyLog,
 }
 
 impl Default for OutputSpec {
     fn default() -> Self {
-        Self { mcap: None, every: 1, scene_every: None, vtu: None, vtu_every: None, state_every: 0 }
+        Self { mcap: None, every: 1, scene_every: None, vtu: None, vtu_every: None, state_every: 0, bodies: BodyLog::Auto }
+    }
+}
+
+/// `output.bodies`: how the bodies' channels are laid out in the log.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum BodyLog {
+    /// A packing's grains on `/bodies`, the scene's own bodies on `/body/<name>` (all on
+    /// `/bodies` when the scene declares more than [`BodyLog::AUTO_CHANNELS`]).
+    Auto,
+    /// A `/body/<name>` channel for every body.
+    Channels,
+    /// Every body on `/bodies`.
+    Batched,
+}
+
+impl BodyLog {
+    /// The most bodies `auto` gives channels of their own.
+    pub const AUTO_CHANNELS: usize = 1000;
+    /// The most bodies `channels` accepts: an MCAP file holds at most 65 536 channels, and the
+    /// run's other channels need some.
+    pub const MAX_CHANNELS: usize = 60_000;
+
+    /// Which bodies go on `/bodies`, given whether each one is a packing's grain.
+    pub fn batched(self, grain: &[bool]) -> Vec<bool> {
+        match self {
+            BodyLog::Channels => vec![false; grain.len()],
+            BodyLog::Batched => vec![true; grain.len()],
+            BodyLog::Auto => {
+                let declared = grain.iter().filter(|g| !**g).count();
+                grain.iter().map(|&g| g || declared > Self::AUTO_CHANNELS).collect()
+            }
+        }
     }
 }
 

@@ -82,6 +82,10 @@ pub(super) fn validate(s: &Scene) -> Result<(), Failure> {
     if s.output.vtu_every == Some(0) {
         fail(Invalid, "output.vtu_every", "the VTU cadence must be at least 1 step (leave out `output.vtu` for no VTU files).")?;
     }
+    if s.output.bodies == BodyLog::Channels && s.body.len() > BodyLog::MAX_CHANNELS {
+        let message = format!("`channels` gives each of the scene's {} bodies its own MCAP channel, and a log holds at most {} of them; use \"auto\" or \"batched\" (one `/bodies` message per step).", s.body.len(), BodyLog::MAX_CHANNELS);
+        fail(Invalid, "output.bodies", message)?;
+    }
     let named = [("material", names_of(&s.material)), ("body", names_of(&s.body)), ("boundary", names_of(&s.boundary)), ("probe", names_of(&s.probe)), ("obstacle", names_of(&s.obstacle))];
     for (section, list) in named {
         // Names become MCAP topics and file names.
