@@ -2,11 +2,13 @@
 //! body pairs through the broad phase (hash grid over facets) and the narrow phase (projection
 //! of each slave node on the facets of the master body).
 
-use super::geometry::{self, frame, norm, sub, Projection, Vec3};
+use super::broad;
+use super::geometry::{self, bounds, frame, norm, sub, Projection, Vec3};
 use super::grid::Grid;
 use super::obstacle::Touch;
 use super::{ContactModel, ContactPoint, Master, Status, Term};
 use crate::precision::Real;
+use rayon::prelude::*;
 use std::collections::{HashMap, HashSet};
 
 /// How far beyond a facet's edge (relative) a projection is still accepted, so that a node
@@ -125,109 +127,181 @@ pub fn thin_second_pass(model: &ContactModel, positions: &[Vec<Vec3>], points: &
 }
 
 fn obstacles(model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, t: Real, dt: Real, margin: Real, out: &mut Vec<ContactPoint>) {
-    let mut touches: Vec<Touch> = Vec::new();
-    for (o, obstacle) in model.obstacles.iter().enumerate() {
-        let offset = obstacle.motion.displacement(t);
-        let velocity = [obstacle.motion.velocity(t), obstacle.motion.velocity(t + dt)];
-        let displacement = sub(obstacle.motion.displacement(t + dt), offset);
-        for (b, surface) in model.surfaces.iter().enumerate() {
+    let bodies = model.surfaces.len();
+    // Obstacle by obstacle, the bodies in parallel, the points in that order.
+    let found: Vec<Vec<ContactPoint>> = (0..model.obstacles.len() * bodies)
+        .into_par_iter()
+        .map(|k| {
+            let (o, b) = (k / bodies, k % bodies);
+            let obstacle = &model.obstacles[o];
+            let mut points = Vec::new();
             if !obstacle.bodies[b] {
-                continue;
+                return points;
             }
-            for &node in &surface.nodes {
+            let offset = obstacle.motion.displacement(t);
+            let velocity = [obstacle.motion.velocity(t), obstacle.motion.velocity(t + dt)];
+            let displacement = sub(obstacle.motion.displacement(t + dt), offset);
+            let mut touches: Vec<Touch> = Vec::new();
+            for &node in &model.surfaces[b].nodes {
                 obstacle.touches(positions[b][node as usize], offset, margin, &mut touches);
                 for touch in &touches {
                     let master = Master::Obstacle { obstacle: o as u32, face: touch.face };
                     let mut p = point(b, node, master, frame(touch.normal, touch.tangent, dim), touch.gap, obstacle.friction);
                     p.obstacle_velocity = velocity;
                     p.obstacle_displacement = displacement;
-                    out.push(p);
+                    points.push(p);
                 }
             }
+            points
+        })
+        .collect();
+    out.extend(found.into_iter().flatten());
+}
+
+/// The points of the facet `f` of `surface` at `x`, in a fixed array (no allocation per facet).
+fn facet_points(surface: &super::Surface, x: &[Vec3], f: usize) -> ([Vec3; 4], usize) {
+    let facet = surface.facet(f);
+    let mut p = [[0.0; 3]; 4];
+    for (k, &n) in facet.iter().enumerate() {
+        p[k] = x[n as usize];
+    }
+    (p, facet.len())
+}
+
+/// Masters with more facets than this get a hash grid of them; smaller ones are scanned.
+const SCANNED_FACETS: usize = 32;
+
+/// A master body's facets for the node search of a step: their boxes grown by how far off a
+/// node can be and still make a point with them, and, on large masters, a grid of those boxes.
+struct MasterFacets {
+    /// `(min, max, size)` per facet, the box grown.
+    boxes: Vec<(Vec3, Vec3, Real)>,
+    grid: Option<Grid>,
+}
+
+impl MasterFacets {
+    fn new(surface: &super::Surface, x: &[Vec3], dim: usize, margin: Real) -> Self {
+        let boxes: Vec<(Vec3, Vec3, Real)> = (0..surface.facet_count())
+            .map(|f| {
+                let (p, len) = facet_points(surface, x, f);
+                let (lo, hi) = bounds(p[..len].iter().copied());
+                let size = facet_size(&p[..len]);
+                // Off its plane by `reach`, beyond its sides by `EDGE_TOLERANCE` (a 2D scene's
+                // boxes stay flat in z, so that each takes one layer of cells).
+                let r = margin.max(0.5 * size) + EDGE_TOLERANCE * size;
+                let grow = |c: Vec3, sign: Real| [0, 1, 2].map(|i| if i < dim { c[i] + sign * r } else { c[i] });
+                (grow(lo, -1.0), grow(hi, 1.0), size)
+            })
+            .collect();
+        let grid = (boxes.len() > SCANNED_FACETS).then(|| {
+            let cell = boxes.iter().map(|b| b.2).sum::<Real>() / boxes.len() as Real + 2.0 * margin;
+            Grid::new(boxes.iter().enumerate().map(|(f, &(lo, hi, _))| (f as u32, lo, hi)), cell)
+        });
+        Self { boxes, grid }
+    }
+
+    /// `f(facet, size)` for each facet whose grown box holds `x`.
+    fn candidates(&self, x: Vec3, mut f: impl FnMut(usize, Real)) {
+        let mut visit = |k: usize| {
+            let (lo, hi, size) = self.boxes[k];
+            if (0..3).all(|i| lo[i] <= x[i] && x[i] <= hi[i]) {
+                f(k, size);
+            }
+        };
+        match &self.grid {
+            Some(grid) => grid.query(x).iter().for_each(|&k| visit(k as usize)),
+            None => (0..self.boxes.len()).for_each(visit),
         }
     }
 }
 
+/// Slave nodes against master facets, searched only inside the body pairs whose boxes come
+/// within reach of each other ([`broad::neighbours`]), the slaves in parallel. The result is
+/// that of a search of every node against every facet: the same points in the same order.
 fn body_pairs(model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, margin: Real, out: &mut Vec<ContactPoint>) {
-    // Every facet of a master body, with its id packed as (body, facet).
-    let mut ids: Vec<(u32, u32)> = Vec::new();
-    let mut boxes: Vec<(Vec3, Vec3, Real)> = Vec::new();
-    let mut xs: Vec<Vec3> = Vec::with_capacity(4);
-    for (b, surface) in model.surfaces.iter().enumerate().filter(|(b, _)| model.pairs.is_master(*b)) {
-        for f in 0..surface.facet_count() {
-            xs.clear();
-            xs.extend(surface.facet(f).iter().map(|&n| positions[b][n as usize]));
-            let (lo, hi) = geometry::bounds(xs.iter().copied());
-            ids.push((b as u32, f as u32));
-            boxes.push((lo, hi, facet_size(&xs)));
-        }
-    }
-    if ids.is_empty() {
+    if !model.pairs.any() {
         return;
     }
-    let mean_size = boxes.iter().map(|b| b.2).sum::<Real>() / boxes.len() as Real;
+    let surfaces = &model.surfaces;
+    // A point's node is at most `reach` (half a facet, or the margin) off its facet's plane and
+    // `EDGE_TOLERANCE` of an edge beyond its sides: a body's box grown by that for its largest
+    // facet, and the margin, holds every node that can make a point with it, so that two bodies
+    // whose grown boxes do not meet are not searched.
     let reach = |size: Real| margin.max(0.5 * size);
-    let cell = mean_size + 2.0 * margin;
-    let grid = Grid::new(
-        boxes.iter().enumerate().map(|(i, &(lo, hi, size))| {
-            let r = reach(size);
-            (i as u32, lo.map(|c| c - r), hi.map(|c| c + r))
-        }),
-        cell,
-    );
-    let bodies = model.surfaces.len();
-    let normals: Vec<Vec<Vec3>> = model.surfaces.iter().enumerate().map(|(b, s)| node_normals(s, &positions[b])).collect();
-    // Best facet per master body for the current node; `touched` lists the masters to visit and
-    // reset, so that a node costs what its neighbourhood holds, not the number of bodies.
-    let mut best: Vec<Option<(Real, usize, Projection)>> = vec![None; bodies];
-    let mut touched: Vec<usize> = Vec::new();
-    for (s, surface) in model.surfaces.iter().enumerate() {
-        if !model.pairs.is_slave(s) {
-            continue;
-        }
-        for &node in &surface.nodes {
-            let x = positions[s][node as usize];
-            for &id in grid.query(x) {
-                let (m, f) = ids[id as usize];
-                let m = m as usize;
-                if model.pairs.friction(s, m).is_none() {
-                    continue;
-                }
-                let facet = model.surfaces[m].facet(f as usize);
-                xs.clear();
-                xs.extend(facet.iter().map(|&n| positions[m][n as usize]));
-                let Some(p) = project(x, &xs) else { continue };
-                // Only facets that face the node's own surface: a corner node lies on the
-                // extension of the master's side facets with a zero gap, and must not take them.
-                if geometry::dot(normals[s][node as usize], p.normal) >= 0.0 {
-                    continue;
-                }
-                // Penetrations deeper than half a facet are the far side of the master body.
-                if p.gap > margin || p.gap < -0.5 * boxes[id as usize].2 {
-                    continue;
-                }
-                if best[m].is_none() {
-                    touched.push(m);
-                }
-                if best[m].as_ref().is_none_or(|(g, _, _)| p.gap.abs() < g.abs()) {
-                    best[m] = Some((p.gap, f as usize, p));
-                }
-            }
-            touched.sort_unstable();
-            for m in touched.drain(..) {
-                let Some((gap, f, p)) = best[m].take() else { continue };
-                let facet = model.surfaces[m].facet(f);
-                let mu = model.pairs.friction(s, m).expect("pair checked");
-                let mut c = point(s, node, Master::Body(m as u32), frame(p.normal, Some(p.tangent), dim), gap, mu);
-                for (k, &n) in facet.iter().enumerate() {
-                    c.terms[1 + k] = Term { body: m as u32, node: n, coef: -p.weights[k] };
-                }
-                c.term_count = 1 + facet.len();
-                c.second = model.pairs.second(s, m);
-                out.push(c);
-            }
-        }
+    let grown_boxes: Vec<broad::Aabb> = surfaces
+        .par_iter()
+        .enumerate()
+        .map(|(b, surface)| {
+            let x = &positions[b];
+            let largest = (0..surface.facet_count()).map(|f| facet_size(&facet_points(surface, x, f).0[..surface.facet_nodes])).fold(0.0, Real::max);
+            broad::grown(bounds(surface.nodes.iter().map(|&n| x[n as usize])), reach(largest) + EDGE_TOLERANCE * largest + margin)
+        })
+        .collect();
+    let near = broad::neighbours(&grown_boxes, |a, b| model.pairs.mu(a, b).is_some());
+    // The masters each slave's nodes are searched against.
+    let masters: Vec<Vec<u32>> = near.par_iter().enumerate().map(|(s, list)| list.iter().copied().filter(|&m| model.pairs.friction(s, m as usize).is_some()).collect()).collect();
+    let mut searched = vec![false; surfaces.len()];
+    for &m in masters.iter().flatten() {
+        searched[m as usize] = true;
     }
+    // The facets of every master that some slave searches (none of the others).
+    let facets: Vec<Option<MasterFacets>> =
+        surfaces.par_iter().enumerate().map(|(m, surface)| searched[m].then(|| MasterFacets::new(surface, &positions[m], dim, margin))).collect();
+    let found: Vec<Vec<ContactPoint>> = (0..surfaces.len())
+        .into_par_iter()
+        .map(|s| {
+            let mut points = Vec::new();
+            if masters[s].is_empty() {
+                return points;
+            }
+            let normals = node_normals(&surfaces[s], &positions[s]);
+            // Best facet per master body for the current node, among this slave's masters.
+            let mut best: Vec<Option<(Real, usize, Projection)>> = vec![None; masters[s].len()];
+            let mut xs: Vec<Vec3> = Vec::with_capacity(4);
+            for &node in &surfaces[s].nodes {
+                let x = positions[s][node as usize];
+                for (k, &m) in masters[s].iter().enumerate() {
+                    let m = m as usize;
+                    if !broad::intersect((x, x), grown_boxes[m]) {
+                        continue;
+                    }
+                    facets[m].as_ref().expect("a searched master").candidates(x, |f, size| {
+                        let facet = surfaces[m].facet(f);
+                        xs.clear();
+                        xs.extend(facet.iter().map(|&n| positions[m][n as usize]));
+                        let Some(p) = project(x, &xs) else { return };
+                        // Only facets that face the node's own surface: a corner node lies on the
+                        // extension of the master's side facets with a zero gap, and must not take them.
+                        if geometry::dot(normals[node as usize], p.normal) >= 0.0 {
+                            return;
+                        }
+                        // Penetrations deeper than half a facet are the far side of the master body.
+                        if p.gap > margin || p.gap < -0.5 * size {
+                            return;
+                        }
+                        if best[k].as_ref().is_none_or(|(g, _, _)| p.gap.abs() < g.abs()) {
+                            best[k] = Some((p.gap, f, p));
+                        }
+                    });
+                }
+                for (k, &m) in masters[s].iter().enumerate() {
+                    let Some((gap, f, p)) = best[k].take() else { continue };
+                    let m = m as usize;
+                    let facet = surfaces[m].facet(f);
+                    let mu = model.pairs.friction(s, m).expect("pair checked");
+                    let mut c = point(s, node, Master::Body(m as u32), frame(p.normal, Some(p.tangent), dim), gap, mu);
+                    for (k, &n) in facet.iter().enumerate() {
+                        c.terms[1 + k] = Term { body: m as u32, node: n, coef: -p.weights[k] };
+                    }
+                    c.term_count = 1 + facet.len();
+                    c.second = model.pairs.second(s, m);
+                    points.push(c);
+                }
+            }
+            points
+        })
+        .collect();
+    out.extend(found.into_iter().flatten());
 }
 
 /// Outward normal of a facet, scaled by its area (length in 2D).
@@ -247,10 +321,9 @@ fn facet_normal(p: &[Vec3]) -> Vec3 {
 fn node_normals(surface: &super::Surface, x: &[Vec3]) -> Vec<Vec3> {
     let mut normals = vec![[0.0; 3]; x.len()];
     for f in 0..surface.facet_count() {
-        let facet = surface.facet(f);
-        let p: Vec<Vec3> = facet.iter().map(|&n| x[n as usize]).collect();
-        let n = facet_normal(&p);
-        for &k in facet {
+        let (p, len) = facet_points(surface, x, f);
+        let n = facet_normal(&p[..len]);
+        for &k in surface.facet(f) {
             normals[k as usize] = geometry::add(normals[k as usize], n);
         }
     }

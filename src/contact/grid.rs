@@ -59,7 +59,23 @@ impl Grid {
     /// Ids of the boxes registered in the bucket of the cell that holds `x` (a superset of the
     /// boxes that overlap that cell).
     pub fn query(&self, x: Vec3) -> &[u32] {
-        let b = hash(Self::key(x, self.cell)) & self.mask;
+        self.bucket(Self::key(x, self.cell))
+    }
+
+    /// `f` on the bucket of every cell the box `lo`..`hi` covers (an id may come more than once).
+    pub fn for_each_cell(&self, lo: Vec3, hi: Vec3, mut f: impl FnMut(&[u32])) {
+        let (a, b) = (Self::key(lo, self.cell), Self::key(hi, self.cell));
+        for i in a[0]..=b[0] {
+            for j in a[1]..=b[1] {
+                for k in a[2]..=b[2] {
+                    f(self.bucket([i, j, k]));
+                }
+            }
+        }
+    }
+
+    fn bucket(&self, cell: [i64; 3]) -> &[u32] {
+        let b = hash(cell) & self.mask;
         &self.ids[self.start[b] as usize..self.start[b + 1] as usize]
     }
 }

@@ -6,6 +6,7 @@
 //! obstacle). Its frame `[n, t1, t2]`, the facet weights and the gap are fixed at the start of
 //! the step, so the relative velocity at the end of the step is linear in the displacements.
 
+pub mod broad;
 pub mod detect;
 pub mod geometry;
 pub mod grid;

@@ -5,6 +5,7 @@
 //! measures the penetration after every step.
 
 use super::geometry::{add, bounds, cross, dot, edge_range, norm, scale, sub, Vec3};
+use super::broad::{self, intersect, Aabb};
 use super::grid::Grid;
 use super::obstacle::Touch;
 use super::ContactModel;
@@ -65,14 +66,14 @@ pub fn overlaps(model: &ContactModel, meshes: &[&Mesh], positions: &[Vec<Vec3>],
     // Only a node inside another body's box can be inside that body, and only elements in the
     // box of a body that can touch theirs can hold such a node: in a packing that leaves the
     // rims of the grains (the search cost a quarter of a step with every element).
-    let body_boxes: Vec<(Vec3, Vec3)> = positions.par_iter().map(|x| bounds(x.iter().copied())).collect();
-    let neighbours = overlapping_boxes(&body_boxes, can_touch);
+    let body_boxes: Vec<Aabb> = positions.par_iter().map(|x| bounds(x.iter().copied())).collect();
+    let neighbours = broad::neighbours(&body_boxes, can_touch);
     let mut ids: Vec<(u32, u32)> = Vec::new();
     let mut boxes: Vec<(Vec3, Vec3)> = Vec::new();
     for (m, mesh) in meshes.iter().enumerate().filter(|(m, _)| !neighbours[*m].is_empty()) {
         for e in 0..mesh.element_count() {
             let (lo, hi) = bounds(mesh.element(e).iter().map(|&n| positions[m][n as usize]));
-            if neighbours[m].iter().any(|&s| intersect((lo, hi), body_boxes[s])) {
+            if neighbours[m].iter().any(|&s| intersect((lo, hi), body_boxes[s as usize])) {
                 ids.push((m as u32, e as u32));
                 boxes.push((lo, hi));
             }
@@ -88,23 +89,24 @@ pub fn overlaps(model: &ContactModel, meshes: &[&Mesh], positions: &[Vec<Vec3>],
         .into_par_iter()
         .flat_map_iter(|s| {
             let surface = &model.surfaces[s];
-            let sizes = node_sizes(surface, &positions[s], positions[s].len());
+            // Computed for the bodies that have a node to measure (few, in a packing).
+            let mut sizes: Option<Vec<Real>> = None;
             let mut found = Vec::new();
             let mut touches: Vec<Touch> = Vec::new();
             for &node in &surface.nodes {
                 let x = positions[s][node as usize];
-                let own = sizes[node as usize];
+                let mut own = || sizes.get_or_insert_with(|| node_sizes(surface, &positions[s]))[node as usize];
                 for (o, obstacle) in model.obstacles.iter().enumerate().filter(|(_, o)| o.bodies[s]) {
                     obstacle.touches(x, offsets[o], 0.0, &mut touches);
                     if let Some(deepest) = touches.iter().min_by(|a, b| a.gap.total_cmp(&b.gap)) {
-                        let depth = -deepest.gap;
-                        if depth > 1e-9 * own {
-                            found.push(Overlap { body: s as u32, node, host: Host::Obstacle(o as u32), depth, out: deepest.normal, size: own });
+                        let (depth, size) = (-deepest.gap, own());
+                        if depth > 1e-9 * size {
+                            found.push(Overlap { body: s as u32, node, host: Host::Obstacle(o as u32), depth, out: deepest.normal, size });
                         }
                     }
                 }
                 let Some(grid) = &grid else { continue };
-                if !neighbours[s].iter().any(|&m| intersect((x, x), body_boxes[m])) {
+                if !neighbours[s].iter().any(|&m| intersect((x, x), body_boxes[m as usize])) {
                     continue;
                 }
                 let mut best: Option<Overlap> = None;
@@ -123,7 +125,7 @@ pub fn overlaps(model: &ContactModel, meshes: &[&Mesh], positions: &[Vec<Vec3>],
                         continue;
                     }
                     let (depth, out) = to_surface(&model.surfaces[m as usize], &positions[m as usize], x);
-                    let size = own.min(edge_range(&element).0);
+                    let size = own().min(edge_range(&element).0);
                     if depth > 1e-9 * size && best.is_none_or(|b| depth / size > b.ratio()) {
                         best = Some(Overlap { body: s as u32, node, host: Host::Body(m), depth, out, size });
                     }
@@ -135,36 +137,16 @@ pub fn overlaps(model: &ContactModel, meshes: &[&Mesh], positions: &[Vec<Vec3>],
         .collect()
 }
 
-fn intersect(a: (Vec3, Vec3), b: (Vec3, Vec3)) -> bool {
-    (0..3).all(|i| a.0[i] <= b.1[i] && b.0[i] <= a.1[i])
-}
-
-/// Per body, the bodies it can touch whose boxes meet its own (sweep and prune along x).
-fn overlapping_boxes(boxes: &[(Vec3, Vec3)], can_touch: impl Fn(usize, usize) -> bool) -> Vec<Vec<usize>> {
-    let mut order: Vec<usize> = (0..boxes.len()).collect();
-    order.sort_unstable_by(|&a, &b| boxes[a].0[0].total_cmp(&boxes[b].0[0]));
-    let mut neighbours = vec![Vec::new(); boxes.len()];
-    for (k, &a) in order.iter().enumerate() {
-        for &b in &order[k + 1..] {
-            if boxes[b].0[0] > boxes[a].1[0] {
-                break;
-            }
-            if intersect(boxes[a], boxes[b]) && can_touch(a, b) {
-                neighbours[a].push(b);
-                neighbours[b].push(a);
-            }
-        }
-    }
-    neighbours
-}
-
 /// Per node, the shortest edge of the boundary facets around it (infinite off the boundary).
-fn node_sizes(surface: &super::Surface, x: &[Vec3], nodes: usize) -> Vec<Real> {
-    let mut sizes = vec![Real::INFINITY; nodes];
+fn node_sizes(surface: &super::Surface, x: &[Vec3]) -> Vec<Real> {
+    let mut sizes = vec![Real::INFINITY; x.len()];
     for f in 0..surface.facet_count() {
         let facet = surface.facet(f);
-        let p: Vec<Vec3> = facet.iter().map(|&n| x[n as usize]).collect();
-        let h = edge_range(&p).0;
+        let mut p = [[0.0; 3]; 4];
+        for (k, &n) in facet.iter().enumerate() {
+            p[k] = x[n as usize];
+        }
+        let h = edge_range(&p[..facet.len()]).0;
         for &n in facet {
             sizes[n as usize] = sizes[n as usize].min(h);
         }
