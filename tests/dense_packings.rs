@@ -241,3 +241,80 @@ fn a_pair_can_name_its_slave() {
     assert_eq!(code, Some(2));
     assert!(stderr.contains("contact.pair.blocks.slave") && stderr.contains("not one of the pair's bodies"), "{stderr}");
 }
+
+/// Depth of the deepest node of any grain inside a tetrahedron of another (3D, Tet4), found by
+/// brute force, independently of the engine's overlap search: the distance from such a node to
+/// the other grain's boundary triangles.
+fn deepest_node_inside_another_grain_3d(sim: &Simulation) -> f64 {
+    type V = [f64; 3];
+    let sub = |a: V, b: V| [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
+    let dot = |a: V, b: V| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let cross = |a: V, b: V| [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]];
+    let volume = |a: V, b: V, c: V, d: V| dot(sub(b, a), cross(sub(c, a), sub(d, a)));
+    let segment = |x: V, a: V, b: V| {
+        let d = sub(b, a);
+        let s = (dot(sub(x, a), d) / dot(d, d)).clamp(0.0, 1.0);
+        let q = [a[0] + s * d[0], a[1] + s * d[1], a[2] + s * d[2]];
+        dot(sub(x, q), sub(x, q)).sqrt()
+    };
+    // Inside the triangle's prism: the distance to its plane; else to its nearest edge.
+    let triangle = |x: V, t: [V; 3]| {
+        let n = cross(sub(t[1], t[0]), sub(t[2], t[0]));
+        let inside = (0..3).all(|i| dot(cross(sub(t[(i + 1) % 3], t[i]), sub(x, t[i])), n) >= 0.0);
+        if inside {
+            dot(sub(x, t[0]), n).abs() / dot(n, n).sqrt()
+        } else {
+            (0..3).map(|i| segment(x, t[i], t[(i + 1) % 3])).fold(f64::INFINITY, f64::min)
+        }
+    };
+    let positions: Vec<Vec<V>> = sim.bodies.iter().map(|b| (0..b.mesh.nodes.len()).map(|n| b.position(n)).collect()).collect();
+    let boxes: Vec<(V, V)> = positions.iter().map(|p| p.iter().fold(([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]), |(lo, hi), x| ([0, 1, 2].map(|i| lo[i].min(x[i])), [0, 1, 2].map(|i| hi[i].max(x[i]))))).collect();
+    let mut deepest: f64 = 0.0;
+    for (a, xs) in positions.iter().enumerate() {
+        for &x in xs {
+            for (b, body) in sim.bodies.iter().enumerate() {
+                let (lo, hi) = boxes[b];
+                if b == a || (0..3).any(|i| x[i] < lo[i] || x[i] > hi[i]) {
+                    continue;
+                }
+                let p = &positions[b];
+                let inside = (0..body.mesh.element_count()).any(|e| {
+                    let t: Vec<V> = body.mesh.element(e).iter().map(|&n| p[n as usize]).collect();
+                    let total = volume(t[0], t[1], t[2], t[3]);
+                    [volume(x, t[1], t[2], t[3]), volume(t[0], x, t[2], t[3]), volume(t[0], t[1], x, t[3]), volume(t[0], t[1], t[2], x)].iter().all(|w| w / total > 0.0)
+                });
+                if !inside {
+                    continue;
+                }
+                let surface = Surface::of(&body.mesh);
+                let depth = (0..surface.facet_count()).map(|f| triangle(x, [0, 1, 2].map(|k| p[surface.facet(f)[k] as usize]))).fold(f64::INFINITY, f64::min);
+                deepest = deepest.max(depth);
+            }
+        }
+    }
+    deepest
+}
+
+/// The shipped 3D packing at its defaults: grains pressed into each other by the wall, no node
+/// of one inside another (the engine's overlap search over the run, a brute-force search at the
+/// end), and the energy balance closed.
+#[test]
+fn grains_3d_keeps_every_node_out_of_other_grains() {
+    let mut sim = simulation("grains_3d", &[]);
+    assert!(sim.bodies.iter().all(|b| b.mesh.kind == bifirst::mesh::ElementKind::Tet4) && sim.bodies.len() == 216);
+    let h = smallest_element(&sim);
+    sim.start();
+    let (mut deepest, mut grain_points): (f64, usize) = (0.0, 0);
+    while !sim.finished() {
+        let report = sim.advance().unwrap_or_else(|f| panic!("step {} at t = {:.4} failed: {}", f.step, f.t, f.failure));
+        deepest = deepest.max(report.contact.max_overlap);
+        grain_points = grain_points.max(sim.contact_points.iter().filter(|c| matches!(c.master, bifirst::contact::Master::Body(_)) && c.r[0] > 0.0).count());
+    }
+    let at_end = deepest_node_inside_another_grain_3d(&sim);
+    let balance = sim.energies().energy_balance_error;
+    println!("grains_3d: deepest overlap over the run {deepest:.3e}, at the end {at_end:.3e}, smallest element {h:.3e}; {grain_points} grain-grain points at most; balance {balance:.1e}");
+    assert!(grain_points >= 10, "the grains press on each other: {grain_points} loaded grain-grain points");
+    assert!(deepest < 0.01 * h, "a node went {deepest:.3e} into another grain (1 % of h = {:.3e})", 0.01 * h);
+    assert!(at_end < 0.01 * h, "a node ends {at_end:.3e} inside another grain");
+    assert!(balance < 1e-8, "energy balance error {balance:e}");
+}

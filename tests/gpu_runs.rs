@@ -100,6 +100,12 @@ fn bar_impact_on_the_gpu_matches_the_cpu_backend() {
     compare_backends("bar_impact_gpu", &scene_path("bar_impact"), &["output.every=1", "output.scene_every=0"]);
 }
 
+/// A small 3D packing (balls and turned boxes of Tet4, pressed by the wall) on the device.
+#[test]
+fn grains_3d_on_the_gpu_match_the_cpu_backend() {
+    compare_backends("grains_3d_gpu", &scene_path("grains_3d"), &["packing.count=27", "time.end=0.15", "packing.wall_velocity=2.0", "output.every=1", "output.scene_every=0"]);
+}
+
 #[test]
 fn reduced_3d_impact_on_the_gpu_matches_the_cpu_backend() {
     let path = temp_path("impact_3d_reduced.toml");

@@ -162,6 +162,52 @@ fn grains_many_packing_is_reproducible_and_runs() {
 }
 
 #[test]
+fn grains_3d_packing_is_reproducible_and_starts_apart() {
+    let load = |sets: &[&str]| {
+        let sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
+        bifirst::scene::load_scene(&common::scene_path("grains_3d"), &sets).unwrap()
+    };
+    let grains = |sets: &[&str]| {
+        let sim = bifirst::solver::build_simulation(&load(sets)).unwrap();
+        sim.bodies.iter().map(|b| b.mesh.nodes.clone()).collect::<Vec<_>>()
+    };
+    let small = ["packing.count=64"];
+    assert_eq!(grains(&small).len(), 64);
+    assert_eq!(grains(&small), grains(&small), "a seed gives one packing");
+    assert_ne!(grains(&small), grains(&["packing.count=64", "packing.seed=2"]), "another seed, another packing");
+    // Balls and turned boxes are drawn, in Tet4 and, on request, Hex8.
+    let loaded = load(&small);
+    let shapes: std::collections::BTreeSet<_> = loaded.scene.body.values().map(|b| format!("{:?}", b.mesh.generator)).collect();
+    assert_eq!(shapes.len(), 2, "balls and boxes: {shapes:?}");
+    assert!(loaded.scene.body.values().any(|b| b.mesh.rotation.as_ref().is_some_and(|w| w.iter().any(|c| *c != 0.0))));
+    assert!(loaded.resolved_toml.contains("[packing]") && !loaded.resolved_toml.contains("grain_0001"));
+    let hex = bifirst::solver::build_simulation(&load(&["packing.count=8", "packing.element=\"hex8\""])).unwrap();
+    assert!(hex.bodies.iter().all(|b| b.mesh.kind == bifirst::mesh::ElementKind::Hex8));
+
+    // No two grains overlap at t = 0 and none touches a wall: each grain lies in the ball of its
+    // radius about its lattice cell's point, and two such balls are apart.
+    let sim = bifirst::solver::build_simulation(&loaded).unwrap();
+    let spheres: Vec<([f64; 3], f64)> = sim
+        .bodies
+        .iter()
+        .map(|b| {
+            let n = b.mesh.nodes.len() as f64;
+            let c = [0, 1, 2].map(|i| b.mesh.nodes.iter().map(|x| x[i]).sum::<f64>() / n);
+            let r = b.mesh.nodes.iter().map(|x| (0..3).map(|i| (x[i] - c[i]).powi(2)).sum::<f64>().sqrt()).fold(0.0, f64::max);
+            (c, r)
+        })
+        .collect();
+    for (i, (a, ra)) in spheres.iter().enumerate() {
+        assert!((0..3).all(|k| a[k] - ra > 0.0), "grain {i} is clear of the left, bottom and back walls");
+        for (b, rb) in &spheres[i + 1..] {
+            let d = (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>().sqrt();
+            assert!(d > ra + rb, "grain {i} and another overlap at t = 0");
+        }
+    }
+    assert!(sim.overlaps().is_empty(), "the engine's overlap search agrees");
+}
+
+#[test]
 fn contour_png_of_a_2d_state_and_a_clear_error_in_3d() {
     let png = temp_path("grains_box_contour.png");
     let _ = std::fs::remove_file(&png);

@@ -173,3 +173,52 @@ pub fn cuboid(origin: [Real; 3], size: [Real; 3], div: [usize; 3], kind: Element
     mesh.finish_sets();
     mesh
 }
+
+/// Ball of radius `r` about `center`: a `2n x 2n x 2n` cube of cells (`kind`: Hex8, or Tet4 by
+/// the cube's split) mapped onto the ball by the 3D elliptical grid mapping
+/// `x = u √(1 - v²/2 - w²/2 + v²w²/3)` (and its permutations), the 3D form of [`disk`]'s: the
+/// cube's faces land on the sphere and every Jacobian stays positive.
+pub fn ball(center: [Real; 3], radius: Real, n: usize, kind: ElementKind) -> Mesh {
+    let m = 2 * n;
+    let cube = cuboid([-1.0; 3], [2.0; 3], [m, m, m], kind);
+    let on_sphere = |[u, v, w]: [Real; 3]| {
+        let (u2, v2, w2) = (u * u, v * v, w * w);
+        [
+            u * (1.0 - 0.5 * v2 - 0.5 * w2 + v2 * w2 / 3.0).sqrt(),
+            v * (1.0 - 0.5 * w2 - 0.5 * u2 + w2 * u2 / 3.0).sqrt(),
+            w * (1.0 - 0.5 * u2 - 0.5 * v2 + u2 * v2 / 3.0).sqrt(),
+        ]
+    };
+    let nodes = cube.nodes.iter().map(|&p| {
+        let x = on_sphere(p);
+        [0, 1, 2].map(|i| center[i] + radius * x[i])
+    }).collect();
+    let faces = ["x_min", "x_max", "y_min", "y_max", "z_min", "z_max"];
+    let boundary: Vec<u32> = faces.iter().flat_map(|f| cube.node_sets[*f].iter().copied()).collect();
+    let middle = ((n * (m + 1) + n) * (m + 1) + n) as u32;
+    let mut sets = BTreeMap::new();
+    sets.insert("boundary".into(), boundary);
+    sets.insert("center".into(), vec![middle]);
+    let mut mesh = Mesh { kind, nodes, connectivity: cube.connectivity, node_sets: sets };
+    mesh.finish_sets();
+    mesh
+}
+
+/// Rotates `mesh` by the rotation vector `w` (axis times angle, radians) about the mean of its
+/// nodes (Rodrigues' formula).
+pub fn rotate(mesh: &mut Mesh, w: [Real; 3]) {
+    let angle = (w[0] * w[0] + w[1] * w[1] + w[2] * w[2]).sqrt();
+    if angle == 0.0 {
+        return;
+    }
+    let k = w.map(|c| c / angle);
+    let (sin, cos) = angle.sin_cos();
+    let count = mesh.nodes.len() as Real;
+    let c = [0, 1, 2].map(|i| mesh.nodes.iter().map(|x| x[i]).sum::<Real>() / count);
+    for x in &mut mesh.nodes {
+        let r = [x[0] - c[0], x[1] - c[1], x[2] - c[2]];
+        let kxr = [k[1] * r[2] - k[2] * r[1], k[2] * r[0] - k[0] * r[2], k[0] * r[1] - k[1] * r[0]];
+        let kr = k[0] * r[0] + k[1] * r[1] + k[2] * r[2];
+        *x = [0, 1, 2].map(|i| c[i] + r[i] * cos + kxr[i] * sin + k[i] * kr * (1.0 - cos));
+    }
+}

@@ -155,6 +155,7 @@ pub enum Generator {
     Disk,
     Polygon,
     Box,
+    Ball,
 }
 
 /// Either a generator with its parameters or a Gmsh `.msh` 4.1 file (relative to the scene).
@@ -168,20 +169,24 @@ pub struct MeshSpec {
     pub origin: Option<Vec<Real>>,
     /// Rectangle and box: edge lengths.
     pub size: Option<Vec<Real>>,
-    /// Rectangle and box: cells per direction; disk: one number, cells per radius.
+    /// Rectangle and box: cells per direction; disk and ball: one number, cells per radius.
     pub divisions: Option<Vec<usize>>,
-    /// Disk: centre and radius.
+    /// Disk and ball: centre and radius.
     pub center: Option<Vec<Real>>,
     pub radius: Option<Real>,
     /// Polygon: the vertices of a convex outline, `[[x, y], ...]`.
     pub points: Option<Vec<Vec<Real>>>,
     /// Mesh file: only the elements of this physical group (one file, several bodies).
     pub group: Option<String>,
+    /// 3D generators: a rotation vector (axis times angle, radians) turning the generated mesh
+    /// about its centre (the mean of its nodes).
+    pub rotation: Option<Vec<Real>>,
 }
 
-/// A random packing of `count` grains (disks and convex polygons, Tri3) in a rigid box whose
-/// left wall moves right. Generated at load time into bodies `grain_0001`... and the obstacles
-/// `left`, `right`, `bottom` and `top`; the same seed gives the same packing.
+/// A random packing of `count` grains in a rigid box whose left wall moves right: disks and
+/// convex polygons (Tri3) in 2D, balls and boxes (Tet4 or Hex8) in 3D. Generated at load time
+/// into bodies `grain_0001`... and the obstacles `left`, `right`, `bottom`, `top` (and `back`,
+/// `front` in 3D); the same seed gives the same packing.
 #[derive(Debug, Clone, Deserialize, Serialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct PackingSpec {
@@ -191,11 +196,19 @@ pub struct PackingSpec {
     pub material: String,
     /// Range of the grains' radii (circumradius of a polygon), `[min, max]`.
     pub radius: Vec<Real>,
-    /// Share of the grains that are polygons (3 to 6 vertices); the rest are disks.
+    /// 2 (disks and polygons) or 3 (balls and boxes).
+    pub dimension: usize,
+    /// Share of the grains that are polygons (3 to 6 vertices), in 2D; the rest are disks.
     pub polygons: Real,
+    /// Share of the grains that are boxes (random edge ratios, random orientation), in 3D; the
+    /// rest are balls.
+    pub polyhedra: Real,
+    /// The 3D grains' element: `tet4` (default) or `hex8`. 2D grains are Tri3.
+    pub element: Option<ElementKind>,
     /// Cells per radius of each grain's mesh.
     pub divisions: usize,
-    /// Grains per row of the initial lattice; 0: about as many rows as columns.
+    /// Grains per row of the initial lattice (and per layer, in 3D); 0: about as many rows as
+    /// columns (and layers).
     pub columns: usize,
     /// Clearance between neighbouring grains' lattice cells, relative to the largest diameter.
     pub gap: Real,
@@ -207,7 +220,21 @@ pub struct PackingSpec {
 
 impl Default for PackingSpec {
     fn default() -> Self {
-        Self { count: 100, seed: 1, material: String::new(), radius: vec![0.4, 0.5], polygons: 0.5, divisions: 2, columns: 0, gap: 0.05, wall_velocity: 0.0, wall_friction: 0.0 }
+        Self {
+            count: 100,
+            seed: 1,
+            material: String::new(),
+            radius: vec![0.4, 0.5],
+            dimension: 2,
+            polygons: 0.5,
+            polyhedra: 0.5,
+            element: None,
+            divisions: 2,
+            columns: 0,
+            gap: 0.05,
+            wall_velocity: 0.0,
+            wall_friction: 0.0,
+        }
     }
 }
 

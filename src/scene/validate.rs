@@ -43,7 +43,7 @@ fn finite_vec(key: &str, v: &[Real], len: Option<usize>) -> Result<(), Failure> 
 pub(super) fn generator_dim(mesh: &MeshSpec) -> Option<usize> {
     mesh.generator.map(|g| match g {
         Generator::Rectangle | Generator::Disk | Generator::Polygon => 2,
-        Generator::Box => 3,
+        Generator::Box | Generator::Ball => 3,
     })
 }
 
@@ -208,6 +208,7 @@ fn validate_mesh(key: &str, m: &MeshSpec) -> Result<(), Failure> {
             ("center", m.center.is_some()),
             ("radius", m.radius.is_some()),
             ("points", m.points.is_some()),
+            ("rotation", m.rotation.is_some()),
         ] {
             if set {
                 fail(Invalid, format!("{key}.{field}"), "a mesh read from a file takes no generator parameters.")?;
@@ -229,6 +230,12 @@ fn validate_mesh(key: &str, m: &MeshSpec) -> Result<(), Failure> {
         fail(Invalid, format!("{key}.element"), format!("{} is a {}D element; this generator makes {dim}D meshes.", kind.name(), kind.dim()))?;
     }
     let need = |field: &str, present: bool| if present { Ok(()) } else { fail(Invalid, format!("{key}.{field}"), format!("this generator needs `{field}`.")) };
+    if let Some(w) = &m.rotation {
+        if dim != 3 {
+            fail(Invalid, format!("{key}.rotation"), "a rotation turns a 3D mesh (box or ball); place 2D meshes by their points.")?;
+        }
+        finite_vec(&format!("{key}.rotation"), w, Some(3))?;
+    }
     match generator {
         Generator::Rectangle | Generator::Box => {
             need("size", m.size.is_some())?;
@@ -249,15 +256,15 @@ fn validate_mesh(key: &str, m: &MeshSpec) -> Result<(), Failure> {
                 fail(Invalid, format!("{key}.divisions.{i}"), "at least one cell is needed.")?;
             }
         }
-        Generator::Disk => {
+        Generator::Disk | Generator::Ball => {
             need("radius", m.radius.is_some())?;
             positive(format!("{key}.radius"), "the radius", m.radius.unwrap_or_default())?;
             if let Some(c) = &m.center {
-                finite_vec(&format!("{key}.center"), c, Some(2))?;
+                finite_vec(&format!("{key}.center"), c, Some(dim))?;
             }
             match m.divisions.as_deref() {
                 Some([n]) if *n > 0 => {}
-                _ => fail(Invalid, format!("{key}.divisions"), "a disk takes one positive number of cells per radius, e.g. [4].")?,
+                _ => fail(Invalid, format!("{key}.divisions"), "a disk or ball takes one positive number of cells per radius, e.g. [4].")?,
             }
         }
         Generator::Polygon => {
@@ -293,6 +300,7 @@ fn generated_elements(m: &MeshSpec) -> u128 {
         Some(Generator::Rectangle | Generator::Box) => product.saturating_mul(per_cell),
         // A disk is a (2n) x (2n) grid mapped onto the circle; a polygon has n² triangles per edge.
         Some(Generator::Disk) => div.first().map_or(0, |&n| (2 * n).saturating_mul(2 * n).saturating_mul(per_cell)),
+        Some(Generator::Ball) => div.first().map_or(0, |&n| (2 * n).saturating_mul(2 * n).saturating_mul(2 * n).saturating_mul(per_cell)),
         Some(Generator::Polygon) => div.first().map_or(0, |&n| n.saturating_mul(n).saturating_mul(m.points.as_ref().map_or(0, |p| p.len()) as u128)),
     }
 }

@@ -39,7 +39,7 @@ pub fn model_of(m: &MaterialSpec) -> Model {
 fn build_mesh(loaded: &LoadedScene, key: &str, spec: &MeshSpec) -> Result<Mesh, SceneError> {
     let v = |o: &Option<Vec<Real>>, i: usize| o.as_ref().map(|x| x[i]).unwrap_or(0.0);
     let kind = spec.element;
-    Ok(match (spec.generator, &spec.file) {
+    let mut mesh = match (spec.generator, &spec.file) {
         (Some(Generator::Rectangle), _) => {
             let (s, d) = (spec.size.as_ref().expect("validated"), spec.divisions.as_ref().expect("validated"));
             generate::rectangle([v(&spec.origin, 0), v(&spec.origin, 1)], [s[0], s[1]], [d[0], d[1]], kind.expect("validated"))
@@ -63,8 +63,18 @@ fn build_mesh(loaded: &LoadedScene, key: &str, spec: &MeshSpec) -> Result<Mesh, 
             let bytes = std::fs::read(&path).map_err(|e| loaded.error(Reference, &format!("{key}.file"), format!("cannot read the mesh file `{}`: {e}.", path.display())))?;
             gmsh::read(&bytes, spec.group.as_deref()).map_err(|e| loaded.error(MeshError, &format!("{key}.file"), format!("the Gmsh file `{}` is not usable: {e}.", path.display())))?
         }
+        (Some(Generator::Ball), _) => generate::ball(
+            [v(&spec.center, 0), v(&spec.center, 1), v(&spec.center, 2)],
+            spec.radius.expect("validated"),
+            spec.divisions.as_ref().expect("validated")[0],
+            kind.expect("validated"),
+        ),
         (None, None) => unreachable!("validated: a mesh has a generator or a file"),
-    })
+    };
+    if let Some(w) = &spec.rotation {
+        generate::rotate(&mut mesh, [w[0], w[1], w[2]]);
+    }
+    Ok(mesh)
 }
 
 const RANGE_WHY: &str = " (energies multiply such numbers and must stay finite)";
