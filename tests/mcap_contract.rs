@@ -135,6 +135,22 @@ fn packing_bodies_are_batched_or_per_channel_with_the_same_values() {
     }
 }
 
+/// Caught by the issue: a packing of more than 65 536 grains failed at the 65 537th channel
+/// (`cannot write more than 65536 channels to one MCAP`) and left a 91-byte file.
+#[test]
+fn a_log_of_more_than_65536_bodies_is_valid() {
+    let count = 65_537;
+    let sets = [&format!("packing.count={count}")[..], "packing.divisions=1", "packing.polygons=0.0", "time.end=0.01", "output.scene_every=0"];
+    let log = run("grains_many", &sets, "bodies_65537");
+    assert_eq!(log.topics["/run"][0]["batched_bodies"]["names"].as_array().unwrap().len(), count);
+    let bodies = &log.topics["/bodies"];
+    assert_eq!(bodies.len(), 3, "the initial state and two steps");
+    assert!(bodies.iter().all(|m| m["kinetic"].as_array().unwrap().len() == count && m["center_of_mass"].as_array().unwrap().len() == count));
+    assert!(log.schemas.len() < 20, "a handful of channels: {}", log.schemas.len());
+    let s = bifirst::output::summary::summarize(&log.record).expect("summary reads the log");
+    assert_eq!((s.status.as_str(), s.steps), ("finished", 2));
+}
+
 #[test]
 fn run_log_vectors_have_two_components_in_2d() {
     let log = run("free_vibration_2d", &["time.end=0.03"], "contract_2d");
