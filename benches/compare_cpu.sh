@@ -3,7 +3,7 @@
 # "CPU speed"). Prints one JSON object per run: label, threads, the `--json` summary's wall time,
 # solver totals, phase times, final energy and peak memory.
 #
-#   benches/compare_cpu.sh BEFORE_BINARY AFTER_BINARY [grains|slope|block|orderings|contact|kernels]...
+#   benches/compare_cpu.sh BEFORE_BINARY AFTER_BINARY [grains|packing|slope|block|orderings|contact|kernels]...
 #
 # With no section, runs them all (about 8 minutes on 2 cores).
 set -euo pipefail
@@ -41,6 +41,10 @@ for section in $sections; do
         run g1000_after "$after" - scenes/grains_many.toml --set packing.count=1000
         run g1000_after "$after" 1 scenes/grains_many.toml --set packing.count=1000
       done ;;
+    packing)
+      # 10 000 grains, the first ten steps: the wall reaches the first column, most grains at rest.
+      p=(scenes/grains_many.toml --set packing.count=10000 --set time.end=0.05)
+      for _ in 1 2 3 4 5; do run p10000_before "$before" - "${p[@]}"; run p10000_after "$after" - "${p[@]}"; done ;;
     slope)
       for n in 100 200 400 800 1600; do run "slope_$n" "$after" - scenes/grains_many.toml --set packing.count=$n; done ;;
     block)

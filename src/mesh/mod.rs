@@ -7,7 +7,7 @@ use crate::precision::Real;
 use std::collections::BTreeMap;
 
 /// Element kinds, all isoparametric with linear shape functions.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Deserialize, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum ElementKind {
     Tri3,

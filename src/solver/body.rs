@@ -3,6 +3,7 @@
 
 use super::linear::{CholeskySolver, LinearError};
 use super::PhaseTimes;
+use super::topology::Topology;
 use crate::assembly::{element_out_stride, DofMap, GatherMap, StiffnessPattern};
 use crate::cpu::{assemble_csr, assemble_residual, dispatch_element_force_tangent, element_energy, element_force_tangent};
 use crate::element::{element_cell_fields, element_von_mises, CellFields, ElementError, ElementOutput, ReferenceGeometry};
@@ -12,6 +13,7 @@ use crate::material::Model;
 use crate::mesh::Mesh;
 use crate::precision::Real;
 use crate::scene::OrderingChoice;
+use std::sync::Arc;
 use std::time::Instant;
 
 /// Displacement, velocity and internal force of every dof.
@@ -22,6 +24,8 @@ pub struct State {
     pub f_int: Vec<Real>,
     /// Strain energy `Σ ∫ W dV`.
     pub strain: Real,
+    /// `strain` was computed by `element_energy` at `u` (not set at t = 0 or by a restore).
+    pub strain_at_u: bool,
 }
 
 /// A prescribed dof: its constant velocity and the boundary set that owns its reaction.
@@ -91,8 +95,8 @@ pub struct Body {
     pub dim: usize,
     /// Lumped mass of each dof.
     pub mass: Vec<Real>,
-    pub dofs: DofMap,
-    pub pattern: StiffnessPattern,
+    pub dofs: Arc<DofMap>,
+    pub pattern: Arc<StiffnessPattern>,
     pub prescribed: Vec<Prescribed>,
     pub state: State,
     /// The state of the step being solved, committed by [`Body::commit`].
@@ -106,12 +110,14 @@ pub struct Body {
     solver: CholeskySolver,
     values: Vec<Real>,
     /// Which element results sum into each stiffness value and each dof.
-    gather: GatherMap,
+    gather: Arc<GatherMap>,
     /// Every element's force and tangent (`element_out_stride` entries per element).
     element_results: Vec<Real>,
     /// The step's start values of every dof, for `assemble_residual`.
     step_inputs: Vec<DofStep<Real>>,
     dof_out: Vec<DofOut<Real>>,
+    /// What `dof_out` was last computed from on the CPU (forces only).
+    evaluated: EvaluatedAt,
     f_ext: Vec<Real>,
     /// Contact-free residual of the last evaluation, every dof.
     pub g: Vec<Real>,
@@ -133,6 +139,31 @@ pub struct Body {
     contraction: Option<Real>,
 }
 
+/// The inputs of a CPU evaluation whose results `Body::dof_out` still holds.
+#[derive(Debug, Default)]
+struct EvaluatedAt {
+    valid: bool,
+    u: Vec<Real>,
+    inputs: Vec<DofStep<Real>>,
+    coefficients: Coefficients<Real>,
+}
+
+impl EvaluatedAt {
+    /// Whether these inputs are the recorded ones, bit for bit (`==` would take -0 for 0).
+    fn holds(&self, u: &[Real], inputs: &[DofStep<Real>], coefficients: Coefficients<Real>) -> bool {
+        self.valid && bytemuck::bytes_of(&coefficients) == bytemuck::bytes_of(&self.coefficients) && bytemuck::cast_slice::<Real, u8>(u) == bytemuck::cast_slice::<Real, u8>(&self.u) && bytemuck::cast_slice::<DofStep<Real>, u8>(inputs) == bytemuck::cast_slice::<DofStep<Real>, u8>(&self.inputs)
+    }
+
+    fn record(&mut self, u: &[Real], inputs: &[DofStep<Real>], coefficients: Coefficients<Real>) {
+        self.u.clear();
+        self.u.extend_from_slice(u);
+        self.inputs.clear();
+        self.inputs.extend_from_slice(inputs);
+        self.coefficients = coefficients;
+        self.valid = true;
+    }
+}
+
 /// A reused factorisation is kept while each Newton iteration reduces the residual at least
 /// tenfold: at the default tolerances (1e-9) a slower contraction would need more iterations
 /// than `solver.max_iterations` allows, and refactorising costs less than a few extra ones.
@@ -151,18 +182,29 @@ impl Body {
         initial_velocity: impl Fn([Real; 3]) -> [Real; 3],
         ordering: OrderingChoice,
     ) -> Result<Self, LinearError> {
+        let topology = Topology::new(&mesh, &prescribed, ordering)?;
+        Ok(Self::with_topology(name, mesh, geometry, model, density, prescribed, initial_velocity, &topology))
+    }
+
+    /// [`Body::new`] with a topology built for its mesh and prescribed dofs (shared with the
+    /// bodies that have the same, see [`Topology::key`]).
+    #[allow(clippy::too_many_arguments)]
+    pub fn with_topology(
+        name: String,
+        mesh: Mesh,
+        geometry: ReferenceGeometry,
+        model: Model,
+        density: Real,
+        prescribed: Vec<Prescribed>,
+        initial_velocity: impl Fn([Real; 3]) -> [Real; 3],
+        topology: &Topology,
+    ) -> Self {
         let dim = mesh.dim();
         let ndof = mesh.nodes.len() * dim;
         let nodal = geometry.lumped_masses(&mesh, density);
         let mass: Vec<Real> = (0..ndof).map(|d| nodal[d / dim]).collect();
-        let mut is_prescribed = vec![false; ndof];
-        for p in &prescribed {
-            is_prescribed[p.dof] = true;
-        }
-        let dofs = DofMap::new(dim, &is_prescribed);
-        let pattern = StiffnessPattern::new(&mesh, &dofs);
-        let coordinates: Vec<[Real; 3]> = dofs.free_pairs().map(|(d, _)| mesh.nodes[d / dim]).collect();
-        let solver = CholeskySolver::new(&pattern, &coordinates, ordering)?;
+        let (dofs, pattern, gather) = (topology.dofs.clone(), topology.pattern.clone(), topology.gather.clone());
+        let solver = CholeskySolver::with(topology.symbolic.clone());
         let mut v = vec![0.0; ndof];
         for (n, x) in mesh.nodes.iter().enumerate() {
             let w = initial_velocity(*x);
@@ -171,14 +213,13 @@ impl Body {
         for p in &prescribed {
             v[p.dof] = p.velocity;
         }
-        let state = State { u: vec![0.0; ndof], v, f_int: vec![0.0; ndof], strain: 0.0 };
+        let state = State { u: vec![0.0; ndof], v, f_int: vec![0.0; ndof], strain: 0.0, strain_at_u: false };
         let values = vec![0.0; pattern.nnz()];
-        let gather = GatherMap::new(&mesh, dim, &pattern);
         let element_results = vec![0.0; mesh.element_count() * element_out_stride(pattern.element_dofs)];
         let reactions = vec![0.0; prescribed.len()];
         let length_scale = mesh.min_edge_length();
         let max_mass = mass.iter().cloned().fold(0.0, Real::max);
-        Ok(Self {
+        Self {
             name,
             mesh,
             geometry,
@@ -199,6 +240,7 @@ impl Body {
             element_results,
             step_inputs: vec![DofStep::default(); ndof],
             dof_out: vec![DofOut::default(); ndof],
+            evaluated: EvaluatedAt::default(),
             f_ext: vec![0.0; ndof],
             g: vec![0.0; ndof],
             contact_force: vec![0.0; ndof],
@@ -210,7 +252,7 @@ impl Body {
             tangent_current: false,
             previous_residual: None,
             contraction: None,
-        })
+        }
     }
 
     /// What the GPU world uploads of the body.
@@ -279,10 +321,21 @@ impl Body {
 
     /// [`Body::evaluate`], with the stiffness values only if `with_tangent`.
     fn evaluate_with(&mut self, p: &StepParams, with_tangent: bool, times: &mut PhaseTimes) -> Result<(), StepFailure> {
+        let c = coefficients(p);
+        // The same inputs, bit for bit, give the same results: a body at rest (a grain no
+        // other touches yet) is not evaluated again every step.
+        if !with_tangent && self.evaluated.holds(&self.trial.u, &self.step_inputs, c) {
+            self.tangent_current = false;
+            self.absorb_residual(p);
+            return Ok(());
+        }
         let u = std::mem::take(&mut self.trial.u);
-        let result = self.assemble_with(&u, coefficients(p), with_tangent, times);
+        let result = self.assemble_with(&u, c, with_tangent, times);
         self.trial.u = u;
         result?;
+        if !with_tangent {
+            self.evaluated.record(&self.trial.u, &self.step_inputs, c);
+        }
         self.absorb_residual(p);
         Ok(())
     }
@@ -306,6 +359,7 @@ impl Body {
     /// `tangent`, the residual if `residual`. Finish with [`Body::finish_device_evaluation`].
     pub fn device_evaluation(&mut self, body: usize, tangent: bool, residual: bool) -> Evaluation<'_> {
         self.tangent_current = false;
+        self.evaluated.valid = false;
         Evaluation { body, u: &self.trial.u, tangent, values: &mut self.values, dof_out: residual.then_some(&mut self.dof_out[..]), failure: None }
     }
 
@@ -338,6 +392,7 @@ impl Body {
     /// [`Body::assemble`], with the stiffness values only if `with_tangent`.
     fn assemble_with(&mut self, u: &[Real], coefficients: Coefficients<Real>, with_tangent: bool, times: &mut PhaseTimes) -> Result<(), StepFailure> {
         self.tangent_current = false;
+        self.evaluated.valid = false;
         self.cpu_elements(u, with_tangent, times)?;
         let t0 = Instant::now();
         if with_tangent {
@@ -457,6 +512,7 @@ impl Body {
             self.reactions[k] = self.g[pr.dof] - self.contact_force[pr.dof];
         }
         self.trial.strain = strain;
+        self.trial.strain_at_u = true;
         let (mut theta_term, mut force_work, mut support_work) = (0.0, 0.0, 0.0);
         for d in 0..ndof {
             let du = self.trial.u[d] - self.state.u[d];
@@ -563,8 +619,12 @@ impl Body {
         self.state.strain
     }
 
-    /// Strain energy at the trial displacement, `element_energy` on the CPU.
+    /// Strain energy at the trial displacement, `element_energy` on the CPU (the state's when
+    /// the body has not moved: the same displacement, bit for bit, has the same energy).
     pub fn trial_strain_energy(&self) -> Real {
+        if self.state.strain_at_u && bytemuck::cast_slice::<Real, u8>(&self.trial.u) == bytemuck::cast_slice::<Real, u8>(&self.state.u) {
+            return self.state.strain;
+        }
         (0..self.mesh.element_count()).map(|e| element_energy(&self.model, self.geometry.element_points(e), &self.mesh.element_displacements(&self.trial.u, e))).sum()
     }
 

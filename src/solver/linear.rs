@@ -10,15 +10,24 @@ use faer::perm::PermRef;
 use faer::sparse::linalg::cholesky::{factorize_symbolic_cholesky, LltRef, SymbolicCholesky, SymmetricOrdering};
 use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
 use faer::{Conj, Par, Side};
+use std::sync::Arc;
 
 /// Bodies with fewer free dofs take AMD without trying nested dissection, and factorise on one
 /// thread (bodies are then factorised in parallel with each other instead).
 const LARGE_BODY_DOFS: usize = 3000;
 
-pub struct CholeskySolver {
+/// The symbolic analysis of a free-dof pattern: the same for every body with that pattern and
+/// ordering, so bodies of one shape (a packing's grains) share one.
+pub struct CholeskySymbolic {
     pattern: SymbolicSparseColMat<u32>,
     symbolic: SymbolicCholesky<u32>,
     ordering: Ordering,
+    par: Par,
+}
+
+/// A body's factorisation: the (shared) symbolic analysis and its own numeric buffers.
+pub struct CholeskySolver {
+    symbolic: Arc<CholeskySymbolic>,
     /// Values of the factor `L`, overwritten by each factorisation.
     factor: Vec<Real>,
     factored: bool,
@@ -27,7 +36,6 @@ pub struct CholeskySolver {
     /// Workspace of the solves, for up to `solve_columns` right-hand sides (grown on demand).
     solve_scratch: MemBuffer,
     solve_columns: usize,
-    par: Par,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -38,7 +46,18 @@ pub enum LinearError {
     Symbolic(String),
 }
 
-impl CholeskySolver {
+impl CholeskySymbolic {
+    /// Whether the analysis depends on the pattern only (not on the nodes' coordinates), so
+    /// that bodies of one pattern can share it: AMD, chosen or taken by `auto` below
+    /// `LARGE_BODY_DOFS`.
+    pub fn pattern_only(free_dofs: usize, choice: OrderingChoice) -> bool {
+        match choice {
+            OrderingChoice::Amd => true,
+            OrderingChoice::Auto => free_dofs < LARGE_BODY_DOFS,
+            OrderingChoice::NestedDissection => false,
+        }
+    }
+
     /// The symbolic analysis of the free-dof pattern. `coordinates` (of each free dof's node)
     /// feed the nested dissection; with `auto` it is tried on large bodies and kept over AMD
     /// when its factor is smaller.
@@ -72,28 +91,42 @@ impl CholeskySolver {
             }
         };
         let par = if p.n >= LARGE_BODY_DOFS { Par::rayon(0) } else { Par::Seq };
-        let scratch = MemBuffer::new(symbolic.factorize_numeric_llt_scratch::<Real>(par, Default::default()));
-        let solve_scratch = MemBuffer::new(symbolic.solve_in_place_scratch::<Real>(1, par));
-        Ok(Self { pattern, factor: vec![0.0; symbolic.len_val()], symbolic, ordering, factored: false, scratch, solve_scratch, solve_columns: 1, par })
+        Ok(Self { pattern, symbolic, ordering, par })
+    }
+}
+
+impl CholeskySolver {
+    /// The symbolic analysis of the free-dof pattern ([`CholeskySymbolic::new`]) and buffers.
+    pub fn new(p: &StiffnessPattern, coordinates: &[[Real; 3]], choice: OrderingChoice) -> Result<Self, LinearError> {
+        Ok(Self::with(Arc::new(CholeskySymbolic::new(p, coordinates, choice)?)))
+    }
+
+    /// Buffers for factorisations with a (shared) symbolic analysis.
+    pub fn with(symbolic: Arc<CholeskySymbolic>) -> Self {
+        let (s, par) = (&symbolic.symbolic, symbolic.par);
+        let scratch = MemBuffer::new(s.factorize_numeric_llt_scratch::<Real>(par, Default::default()));
+        let solve_scratch = MemBuffer::new(s.solve_in_place_scratch::<Real>(1, par));
+        Self { factor: vec![0.0; s.len_val()], symbolic, factored: false, scratch, solve_scratch, solve_columns: 1 }
     }
 
     /// The ordering the factorisation uses.
     pub fn ordering(&self) -> Ordering {
-        self.ordering
+        self.symbolic.ordering
     }
 
     /// Stored entries of the factor `L` (the fill).
     pub fn factor_entries(&self) -> usize {
-        self.symbolic.len_val()
+        self.symbolic.symbolic.len_val()
     }
 
     /// Numeric factorisation of the matrix with these lower-triangle values.
     pub fn factorize(&mut self, values: &[Real]) -> Result<(), LinearError> {
-        let mat = SparseColMatRef::new(self.pattern.as_ref(), values);
+        let s = &*self.symbolic;
+        let mat = SparseColMatRef::new(s.pattern.as_ref(), values);
         self.factored = false;
         let stack = MemStack::new(&mut self.scratch);
-        self.symbolic
-            .factorize_numeric_llt(&mut self.factor, mat, Side::Lower, Default::default(), self.par, stack, Default::default())
+        s.symbolic
+            .factorize_numeric_llt(&mut self.factor, mat, Side::Lower, Default::default(), s.par, stack, Default::default())
             .map_err(|_| LinearError::NotPositiveDefinite)?;
         self.factored = true;
         Ok(())
@@ -109,11 +142,12 @@ impl CholeskySolver {
     pub fn solve_columns(&mut self, rhs: &mut [Real], n: usize) {
         assert!(self.factored, "factorize before solve");
         let k = rhs.len() / n.max(1);
+        let s = &*self.symbolic;
         if k > self.solve_columns {
-            self.solve_scratch = MemBuffer::new(self.symbolic.solve_in_place_scratch::<Real>(k, self.par));
+            self.solve_scratch = MemBuffer::new(s.symbolic.solve_in_place_scratch::<Real>(k, s.par));
             self.solve_columns = k;
         }
         let stack = MemStack::new(&mut self.solve_scratch);
-        LltRef::new(&self.symbolic, &self.factor).solve_in_place_with_conj(Conj::No, faer::MatMut::from_column_major_slice_mut(rhs, n, k), self.par, stack);
+        LltRef::new(&s.symbolic, &self.factor).solve_in_place_with_conj(Conj::No, faer::MatMut::from_column_major_slice_mut(rhs, n, k), s.par, stack);
     }
 }

@@ -8,6 +8,7 @@ pub mod linear;
 pub mod ordering;
 mod restart;
 mod setup;
+pub mod topology;
 
 pub use body::{Body, StepFailure};
 pub use restart::{RestoreError, SavedBody, SavedFactor, SavedReaction, SavedState};

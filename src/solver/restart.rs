@@ -139,6 +139,7 @@ impl Simulation {
             b.state.v.clone_from(&s.v);
             b.state.f_int.clone_from(&s.f_int);
             b.state.strain = s.strain;
+            b.state.strain_at_u = false;
             b.reactions.clone_from(&s.reactions);
         }
         self.t = saved.t;

@@ -2,6 +2,7 @@
 //! Every failure here is a [`SceneError`] pointing at the key responsible.
 
 use super::body::{Body, Prescribed};
+use super::topology::{Topology, TopologyKey};
 use super::{BoundarySet, Probe, Simulation};
 use crate::contact::obstacle::Shape;
 use super::{body_overlaps, node_positions};
@@ -166,11 +167,28 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
         sets.push(BoundarySet { name: name.clone(), body: b });
     }
 
+    // One topology per distinct body (connectivity and prescribed dofs), built in parallel and
+    // shared; a failure is reported for the first body in the scene's order that has it.
+    let ordering = scene.solver.ordering;
+    let keys: Vec<Option<TopologyKey>> = meshes.par_iter().zip(&prescribed).map(|((_, mesh, _), p)| Topology::key(mesh, p, ordering)).collect();
+    let mut first_of: HashMap<&TopologyKey, usize> = HashMap::new();
+    let owner_of: Vec<usize> = keys.iter().enumerate().map(|(b, key)| key.as_ref().map_or(b, |k| *first_of.entry(k).or_insert(b))).collect();
+    let built_topologies: HashMap<usize, Result<Topology, String>> = owner_of
+        .iter()
+        .enumerate()
+        .filter(|(b, owner)| b == *owner)
+        .map(|(b, _)| b)
+        .collect::<Vec<_>>()
+        .into_par_iter()
+        .map(|b| (b, Topology::new(&meshes[b].1, &prescribed[b], ordering).map_err(|e| e.to_string())))
+        .collect();
+    let topologies: Vec<&Result<Topology, String>> = owner_of.iter().map(|o| &built_topologies[o]).collect();
+
     // The bodies are independent (a grain packing has thousands): built in parallel, and the
     // first failing one in the scene's order reported.
     let specs: Vec<_> = scene.body.values().collect();
-    let inputs = meshes.into_par_iter().zip(specs).zip(std::mem::take(&mut prescribed));
-    let built: Vec<Result<Body, SceneError>> = inputs.map(|(((name, mesh, geometry), spec), prescribed)| {
+    let inputs = meshes.into_par_iter().zip(specs).zip(std::mem::take(&mut prescribed)).zip(topologies);
+    let built: Vec<Result<Body, SceneError>> = inputs.map(|((((name, mesh, geometry), spec), prescribed), topology)| {
         let key = format!("body.{name}");
         let material = &scene.material[&spec.material];
         let v0 = spec.initial_velocity.clone().unwrap_or_else(|| vec![0.0; dim]);
@@ -197,8 +215,8 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
             let r = [x[0] - c[0], x[1] - c[1], x[2] - c[2]];
             [v[0] + omega[1] * r[2] - omega[2] * r[1], v[1] + omega[2] * r[0] - omega[0] * r[2], v[2] + omega[0] * r[1] - omega[1] * r[0]]
         };
-        let mut body = Body::new(name.clone(), mesh, geometry, model_of(material), material.density, prescribed, initial, scene.solver.ordering)
-            .map_err(|e| loaded.error(MeshError, &format!("{key}.mesh"), e.to_string()))?;
+        let topology = topology.as_ref().map_err(|e| loaded.error(MeshError, &format!("{key}.mesh"), e.clone()))?;
+        let mut body = Body::with_topology(name.clone(), mesh, geometry, model_of(material), material.density, prescribed, initial, topology);
         body.reuse_factorization = scene.solver.reuse_factorization;
         Ok(body)
     }).collect();
