@@ -161,6 +161,22 @@ fn grains_many_packing_is_reproducible_and_runs() {
     assert_eq!(log.series("/solver", "step").len(), 20, "every step of the small packing converges");
 }
 
+/// Building a pattern, gather map and symbolic factorisation per grain was most of the set-up
+/// of a large packing and most of its memory: grains of one shape share them.
+#[test]
+fn grains_of_one_shape_share_their_topology() {
+    let loaded = bifirst::scene::load_scene(&common::scene_path("grains_many"), &["packing.count=60".to_string()]).unwrap();
+    let sim = bifirst::solver::build_simulation(&loaded).unwrap();
+    let mut shapes: Vec<&Vec<u32>> = sim.bodies.iter().map(|b| &b.mesh.connectivity).collect();
+    shapes.sort();
+    shapes.dedup();
+    let mut patterns: Vec<*const bifirst::assembly::StiffnessPattern> = sim.bodies.iter().map(|b| std::sync::Arc::as_ptr(&b.pattern)).collect();
+    patterns.sort();
+    patterns.dedup();
+    assert_eq!(patterns.len(), shapes.len(), "one pattern per distinct connectivity");
+    assert!(shapes.len() < 20, "60 grains, {} shapes", shapes.len());
+}
+
 #[test]
 fn grains_3d_packing_is_reproducible_and_starts_apart() {
     let load = |sets: &[&str]| {
