@@ -168,3 +168,22 @@ fn a_killed_run_continues_from_its_last_cadence_state() {
     let summary = run_scene(&loaded, &continued, &RunOptions { restart: Some(state.clone()), ..Default::default() }, &mut Silent).expect("continues");
     assert_eq!(summary.steps, state.step + 20);
 }
+
+/// A packing logged on `/bodies` continues from its log like any run: the restarted log has the
+/// same layout, and ends where the uninterrupted run does, bit for bit.
+#[test]
+fn a_packing_logged_on_bodies_restarts_and_ends_where_the_whole_run_does() {
+    let sets = |end: &str| -> Vec<String> { ["packing.count=20", "output.scene_every=0", end].iter().map(|s| s.to_string()).collect() };
+    let run = |end: &str, out: &str| {
+        let path = temp_path(out);
+        run_scene(&load_scene(&scene_path("grains_many"), &sets(end)).unwrap(), &path, &RunOptions::default(), &mut Silent).expect("the run finishes");
+        path
+    };
+    let (whole, first) = (run("time.end=0.08", "bodies_whole.mcap"), run("time.end=0.05", "bodies_first.mcap"));
+    let (reloaded, state) = restart_from(&first, None, &["time.end=0.08".to_string()]).expect("the log holds a state");
+    let continued = temp_path("bodies_continued.mcap");
+    run_scene(&reloaded, &continued, &RunOptions { restart: Some(state), ..Default::default() }, &mut Silent).expect("the restarted run finishes");
+    let last = |path: &std::path::Path| bifirst::output::read_run(path).unwrap().messages("/bodies").last().cloned().expect("a /bodies channel");
+    assert_eq!(last(&whole), last(&continued));
+    assert!(!bifirst::output::read_run(&continued).unwrap().topics.keys().any(|t| t.starts_with("/body/")));
+}
