@@ -14,6 +14,7 @@ use std::sync::Arc;
 use bifirst::material::{Model, NeoHookean};
 use bifirst::mesh::{generate, ElementKind, Mesh};
 use bifirst::solver::body::{Body, Prescribed};
+use bifirst::solver::topology::Topology;
 use bifirst::solver::PhaseTimes;
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use std::hint::black_box;
@@ -69,7 +70,8 @@ fn newton_iteration(c: &mut Criterion) {
     let geometry = ReferenceGeometry::new(&mesh).unwrap();
     let prescribed: Vec<Prescribed> = mesh.node_sets["z_min"].iter().flat_map(|&n| (0..3).map(move |i| Prescribed { dof: n as usize * 3 + i, velocity: 0.0, set: 0 })).collect();
     let model = Model::NeoHookean(NeoHookean { g: 1000.0, k: 3000.0 });
-    let mut body = Body::new("block".into(), mesh.clone(), geometry, model, 1.0, prescribed, |_| [0.0; 3], Default::default()).unwrap();
+    let topology = Topology::new(&mesh, &prescribed, Default::default()).unwrap();
+    let mut body = Body::new("block".into(), mesh.clone(), geometry, model, 1.0, prescribed, |_| [0.0; 3], &topology);
     let u: Vec<f64> = mesh.nodes.iter().flat_map(|&x| deform(x)).collect();
     let (dt, theta, xi) = (1e-3, 0.5, 0.5);
     let c1 = 1.0 / (theta * dt * dt);

@@ -2,7 +2,7 @@
 //! facets (or elements) to be searched at all. In a packing most grains touch none or a few
 //! others, so the node-facet search of a step costs what is near, not the number of bodies.
 
-use super::geometry::{bounds, Vec3};
+use super::geometry::Vec3;
 use super::grid::Grid;
 use crate::precision::Real;
 use rayon::prelude::*;
@@ -17,12 +17,6 @@ pub fn intersect(a: Aabb, b: Aabb) -> bool {
 /// `a` grown by `r` on every side.
 pub fn grown(a: Aabb, r: Real) -> Aabb {
     (a.0.map(|c| c - r), a.1.map(|c| c + r))
-}
-
-/// The box of each body's points (`positions[b]`, of the nodes `nodes(b)` only, e.g. its
-/// boundary).
-pub fn body_boxes<'a>(positions: &'a [Vec<Vec3>], nodes: impl Fn(usize) -> &'a [u32] + Sync) -> Vec<Aabb> {
-    positions.par_iter().enumerate().map(|(b, x)| bounds(nodes(b).iter().map(|&n| x[n as usize]))).collect()
 }
 
 /// Per body, the other bodies whose boxes meet its own and that `can_touch` it, in increasing

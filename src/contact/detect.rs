@@ -158,16 +158,6 @@ fn obstacles(model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, t: Real,
     out.extend(found.into_iter().flatten());
 }
 
-/// The points of the facet `f` of `surface` at `x`, in a fixed array (no allocation per facet).
-fn facet_points(surface: &super::Surface, x: &[Vec3], f: usize) -> ([Vec3; 4], usize) {
-    let facet = surface.facet(f);
-    let mut p = [[0.0; 3]; 4];
-    for (k, &n) in facet.iter().enumerate() {
-        p[k] = x[n as usize];
-    }
-    (p, facet.len())
-}
-
 /// Masters with more facets than this get a hash grid of them; smaller ones are scanned.
 const SCANNED_FACETS: usize = 32;
 
@@ -183,7 +173,7 @@ impl MasterFacets {
     fn new(surface: &super::Surface, x: &[Vec3], dim: usize, margin: Real) -> Self {
         let boxes: Vec<(Vec3, Vec3, Real)> = (0..surface.facet_count())
             .map(|f| {
-                let (p, len) = facet_points(surface, x, f);
+                let (p, len) = surface.facet_points(x, f);
                 let (lo, hi) = bounds(p[..len].iter().copied());
                 let size = facet_size(&p[..len]);
                 // Off its plane by `reach`, beyond its sides by `EDGE_TOLERANCE` (a 2D scene's
@@ -233,7 +223,7 @@ fn body_pairs(model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, margin:
         .enumerate()
         .map(|(b, surface)| {
             let x = &positions[b];
-            let largest = (0..surface.facet_count()).map(|f| facet_size(&facet_points(surface, x, f).0[..surface.facet_nodes])).fold(0.0, Real::max);
+            let largest = (0..surface.facet_count()).map(|f| facet_size(&surface.facet_points(x, f).0[..surface.facet_nodes])).fold(0.0, Real::max);
             broad::grown(bounds(surface.nodes.iter().map(|&n| x[n as usize])), reach(largest) + EDGE_TOLERANCE * largest + margin)
         })
         .collect();
@@ -321,7 +311,7 @@ fn facet_normal(p: &[Vec3]) -> Vec3 {
 fn node_normals(surface: &super::Surface, x: &[Vec3]) -> Vec<Vec3> {
     let mut normals = vec![[0.0; 3]; x.len()];
     for f in 0..surface.facet_count() {
-        let (p, len) = facet_points(surface, x, f);
+        let (p, len) = surface.facet_points(x, f);
         let n = facet_normal(&p[..len]);
         for &k in surface.facet(f) {
             normals[k as usize] = geometry::add(normals[k as usize], n);

@@ -141,13 +141,9 @@ pub fn overlaps(model: &ContactModel, meshes: &[&Mesh], positions: &[Vec<Vec3>],
 fn node_sizes(surface: &super::Surface, x: &[Vec3]) -> Vec<Real> {
     let mut sizes = vec![Real::INFINITY; x.len()];
     for f in 0..surface.facet_count() {
-        let facet = surface.facet(f);
-        let mut p = [[0.0; 3]; 4];
-        for (k, &n) in facet.iter().enumerate() {
-            p[k] = x[n as usize];
-        }
-        let h = edge_range(&p[..facet.len()]).0;
-        for &n in facet {
+        let (p, len) = surface.facet_points(x, f);
+        let h = edge_range(&p[..len]).0;
+        for &n in surface.facet(f) {
             sizes[n as usize] = sizes[n as usize].min(h);
         }
     }

@@ -2,6 +2,7 @@
 //! (Tet4) and quadrilaterals (Hex8). Found once at set-up: a facet is on the boundary when no
 //! other element shares it.
 
+use super::geometry::Vec3;
 use crate::mesh::{ElementKind, Mesh};
 use std::collections::HashMap;
 
@@ -60,5 +61,15 @@ impl Surface {
 
     pub fn facet(&self, f: usize) -> &[u32] {
         &self.facets[f * self.facet_nodes..(f + 1) * self.facet_nodes]
+    }
+
+    /// The points of facet `f` at the node positions `x`: a fixed array and the facet's node
+    /// count (no allocation per facet in the searches that visit every facet each step).
+    pub fn facet_points(&self, x: &[Vec3], f: usize) -> ([Vec3; 4], usize) {
+        let mut p = [[0.0; 3]; 4];
+        for (k, &n) in self.facet(f).iter().enumerate() {
+            p[k] = x[n as usize];
+        }
+        (p, self.facet_nodes)
     }
 }

@@ -1,7 +1,7 @@
 //! A deformable body at run time: mesh, material, lumped mass, constraints, state, and the
 //! Newton solve of one theta-method step (paper eqs. 16-19).
 
-use super::linear::{CholeskySolver, LinearError};
+use super::linear::CholeskySolver;
 use super::PhaseTimes;
 use super::topology::Topology;
 use crate::assembly::{element_out_stride, DofMap, GatherMap, StiffnessPattern};
@@ -12,7 +12,6 @@ use crate::gpu::{ElementFailure, Evaluation, GpuError, WorldBody};
 use crate::material::Model;
 use crate::mesh::Mesh;
 use crate::precision::Real;
-use crate::scene::OrderingChoice;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -171,25 +170,10 @@ pub const REFACTOR_CONTRACTION: Real = 0.1;
 
 impl Body {
     /// `initial_velocity(node) -> velocity` gives the free motion at t = 0; prescribed dofs start
-    /// at their prescribed velocity.
-    pub fn new(
-        name: String,
-        mesh: Mesh,
-        geometry: ReferenceGeometry,
-        model: Model,
-        density: Real,
-        prescribed: Vec<Prescribed>,
-        initial_velocity: impl Fn([Real; 3]) -> [Real; 3],
-        ordering: OrderingChoice,
-    ) -> Result<Self, LinearError> {
-        let topology = Topology::new(&mesh, &prescribed, ordering)?;
-        Ok(Self::with_topology(name, mesh, geometry, model, density, prescribed, initial_velocity, &topology))
-    }
-
-    /// [`Body::new`] with a topology built for its mesh and prescribed dofs (shared with the
-    /// bodies that have the same, see [`Topology::key`]).
+    /// at their prescribed velocity. `topology` is built for its mesh and prescribed dofs, and
+    /// shared with the bodies that have the same ([`Topology::key`]).
     #[allow(clippy::too_many_arguments)]
-    pub fn with_topology(
+    pub fn new(
         name: String,
         mesh: Mesh,
         geometry: ReferenceGeometry,

@@ -96,11 +96,6 @@ impl CholeskySymbolic {
 }
 
 impl CholeskySolver {
-    /// The symbolic analysis of the free-dof pattern ([`CholeskySymbolic::new`]) and buffers.
-    pub fn new(p: &StiffnessPattern, coordinates: &[[Real; 3]], choice: OrderingChoice) -> Result<Self, LinearError> {
-        Ok(Self::with(Arc::new(CholeskySymbolic::new(p, coordinates, choice)?)))
-    }
-
     /// Buffers for factorisations with a (shared) symbolic analysis.
     pub fn with(symbolic: Arc<CholeskySymbolic>) -> Self {
         let (s, par) = (&symbolic.symbolic, symbolic.par);

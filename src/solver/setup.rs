@@ -216,7 +216,7 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
             [v[0] + omega[1] * r[2] - omega[2] * r[1], v[1] + omega[2] * r[0] - omega[0] * r[2], v[2] + omega[0] * r[1] - omega[1] * r[0]]
         };
         let topology = topology.as_ref().map_err(|e| loaded.error(MeshError, &format!("{key}.mesh"), e.clone()))?;
-        let mut body = Body::with_topology(name.clone(), mesh, geometry, model_of(material), material.density, prescribed, initial, topology);
+        let mut body = Body::new(name.clone(), mesh, geometry, model_of(material), material.density, prescribed, initial, topology);
         body.reuse_factorization = scene.solver.reuse_factorization;
         Ok(body)
     }).collect();
