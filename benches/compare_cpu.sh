@@ -3,7 +3,7 @@
 # "CPU speed"). Prints one JSON object per run: label, threads, the `--json` summary's wall time,
 # solver totals, phase times, final energy and peak memory.
 #
-#   benches/compare_cpu.sh BEFORE_BINARY AFTER_BINARY [grains|packing|slope|block|orderings|contact|kernels]...
+#   benches/compare_cpu.sh BEFORE_BINARY AFTER_BINARY [grains|packing|slope|block|orderings|contact|kernels|stress]...
 #
 # With no section, runs them all (about 8 minutes on 2 cores).
 set -euo pipefail
@@ -18,14 +18,14 @@ run() { # label binary threads(- for default) run-arguments...
   shift 3
   local t=()
   [ "$threads" != "-" ] && t=(--threads "$threads")
-  /usr/bin/time -f "%M" -o "$tmp/mem" "$bin" "${t[@]}" run "$@" --backend cpu --set output.scene_every=0 --out "$tmp/run.mcap" --quiet --json >"$tmp/run.json"
+  /usr/bin/time -f "%M" -o "$tmp/mem" "$bin" "${t[@]}" run "$@" --backend cpu --set output.scene_every=0 --out "$tmp/run.mcap" --quiet --json >"$tmp/run.json" || true
   python3 - "$label" "$threads" "$tmp" <<'PY'
 import json, sys
 label, threads, tmp = sys.argv[1:]
 d = json.load(open(f"{tmp}/run.json"))
 mem = int(open(f"{tmp}/mem").read().split()[-1])
 print(json.dumps({"label": label, "threads": threads, "wall": d["wall_s"], "steps": d["steps"], "newton": d["newton_iterations"],
-                  "bodies_iterated": d.get("bodies_iterated"), "factorizations": d.get("factorizations"), "cutbacks": d["cutbacks"],
+                  "uzawa": d["uzawa_iterations"], "status": d["status"], "max_overlap_ratio": d["max_overlap_ratio"], "bodies_iterated": d.get("bodies_iterated"), "factorizations": d.get("factorizations"), "cutbacks": d["cutbacks"],
                   "phases": d["wall_by_phase"], "energy": d["energy"]["total"], "balance": d["energy"]["energy_balance_error"],
                   "max_penetration": d["max_penetration"], "peak_memory_kb": mem}))
 PY
@@ -33,6 +33,16 @@ PY
 
 for section in $sections; do
   case $section in
+    stress) # issue 28's table: grains_many N = 200 at its defaults, at 4x dt and 10x wall speed; bar_impact at 100x speed and 50x dt
+      g=(scenes/grains_many.toml --set packing.count=200)
+      for _ in 1 2 3; do run g200_before "$before" - "${g[@]}"; run g200_after "$after" - "${g[@]}"; done
+      run g200_dt4_before "$before" - "${g[@]}" --set time.dt=0.02; run g200_dt4_after "$after" - "${g[@]}" --set time.dt=0.02
+      run g200_wall10_after "$after" - "${g[@]}" --set packing.wall_velocity=20.0 --set time.end=0.3
+      for bin in before after; do b=$before; [ $bin = after ] && b=$after
+        run bar_speed100_$bin "$b" - scenes/bar_impact.toml --set 'body.bar.initial_velocity=[-50.0, 0.0]'
+        run bar_dt50_$bin "$b" - scenes/bar_impact.toml --set time.dt=2.5e-3
+      done
+      ;;
     grains)
       g=(scenes/grains_many.toml --set packing.count=400 --set time.end=0.1)
       for _ in 1 2 3 4 5; do run g400_before "$before" - "${g[@]}"; run g400_after "$after" - "${g[@]}"; run g400_after "$after" 1 "${g[@]}"; done

@@ -56,7 +56,7 @@ fn detection(c: &mut Criterion) {
         let surfaces = vec![Surface::of(&lower), Surface::of(&upper)];
         let facets: usize = surfaces.iter().map(Surface::facet_count).sum();
         let model = ContactModel {
-            settings: Settings { tolerance: 1e-8, max_iterations: 1, sweep: Sweep::GaussSeidel },
+            settings: Settings { tolerance: 1e-8, max_iterations: 1, sweep: Sweep::GaussSeidel, acceleration: Default::default() },
             surfaces,
             obstacles: Vec::new(),
             pairs: upper_on_lower(0.3),

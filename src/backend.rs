@@ -2,7 +2,7 @@
 //! or on the CPU. The rest of the engine asks [`Backend::apply`] to place each body's kernels
 //! and does not care where they went.
 
-use crate::contact::uzawa::Sweep;
+use crate::contact::uzawa::{Acceleration, Sweep};
 use crate::contact::Settings;
 use crate::gpu::{self, Gpu, GpuError, GpuWorld};
 use crate::precision::{Precision, PRECISION_NAME};
@@ -231,7 +231,10 @@ impl Backend {
 /// device has no Jacobi kernel, and in f32 the iterations cannot reach the contact tolerance.
 /// `auto` never takes a software adapter (lavapipe was measured 1.8x to 11x slower than the
 /// CPU's sweeps at every size), and takes a hardware one when a colour holds on average at least
-/// [`AUTO_UZAWA_POINTS_PER_COLOUR`] points and the round at least [`AUTO_UZAWA_POINTS`].
+/// [`AUTO_UZAWA_POINTS_PER_COLOUR`] points and the round at least [`AUTO_UZAWA_POINTS`], and
+/// only for plain sweeps: the device's sweeps are not accelerated, and the CPU's Anderson-mixed
+/// sweeps need 5 to 10 times fewer (doc/benchmarks.md, "Contact solver"). `gpu` runs plain
+/// sweeps on the device whatever `contact.acceleration` says.
 pub fn uzawa_on_device(world: &GpuWorld, settings: &Settings, points: usize, colours: usize) -> bool {
     if settings.sweep != Sweep::GaussSeidel || world.precision() != Precision::F64 {
         return false;
@@ -239,6 +242,6 @@ pub fn uzawa_on_device(world: &GpuWorld, settings: &Settings, points: usize, col
     match world.uzawa {
         UzawaPlacement::Gpu => true,
         UzawaPlacement::Cpu => false,
-        UzawaPlacement::Auto => !world.software() && points >= AUTO_UZAWA_POINTS && points >= AUTO_UZAWA_POINTS_PER_COLOUR * colours,
+        UzawaPlacement::Auto => settings.acceleration == Acceleration::None && !world.software() && points >= AUTO_UZAWA_POINTS && points >= AUTO_UZAWA_POINTS_PER_COLOUR * colours,
     }
 }

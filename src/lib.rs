@@ -20,3 +20,4 @@ pub mod output;
 pub mod run;
 pub mod sweep;
 pub mod accuracy;
+pub mod stability;

@@ -1,5 +1,5 @@
 //! The `bifirst` command line: run (and restart), sweep (whole, sharded, as a Slurm array), sweep-report,
-//! accuracy, state, check, plot, summary, bench and info.
+//! accuracy, stability, state, check, plot, summary, bench and info.
 
 use anyhow::Result;
 use bifirst::backend::{BackendChoice, BackendRequest, UzawaPlacement};
@@ -11,6 +11,7 @@ use bifirst::run::{run_scene, Monitor, RunError, RunOptions, RunSummary, Stop};
 use bifirst::scene::load_scene;
 use bifirst::solver::StepReport;
 use bifirst::sweep::{report, Report, SbatchOption, Shard, SlurmJob, Sweep, SweepAxis};
+use bifirst::stability::Budget;
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::io::IsTerminal;
@@ -144,6 +145,33 @@ enum Command {
         /// The error to reach: the cheapest variant within it is named.
         #[arg(long, default_value_t = 0.01)]
         target: f64,
+        #[command(flatten)]
+        backend: BackendArgs,
+        /// Print the rows as JSON instead of a table.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Stress a scene over a grid of variants (any scene keys: time step, theta, speeds,
+    /// stiffness, friction), one at a time: each is stable, degraded (finished with warnings),
+    /// failed or too slow; a table, `stability.csv`, `stability.png` (a map over the first two
+    /// axes) and the largest stable value along each axis. Exit 0 when every variant is stable.
+    Stability {
+        scene: PathBuf,
+        /// A scene key and its values, as for `sweep`.
+        #[arg(long = "over", value_name = "KEY=V1,V2,...", required = true)]
+        over: Vec<SweepAxis>,
+        /// Overrides applied to every variant before its own.
+        #[arg(long = "set", value_name = "KEY=VALUE")]
+        sets: Vec<String>,
+        /// Directory for the logs, `stability.csv` and `stability.png` (default: `<scene name>_stability`).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// Uzawa sweeps per step above which a run is too slow.
+        #[arg(long, default_value_t = 2000.0)]
+        max_sweeps: f64,
+        /// Wall seconds after which a run still going is stopped as too slow.
+        #[arg(long, default_value_t = 300.0)]
+        max_wall: f64,
         #[command(flatten)]
         backend: BackendArgs,
         /// Print the rows as JSON instead of a table.
@@ -381,6 +409,9 @@ struct RunArgs {
     json: bool,
 }
 
+/// Exit status of a run that finished but created more energy than `solver.max_energy_gain`.
+const ENERGY_CREATED_EXIT: u8 = 3;
+
 fn run(args: RunArgs) -> Result<ExitCode> {
     let (loaded, state, out) = match (&args.restart, &args.scene) {
         (Some(log), _) => {
@@ -422,6 +453,11 @@ fn run(args: RunArgs) -> Result<ExitCode> {
         }
     };
     match result {
+        Ok(summary) if summary.status == bifirst::run::ENERGY_CREATED => {
+            report(&summary);
+            eprintln!("error: {}", summary.message.as_deref().unwrap_or_default());
+            Ok(ExitCode::from(ENERGY_CREATED_EXIT))
+        }
         Ok(summary) => {
             report(&summary);
             Ok(ExitCode::SUCCESS)
@@ -585,6 +621,33 @@ fn accuracy_command(args: AccuracyArgs) -> Result<ExitCode> {
     Ok(if rows.len() == count && rows.iter().all(|r| r.status == "finished") { ExitCode::SUCCESS } else { ExitCode::FAILURE })
 }
 
+fn stability_command(scene: &std::path::Path, over: &[SweepAxis], sets: &[String], out: Option<PathBuf>, budget: Budget, backend: BackendRequest, json: bool) -> Result<ExitCode> {
+    use bifirst::stability::{csv, largest_stable, map_png, table, Class, Study};
+    let study = Study::plan(scene, sets, over)?;
+    let out = out.unwrap_or_else(|| PathBuf::from(format!("{}_stability", study.name)));
+    let count = study.variant_count();
+    eprintln!("bifirst {}: stability of `{}`, {count} variants one at a time (budget {} sweeps per step, {} s each), into {}", env!("CARGO_PKG_VERSION"), study.name, budget.sweeps_per_step, budget.wall_s, out.display());
+    let interrupt = interrupt_flags()?.0;
+    let rows = study.run(&out, budget, &backend, Some(interrupt), |r| eprintln!("[{}/{count}] {}: {} in {:.2} s {}", r.index + 1, r.label, r.class.name(), r.wall_s, r.reasons.join("; ")))?;
+    let csv_path = out.join("stability.csv");
+    std::fs::write(&csv_path, csv(&study.axes, &rows)).map_err(|e| anyhow::anyhow!("cannot write `{}`: {e}", csv_path.display()))?;
+    let png = out.join("stability.png");
+    map_png(&png, &format!("{}: stability", study.name), &study.axes, &rows)?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&rows)?);
+    } else {
+        print!("{}", table(&study.axes, &rows));
+        for (key, value) in largest_stable(&study.axes, &rows) {
+            match value {
+                Some(v) => println!("largest stable {key}: {v}"),
+                None => println!("no value of {key} is stable for every variant"),
+            }
+        }
+    }
+    eprintln!("table: {}\nmap: {}", csv_path.display(), png.display());
+    Ok(if rows.len() == count && rows.iter().all(|r| r.class == Class::Stable) { ExitCode::SUCCESS } else { ExitCode::FAILURE })
+}
+
 /// The summary table (or JSON) and the overlaid plots of a sweep directory; fails when a variant
 /// is missing or did not finish.
 fn print_report(mut report: Report, json: bool, trace: Option<[String; 3]>) -> Result<ExitCode> {
@@ -713,6 +776,9 @@ fn main() -> ExitCode {
         Command::SweepReport { dir, json, trace } => report(&dir).map_err(anyhow::Error::from).and_then(|r| print_report(r, json, trace)),
         Command::Accuracy { scene, over, sets, measure, out, repeat, target, backend, json } => {
             accuracy_command(AccuracyArgs { scene, over, sets, measure, out, repeat, target, backend: backend.into(), json })
+        }
+        Command::Stability { scene, over, sets, out, max_sweeps, max_wall, backend, json } => {
+            stability_command(&scene, &over, &sets, out, Budget { sweeps_per_step: max_sweeps, wall_s: max_wall }, backend.into(), json)
         }
         Command::State { run, at, contour, vtu } => state_command(run, at, contour, vtu),
         Command::Plot { runs, out, trace } => plot_command(runs, out, trace),

@@ -80,7 +80,7 @@ pub struct RunOptions {
 pub struct RunSummary {
     pub scene: String,
     /// `finished`, `failed` or `interrupted`.
-    #[schemars(extend("enum" = ["finished", "failed", "interrupted"]))]
+    #[schemars(extend("enum" = ["finished", "energy_created", "failed", "interrupted"]))]
     pub status: String,
     /// Why the run stopped early.
     pub message: Option<String>,
@@ -107,6 +107,14 @@ pub struct RunSummary {
     /// created by the scheme), and the largest such gain relative to the energy scale.
     pub energy_gain_steps: usize,
     pub max_energy_gain: Real,
+    /// Step control over the run (see `/solver`): attempts rejected for overlap and for
+    /// energy, and sub-steps kept beyond a bound at the smallest step allowed.
+    pub overlap_retries: usize,
+    pub energy_retries: usize,
+    pub kept_beyond_bounds: usize,
+    /// Energy the run created, relative to the energy scale ([`Simulation::energy_created`]):
+    /// above `solver.max_energy_gain` the status is `energy_created` and the exit status 3.
+    pub energy_created: Real,
     pub wall_s: f64,
     /// Wall time of the steps by phase, summed over the run.
     pub wall_by_phase: PhaseTimes,
@@ -350,6 +358,11 @@ impl Logger {
             factorizations: r.factorizations,
             residual_norm: r.residual_norm,
             cutbacks: r.cutbacks,
+            substeps: r.substeps,
+            overlap_retries: r.overlap_retries,
+            energy_retries: r.energy_retries,
+            raised_theta: r.raised_theta,
+            kept_beyond_bounds: r.kept_beyond_bounds,
             wall_s: r.wall,
             bytes_moved: r.bytes_moved,
             device_submits: r.device_submits,
@@ -399,6 +412,9 @@ struct Totals {
     max_overlap_ratio: Real,
     energy_gain_steps: usize,
     max_energy_gain: Real,
+    overlap_retries: usize,
+    energy_retries: usize,
+    kept_beyond_bounds: usize,
     wall: PhaseTimes,
     bytes_moved: u64,
     device_submits: u64,
@@ -407,6 +423,9 @@ struct Totals {
 /// A step whose numerical dissipation is negative by more than this share of the energy scale
 /// created energy: the scheme is meant to dissipate (theta, xi, impacts), never to add.
 pub const ENERGY_GAIN_TOLERANCE: Real = 1e-4;
+/// The status of a run that finished having created more energy than `solver.max_energy_gain`.
+pub const ENERGY_CREATED: &str = "energy_created";
+
 /// Energy-gain warnings written to `/log` before they are only counted.
 const ENERGY_GAIN_LINES: usize = 10;
 
@@ -475,10 +494,21 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
     logger.frames(&sim, false)?;
     logger.saved(&sim, false)?;
     let mut totals = Totals::default();
-    let summary = |sim: &Simulation, totals: &Totals, stop: Option<&Stop>| RunSummary {
+    let max_energy_gain = loaded.scene.solver.max_energy_gain;
+    let summary = |sim: &Simulation, totals: &Totals, stop: Option<&Stop>| {
+        let created = sim.energy_created();
+        let (status, message) = match stop {
+            Some(stop) => (stop.status().to_string(), Some(stop.to_string())),
+            None if created > max_energy_gain => (
+                ENERGY_CREATED.to_string(),
+                Some(format!("the run created {created:.3e} of the energy scale, more than solver.max_energy_gain = {max_energy_gain:.3e} (a time step too large for the impact speed? `bifirst stability` maps it)")),
+            ),
+            None => ("finished".to_string(), None),
+        };
+        RunSummary {
         scene: loaded.name.clone(),
-        status: stop.map_or("finished", Stop::status).to_string(),
-        message: stop.map(Stop::to_string),
+        status,
+        message,
         backend: backend.name().to_string(),
         precision: backend.precision().to_string(),
         adapter: backend.adapter(),
@@ -494,12 +524,17 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
         max_overlap_ratio: totals.max_overlap_ratio,
         energy_gain_steps: totals.energy_gain_steps,
         max_energy_gain: totals.max_energy_gain,
+        overlap_retries: totals.overlap_retries,
+        energy_retries: totals.energy_retries,
+        kept_beyond_bounds: totals.kept_beyond_bounds,
+        energy_created: created,
         wall_s: started.elapsed().as_secs_f64(),
         wall_by_phase: totals.wall,
         bytes_moved: totals.bytes_moved,
         device_submits: totals.device_submits,
         energy: sim.energies(),
         output: out.to_path_buf(),
+    }
     };
     let stop = loop {
         if sim.finished() {
@@ -529,6 +564,9 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
         };
         logger.events(monitor, sim.t, &report.events)?;
         totals.cutbacks += report.cutbacks;
+        totals.overlap_retries += report.overlap_retries;
+        totals.energy_retries += report.energy_retries;
+        totals.kept_beyond_bounds += report.kept_beyond_bounds;
         totals.newton += report.newton_iterations;
         totals.uzawa += report.uzawa_iterations;
         totals.bodies_iterated += report.bodies_iterated;

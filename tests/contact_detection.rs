@@ -98,7 +98,7 @@ fn broad_phase_finds_what_brute_force_finds() {
         let meshes = [lower, upper];
         let surfaces: Vec<Surface> = meshes.iter().map(Surface::of).collect();
         let model = ContactModel {
-            settings: Settings { tolerance: 1e-8, max_iterations: 10, sweep: Sweep::GaussSeidel },
+            settings: Settings { tolerance: 1e-8, max_iterations: 10, sweep: Sweep::GaussSeidel, acceleration: Default::default() },
             surfaces: surfaces.clone(),
             obstacles: Vec::new(),
             pairs: upper_on_lower(0.2),

@@ -6,6 +6,7 @@
 //! obstacle). Its frame `[n, t1, t2]`, the facet weights and the gap are fixed at the start of
 //! the step, so the relative velocity at the end of the step is linear in the displacements.
 
+pub mod anderson;
 pub mod broad;
 pub mod detect;
 pub mod geometry;
@@ -111,6 +112,7 @@ pub struct Settings {
     /// Uzawa iterations allowed per Newton iteration.
     pub max_iterations: usize,
     pub sweep: uzawa::Sweep,
+    pub acceleration: uzawa::Acceleration,
 }
 
 /// Everything the engine knows about contact in a scene, built once.

@@ -13,6 +13,7 @@
 //! `3 x 3` block for each pair of points that share a body.
 
 use super::geometry::norm;
+use super::anderson::Anderson;
 use super::law::uzawa_step;
 use crate::precision::Real;
 use rayon::prelude::*;
@@ -88,6 +89,24 @@ pub enum Sweep {
     GaussSeidel,
     Jacobi,
 }
+
+/// What is done between Gauss-Seidel sweeps to speed them up.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Acceleration {
+    /// Anderson mixing of the last sweeps, safeguarded ([`super::anderson`]).
+    #[default]
+    Anderson,
+    /// Plain sweeps.
+    None,
+}
+
+/// A mixed iterate whose sweep changes the nodal forces by more than this many times the
+/// smallest change of the solve so far is rejected ([`super::anderson::Anderson::reject`]).
+const REJECT_GROWTH: Real = 2.0;
+
+/// Rejections after which a solve goes on with plain sweeps.
+const MAX_REJECTIONS: usize = 30;
 
 /// Local Uzawa steps per point and Gauss-Seidel visit: enough to settle the point against the
 /// others' current reactions (`LOCAL_STEPS` of the `uzawa_sweep` kernel).
@@ -306,20 +325,28 @@ pub struct Problem<'a> {
     pub tolerance: Real,
     pub floor: Real,
     pub max_iterations: usize,
+    /// Between Gauss-Seidel sweeps (Jacobi sweeps are never accelerated; the device's sweeps
+    /// are plain).
+    pub acceleration: Acceleration,
 }
 
 /// Uzawa iterations from the reactions in `p.r` until the estimated distance to the fixed
 /// point, in nodal forces, is below `tolerance * max(largest nodal force, floor)` ([`Judge`]),
 /// or `max_iterations`, or until `stop` is set (an interrupt: then not converged). Gauss-Seidel
-/// sweeps visit the points by `colours`.
+/// sweeps visit the points by `colours`, with Anderson mixing between them if `p.acceleration`
+/// says so; the reactions returned are always those of a sweep.
 pub fn solve(p: &mut Problem, sweep: Sweep, stop: Option<&AtomicBool>) -> Outcome {
-    let Problem { w, colours, local, nodal, ref mut r, tolerance, floor, max_iterations } = *p;
+    let Problem { w, colours, local, nodal, ref mut r, tolerance, floor, max_iterations, acceleration } = *p;
     let n = local.len();
     let mut next = vec![[0.0; 3]; n];
     let mut dr = vec![[0.0; 3]; n];
     let mut scratch = Vec::new();
     let mut outcome = Outcome::default();
     let mut judge = Judge::new(tolerance, floor);
+    let accelerate = sweep == Sweep::GaussSeidel && acceleration == Acceleration::Anderson;
+    let mut anderson = Anderson::new();
+    let mut start = Vec::new();
+    let (mut mixed, mut best_change, mut rejections) = (false, Real::INFINITY, 0);
     for it in 1..=max_iterations {
         if stop.is_some_and(|s| s.load(Ordering::Relaxed)) {
             break;
@@ -338,15 +365,34 @@ pub fn solve(p: &mut Problem, sweep: Sweep, stop: Option<&AtomicBool>) -> Outcom
                 r.copy_from_slice(&next);
             }
             Sweep::GaussSeidel => {
+                if accelerate {
+                    start.clear();
+                    start.extend_from_slice(r);
+                }
                 for c in 0..colours.count() {
                     uzawa_sweep(w, local, colours.colour(c), r, &mut dr, SETTLE * tolerance, floor);
                 }
             }
         }
         let (change, size) = nodal.change(&dr, r, &mut scratch);
+        // A mixed iterate that made things worse: back to the sweep before it.
+        if mixed && change > REJECT_GROWTH * best_change {
+            anderson.reject(r);
+            outcome.iterations = it;
+            rejections += 1;
+            mixed = false;
+            continue;
+        }
+        if mixed {
+            anderson.accept();
+        }
+        best_change = best_change.min(change);
         outcome = judge.after(it, change, size);
         if outcome.converged {
             break;
+        }
+        if accelerate && rejections < MAX_REJECTIONS && it < max_iterations {
+            mixed = anderson.mix(&start, r, |i| local[i].mu);
         }
     }
     outcome

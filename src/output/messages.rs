@@ -66,6 +66,15 @@ pub struct SolverMessage {
     pub factorizations: usize,
     pub residual_norm: Real,
     pub cutbacks: usize,
+    /// Step control: sub-steps the step was taken in, attempts rejected for a node deeper than
+    /// `solver.max_overlap` or for creating more energy than `solver.max_step_energy_gain`,
+    /// sub-steps kept with θ = ξ = 1 after one that created energy, and sub-steps kept beyond
+    /// a bound at the smallest step allowed.
+    pub substeps: usize,
+    pub overlap_retries: usize,
+    pub energy_retries: usize,
+    pub raised_theta: usize,
+    pub kept_beyond_bounds: usize,
     pub wall_s: PhaseTimes,
     /// Bytes between host and GPU in the step (0 on the CPU).
     pub bytes_moved: u64,

@@ -1,6 +1,6 @@
 //! The scene format. Unknown keys are rejected everywhere.
 
-pub use crate::contact::uzawa::Sweep;
+pub use crate::contact::uzawa::{Acceleration, Sweep};
 use crate::mesh::ElementKind;
 use crate::precision::Real;
 use serde::{Deserialize, Serialize};
@@ -87,6 +87,16 @@ pub struct SolverSpec {
     pub reuse_factorization: bool,
     /// Fill-reducing ordering of each body's factorisation.
     pub ordering: OrderingChoice,
+    /// Step control: a step that leaves a node deeper than this share of its element inside
+    /// another body (or behind an obstacle) is retried smaller (`inf`: never).
+    pub max_overlap: Real,
+    /// Step control: a step that creates more than this share of the energy scale is retried
+    /// with θ = ξ = 1, then smaller (`inf`: never).
+    pub max_step_energy_gain: Real,
+    /// A run that ends having created more than this share of the energy scale (total energy
+    /// above what it started with, plus external work, less friction) exits non-zero
+    /// (`inf`: never).
+    pub max_energy_gain: Real,
 }
 
 /// `solver.ordering`: `auto` tries nested dissection on bodies of 3000 free dofs or more and
@@ -102,7 +112,7 @@ pub enum OrderingChoice {
 
 impl Default for SolverSpec {
     fn default() -> Self {
-        Self { residual_tolerance: 1e-9, increment_tolerance: 1e-9, max_iterations: 25, max_cutbacks: 6, reuse_factorization: true, ordering: OrderingChoice::Auto }
+        Self { residual_tolerance: 1e-9, increment_tolerance: 1e-9, max_iterations: 25, max_cutbacks: 6, reuse_factorization: true, ordering: OrderingChoice::Auto, max_overlap: 0.01, max_step_energy_gain: 1e-4, max_energy_gain: 0.01 }
     }
 }
 
@@ -352,6 +362,9 @@ pub struct ContactSpec {
     pub max_iterations: usize,
     /// Order of the Uzawa updates: `gauss_seidel` (robust) or `jacobi` (parallel, as on the GPU).
     pub sweep: Sweep,
+    /// Between Gauss-Seidel sweeps: `anderson` (mixing of the last sweeps, safeguarded) or
+    /// `none` (plain sweeps, as on the device).
+    pub acceleration: Acceleration,
     /// Body pairs with their own friction coefficient or slave (or, with `all_pairs = false`,
     /// the only pairs in contact).
     pub pair: BTreeMap<String, PairSpec>,
@@ -362,7 +375,7 @@ pub struct ContactSpec {
 
 impl Default for ContactSpec {
     fn default() -> Self {
-        Self { friction: 0.0, two_pass: false, all_pairs: true, tolerance: 1e-8, max_iterations: 5000, sweep: Sweep::GaussSeidel, pair: BTreeMap::new(), resolve_initial_overlap: false }
+        Self { friction: 0.0, two_pass: false, all_pairs: true, tolerance: 1e-8, max_iterations: 5000, sweep: Sweep::GaussSeidel, acceleration: Acceleration::Anderson, pair: BTreeMap::new(), resolve_initial_overlap: false }
     }
 }
 

@@ -59,6 +59,11 @@ pub(super) fn validate(s: &Scene) -> Result<(), Failure> {
     }
     positive("solver.residual_tolerance".into(), "the residual tolerance", s.solver.residual_tolerance)?;
     positive("solver.increment_tolerance".into(), "the increment tolerance", s.solver.increment_tolerance)?;
+    for (key, v) in [("solver.max_overlap", s.solver.max_overlap), ("solver.max_step_energy_gain", s.solver.max_step_energy_gain), ("solver.max_energy_gain", s.solver.max_energy_gain)] {
+        if !(v > 0.0) {
+            fail(Invalid, key, format!("the bound must be positive, or inf to turn it off (got {v})."))?;
+        }
+    }
     if s.solver.max_iterations == 0 {
         fail(Invalid, "solver.max_iterations", "at least one Newton iteration is needed.")?;
     }

@@ -70,6 +70,15 @@ pub enum StepFailure {
     /// element size); it is cut back instead.
     #[error("with the second contact pass thinned, a node went {ratio:.3} elements deep")]
     ThinnedPenetration { ratio: Real },
+    /// The step ended with a node deeper inside another body (or behind an obstacle) than
+    /// `solver.max_overlap` of its element: it is retried smaller.
+    #[error("a node went {ratio:.3e} elements deep (solver.max_overlap = {bound:.3e})")]
+    Overlap { ratio: Real, bound: Real },
+    /// The step created energy (its numerical dissipation was negative) beyond
+    /// `solver.max_step_energy_gain` of the energy scale: it is retried with θ = ξ = 1 if it
+    /// had contact reactions (an impact), then smaller.
+    #[error("the step created {gain:.3e} of the energy scale (solver.max_step_energy_gain = {bound:.3e})")]
+    EnergyGain { gain: Real, bound: Real, contact: bool },
     /// The run's interrupt flag was set during the step: it is abandoned, not cut back.
     #[error("interrupted during the step")]
     Interrupted,

@@ -96,6 +96,16 @@ pub struct StepReport {
     pub device_submits: u64,
     /// One line per cut-back: why the step failed and the new time step.
     pub events: Vec<String>,
+    /// Sub-steps the step was taken in (1 without step control acting).
+    pub substeps: usize,
+    /// Attempts rejected because a node went deeper than `solver.max_overlap`, or because
+    /// the attempt created more energy than `solver.max_step_energy_gain`.
+    pub overlap_retries: usize,
+    pub energy_retries: usize,
+    /// Sub-steps kept with θ = ξ = 1 (raised after one at the scene's θ created energy).
+    pub raised_theta: usize,
+    /// Sub-steps kept beyond a bound at the smallest step the cut-backs allow.
+    pub kept_beyond_bounds: usize,
 }
 
 /// A step that could not be completed even after all cut-backs.
@@ -153,6 +163,27 @@ pub(crate) fn body_overlaps(bodies: &[Body], model: &ContactModel, positions: &[
 /// this share of its element inside another body; otherwise it is cut back.
 pub const THINNED_PENETRATION: Real = 0.01;
 
+/// A step is retried for overlap only when it leaves the deepest overlap more than this many
+/// times deeper than the step before it did.
+pub const OVERLAP_GROWTH: Real = 1.25;
+
+/// Steps in a row without a retry after which the sub-step doubles back.
+pub const GROW_AFTER: usize = 4;
+
+/// How an attempt at a step is solved and judged.
+#[derive(Debug, Clone, Copy, Default)]
+struct Attempt {
+    /// Without the second-pass points that repeat first-pass ones ([`thin_second_pass`]).
+    thin: bool,
+    /// With θ = ξ = 1 (backward Euler, which dissipates), after the scene's θ created energy.
+    raised: bool,
+    /// At the smallest step the cut-backs allow: kept even beyond the overlap and energy
+    /// bounds (counted in [`StepReport::kept_beyond_bounds`]).
+    last: bool,
+    /// The energy scale the step's gain is measured against.
+    energy_scale: Real,
+}
+
 pub struct Simulation {
     pub dim: usize,
     pub bodies: Vec<Body>,
@@ -169,6 +200,17 @@ pub struct Simulation {
     pub increment_tolerance: Real,
     pub max_iterations: usize,
     pub max_cutbacks: usize,
+    /// Step control: the deepest overlap a kept step may leave, in element sizes, and the
+    /// share of the energy scale a kept step may create ([`StepFailure::Overlap`],
+    /// [`StepFailure::EnergyGain`]).
+    pub max_overlap: Real,
+    pub max_step_energy_gain: Real,
+    /// Cut-back level the next step starts at (its sub-steps are `dt / 2^level`), and the easy
+    /// steps taken at it since: after [`GROW_AFTER`] the level drops by one (dt doubles back).
+    pub level: usize,
+    pub easy_steps: usize,
+    /// The deepest overlap the last committed sub-step left, in element sizes.
+    pub last_overlap: Real,
     /// Cumulative work of the reactions of prescribed sets and of moving obstacles.
     pub external_work: Real,
     pub friction_dissipation: Real,
@@ -205,14 +247,28 @@ impl Simulation {
         self.step >= self.step_count()
     }
 
-    /// Advances one scene step, halving the time step of a failed attempt up to `max_cutbacks`
-    /// times (each half is itself retried the same way).
+    /// Advances one scene step in `2^level` sub-steps, halving the time step of a failed or
+    /// rejected attempt up to `max_cutbacks` levels (each half is itself retried the same way).
+    /// A step that needed a retry sets the level the next one starts at to the deepest it
+    /// used; [`GROW_AFTER`] steps in a row without one take the level back up by one.
     pub fn advance(&mut self) -> Result<StepReport, RunFailure> {
         let started = std::time::Instant::now();
         let dt = self.dt.min(self.end - self.t).max(self.dt * 1e-9);
         let mut report = StepReport { step: self.step + 1, dt, ..Default::default() };
         let submits = self.world.as_ref().map_or(0, GpuWorld::submits);
-        let result = self.advance_by(dt, 0, &mut report);
+        let level = self.level.min(self.max_cutbacks);
+        let energy_scale = if self.max_step_energy_gain.is_finite() { self.energy_scale() } else { Real::INFINITY };
+        let mut deepest = level;
+        let result = (0..1usize << level).try_for_each(|_| self.advance_by(dt / (1u64 << level) as Real, level, energy_scale, &mut report, &mut deepest));
+        let retried = report.cutbacks + report.overlap_retries + report.energy_retries > 0;
+        if retried {
+            (self.level, self.easy_steps) = (deepest, 0);
+        } else {
+            self.easy_steps += 1;
+            if self.easy_steps >= GROW_AFTER && self.level > 0 {
+                (self.level, self.easy_steps) = (self.level - 1, 0);
+            }
+        }
         report.wall.total = started.elapsed().as_secs_f64();
         if let Some(world) = &mut self.world {
             report.bytes_moved = world.take_traffic().total();
@@ -229,25 +285,48 @@ impl Simulation {
         }
     }
 
-    fn advance_by(&mut self, dt: Real, depth: usize, report: &mut StepReport) -> Result<(), (StepFailure, Real)> {
+    /// The energy scale a step's gain is measured against: `max(|E(0)|, |E|, |W_ext|)`.
+    pub fn energy_scale(&self) -> Real {
+        let e = self.energies();
+        [self.initial_energy, e.total, e.external_work].iter().map(|x| x.abs()).fold(Real::MIN_POSITIVE, Real::max)
+    }
+
+    fn advance_by(&mut self, dt: Real, depth: usize, energy_scale: Real, report: &mut StepReport, deepest: &mut usize) -> Result<(), (StepFailure, Real)> {
         if self.interrupted() {
             return Err((StepFailure::Interrupted, dt));
         }
-        let result = match self.try_step(dt, report, false) {
-            Err(failure @ StepFailure::NotConverged { .. }) if self.contact.as_ref().is_some_and(|c| c.pairs.any_second()) => {
+        *deepest = (*deepest).max(depth);
+        let attempt = Attempt { last: depth >= self.max_cutbacks, energy_scale, ..Default::default() };
+        let mut result = self.try_step(dt, report, attempt);
+        if let Err(failure @ StepFailure::NotConverged { .. }) = &result {
+            if self.contact.as_ref().is_some_and(|c| c.pairs.any_second()) {
                 report.events.push(format!("t = {:.6e}: {failure}; retrying with the second contact pass thinned", self.t));
-                self.try_step(dt, report, true)
+                result = self.try_step(dt, report, Attempt { thin: true, ..attempt });
             }
-            other => other,
-        };
+        }
+        if let Err(failure @ StepFailure::EnergyGain { contact, .. }) = &result {
+            report.energy_retries += 1;
+            // Only an impact step is taken with backward Euler: raising θ on a step of free
+            // elastodynamics would damp the vibration; a shorter step is the cure there.
+            if *contact && (self.theta < 1.0 || self.xi < 1.0) {
+                report.events.push(format!("t = {:.6e}: {failure}; retrying with theta = xi = 1", self.t));
+                result = self.try_step(dt, report, Attempt { raised: true, ..attempt });
+                if matches!(result, Err(StepFailure::EnergyGain { .. })) {
+                    report.energy_retries += 1;
+                }
+            }
+        }
+        if matches!(result, Err(StepFailure::Overlap { .. })) {
+            report.overlap_retries += 1;
+        }
         match result {
             Ok(()) => Ok(()),
             Err(StepFailure::Interrupted) => Err((StepFailure::Interrupted, dt)),
             Err(failure) if depth < self.max_cutbacks => {
                 report.cutbacks += 1;
                 report.events.push(format!("t = {:.6e}: {failure}; retrying with dt = {:.3e}", self.t, dt / 2.0));
-                self.advance_by(dt / 2.0, depth + 1, report)?;
-                self.advance_by(dt / 2.0, depth + 1, report)
+                self.advance_by(dt / 2.0, depth + 1, energy_scale, report, deepest)?;
+                self.advance_by(dt / 2.0, depth + 1, energy_scale, report, deepest)
             }
             Err(failure) => Err((failure, dt)),
         }
@@ -258,13 +337,15 @@ impl Simulation {
         self.interrupt.as_ref().is_some_and(|f| f.load(Ordering::SeqCst))
     }
 
-    /// One attempt at a step of length `dt`; `thin`: without the second-pass contact points
-    /// that repeat first-pass ones ([`thin_second_pass`]).
-    fn try_step(&mut self, dt: Real, report: &mut StepReport, thin: bool) -> Result<(), StepFailure> {
+    /// One attempt at a step of length `dt`, solved and judged as `attempt` says. A converged
+    /// attempt that breaks the overlap or energy bound (not at the last level) is rejected
+    /// before anything is committed.
+    fn try_step(&mut self, dt: Real, report: &mut StepReport, attempt: Attempt) -> Result<(), StepFailure> {
+        let Attempt { thin, raised, last, energy_scale } = attempt;
         let p = StepParams {
             dt,
-            xi: self.xi,
-            theta: self.theta,
+            xi: if raised { 1.0 } else { self.xi },
+            theta: if raised { 1.0 } else { self.theta },
             residual_tolerance: self.residual_tolerance,
             increment_tolerance: self.increment_tolerance,
             max_iterations: self.max_iterations,
@@ -313,8 +394,35 @@ impl Simulation {
             // with both passes is the better trade.
             return Err(StepFailure::ThinnedPenetration { ratio: overlap.ratio });
         }
+        // Only an overlap the step deepened is retried: one that stays (a master's corner
+        // between two slave nodes of a single pass) does not shrink with the step.
+        let over_overlap = overlap.ratio > self.max_overlap && overlap.ratio > OVERLAP_GROWTH * self.last_overlap;
+        if over_overlap && !last {
+            return Err(StepFailure::Overlap { ratio: overlap.ratio, bound: self.max_overlap });
+        }
         let stats = ContactStats::of(&points, dt);
+        let accumulators = (self.external_work, self.friction_dissipation, self.numerical_dissipation, self.contact_correction);
         self.book_step(&p, &points, stats.friction_dissipation_step, &mut report.wall)?;
+        // Created energy: what the scheme dissipated, when negative. The drift correction's
+        // input is booked apart and bounded by design (`coupling::shift`); the run's total
+        // counts it ([`Simulation::energy_created`]).
+        let created = accumulators.2 - self.numerical_dissipation;
+        // The work done on the bodies in this step counts in the scale: a body pulled from rest
+        // has no energy at the start of its first step.
+        let energy_scale = energy_scale.max(self.external_work.abs());
+        let over_gain = created > self.max_step_energy_gain * energy_scale;
+        if over_gain && !last {
+            (self.external_work, self.friction_dissipation, self.numerical_dissipation, self.contact_correction) = accumulators;
+            let contact = points.iter().any(|c| c.r[0] > 0.0);
+            return Err(StepFailure::EnergyGain { gain: created / energy_scale, bound: self.max_step_energy_gain, contact });
+        }
+        if over_overlap || over_gain {
+            report.kept_beyond_bounds += 1;
+            let why = if over_overlap { format!("a node {:.3e} elements deep", overlap.ratio) } else { format!("{:.3e} of the energy scale created", created / energy_scale) };
+            report.events.push(format!("t = {:.6e}: kept at the smallest step (dt = {dt:.3e}, solver.max_cutbacks reached) with {why}", self.t));
+        }
+        report.substeps += 1;
+        report.raised_theta += raised as usize;
         let r = &mut report.contact;
         r.active = r.active.max(stats.active);
         r.sticking = r.sticking.max(stats.sticking);
@@ -327,6 +435,7 @@ impl Simulation {
             body.commit();
         }
         self.t += dt;
+        self.last_overlap = overlap.ratio;
         report.contact.max_overlap = report.contact.max_overlap.max(overlap.depth);
         report.contact.max_overlap_ratio = report.contact.max_overlap_ratio.max(overlap.ratio);
         Ok(())
@@ -419,6 +528,17 @@ impl Simulation {
         self.numerical_dissipation += correction - relative_work - friction;
         self.obstacle_reactions = reactions;
         Ok(())
+    }
+
+    /// Energy the run has created so far, relative to the energy scale: the total energy less
+    /// what it started with, the external work and the friction dissipation (the drift
+    /// correction's input and the scheme's negative dissipation). Zero or negative when the
+    /// scheme only dissipated.
+    pub fn energy_created(&self) -> Real {
+        let e = self.energies();
+        let created = e.total - self.initial_energy - e.external_work + e.friction_dissipation;
+        let scale = [self.initial_energy, e.total, e.external_work].iter().map(|x| x.abs()).fold(Real::MIN_POSITIVE, Real::max);
+        created / scale
     }
 
     /// Records the initial energy, the reference of the energy balance.

@@ -19,6 +19,15 @@ pub struct SavedState {
     pub friction_dissipation: Real,
     pub numerical_dissipation: Real,
     pub contact_correction: Real,
+    /// Step control: the cut-back level the next step starts at and the easy steps taken at
+    /// it (absent in logs written before step control: level 0).
+    #[serde(default)]
+    pub step_level: usize,
+    #[serde(default)]
+    pub easy_steps: usize,
+    /// The deepest overlap the last step left, in element sizes (step control's reference).
+    #[serde(default)]
+    pub last_overlap: Real,
     pub bodies: Vec<SavedBody>,
     pub contact: Vec<SavedReaction>,
     pub obstacle_reactions: Vec<[Real; 3]>,
@@ -82,6 +91,9 @@ impl Simulation {
             friction_dissipation: self.friction_dissipation,
             numerical_dissipation: self.numerical_dissipation,
             contact_correction: self.contact_correction,
+            step_level: self.level,
+            easy_steps: self.easy_steps,
+            last_overlap: self.last_overlap,
             bodies: self
                 .bodies
                 .iter()
@@ -150,6 +162,7 @@ impl Simulation {
         self.friction_dissipation = saved.friction_dissipation;
         self.numerical_dissipation = saved.numerical_dissipation;
         self.contact_correction = saved.contact_correction;
+        (self.level, self.easy_steps, self.last_overlap) = (saved.step_level, saved.easy_steps, saved.last_overlap);
         self.obstacle_reactions.clone_from(&saved.obstacle_reactions);
         self.restored_warm_start = Some(saved.contact.iter().map(|c| ((c.slave_body, c.slave_node, c.master), (c.r, c.rho))).collect());
         Ok(())

@@ -276,6 +276,11 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
         increment_tolerance: scene.solver.increment_tolerance,
         max_iterations: scene.solver.max_iterations,
         max_cutbacks: scene.solver.max_cutbacks,
+        max_overlap: scene.solver.max_overlap,
+        max_step_energy_gain: scene.solver.max_step_energy_gain,
+        level: 0,
+        easy_steps: 0,
+        last_overlap: 0.0,
         external_work: 0.0,
         friction_dissipation: 0.0,
         numerical_dissipation: 0.0,
@@ -443,6 +448,6 @@ fn build_contact(loaded: &LoadedScene, bodies: &[Body], dim: usize) -> Result<Op
     if obstacles.is_empty() && !pairs.any() {
         return Ok(None);
     }
-    let settings = Settings { tolerance: spec.tolerance, max_iterations: spec.max_iterations, sweep: spec.sweep };
+    let settings = Settings { tolerance: spec.tolerance, max_iterations: spec.max_iterations, sweep: spec.sweep, acceleration: spec.acceleration };
     Ok(Some(ContactModel { settings, surfaces, obstacles, pairs }))
 }
