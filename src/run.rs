@@ -434,8 +434,7 @@ const ENERGY_GAIN_LINES: usize = 10;
 /// `dissipated` the numerical dissipation before it. The run counts its steps with it, and the
 /// summary of a log without `/summary` its logged intervals.
 pub fn energy_gain(initial: Real, e: &Energies, dissipated: Real) -> Option<Real> {
-    let scale = [initial, e.total, e.external_work].iter().map(|x| x.abs()).fold(Real::MIN_POSITIVE, Real::max);
-    let gain = (dissipated - e.numerical_dissipation) / scale;
+    let gain = (dissipated - e.numerical_dissipation) / e.scale(initial);
     (gain > ENERGY_GAIN_TOLERANCE).then_some(gain)
 }
 

@@ -15,7 +15,7 @@ use crate::output::plot::PlotError;
 use crate::run::{run_scene, Monitor, RunError, RunOptions};
 use crate::scene::{load_scene, LoadedScene, SceneError};
 use crate::solver::Simulation;
-use crate::sweep::{variants, SweepAxis, SweepError, Variant};
+use crate::sweep::{numbers_of, variants, SweepAxis, SweepError, Variant};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
@@ -138,7 +138,7 @@ impl Study {
             }
             let (summary, message, errors) = first.expect("one run or more");
             let error = errors.iter().map(|e| e.error).fold(0.0, f64::max);
-            let values = self.axes.iter().map(|a| variant.sets.iter().find_map(|s| s.strip_prefix(&format!("{}=", a.key))).unwrap_or_default().to_string()).collect();
+            let values = self.axes.iter().map(|a| variant.value(&a.key).to_string()).collect();
             let row = Row {
                 index: variant.index,
                 label: variant.label.clone(),
@@ -201,12 +201,7 @@ pub fn cheapest_within(rows: &[Row], target: f64) -> Option<&Row> {
 
 /// A swept value as a number: a number, or the largest entry of an array (mesh divisions).
 fn numeric(value: &str) -> Option<f64> {
-    let v: toml::Value = toml::from_str(&format!("v = {value}")).ok().and_then(|t: toml::Table| t.get("v").cloned())?;
-    let number = |v: &toml::Value| v.as_float().or_else(|| v.as_integer().map(|i| i as f64));
-    match &v {
-        toml::Value::Array(items) => items.iter().map(number).collect::<Option<Vec<f64>>>()?.into_iter().reduce(f64::max),
-        other => number(other),
-    }
+    numbers_of(value)?.into_iter().reduce(f64::max)
 }
 
 /// Along each numeric axis, with the other axes fixed, the slope of log(error) against

@@ -141,6 +141,14 @@ pub struct Energies {
     pub energy_balance_error: Real,
 }
 
+impl Energies {
+    /// The scale energy gains are measured against: `max(|E(0)|, |E|, |W_ext|)`, `initial`
+    /// being `E(0)`.
+    pub fn scale(&self, initial: Real) -> Real {
+        [initial, self.total, self.external_work].iter().map(|x| x.abs()).fold(Real::MIN_POSITIVE, Real::max)
+    }
+}
+
 /// Node positions per body: the reference nodes plus the displacements `u(body)` (committed or
 /// trial), padded to 3 components.
 pub(crate) fn node_positions(bodies: &[Body], u: impl Fn(&Body) -> &[Real] + Sync) -> Vec<Vec<[Real; 3]>> {
@@ -285,10 +293,9 @@ impl Simulation {
         }
     }
 
-    /// The energy scale a step's gain is measured against: `max(|E(0)|, |E|, |W_ext|)`.
+    /// The energy scale a step's gain is measured against, now ([`Energies::scale`]).
     pub fn energy_scale(&self) -> Real {
-        let e = self.energies();
-        [self.initial_energy, e.total, e.external_work].iter().map(|x| x.abs()).fold(Real::MIN_POSITIVE, Real::max)
+        self.energies().scale(self.initial_energy)
     }
 
     fn advance_by(&mut self, dt: Real, depth: usize, energy_scale: Real, report: &mut StepReport, deepest: &mut usize) -> Result<(), (StepFailure, Real)> {
@@ -536,9 +543,7 @@ impl Simulation {
     /// scheme only dissipated.
     pub fn energy_created(&self) -> Real {
         let e = self.energies();
-        let created = e.total - self.initial_energy - e.external_work + e.friction_dissipation;
-        let scale = [self.initial_energy, e.total, e.external_work].iter().map(|x| x.abs()).fold(Real::MIN_POSITIVE, Real::max);
-        created / scale
+        (e.total - self.initial_energy - e.external_work + e.friction_dissipation) / e.scale(self.initial_energy)
     }
 
     /// Records the initial energy, the reference of the energy balance.

@@ -10,7 +10,7 @@ pub use plot::map_png;
 use crate::backend::BackendRequest;
 use crate::run::{run_scene, RunError, RunOptions, RunSummary, Silent, Stop, ENERGY_CREATED};
 use crate::scene::{load_scene, LoadedScene, SceneError};
-use crate::sweep::{variants, SweepAxis, SweepError, Variant};
+use crate::sweep::{numbers_of, variants, SweepAxis, SweepError, Variant};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -136,7 +136,7 @@ impl Study {
                 Err(RunError::Stopped { reason, summary }) => (summary, Some(reason)),
                 Err(e) => return Err(StabilityError::Run { label: variant.label.clone(), source: Box::new(e) }),
             };
-            let values = self.axes.iter().map(|a| value_of(variant, &a.key)).collect();
+            let values = self.axes.iter().map(|a| variant.value(&a.key).to_string()).collect();
             let (class, reasons) = classify(&summary, stop.as_ref(), over_time.load(Ordering::SeqCst), budget);
             let row = Row {
                 index: variant.index,
@@ -180,11 +180,6 @@ fn watch(wall_s: f64, interrupt: Option<Arc<AtomicBool>>) -> (Arc<AtomicBool>, A
     (flag, over_time, handle)
 }
 
-/// The value a variant gives `key` (its `--set`), as written.
-fn value_of(variant: &Variant, key: &str) -> String {
-    variant.sets.iter().rev().find_map(|s| s.split_once('=').filter(|(k, _)| *k == key).map(|(_, v)| v.to_string())).unwrap_or_default()
-}
-
 /// The class of a run and why: failed (stopped for a reason other than the budget), too slow
 /// (stopped at the wall budget, or over the sweeps per step), degraded (finished with
 /// warnings), else stable.
@@ -222,11 +217,9 @@ pub fn classify(s: &RunSummary, stop: Option<&Stop>, over_time: bool, budget: Bu
 /// A value's size for ordering an axis: the number, or the Euclidean norm of an array of numbers
 /// (an initial velocity); `None` for anything else.
 pub fn magnitude(value: &str) -> Option<f64> {
-    let parsed: toml::Value = toml::from_str(&format!("v = {value}")).ok().and_then(|t: toml::Table| t.get("v").cloned())?;
-    let number = |v: &toml::Value| v.as_float().or_else(|| v.as_integer().map(|i| i as f64));
-    match &parsed {
-        toml::Value::Array(items) => items.iter().map(number).collect::<Option<Vec<f64>>>().map(|xs| xs.iter().map(|x| x * x).sum::<f64>().sqrt()),
-        other => number(other),
+    match numbers_of(value)?.as_slice() {
+        [x] => Some(*x),
+        xs => Some(xs.iter().map(|x| x * x).sum::<f64>().sqrt()),
     }
 }
 

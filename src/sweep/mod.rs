@@ -86,6 +86,25 @@ pub struct Variant {
     pub stem: String,
 }
 
+impl Variant {
+    /// The value this variant gives `key` (as written in `--over`), or "" for a key it does
+    /// not set.
+    pub fn value(&self, key: &str) -> &str {
+        self.sets.iter().find_map(|s| s.strip_prefix(key).and_then(|rest| rest.strip_prefix('='))).unwrap_or_default()
+    }
+}
+
+/// The numbers an axis value holds: one for a number, each entry of an array of numbers (a
+/// velocity); `None` for anything else.
+pub fn numbers_of(value: &str) -> Option<Vec<f64>> {
+    let v: toml::Value = toml::from_str(&format!("v = {value}")).ok().and_then(|t: toml::Table| t.get("v").cloned())?;
+    let number = |v: &toml::Value| v.as_float().or_else(|| v.as_integer().map(|i| i as f64));
+    match &v {
+        toml::Value::Array(items) => items.iter().map(number).collect(),
+        other => number(other).map(|x| vec![x]),
+    }
+}
+
 /// Every combination of the axes' values, the first axis varying slowest. Labels use the last
 /// segment of each key (`friction=0.2`) unless two axes share it.
 pub fn variants(scene_name: &str, axes: &[SweepAxis]) -> Result<Vec<Variant>, SweepError> {
