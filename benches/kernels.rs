@@ -1,13 +1,14 @@
 //! Criterion benchmarks of the CPU engine:
-//! - `element/<model>/<element>`: internal force + tangent of 1000 elements (elements/s);
+//! - `element/<model>/<element>`: internal force + tangent of 1000 elements (elements/s), the
+//!   F-bar element as `quad4+fbar` and `hex8+fbar`;
 //! - `newton_hex8_50k/{assembly,factorization,solve}`: the three phases of one Newton iteration
 //!   of a 3D Hex8 block with about 50k unknowns, and `assembly_gpu_<precision>` on a GPU adapter;
 //! - `gpu_element/<precision>/<model>/<element>` and `gpu_assembly/<precision>/<element>`: the
 //!   element and assembly kernels on a GPU adapter (skipped, with the reason, without one).
 //! Results are recorded in doc/benchmarks.md.
 
-use bifirst::bench::{bench_devices, bench_models, BenchCase, KINDS};
-use bifirst::element::{element_force_tangent, ElementOutput, ReferenceGeometry};
+use bifirst::bench::{bench_devices, bench_elements, bench_models, element_label, BenchCase, KINDS};
+use bifirst::element::{element_force_tangent, ElementOutput, Formulation, ReferenceGeometry};
 use bifirst::gpu::types::{Coefficients, DofOut};
 use bifirst::gpu::{Gpu, WorldKernel};
 use std::sync::Arc;
@@ -36,7 +37,7 @@ fn deform(x: [f64; 3]) -> [f64; 3] {
 
 fn element_kernels(c: &mut Criterion) {
     let mut group = c.benchmark_group("element");
-    for kind in [ElementKind::Tri3, ElementKind::Quad4, ElementKind::Tet4, ElementKind::Hex8] {
+    for (kind, formulation) in bench_elements() {
         let mesh = mesh_of(kind);
         let geometry = ReferenceGeometry::new(&mesh).unwrap();
         let u: Vec<Vec<[f64; 3]>> = (0..mesh.element_count())
@@ -50,11 +51,11 @@ fn element_kernels(c: &mut Criterion) {
             .collect();
         group.throughput(Throughput::Elements(mesh.element_count() as u64));
         for model in bench_models() {
-            group.bench_with_input(BenchmarkId::new(model.name(), kind.name()), &model, |b, model| {
+            group.bench_with_input(BenchmarkId::new(model.name(), element_label(kind, formulation)), &model, |b, model| {
                 let mut out = ElementOutput::default();
                 b.iter(|| {
                     for (e, ue) in u.iter().enumerate() {
-                        element_force_tangent(model, geometry.element_points(e), ue, kind.dim(), true, &mut out).unwrap();
+                        element_force_tangent(model, geometry.element_points(e), ue, kind.dim(), formulation, true, &mut out).unwrap();
                         black_box(&out);
                     }
                 })
@@ -71,7 +72,7 @@ fn newton_iteration(c: &mut Criterion) {
     let prescribed: Vec<Prescribed> = mesh.node_sets["z_min"].iter().flat_map(|&n| (0..3).map(move |i| Prescribed { dof: n as usize * 3 + i, velocity: 0.0, set: 0 })).collect();
     let model = Model::NeoHookean(NeoHookean { g: 1000.0, k: 3000.0 });
     let topology = Topology::new(&mesh, &prescribed, Default::default()).unwrap();
-    let mut body = Body::new("block".into(), mesh.clone(), geometry, model, 1.0, prescribed, |_| [0.0; 3], &topology);
+    let mut body = Body::new("block".into(), mesh.clone(), geometry, model, Formulation::Displacement, 1.0, prescribed, |_| [0.0; 3], &topology);
     let u: Vec<f64> = mesh.nodes.iter().flat_map(|&x| deform(x)).collect();
     let (dt, theta, xi) = (1e-3, 0.5, 0.5);
     let c1 = 1.0 / (theta * dt * dt);
@@ -110,20 +111,20 @@ fn gpu_kernels(c: &mut Criterion) {
     for gpu in devices() {
         let precision = gpu.precision.name();
         let mut group = c.benchmark_group("gpu_element");
-        for kind in KINDS {
+        for (kind, formulation) in bench_elements() {
             for model in bench_models() {
-                let case = BenchCase::new(kind, model, 1000);
+                let case = BenchCase::new(kind, formulation, model, 1000);
                 let mut world = case.on(&gpu).unwrap();
                 let (mut values, mut dof_out) = (vec![0.0; case.pattern.nnz()], vec![DofOut::default(); case.u.len()]);
                 case.evaluate_on(&mut world, true, &mut values, &mut dof_out).unwrap();
                 group.throughput(Throughput::Elements(case.elements() as u64));
-                group.bench_function(format!("{precision}/{}/{}", case.model.name(), kind.name()), |b| b.iter(|| world.replay(WorldKernel::ForceTangent).unwrap()));
+                group.bench_function(format!("{precision}/{}/{}", case.model.name(), element_label(kind, formulation)), |b| b.iter(|| world.replay(WorldKernel::ForceTangent).unwrap()));
             }
         }
         group.finish();
         let mut group = c.benchmark_group("gpu_assembly");
         for kind in KINDS {
-            let case = BenchCase::new(kind, bench_models()[0].clone(), 1000);
+            let case = BenchCase::new(kind, Formulation::Displacement, bench_models()[0].clone(), 1000);
             let mut world = case.on(&gpu).unwrap();
             let (mut values, mut dof_out) = (vec![0.0; case.pattern.nnz()], vec![DofOut::default(); case.u.len()]);
             group.throughput(Throughput::Elements(case.elements() as u64));

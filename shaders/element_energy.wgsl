@@ -1,4 +1,4 @@
-// Strain energy of one element per invocation, `Σ_q dV W(E)`, for the active members of a batch
+// Strain energy of one element per invocation, `Σ_q dV W(E)` (E of F̄ for the F-bar element), for the active members of a batch
 // (`batch.wgsl`). CPU twin: `element::element_energy`. Same inputs and prelude as
 // `element_force_tangent`.
 
@@ -24,10 +24,21 @@ fn main(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workg
     let e = range.element_start + local;
     material = materials[range.material];
     let ue = element_displacements(e);
+    var fq: array<Mat3, NQP>;
+    for (var q = 0u; q < NQP; q++) {
+        fq[q] = deformation_gradient((e * NQP + q) * POINT_STRIDE, ue);
+    }
+    var theta = real(1.0);
+    if FBAR {
+        theta = mean_dilatation(e, fq);
+    }
     var w = real(0.0);
     for (var q = 0u; q < NQP; q++) {
-        let point = (e * NQP + q) * POINT_STRIDE;
-        w += point_volume(point) * material_energy(green_lagrange(deformation_gradient(point, ue)));
+        var f = fq[q];
+        if FBAR {
+            f = fbar_scale(f, fbar_alpha(theta, determinant(f)));
+        }
+        w += point_volume((e * NQP + q) * POINT_STRIDE) * material_energy(green_lagrange(f));
     }
     energy[e] = w;
 }

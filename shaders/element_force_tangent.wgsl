@@ -3,17 +3,20 @@
 // `element::element_force_tangent`; these are its sums, spread over the invocations of a
 // workgroup so that no invocation holds a whole element matrix.
 // The prelude defines `real`, the element constants NEN (nodes), NQP (quadrature points), DIM,
-// NDOF = NEN * DIM, and includes `element.wgsl` and the material (`material_stress` and
+// NDOF = NEN * DIM, FBAR (the F-bar element, `include/fbar.wgsl`, or the displacement one), and
+// includes `element.wgsl`, `fbar.wgsl` and the material (`material_stress` and
 // `material_stress_tangent`, which read the private `material`).
 //
 // Two entry points:
 //   `forces`: one element per invocation, the internal force only (Newton evaluations that keep
 //             a factorisation need no tangent).
 //   `main`:   force and tangent of ELEMENTS_PER_GROUP elements per workgroup. Phase 1: one
-//             invocation per quadrature point computes F, dV S and dV D into workgroup memory.
+//             invocation per quadrature point computes F, then dV S and dV D (at F̄ for
+//             F-bar, which needs the element's other points' J) into workgroup memory.
 //             Phase 2: the node pairs (a <= b) of those elements, spread over the invocations,
 //             each integrating the DIM x DIM block K_ab = Σ_q B_aᵀ (dV D) B_b + (g_a · dV S g_b) I
-//             and, for a == b, the force of node a.
+//             and, for a == b, the force of node a (F-bar: `fbar_pair`, whose blocks couple
+//             every point of the element through θ).
 //
 // Per element out: NDOF forces, then the upper triangle (row <= col) of the tangent packed row
 // by row, local order (node a, component i) -> a * DIM + i.
@@ -75,19 +78,46 @@ fn forces(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) wor
     let e = range.element_start + local;
     material = materials[range.material];
     let ue = element_displacements(e);
-    var force: array<real, NDOF>;
+    var fq: array<Mat3, NQP>;
     for (var q = 0u; q < NQP; q++) {
-        let point = (e * NQP + q) * POINT_STRIDE;
-        let f = deformation_gradient(point, ue);
-        if !(determinant(f) > real(0.0)) {
+        fq[q] = deformation_gradient((e * NQP + q) * POINT_STRIDE, ue);
+        if !(determinant(fq[q]) > real(0.0)) {
             fail(job.member, local, INVERTED);
             return;
         }
-        let fs = f * material_stress(green_lagrange(f)) * point_volume(point);
-        for (var a = 0u; a < NEN; a++) {
-            let g = fs * gradient(point, a);
-            for (var i = 0u; i < DIM; i++) {
-                force[a * DIM + i] += g[i];
+    }
+    var theta = real(1.0);
+    var theta_hat: array<vec3<real>, NEN>;
+    if FBAR {
+        theta = mean_dilatation(e, fq);
+        theta_hat = dilatation_gradient(e, fq);
+    }
+    var force: array<real, NDOF>;
+    for (var q = 0u; q < NQP; q++) {
+        let point = (e * NQP + q) * POINT_STRIDE;
+        let f = fq[q];
+        if FBAR {
+            // f_a = Σ_q dV α² (F S̄ g_a + (S̄ : C) β_a), β_a = (θ̂_a - h_a) / DIM.
+            let alpha = fbar_alpha(theta, determinant(f));
+            let s = material_stress(green_lagrange(fbar_scale(f, alpha))) * point_volume(point);
+            let t = scaled_trace(s, transpose(f) * f);
+            let fs = f * s;
+            let inv_t = transpose(inverse3(f));
+            for (var a = 0u; a < NEN; a++) {
+                let g = gradient(point, a);
+                let beta = (theta_hat[a] - inv_t * g) / real(DIM);
+                let fa = (fs * g + t * beta) * (alpha * alpha);
+                for (var i = 0u; i < DIM; i++) {
+                    force[a * DIM + i] += fa[i];
+                }
+            }
+        } else {
+            let fs = f * material_stress(green_lagrange(f)) * point_volume(point);
+            for (var a = 0u; a < NEN; a++) {
+                let g = fs * gradient(point, a);
+                for (var i = 0u; i < DIM; i++) {
+                    force[a * DIM + i] += g[i];
+                }
             }
         }
     }
@@ -121,25 +151,39 @@ fn main(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workg
     let job = jobs[workgroup.z];
     let range = members[job.member];
     let first = chunk_of(workgroup) * ELEMENTS_PER_GROUP;
-    // Phase 1: one quadrature point per invocation, every invocation busy.
+    // Phase 1: one quadrature point per invocation, every invocation busy. First F, then (the
+    // F-bar element needs every point's J) the material at F or F̄.
     let point_element = first + lane / NQP;
+    let busy = job.mode == TANGENT && point_element < range.elements;
+    let e = range.element_start + point_element;
+    let point = (e * NQP + lane % NQP) * POINT_STRIDE;
     point_ok[lane] = 0u;
-    if job.mode == TANGENT && point_element < range.elements {
-        let e = range.element_start + point_element;
-        material = materials[range.material];
-        let point = (e * NQP + lane % NQP) * POINT_STRIDE;
+    if busy {
         let f = deformation_gradient(point, element_displacements(e));
         point_f[lane] = f;
         if determinant(f) > real(0.0) {
-            let st = material_stress_tangent(green_lagrange(f));
-            let dv = point_volume(point);
-            point_s[lane] = st.s * dv;
-            for (var r = 0u; r < 36u; r++) {
-                point_d[lane][r] = st.d[r] * dv;
-            }
             point_ok[lane] = 1u;
         } else {
             fail(job.member, point_element, INVERTED);
+        }
+    }
+    workgroupBarrier();
+    let base = lane - lane % NQP;
+    if busy && element_ok(base) {
+        material = materials[range.material];
+        var f = point_f[lane];
+        if FBAR {
+            var fq: array<Mat3, NQP>;
+            for (var q = 0u; q < NQP; q++) {
+                fq[q] = point_f[base + q];
+            }
+            f = fbar_scale(f, fbar_alpha(mean_dilatation(e, fq), determinant(f)));
+        }
+        let st = material_stress_tangent(green_lagrange(f));
+        let dv = point_volume(point);
+        point_s[lane] = st.s * dv;
+        for (var r = 0u; r < 36u; r++) {
+            point_d[lane][r] = st.d[r] * dv;
         }
     }
     workgroupBarrier();
@@ -156,6 +200,16 @@ fn main(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workg
     }
 }
 
+// Whether every point of the element whose points start at `base` has det F > 0.
+fn element_ok(base: u32) -> bool {
+    for (var q = 0u; q < NQP; q++) {
+        if point_ok[base + q] == 0u {
+            return false;
+        }
+    }
+    return true;
+}
+
 // The block K_ab of node pair `pair` (a <= b) of element `e`, from the points of phase 1 at
 // `base`, and for a == b the force of node a.
 fn pair_block(member: u32, e: u32, local: u32, base: u32, pair_index: u32) {
@@ -166,42 +220,44 @@ fn pair_block(member: u32, e: u32, local: u32, base: u32, pair_index: u32) {
         a++;
     }
     let b = a + pair;
-    for (var q = 0u; q < NQP; q++) {
-        if point_ok[base + q] == 0u {
-            // The element is inverted: phase 1 reported it.
-            return;
-        }
+    if !element_ok(base) {
+        // The element is inverted: phase 1 reported it.
+        return;
     }
     var k: array<array<real, 3>, 3>;
     var force = vec3<real>(real(0.0));
-    for (var q = 0u; q < NQP; q++) {
-        let point = (e * NQP + q) * POINT_STRIDE;
-        let f = point_f[base + q];
-        let s = point_s[base + q];
-        let ga = gradient(point, a);
-        let gb = gradient(point, b);
-        // (dV D) B_b, one column per component j of node b.
-        var db: array<vec3<real>, 6>;
-        for (var c = 0u; c < 6u; c++) {
-            let bc = b_row(f, gb, c);
-            for (var r = 0u; r < 6u; r++) {
-                db[r] += point_d[base + q][r * 6u + c] * bc;
-            }
-        }
-        let geometric = dot(ga, s * gb);
-        for (var r = 0u; r < 6u; r++) {
-            let ba = b_row(f, ga, r);
-            for (var i = 0u; i < DIM; i++) {
-                for (var j = 0u; j < DIM; j++) {
-                    k[i][j] += ba[i] * db[r][j];
+    if FBAR {
+        fbar_pair(e, base, a, b, &k, &force);
+    } else {
+        for (var q = 0u; q < NQP; q++) {
+            let point = (e * NQP + q) * POINT_STRIDE;
+            let f = point_f[base + q];
+            let s = point_s[base + q];
+            let ga = gradient(point, a);
+            let gb = gradient(point, b);
+            // (dV D) B_b, one column per component j of node b.
+            var db: array<vec3<real>, 6>;
+            for (var c = 0u; c < 6u; c++) {
+                let bc = b_row(f, gb, c);
+                for (var r = 0u; r < 6u; r++) {
+                    db[r] += point_d[base + q][r * 6u + c] * bc;
                 }
             }
-        }
-        for (var i = 0u; i < DIM; i++) {
-            k[i][i] += geometric;
-        }
-        if a == b {
-            force += f * (s * ga);
+            let geometric = dot(ga, s * gb);
+            for (var r = 0u; r < 6u; r++) {
+                let ba = b_row(f, ga, r);
+                for (var i = 0u; i < DIM; i++) {
+                    for (var j = 0u; j < DIM; j++) {
+                        k[i][j] += ba[i] * db[r][j];
+                    }
+                }
+            }
+            for (var i = 0u; i < DIM; i++) {
+                k[i][i] += geometric;
+            }
+            if a == b {
+                force += f * (s * ga);
+            }
         }
     }
     let out = e * OUT_STRIDE;
@@ -222,5 +278,87 @@ fn pair_block(member: u32, e: u32, local: u32, base: u32, pair_index: u32) {
     }
     if !finite {
         fail(member, local, NON_FINITE);
+    }
+}
+
+// The F-bar block K_ab = Σ_q [B̄_aᵀ (dV D̄) B̄_b + dV α² (t (2 β_a β_bᵀ + β_ab) + 2 (β_a r_bᵀ +
+// r_a β_bᵀ) + (g_a · S̄ g_b) I)] and the force of node a (for a == b), with B̄ = α² (B + c βᵀ),
+// t = S̄ : C, r = F S̄ g, β = d ln α / du and β_ab = d² ln α / du_a du_b (`element/fbar.rs`).
+fn fbar_pair(e: u32, base: u32, a: u32, b: u32, k: ptr<function, array<array<real, 3>, 3>>, force: ptr<function, vec3<real>>) {
+    // The element's θ, θ̂_a, θ̂_b and (d²θ/du_a du_b) / θ.
+    var volume = real(0.0);
+    var big_theta = real(0.0);
+    var theta_a = vec3<real>(real(0.0));
+    var theta_b = vec3<real>(real(0.0));
+    var theta_ab: array<array<real, 3>, 3>;
+    for (var q = 0u; q < NQP; q++) {
+        let point = (e * NQP + q) * POINT_STRIDE;
+        let f = point_f[base + q];
+        let dv = point_volume(point);
+        let w = dv * determinant(f);
+        let inv_t = transpose(inverse3(f));
+        let ha = inv_t * gradient(point, a);
+        let hb = inv_t * gradient(point, b);
+        volume += dv;
+        big_theta += w;
+        theta_a += w * ha;
+        theta_b += w * hb;
+        for (var i = 0u; i < DIM; i++) {
+            for (var j = 0u; j < DIM; j++) {
+                theta_ab[i][j] += w * (ha[i] * hb[j] - ha[j] * hb[i]);
+            }
+        }
+    }
+    let theta = big_theta / volume;
+    theta_a = theta_a / big_theta;
+    theta_b = theta_b / big_theta;
+    let n = real(DIM);
+    for (var q = 0u; q < NQP; q++) {
+        let point = (e * NQP + q) * POINT_STRIDE;
+        let f = point_f[base + q];
+        let s = point_s[base + q];
+        let ga = gradient(point, a);
+        let gb = gradient(point, b);
+        let alpha = fbar_alpha(theta, determinant(f));
+        let alpha2 = alpha * alpha;
+        let inv_t = transpose(inverse3(f));
+        let ha = inv_t * ga;
+        let hb = inv_t * gb;
+        let c = transpose(f) * f;
+        let t = scaled_trace(s, c);
+        let beta_a = (theta_a - ha) / n;
+        let beta_b = (theta_b - hb) / n;
+        let ra = f * (s * ga);
+        let rb = f * (s * gb);
+        // (dV D̄) B̄_b, one column per component j of node b.
+        var db: array<vec3<real>, 6>;
+        for (var col = 0u; col < 6u; col++) {
+            let bc = (b_row(f, gb, col) + scaled_voigt(c, col) * beta_b) * alpha2;
+            for (var r = 0u; r < 6u; r++) {
+                db[r] += point_d[base + q][r * 6u + col] * bc;
+            }
+        }
+        for (var r = 0u; r < 6u; r++) {
+            let ba = (b_row(f, ga, r) + scaled_voigt(c, r) * beta_a) * alpha2;
+            for (var i = 0u; i < DIM; i++) {
+                for (var j = 0u; j < DIM; j++) {
+                    (*k)[i][j] += ba[i] * db[r][j];
+                }
+            }
+        }
+        let geometric = dot(ga, s * gb);
+        for (var i = 0u; i < DIM; i++) {
+            for (var j = 0u; j < DIM; j++) {
+                let beta_ab = (theta_ab[i][j] / big_theta - theta_a[i] * theta_b[j] + ha[j] * hb[i]) / n;
+                var kij = t * (real(2.0) * beta_a[i] * beta_b[j] + beta_ab) + real(2.0) * (beta_a[i] * rb[j] + ra[i] * beta_b[j]);
+                if i == j {
+                    kij += geometric;
+                }
+                (*k)[i][j] += alpha2 * kij;
+            }
+        }
+        if a == b {
+            *force += (ra + t * beta_a) * alpha2;
+        }
     }
 }

@@ -4,7 +4,7 @@
 
 use crate::assembly::{element_out_stride, DofMap, GatherMap, StiffnessPattern};
 use crate::cpu;
-use crate::element::ReferenceGeometry;
+use crate::element::{Formulation, ReferenceGeometry};
 use crate::gpu::types::{Coefficients, DofOut, DofStep};
 use crate::contact::uzawa::{self, Acceleration, Colours, Delassus, Local, NodalMap, Problem, Sweep};
 use crate::gpu::uzawa_step::{UzawaPoint, UzawaStepKernel};
@@ -29,11 +29,29 @@ pub fn bench_models() -> [Model; 3] {
 
 pub const KINDS: [ElementKind; 4] = [ElementKind::Tri3, ElementKind::Quad4, ElementKind::Tet4, ElementKind::Hex8];
 
+/// The element kernels the bench measures: every kind as a displacement element, and the F-bar
+/// element of Quad4 and Hex8.
+pub fn bench_elements() -> Vec<(ElementKind, Formulation)> {
+    KINDS
+        .iter()
+        .flat_map(|&kind| std::iter::once((kind, Formulation::Displacement)).chain(Formulation::fbar_applies(kind).then_some((kind, Formulation::Fbar))))
+        .collect()
+}
+
+/// An element's name in the bench rows: the kind, with `+fbar` for the F-bar element.
+pub fn element_label(kind: ElementKind, formulation: Formulation) -> String {
+    match formulation {
+        Formulation::Displacement => kind.name().to_string(),
+        Formulation::Fbar => format!("{}+fbar", kind.name()),
+    }
+}
+
 /// A body's data for the kernels: a mesh of about `elements` elements of `kind` in a smooth,
 /// moderate deformation (a twist and a stretch), with the step inputs of `assemble_residual`.
 pub struct BenchCase {
     pub mesh: Mesh,
     pub model: Model,
+    pub formulation: Formulation,
     pub geometry: ReferenceGeometry,
     pub pattern: StiffnessPattern,
     pub gather: GatherMap,
@@ -43,7 +61,7 @@ pub struct BenchCase {
 }
 
 impl BenchCase {
-    pub fn new(kind: ElementKind, model: Model, elements: usize) -> Self {
+    pub fn new(kind: ElementKind, formulation: Formulation, model: Model, elements: usize) -> Self {
         let n = elements as f64;
         let mesh = match kind {
             ElementKind::Tri3 => generate::rectangle([0.0; 2], [1.0; 2], [side(n / 2.0, 2), side(n / 2.0, 2)], kind),
@@ -65,7 +83,7 @@ impl BenchCase {
         let gather = GatherMap::new(&mesh, dim, &pattern);
         let geometry = ReferenceGeometry::new(&mesh).expect("generated meshes are valid");
         let step = u.iter().enumerate().map(|(d, &x)| DofStep { mass: 1.0 + (d % 7) as Real * 0.1, u_pred: 0.9 * x, f_int_t: 0.0, f_ext: 0.1 }).collect();
-        Self { mesh, model, geometry, pattern, gather, u, step, coefficients: Coefficients { factor: 0.5, c1: 1e4 } }
+        Self { mesh, model, formulation, geometry, pattern, gather, u, step, coefficients: Coefficients { factor: 0.5, c1: 1e4 } }
     }
 
     pub fn elements(&self) -> usize {
@@ -74,7 +92,7 @@ impl BenchCase {
 
     /// `element_force_tangent` of every element on the CPU.
     pub fn cpu_elements(&self, results: &mut [Real]) {
-        cpu::dispatch_element_force_tangent(&self.model, &self.mesh, &self.geometry, &self.u, true, results).expect("valid deformation");
+        cpu::dispatch_element_force_tangent(&self.model, &self.mesh, &self.geometry, self.formulation, &self.u, true, results).expect("valid deformation");
     }
 
     pub fn results_len(&self) -> usize {
@@ -83,7 +101,7 @@ impl BenchCase {
 
     /// A GPU world of this one body, with its step inputs uploaded.
     pub fn on(&self, gpu: &Arc<Gpu>) -> Result<GpuWorld, GpuError> {
-        let body = crate::gpu::WorldBody { mesh: &self.mesh, geometry: &self.geometry, model: &self.model, pattern: &self.pattern, gather: &self.gather };
+        let body = crate::gpu::WorldBody { mesh: &self.mesh, geometry: &self.geometry, model: &self.model, formulation: self.formulation, pattern: &self.pattern, gather: &self.gather };
         let mut world = GpuWorld::new(gpu.clone(), &[body])?;
         world.begin_step(&[(0, &self.step[..])]);
         world.take_traffic();
@@ -210,19 +228,20 @@ fn cpu_reference(case: &BenchCase) -> Reference {
 }
 
 fn element_energies(case: &BenchCase) -> Vec<Real> {
-    (0..case.elements()).map(|e| cpu::element_energy(&case.model, case.geometry.element_points(e), &case.mesh.element_displacements(&case.u, e))).collect()
+    (0..case.elements()).map(|e| cpu::element_energy(&case.model, case.geometry.element_points(e), &case.mesh.element_displacements(&case.u, e), case.mesh.dim(), case.formulation)).collect()
 }
 
 /// Runs the benchmark; `gpus` are the devices to compare with the CPU (f64 and/or f32).
 pub fn run_bench(options: &BenchOptions, gpus: &[Arc<Gpu>], mut row: impl FnMut(BenchRow)) -> Result<(), GpuError> {
     let peaks = peak_rows(options, gpus, &mut row)?;
     let element_kernels = [FORCE_TANGENT, ASSEMBLY, EVALUATE, ENERGY].iter().any(|k| wanted(options, k));
-    for kind in KINDS.into_iter().filter(|_| element_kernels) {
+    for (kind, formulation) in bench_elements().into_iter().filter(|_| element_kernels) {
+        let label = element_label(kind, formulation);
         for model in bench_models() {
-            let case = BenchCase::new(kind, model, options.elements);
+            let case = BenchCase::new(kind, formulation, model, options.elements);
             let n = case.elements();
             let make = |kernel: &str, backend: String, timing: Timing, traffic: u64, error: f64| {
-                BenchRow::new(kernel, kind.name(), case.model.name(), n, backend, timing, traffic, error)
+                BenchRow::new(kernel, &label, case.model.name(), n, backend, timing, traffic, error)
             };
             // The CPU twins, and the reference.
             let mut reference = Reference { results: vec![0.0; case.results_len()], values: vec![0.0; case.pattern.nnz()], dof_out: vec![DofOut::default(); case.u.len()], energy: 0.0 };
@@ -249,13 +268,13 @@ pub fn run_bench(options: &BenchOptions, gpus: &[Arc<Gpu>], mut row: impl FnMut(
                 // buffer) is measured at the largest size that fits, against its own reference.
                 let fitting = fitting_elements(gpu, &case);
                 let smaller = (fitting < case.elements()).then(|| {
-                    let small = BenchCase::new(kind, case.model.clone(), fitting * 9 / 10);
+                    let small = BenchCase::new(kind, formulation, case.model.clone(), fitting * 9 / 10);
                     let reference = cpu_reference(&small);
                     (small, reference)
                 });
                 let (case, reference) = smaller.as_ref().map_or((&case, &reference), |(c, r)| (c, r));
                 let make = |kernel: &str, backend: String, timing: Timing, traffic: u64, error: f64| {
-                    BenchRow::new(kernel, kind.name(), case.model.name(), case.elements(), backend, timing, traffic, error)
+                    BenchRow::new(kernel, &label, case.model.name(), case.elements(), backend, timing, traffic, error)
                 };
                 let mut world = case.on(gpu)?;
                 let stride = element_out_stride(case.pattern.element_dofs);
@@ -348,6 +367,12 @@ fn kernel_cost(kernel: Costed, case: &BenchCase, real: usize) -> (f64, f64) {
             // and node pair: D B_b, the geometric term, B_aᵀ (D B_b); the forces per node.
             let per_point = 18.0 * nen + 116.0 + tangent_flops;
             let per_pair = 36.0 * dim + 236.0 + 12.0 * dim * dim + dim;
+            // F-bar: every point's J for θ and α in phase 1; per point and pair, F⁻¹ twice, h_a,
+            // h_b, θ's sums and second derivative, C, S̄ : C, the β and r terms.
+            let (per_point, per_pair) = match case.formulation {
+                Formulation::Displacement => (per_point, per_pair),
+                Formulation::Fbar => (per_point + 20.0 * nqp + 30.0, per_pair + 300.0 + 12.0 * dim + 10.0 * dim * dim),
+            };
             (n * (element_inputs + real * stride), n * nqp * (per_point + pairs * per_pair + nen * 36.0))
         }
         Costed::Assembly => {

@@ -451,6 +451,9 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
     if let Some(notice) = &uzawa_notice {
         monitor.warning(notice);
     }
+    for notice in &sim.notices {
+        monitor.warning(notice);
+    }
     monitor.backend(&backend.describe());
     backend.apply(&mut sim).map_err(BackendError::from)?;
     if let (Some(path), 3) = (&options.contour, sim.dim) {
@@ -476,7 +479,7 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
     );
     // A restarted run's log begins at its state's time.
     logger.line(sim.t, Level::Info, &start)?;
-    for notice in resolved.notice.iter().chain(&uzawa_notice) {
+    for notice in resolved.notice.iter().chain(&uzawa_notice).chain(&sim.notices) {
         logger.line(sim.t, Level::Warning, notice)?;
     }
     if let Some(reason) = &resolved.reason {

@@ -68,3 +68,10 @@ fn hertz_cylinder_holds_for_a_stiffer_less_compressible_material() {
     let sets = ["material.rubber.G=2000.0", "material.rubber.K=5000.0", "obstacle.plate.velocity=[0.0, -0.004]"];
     hertz(&sets, "hertz_other", 2000.0, 5000.0);
 }
+
+/// Nearly incompressible rubber (K/G = 1000, F-bar by default): the displacement element locked
+/// and the contact strip narrowed.
+#[test]
+fn hertz_cylinder_holds_for_nearly_incompressible_rubber() {
+    hertz(&["material.rubber.K=1.0e6"], "hertz_incompressible", 1000.0, 1.0e6);
+}

@@ -5,7 +5,7 @@
 #[path = "common/random.rs"]
 mod common_random;
 
-use bifirst::element::{element_energy, element_force_tangent, element_stresses, ElementOutput, ReferenceGeometry};
+use bifirst::element::{element_energy, element_force_tangent, element_stresses, ElementOutput, Formulation, ReferenceGeometry};
 use bifirst::material::tensor::{green_lagrange, to_voigt, Mat3};
 use bifirst::material::{BlatzKo, Hyperelastic, Lvf, Model, NeoHookean};
 use bifirst::mesh::{generate, ElementKind, Mesh};
@@ -45,10 +45,15 @@ fn plane_strain(mut f: Mat3) -> Mat3 {
 
 const KINDS: [ElementKind; 4] = [ElementKind::Tri3, ElementKind::Quad4, ElementKind::Tet4, ElementKind::Hex8];
 
+/// Every element kind with every formulation it has.
+fn elements() -> Vec<(ElementKind, Formulation)> {
+    KINDS.iter().flat_map(|&k| std::iter::once((k, Formulation::Displacement)).chain(Formulation::fbar_applies(k).then_some((k, Formulation::Fbar)))).collect()
+}
+
 #[test]
 fn homogeneous_deformation_gives_the_closed_form_stress() {
     let mut r = rng(21);
-    for kind in KINDS {
+    for (kind, formulation) in elements() {
         for model in models() {
             for _ in 0..10 {
                 let mesh = distorted_element(kind, &mut r);
@@ -66,9 +71,9 @@ fn homogeneous_deformation_gives_the_closed_form_stress() {
                     [v[0], v[1], v[2]]
                 }).collect();
                 let expected = to_voigt(&model.stress(&green_lagrange(&f)));
-                for s in element_stresses(&model, geometry.element_points(0), &u) {
+                for s in element_stresses(&model, geometry.element_points(0), &u, kind.dim(), formulation) {
                     let err = (s - expected).norm() / expected.norm();
-                    assert!(err < 1e-10, "{kind:?} {model:?}: stress error {err:e}");
+                    assert!(err < 1e-10, "{kind:?} {formulation:?} {model:?}: stress error {err:e}");
                 }
             }
         }
@@ -92,7 +97,7 @@ fn force_is_the_gradient_of_the_energy_and_tangent_the_gradient_of_the_force() {
     let mut out = ElementOutput::default();
     let mut plus = ElementOutput::default();
     let mut minus = ElementOutput::default();
-    for kind in KINDS {
+    for (kind, formulation) in elements() {
         let dim = kind.dim();
         for model in models() {
             for _ in 0..5 {
@@ -100,7 +105,7 @@ fn force_is_the_gradient_of_the_energy_and_tangent_the_gradient_of_the_force() {
                 let geometry = ReferenceGeometry::new(&mesh).unwrap();
                 let points = geometry.element_points(0);
                 let u = random_displacements(&mesh, &mut r);
-                element_force_tangent(&model, points, &u, dim, true, &mut out).expect("valid deformation");
+                element_force_tangent(&model, points, &u, dim, formulation, true, &mut out).expect("valid deformation");
                 let n = u.len() * dim;
                 let h = 1e-6;
                 let (mut fd_force, mut fd_tangent) = (vec![0.0; n], vec![0.0; n * n]);
@@ -108,9 +113,9 @@ fn force_is_the_gradient_of_the_energy_and_tangent_the_gradient_of_the_force() {
                     let (mut up, mut um) = (u.clone(), u.clone());
                     up[j / dim][j % dim] += h;
                     um[j / dim][j % dim] -= h;
-                    fd_force[j] = (element_energy(&model, points, &up) - element_energy(&model, points, &um)) / (2.0 * h);
-                    element_force_tangent(&model, points, &up, dim, false, &mut plus).unwrap();
-                    element_force_tangent(&model, points, &um, dim, false, &mut minus).unwrap();
+                    fd_force[j] = (element_energy(&model, points, &up, dim, formulation) - element_energy(&model, points, &um, dim, formulation)) / (2.0 * h);
+                    element_force_tangent(&model, points, &up, dim, formulation, false, &mut plus).unwrap();
+                    element_force_tangent(&model, points, &um, dim, formulation, false, &mut minus).unwrap();
                     for i in 0..n {
                         fd_tangent[i * n + j] = (plus.force[i] - minus.force[i]) / (2.0 * h);
                     }
@@ -120,8 +125,8 @@ fn force_is_the_gradient_of_the_energy_and_tangent_the_gradient_of_the_force() {
                     d / b.iter().map(|y| y * y).sum::<f64>().sqrt()
                 };
                 let (ef, ek) = (rel(&fd_force, &out.force), rel(&fd_tangent, &out.tangent));
-                assert!(ef < 1e-6, "{kind:?} {model:?}: force error {ef:e}");
-                assert!(ek < 1e-6, "{kind:?} {model:?}: tangent error {ek:e}");
+                assert!(ef < 1e-6, "{kind:?} {formulation:?} {model:?}: force error {ef:e}");
+                assert!(ek < 1e-6, "{kind:?} {formulation:?} {model:?}: tangent error {ek:e}");
             }
         }
     }
@@ -179,9 +184,56 @@ fn a_non_finite_state_is_not_an_inverted_element() {
     let model = BlatzKo { g: 1000.0 };
     let mut u = vec![[0.0; 3]; 4];
     u[2][0] = f64::NAN;
-    let error = element_force_tangent(&model, geometry.element_points(0), &u, 2, true, &mut ElementOutput::default()).unwrap_err();
+    let error = element_force_tangent(&model, geometry.element_points(0), &u, 2, Formulation::Displacement, true, &mut ElementOutput::default()).unwrap_err();
     assert!(matches!(error, bifirst::element::ElementError::NonFinite), "{error:?}");
     u[2][0] = -3.0;
-    let error = element_force_tangent(&model, geometry.element_points(0), &u, 2, true, &mut ElementOutput::default()).unwrap_err();
+    let error = element_force_tangent(&model, geometry.element_points(0), &u, 2, Formulation::Displacement, true, &mut ElementOutput::default()).unwrap_err();
     assert!(matches!(error, bifirst::element::ElementError::Inverted(_)), "{error:?}");
+}
+
+/// The patch test: a homogeneous deformation of a patch of distorted elements is an
+/// equilibrium (the interior nodes carry no force), for every element and formulation.
+#[test]
+fn a_homogeneous_deformation_of_a_distorted_patch_is_in_equilibrium() {
+    let mut r = rng(23);
+    for (kind, formulation) in elements() {
+        let dim = kind.dim();
+        let mut mesh = match dim {
+            2 => generate::rectangle([0.0, 0.0], [1.0, 1.0], [3, 3], kind),
+            _ => generate::cuboid([0.0; 3], [1.0; 3], [3, 3, 3], kind),
+        };
+        let interior = |x: &[f64; 3]| (0..dim).all(|i| x[i] > 1e-9 && x[i] < 1.0 - 1e-9);
+        for x in mesh.nodes.iter_mut().filter(|x| interior(x)) {
+            for c in x.iter_mut().take(dim) {
+                *c += r.random_range(-0.08..0.08);
+            }
+        }
+        let geometry = ReferenceGeometry::new(&mesh).unwrap();
+        for model in models() {
+            let mut f = random_f(&mut r);
+            if dim == 2 {
+                while plane_strain(f).determinant() <= 0.3 {
+                    f = random_f(&mut r);
+                }
+                f = plane_strain(f);
+            }
+            let u: Vec<f64> = mesh.nodes.iter().flat_map(|x| {
+                let v = (f - Mat3::identity()) * nalgebra::Vector3::new(x[0], x[1], x[2]);
+                (0..dim).map(move |i| v[i])
+            }).collect();
+            let mut force = vec![0.0; u.len()];
+            let mut out = ElementOutput::default();
+            for e in 0..mesh.element_count() {
+                element_force_tangent(&model, geometry.element_points(e), &mesh.element_displacements(&u, e), dim, formulation, false, &mut out).unwrap();
+                for (a, &n) in mesh.element(e).iter().enumerate() {
+                    for i in 0..dim {
+                        force[n as usize * dim + i] += out.force[a * dim + i];
+                    }
+                }
+            }
+            let scale = force.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            let worst = (0..mesh.nodes.len()).filter(|&n| interior(&mesh.nodes[n])).flat_map(|n| (0..dim).map(move |i| n * dim + i)).fold(0.0f64, |m, d| m.max(force[d].abs()));
+            assert!(worst < 1e-11 * scale, "{kind:?} {formulation:?} {model:?}: interior force {worst:e} of {scale:e}");
+        }
+    }
 }

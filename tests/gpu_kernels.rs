@@ -7,7 +7,7 @@ mod random;
 use bifirst::assembly::{element_out_stride, DofMap, GatherMap, StiffnessPattern};
 use bifirst::contact::Status;
 use bifirst::cpu;
-use bifirst::element::{ElementOutput, ReferenceGeometry};
+use bifirst::element::{ElementOutput, Formulation, ReferenceGeometry};
 use bifirst::gpu::shaders::{is_element_kernel, validate, ElementVariant, SHADERS};
 use bifirst::gpu::types::{Coefficients, DofOut, DofStep, MaterialParams};
 use bifirst::gpu::uzawa_step::{UzawaPoint, UzawaStepKernel};
@@ -109,7 +109,7 @@ fn uzawa_sweep_structs_match_the_shader_layout() {
 #[test]
 fn kernel_structs_match_the_shader_layouts() {
     use std::mem::size_of;
-    let variant = Some(ElementVariant { kind: ElementKind::Hex8, material: "lvf" });
+    let variant = Some(ElementVariant { kind: ElementKind::Hex8, formulation: Formulation::Displacement, material: "lvf" });
     let material = ["g", "k", "a1", "a2", "a3", "a4", "a5", "unused"];
     check_all_real_struct("element_force_tangent", variant, "MaterialParams", &material, [size_of::<MaterialParams<f32>>(), size_of::<MaterialParams<f64>>()]);
     let p = MaterialParams::<f64> { g: 1.0, k: 2.0, a1: 3.0, a2: 4.0, a3: 5.0, a4: 6.0, a5: 7.0, unused: 8.0 };
@@ -131,7 +131,7 @@ fn batch_structs_match_the_shader_layout() {
     let range = ["element_start", "elements", "nonzero_start", "nonzeros", "dof_start", "dofs", "material", "unused"];
     for precision in PRECISIONS {
         for kernel in SHADERS.iter().map(|(name, _)| *name).filter(|k| bifirst::gpu::shaders::is_batch_kernel(k)) {
-            let variant = is_element_kernel(kernel).then_some(ElementVariant { kind: ElementKind::Tet4, material: "blatz_ko" });
+            let variant = is_element_kernel(kernel).then_some(ElementVariant { kind: ElementKind::Tet4, formulation: Formulation::Displacement, material: "blatz_ko" });
             let module = validate(kernel, precision, variant).unwrap();
             let (members, span) = naga_layout(&module, "MemberRange");
             let expected: Vec<(String, u32)> = range.iter().enumerate().map(|(i, f)| (f.to_string(), 4 * i as u32)).collect();
@@ -300,6 +300,7 @@ fn deformed_mesh(kind: ElementKind, seed: u64) -> (Mesh, Vec<f64>) {
 struct Case {
     mesh: Mesh,
     model: Model,
+    formulation: Formulation,
     geometry: ReferenceGeometry,
     pattern: StiffnessPattern,
     gather: GatherMap,
@@ -319,12 +320,12 @@ fn case(variant: ElementVariant, seed: u64) -> Case {
     let pattern = StiffnessPattern::new(&mesh, &dofs);
     let gather = GatherMap::new(&mesh, dim, &pattern);
     let geometry = ReferenceGeometry::new(&mesh).unwrap();
-    Case { model: model_of(variant.material), mesh, geometry, pattern, gather, u }
+    Case { model: model_of(variant.material), formulation: variant.formulation, mesh, geometry, pattern, gather, u }
 }
 
 impl Case {
     fn world_body(&self) -> WorldBody<'_> {
-        WorldBody { mesh: &self.mesh, geometry: &self.geometry, model: &self.model, pattern: &self.pattern, gather: &self.gather }
+        WorldBody { mesh: &self.mesh, geometry: &self.geometry, model: &self.model, formulation: self.formulation, pattern: &self.pattern, gather: &self.gather }
     }
 
     fn element_u(&self, e: usize) -> Vec<[f64; 3]> {
@@ -335,7 +336,7 @@ impl Case {
     /// triangle of the tangent (forces only without it).
     fn cpu_results(&self, e: usize, tangent: bool) -> Vec<f64> {
         let mut out = ElementOutput::default();
-        cpu::element_force_tangent(&self.model, self.geometry.element_points(e), &self.element_u(e), self.mesh.dim(), tangent, &mut out).unwrap();
+        cpu::element_force_tangent(&self.model, self.geometry.element_points(e), &self.element_u(e), self.mesh.dim(), self.formulation, tangent, &mut out).unwrap();
         let ndof = out.force.len();
         let mut packed = out.force.clone();
         if tangent {
@@ -412,7 +413,7 @@ fn element_force_tangent_kernel_matches_its_cpu_twin() {
                         worst = worst.max(relative_error(&on_gpu[e * stride..e * stride + expected.len()], &expected));
                     }
                 }
-                eprintln!("{} {} {} tangent {tangent}: max relative error {worst:.2e}", precision.name(), variant.kind.name(), variant.material);
+                eprintln!("{} {} {} {} tangent {tangent}: max relative error {worst:.2e}", precision.name(), variant.kind.name(), variant.formulation.name(), variant.material);
                 assert!(worst <= tolerance, "{variant:?} {} tangent {tangent}: {worst:.3e}", precision.name());
             }
         }
@@ -422,25 +423,28 @@ fn element_force_tangent_kernel_matches_its_cpu_twin() {
 #[test]
 fn element_force_tangent_kernel_reports_the_first_inverted_element_of_each_body() {
     let Some(gpu) = gpu_or_skip("element_force_tangent_kernel_reports_the_first_inverted_element_of_each_body", Precision::F64) else { return };
-    let variant = ElementVariant { kind: ElementKind::Quad4, material: "neo_hookean" };
-    let [good, mut bad] = two_bodies(variant, 5);
-    // Turn elements 7 and 20 of the second body inside out by moving their third node through
-    // the first.
-    for e in [20, 7] {
-        let nodes = bad.mesh.element(e).to_vec();
-        let (a, b) = (nodes[0] as usize, nodes[2] as usize);
-        for i in 0..2 {
-            let target = bad.mesh.nodes[a][i] + bad.u[a * 2 + i] - 0.5 * (bad.mesh.nodes[b][i] - bad.mesh.nodes[a][i]);
-            bad.u[b * 2 + i] = target - bad.mesh.nodes[b][i];
+    let gpu = Arc::new(gpu);
+    for formulation in [Formulation::Displacement, Formulation::Fbar] {
+        let variant = ElementVariant { kind: ElementKind::Quad4, formulation, material: "neo_hookean" };
+        let [good, mut bad] = two_bodies(variant, 5);
+        // Turn elements 7 and 20 of the second body inside out by moving their third node through
+        // the first.
+        for e in [20, 7] {
+            let nodes = bad.mesh.element(e).to_vec();
+            let (a, b) = (nodes[0] as usize, nodes[2] as usize);
+            for i in 0..2 {
+                let target = bad.mesh.nodes[a][i] + bad.u[a * 2 + i] - 0.5 * (bad.mesh.nodes[b][i] - bad.mesh.nodes[a][i]);
+                bad.u[b * 2 + i] = target - bad.mesh.nodes[b][i];
+            }
         }
-    }
-    let cases = [good, bad];
-    let mut world = world_of(&Arc::new(gpu), &cases);
-    let (mut values, mut dof_out) = buffers_for(&cases);
-    for tangent in [false, true] {
-        let failures = evaluate_all(&mut world, &cases, tangent, &mut values, &mut dof_out, Coefficients { factor: 0.5, c1: 1.0 });
-        assert_eq!(failures[0], None, "the good body passes");
-        assert!(matches!(failures[1], Some(ElementFailure::Inverted(e)) if e <= 7), "tangent {tangent}: {:?}", failures[1]);
+        let cases = [good, bad];
+        let mut world = world_of(&gpu, &cases);
+        let (mut values, mut dof_out) = buffers_for(&cases);
+        for tangent in [false, true] {
+            let failures = evaluate_all(&mut world, &cases, tangent, &mut values, &mut dof_out, Coefficients { factor: 0.5, c1: 1.0 });
+            assert_eq!(failures[0], None, "the good body passes");
+            assert!(matches!(failures[1], Some(ElementFailure::Inverted(e)) if e <= 7), "{formulation:?} tangent {tangent}: {:?}", failures[1]);
+        }
     }
 }
 
@@ -452,7 +456,7 @@ fn assembly_kernels_match_their_cpu_twins() {
         let Some(gpu) = gpu_or_skip("assembly_kernels_match_their_cpu_twins", precision) else { continue };
         let gpu = Arc::new(gpu);
         for (k, kind) in [ElementKind::Tri3, ElementKind::Quad4, ElementKind::Tet4, ElementKind::Hex8].into_iter().enumerate() {
-            let cases = two_bodies(ElementVariant { kind, material: "blatz_ko" }, 200 + k as u64);
+            let cases = two_bodies(ElementVariant { kind, formulation: Formulation::Displacement, material: "blatz_ko" }, 200 + k as u64);
             let mut rng = random::rng(300 + k as u64);
             let steps: Vec<Vec<DofStep<f64>>> = cases
                 .iter()
@@ -501,7 +505,7 @@ fn element_energy_kernel_matches_its_cpu_twin() {
             let list: Vec<(usize, &[f64])> = cases.iter().enumerate().map(|(b, c)| (b, &c.u[..])).collect();
             let energies = world.element_energies(&list, &mut Default::default()).unwrap();
             for (c, energies) in cases.iter().zip(&energies) {
-                let expected: Vec<f64> = (0..c.mesh.element_count()).map(|e| cpu::element_energy(&c.model, c.geometry.element_points(e), &c.element_u(e))).collect();
+                let expected: Vec<f64> = (0..c.mesh.element_count()).map(|e| cpu::element_energy(&c.model, c.geometry.element_points(e), &c.element_u(e), c.mesh.dim(), c.formulation)).collect();
                 let error = energies.iter().zip(&expected).map(|(a, b)| (a - b).abs() / b.abs().max(1e-300)).fold(0.0, f64::max);
                 assert!(error <= tolerance, "{variant:?} {}: element energy {error:.3e}", precision.name());
             }
@@ -515,7 +519,7 @@ fn one_device_pass_serves_any_number_of_bodies() {
     // time, and each body's results are those of the same body evaluated alone.
     let Some(gpu) = gpu_or_skip("one_device_pass_serves_any_number_of_bodies", Precision::F64) else { return };
     let gpu = Arc::new(gpu);
-    let variant = ElementVariant { kind: ElementKind::Tet4, material: "lvf" };
+    let variant = ElementVariant { kind: ElementKind::Tet4, formulation: Formulation::Displacement, material: "lvf" };
     let cases: Vec<Case> = (0..40).map(|k| case(variant, 600 + k)).collect();
     let mut world = world_of(&gpu, &cases);
     let coefficients = Coefficients { factor: 0.5, c1: 10.0 };

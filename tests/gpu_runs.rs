@@ -102,6 +102,12 @@ fn bar_impact_on_the_gpu_matches_the_cpu_backend() {
 
 /// A small 3D packing (balls and turned boxes of Tet4, pressed by the wall) on the device.
 #[test]
+fn an_fbar_bar_impact_on_the_gpu_matches_the_cpu_backend() {
+    // K/G = 20: the bar's elements are F-bar (`auto`), on the device and on the CPU.
+    compare_backends("bar_impact_fbar_gpu", &scene_path("bar_impact"), &["material.bar.K=60000.0", "time.end=0.01", "output.every=1", "output.scene_every=0"]);
+}
+
+#[test]
 fn grains_3d_on_the_gpu_match_the_cpu_backend() {
     compare_backends("grains_3d_gpu", &scene_path("grains_3d"), &["packing.count=27", "time.end=0.15", "packing.wall_velocity=2.0", "output.every=1", "output.scene_every=0"]);
 }

@@ -189,3 +189,23 @@ fn a_packing_logged_on_bodies_restarts_and_ends_where_the_whole_run_does() {
     assert_eq!(last(&whole), last(&continued));
     assert!(!bifirst::output::read_run(&continued).unwrap().topics.keys().any(|t| t.starts_with("/body/")));
 }
+
+/// The F-bar element keeps no state of its own (θ is a function of u): a nearly incompressible
+/// beam interrupted and continued ends where the uninterrupted run does, its energy balanced.
+#[test]
+fn a_nearly_incompressible_fbar_beam_continues_exactly() {
+    let sets: Vec<String> = ["material.rubber.K=1e7", "time.end=0.2", "output.state_every=5", "body.beam.mesh.divisions=[8,2,2]"].iter().map(|s| s.to_string()).collect();
+    let loaded = load_scene(&scene_path("free_vibration_3d"), &sets).unwrap();
+    let whole = temp_path("restart_fbar_whole.mcap");
+    let summary = run_scene(&loaded, &whole, &RunOptions::default(), &mut Silent).expect("the uninterrupted run finishes");
+    assert!(summary.energy.energy_balance_error.abs() <= 1e-8 * summary.energy.total, "energy balance (the Newton tolerances are 1e-9) {:?}", summary.energy);
+    let cut = temp_path("restart_fbar_cut.mcap");
+    let flag = Arc::new(AtomicBool::new(false));
+    let options = RunOptions { interrupt: Some(flag.clone()), ..Default::default() };
+    assert!(run_scene(&loaded, &cut, &options, &mut InterruptAfter { at: 7, flag }).is_err(), "interrupted");
+    let (reloaded, state) = restart_from(&cut, None, &[]).unwrap();
+    let continued = temp_path("restart_fbar_continued.mcap");
+    run_scene(&reloaded, &continued, &RunOptions { restart: Some(state), ..Default::default() }, &mut Silent).expect("the restarted run finishes");
+    let difference = relative_difference(states(&whole).last().unwrap(), states(&continued).last().unwrap());
+    assert!(difference <= 1e-12, "end states differ by {difference:e}");
+}

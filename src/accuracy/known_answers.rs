@@ -8,11 +8,12 @@ use crate::scene::{LoadedScene, MaterialSpec};
 use crate::solver::Simulation;
 
 /// The scenes with a known answer, by measure name (the scene's `name` picks its measure).
-pub const KNOWN_ANSWERS: [(&str, &str); 5] = [
+pub const KNOWN_ANSWERS: [(&str, &str); 6] = [
     ("bar_impact", "contact duration against 2 L / c and rebound velocity against V (1D wave theory)"),
     ("sliding_block", "stopping distance against v0^2 / (2 mu g) and friction dissipation against m v0^2 / 2"),
     ("hertz_cylinder", "contact half-width and peak pressure against Hertz's line contact"),
-    ("free_vibration_2d", "largest drift of the total energy, relative to the initial energy"),
+    ("free_vibration_2d", "largest drift of the total energy, relative to the initial energy; the first probe's period against the Euler-Bernoulli cantilever (plane-strain modulus)"),
+    ("free_vibration_3d", "largest drift of the total energy; the first probe's period against the Euler-Bernoulli cantilever"),
     ("free_flight_3d", "largest drift of the linear and angular momentum, relative to their initial values"),
 ];
 
@@ -71,7 +72,21 @@ pub fn known_answer(name: &str, loaded: &LoadedScene) -> Result<Box<dyn KnownAns
             }
             Box::new(Hertz { contact_modulus: plane_strain_contact_modulus(g, k), end: None })
         }
-        "free_vibration_2d" => Box::new(EnergyDrift { initial: None, drift: 0.0 }),
+        "free_vibration_2d" | "free_vibration_3d" => {
+            let (g, k) = moduli(material)?;
+            let size = body.mesh.size.as_ref().filter(|s| s.len() >= 2).ok_or_else(|| missing("the beam's mesh size"))?;
+            let v0 = body.initial_velocity.as_ref().ok_or_else(|| missing(&format!("body.{body_name}.initial_velocity")))?;
+            let axis = (1..v0.len()).max_by(|&i, &j| v0[i].abs().total_cmp(&v0[j].abs())).ok_or_else(|| missing("a transverse initial velocity"))?;
+            if scene.probe.is_empty() {
+                return Err(missing("a probe at the beam's tip"));
+            }
+            let (e, nu) = (9.0 * k * g / (3.0 * k + g), (3.0 * k - 2.0 * g) / (2.0 * (3.0 * k + g)));
+            let modulus = if name == "free_vibration_2d" { e / (1.0 - nu * nu) } else { e };
+            let (length, depth) = (size[0], size[axis]);
+            // Euler-Bernoulli: ω = 1.8751² / L² √(E I / (ρ A)), I / A = depth² / 12.
+            let omega = 1.875_104_068_711_961_f64.powi(2) / (length * length) * depth * (modulus / (12.0 * material.density)).sqrt();
+            Box::new(Vibration { drift: EnergyDrift { initial: None, drift: 0.0 }, axis, period: 2.0 * std::f64::consts::PI / omega, last: None, crossings: vec![0.0] })
+        }
         "free_flight_3d" => Box::new(MomentumDrift { initial: None, linear: 0.0, angular: 0.0 }),
         _ => return Err(AccuracyError::UnknownMeasure(name.to_string())),
     })
@@ -187,6 +202,40 @@ impl KnownAnswer for EnergyDrift {
     }
     fn errors(&self) -> Vec<ErrorTerm> {
         vec![ErrorTerm::drift("energy drift", self.drift)]
+    }
+}
+
+/// A cantilever vibrating freely: the energy drift, and the first bending period from the tip
+/// probe's zero crossings (the tip starts at zero displacement, so t = 0 is one).
+struct Vibration {
+    drift: EnergyDrift,
+    /// The component of the tip's displacement that vibrates.
+    axis: usize,
+    /// Euler-Bernoulli's first period.
+    period: f64,
+    /// The last sample with a non-zero displacement, `(t, u)`.
+    last: Option<(f64, f64)>,
+    crossings: Vec<f64>,
+}
+
+impl KnownAnswer for Vibration {
+    fn observe(&mut self, sim: &Simulation) {
+        self.drift.observe(sim);
+        let Some(probe) = sim.probes.first() else { return };
+        let u = sim.bodies[probe.body].state.u[probe.node * sim.dim + self.axis];
+        if u == 0.0 {
+            return;
+        }
+        if let Some((t0, u0)) = self.last.filter(|(_, u0)| u0.signum() != u.signum()) {
+            self.crossings.push(t0 + (sim.t - t0) * u0 / (u0 - u));
+        }
+        self.last = Some((sim.t, u));
+    }
+    fn errors(&self) -> Vec<ErrorTerm> {
+        let n = self.crossings.len();
+        // Successive crossings are half a period apart.
+        let measured = if n >= 2 { 2.0 * (self.crossings[n - 1] - self.crossings[0]) / (n - 1) as f64 } else { f64::NAN };
+        vec![ErrorTerm::drift("energy drift", self.drift.drift), ErrorTerm::relative("first bending period", measured, self.period)]
     }
 }
 

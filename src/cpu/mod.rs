@@ -18,7 +18,7 @@ pub use crate::contact::uzawa::uzawa_sweep;
 pub use crate::element::{element_energy, element_force_tangent};
 
 use crate::assembly::element_out_stride;
-use crate::element::{ElementError, ElementOutput, ReferenceGeometry};
+use crate::element::{ElementError, ElementOutput, Formulation, ReferenceGeometry};
 use crate::gpu::types::{Coefficients, DofOut, DofStep};
 use crate::material::Hyperelastic;
 use crate::mesh::Mesh;
@@ -36,6 +36,7 @@ pub fn dispatch_element_force_tangent<M: Hyperelastic + Sync>(
     model: &M,
     mesh: &Mesh,
     geometry: &ReferenceGeometry,
+    formulation: Formulation,
     u: &[Real],
     with_tangent: bool,
     results: &mut [Real],
@@ -48,7 +49,7 @@ pub fn dispatch_element_force_tangent<M: Hyperelastic + Sync>(
         for (k, out) in block.chunks_mut(stride).enumerate() {
             let e = task * ELEMENTS_PER_TASK + k;
             mesh.element_displacements_into(u, e, &mut ue);
-            if let Err(error) = element_force_tangent(model, geometry.element_points(e), &ue, dim, with_tangent, &mut scratch) {
+            if let Err(error) = element_force_tangent(model, geometry.element_points(e), &ue, dim, formulation, with_tangent, &mut scratch) {
                 return Some((e, error));
             }
             out[..ndof].copy_from_slice(&scratch.force);

@@ -1,7 +1,8 @@
 //! The per-element kernel: deformation gradient, stress and consistent tangent at each
 //! quadrature point, integrated into the element force vector and stiffness matrix.
 
-use super::GaussPoint;
+use super::fbar::{fbar_force_tangent, fbar_gradients};
+use super::{Formulation, GaussPoint};
 use crate::material::tensor::{green_lagrange, to_voigt, von_mises, Mat3, VOIGT};
 use crate::material::Hyperelastic;
 use crate::precision::Real;
@@ -29,7 +30,7 @@ pub struct ElementOutput {
 }
 
 /// Deformation gradient `F = I + Σ_a u_a ⊗ dN_a/dX` at one quadrature point.
-fn deformation_gradient(gp: &GaussPoint, u: &[[Real; 3]]) -> Mat3 {
+pub(super) fn deformation_gradient(gp: &GaussPoint, u: &[[Real; 3]]) -> Mat3 {
     let mut f = Mat3::identity();
     for (ua, g) in u.iter().zip(&gp.dn_dx) {
         for i in 0..3 {
@@ -41,15 +42,27 @@ fn deformation_gradient(gp: &GaussPoint, u: &[[Real; 3]]) -> Mat3 {
     f
 }
 
+/// The gradient each quadrature point's stress sees: `F`, or `F̄` of the F-bar element.
+fn point_gradients(points: &[GaussPoint], u: &[[Real; 3]], dim: usize, formulation: Formulation) -> Vec<Mat3> {
+    match formulation {
+        Formulation::Displacement => points.iter().map(|gp| deformation_gradient(gp, u)).collect(),
+        Formulation::Fbar => fbar_gradients(points, u, dim),
+    }
+}
+
 /// Internal force and tangent stiffness of one element; `u` holds its nodal displacements.
 pub fn element_force_tangent<M: Hyperelastic>(
     material: &M,
     points: &[GaussPoint],
     u: &[[Real; 3]],
     dim: usize,
+    formulation: Formulation,
     with_tangent: bool,
     out: &mut ElementOutput,
 ) -> Result<(), ElementError> {
+    if formulation == Formulation::Fbar {
+        return fbar_force_tangent(material, points, u, dim, with_tangent, out);
+    }
     let nen = u.len();
     let ndof = nen * dim;
     out.force.clear();
@@ -135,15 +148,17 @@ pub fn element_force_tangent<M: Hyperelastic>(
 }
 
 /// Strain energy of one element.
-pub fn element_energy<M: Hyperelastic>(material: &M, points: &[GaussPoint], u: &[[Real; 3]]) -> Real {
-    points.iter().map(|gp| gp.dv * material.energy(&green_lagrange(&deformation_gradient(gp, u)))).sum()
+pub fn element_energy<M: Hyperelastic>(material: &M, points: &[GaussPoint], u: &[[Real; 3]], dim: usize, formulation: Formulation) -> Real {
+    match formulation {
+        Formulation::Displacement => points.iter().map(|gp| gp.dv * material.energy(&green_lagrange(&deformation_gradient(gp, u)))).sum(),
+        Formulation::Fbar => points.iter().zip(fbar_gradients(points, u, dim)).map(|(gp, f)| gp.dv * material.energy(&green_lagrange(&f))).sum(),
+    }
 }
 
 /// Volume-averaged von Mises stress of the Cauchy stress over the element's quadrature points.
-pub fn element_von_mises<M: Hyperelastic>(material: &M, points: &[GaussPoint], u: &[[Real; 3]]) -> Real {
+pub fn element_von_mises<M: Hyperelastic>(material: &M, points: &[GaussPoint], u: &[[Real; 3]], dim: usize, formulation: Formulation) -> Real {
     let (mut sum, mut vol) = (0.0, 0.0);
-    for gp in points {
-        let f = deformation_gradient(gp, u);
+    for (gp, f) in points.iter().zip(point_gradients(points, u, dim, formulation)) {
         let s = material.stress(&green_lagrange(&f));
         sum += gp.dv * von_mises(&f, &s);
         vol += gp.dv;
@@ -163,10 +178,9 @@ pub struct CellFields {
 }
 
 /// Volume-averaged Cauchy stress, von Mises stress and `J` of one element.
-pub fn element_cell_fields<M: Hyperelastic>(material: &M, points: &[GaussPoint], u: &[[Real; 3]]) -> CellFields {
+pub fn element_cell_fields<M: Hyperelastic>(material: &M, points: &[GaussPoint], u: &[[Real; 3]], dim: usize, formulation: Formulation) -> CellFields {
     let (mut cauchy, mut vm, mut jacobian, mut vol) = (Mat3::zeros(), 0.0, 0.0, 0.0);
-    for gp in points {
-        let f = deformation_gradient(gp, u);
+    for (gp, f) in points.iter().zip(point_gradients(points, u, dim, formulation)) {
         let s = material.stress(&green_lagrange(&f));
         let j = f.determinant();
         cauchy += f * s * f.transpose() * (gp.dv / j);
@@ -179,6 +193,6 @@ pub fn element_cell_fields<M: Hyperelastic>(material: &M, points: &[GaussPoint],
 }
 
 /// Second Piola-Kirchhoff stress at each quadrature point, Voigt order (for closed-form checks).
-pub fn element_stresses<M: Hyperelastic>(material: &M, points: &[GaussPoint], u: &[[Real; 3]]) -> Vec<Vector6<Real>> {
-    points.iter().map(|gp| to_voigt(&material.stress(&green_lagrange(&deformation_gradient(gp, u))))).collect()
+pub fn element_stresses<M: Hyperelastic>(material: &M, points: &[GaussPoint], u: &[[Real; 3]], dim: usize, formulation: Formulation) -> Vec<Vector6<Real>> {
+    point_gradients(points, u, dim, formulation).iter().map(|f| to_voigt(&material.stress(&green_lagrange(f)))).collect()
 }

@@ -1,15 +1,47 @@
 //! Total Lagrangian finite elements: reference geometry (computed once) and the per-element
 //! kernel that evaluates internal force, tangent stiffness, strain energy and stresses.
 
+mod fbar;
 mod kernel;
 pub mod shape;
 
 pub use kernel::{element_cell_fields, element_energy, element_force_tangent, element_stresses, element_von_mises, CellFields, ElementError, ElementOutput};
 
+
 use crate::mesh::{ElementKind, Mesh};
 use crate::precision::Real;
 use nalgebra::Matrix3;
 use thiserror::Error;
+
+/// How an element's volume change enters its energy.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Formulation {
+    /// Every quadrature point's own `F` (locks when `K/G` is large).
+    #[default]
+    Displacement,
+    /// `F̄`: the element's mean dilatation with each point's distortion (`fbar.rs`); Quad4 and Hex8.
+    Fbar,
+}
+
+/// Above this small-strain K/G (Poisson's ratio 0.45), a body's `auto` formulation is F-bar on
+/// Quad4 and Hex8: below it the displacement element's volumetric stiffening is under the
+/// discretisation error (doc/results.md, "Nearly incompressible rubber").
+pub const FBAR_ABOVE_K_OVER_G: Real = 10.0;
+
+impl Formulation {
+    /// Whether F-bar applies to an element kind: it needs more than one quadrature point.
+    pub fn fbar_applies(kind: ElementKind) -> bool {
+        matches!(kind, ElementKind::Quad4 | ElementKind::Hex8)
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Formulation::Displacement => "displacement",
+            Formulation::Fbar => "fbar",
+        }
+    }
+}
 
 /// Reference-configuration data of one quadrature point.
 #[derive(Debug, Clone)]

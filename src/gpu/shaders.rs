@@ -4,6 +4,7 @@
 //! `LOCAL_STEPS` for the Uzawa kernels, then for element kernels the element constants and the shared
 //! includes of `shaders/include/`, then the kernel.
 
+use crate::element::Formulation;
 use crate::mesh::ElementKind;
 use crate::precision::Precision;
 
@@ -24,8 +25,9 @@ pub const INCLUDES: &[(&str, &str)] = &[
     ("batch", include_str!("../../shaders/include/batch.wgsl")),
     ("contact_law", include_str!("../../shaders/include/contact_law.wgsl")),
     ("element", include_str!("../../shaders/include/element.wgsl")),
-    ("ln_f32", include_str!("../../shaders/include/ln_f32.wgsl")),
-    ("ln_f64", include_str!("../../shaders/include/ln_f64.wgsl")),
+    ("fbar", include_str!("../../shaders/include/fbar.wgsl")),
+    ("math_f32", include_str!("../../shaders/include/math_f32.wgsl")),
+    ("math_f64", include_str!("../../shaders/include/math_f64.wgsl")),
     ("material_blatz_ko", include_str!("../../shaders/include/material_blatz_ko.wgsl")),
     ("material_lvf", include_str!("../../shaders/include/material_lvf.wgsl")),
     ("material_neo_hookean", include_str!("../../shaders/include/material_neo_hookean.wgsl")),
@@ -35,18 +37,23 @@ pub const INCLUDES: &[(&str, &str)] = &[
 /// The materials the element kernels can be built for (`Model::name`).
 pub const MATERIALS: [&str; 3] = ["blatz_ko", "lvf", "neo_hookean"];
 
-/// The element and material an element kernel is built for.
+/// The element, formulation and material an element kernel is built for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ElementVariant {
     pub kind: ElementKind,
+    pub formulation: Formulation,
     pub material: &'static str,
 }
 
 impl ElementVariant {
-    /// Every element kind with every material.
+    /// Every element kind with every material, and the F-bar element where it applies.
     pub fn all() -> Vec<Self> {
         let kinds = [ElementKind::Tri3, ElementKind::Quad4, ElementKind::Tet4, ElementKind::Hex8];
-        kinds.iter().flat_map(|&kind| MATERIALS.iter().map(move |&material| Self { kind, material })).collect()
+        let elements = kinds.iter().flat_map(|&kind| {
+            let fbar = Formulation::fbar_applies(kind).then_some((kind, Formulation::Fbar));
+            std::iter::once((kind, Formulation::Displacement)).chain(fbar)
+        });
+        elements.flat_map(|(kind, formulation)| MATERIALS.iter().map(move |&material| Self { kind, formulation, material })).collect()
     }
 }
 
@@ -87,10 +94,12 @@ pub fn source(kernel: &str, precision: Precision, variant: Option<ElementVariant
         (true, Some(v)) => {
             let (nen, dim) = (v.kind.nodes(), v.kind.dim());
             let nqp = crate::element::shape::quadrature(v.kind).len();
-            module += &format!("const NEN = {nen}u;\nconst NQP = {nqp}u;\nconst DIM = {dim}u;\nconst NDOF = {}u;\n", nen * dim);
-            module += include(&format!("ln_{}", precision.name()))?;
+            let fbar = v.formulation == Formulation::Fbar;
+            module += &format!("const NEN = {nen}u;\nconst NQP = {nqp}u;\nconst DIM = {dim}u;\nconst NDOF = {}u;\nconst FBAR = {fbar};\n", nen * dim);
+            module += include(&format!("math_{}", precision.name()))?;
             module += include("tensor")?;
             module += include("element")?;
+            module += include("fbar")?;
             module += include(&format!("material_{}", v.material))?;
         }
     }

@@ -15,7 +15,7 @@ use super::{ElementVariant, Gpu, GpuError};
 use crate::assembly::{element_out_stride, GatherMap, StiffnessPattern};
 use crate::backend::UzawaPlacement;
 use crate::contact::uzawa::{Outcome, Problem};
-use crate::element::ReferenceGeometry;
+use crate::element::{Formulation, ReferenceGeometry};
 use crate::material::Model;
 use crate::mesh::Mesh;
 use crate::precision::{Precision, Real};
@@ -59,6 +59,7 @@ pub struct WorldBody<'a> {
     pub mesh: &'a Mesh,
     pub geometry: &'a ReferenceGeometry,
     pub model: &'a Model,
+    pub formulation: Formulation,
     pub pattern: &'a StiffnessPattern,
     pub gather: &'a GatherMap,
 }
@@ -263,7 +264,7 @@ impl GpuWorld {
         let max_members = limits.max_compute_workgroups_per_dimension as usize;
         let mut groups: Vec<(ElementVariant, Vec<usize>, u64)> = Vec::new();
         for (b, body) in bodies.iter().enumerate() {
-            let variant = ElementVariant { kind: body.mesh.kind, material: body.model.name() };
+            let variant = ElementVariant { kind: body.mesh.kind, formulation: body.formulation, material: body.model.name() };
             let bytes = largest_buffer(body, real);
             if bytes > max_bytes {
                 return Err(GpuError::Kernel {

@@ -59,13 +59,18 @@ impl Model {
         }
     }
 
-    /// Small-strain (Young's modulus, Poisson ratio), used for wave speeds and time-step hints.
-    pub fn small_strain_moduli(&self) -> (Real, Real) {
-        let (k, g) = match self {
+    /// Small-strain bulk and shear moduli `(K, G)`.
+    pub fn bulk_shear(&self) -> (Real, Real) {
+        match self {
             Model::BlatzKo(m) => (5.0 * m.g / 3.0, m.g),
             Model::Lvf(m) => (m.k, m.g),
             Model::NeoHookean(m) => (m.k, m.g),
-        };
+        }
+    }
+
+    /// Small-strain (Young's modulus, Poisson ratio), used for wave speeds and time-step hints.
+    pub fn small_strain_moduli(&self) -> (Real, Real) {
+        let (k, g) = self.bulk_shear();
         let e = 9.0 * k * g / (3.0 * k + g);
         let nu = (3.0 * k - 2.0 * g) / (2.0 * (3.0 * k + g));
         (e, nu)

@@ -127,7 +127,7 @@ pub(super) fn expand(s: &mut Scene) -> Result<(), Failure> {
             *c = (lattice[k] as Real + 0.5) * cell + rng.between(-play, play);
         }
         let mesh = if dim == 2 { grain_2d(&p, &mut rng, [center[0], center[1]], r, finest_disk) } else { grain_3d(&p, &mut rng, center, r, r_min) };
-        s.body.insert(name, BodySpec { material: p.material.clone(), mesh, initial_velocity: None, angular_velocity: None });
+        s.body.insert(name, BodySpec { material: p.material.clone(), mesh, initial_velocity: None, angular_velocity: None, formulation: None });
     }
     let size = [columns as Real * cell, rows as Real * cell, layers as Real * cell];
     let mut walls = vec![

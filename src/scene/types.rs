@@ -149,6 +149,19 @@ pub struct BodySpec {
     pub initial_velocity: Option<Vec<Real>>,
     /// Rotation about the centre of mass at t = 0: a number (2D) or a vector (3D).
     pub angular_velocity: Option<AngularVelocity>,
+    /// How the elements take the volume change; `auto` (the default) is F-bar on Quad4 and
+    /// Hex8 when the material's K/G exceeds `element::FBAR_ABOVE_K_OVER_G`.
+    pub formulation: Option<FormulationChoice>,
+}
+
+/// A body's element formulation as the scene names it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FormulationChoice {
+    #[default]
+    Auto,
+    Displacement,
+    Fbar,
 }
 
 #[derive(Debug, Clone, Deserialize, Serialize)]

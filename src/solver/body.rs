@@ -6,7 +6,7 @@ use super::PhaseTimes;
 use super::topology::Topology;
 use crate::assembly::{element_out_stride, DofMap, GatherMap, StiffnessPattern};
 use crate::cpu::{assemble_csr, assemble_residual, dispatch_element_force_tangent, element_energy, element_force_tangent};
-use crate::element::{element_cell_fields, element_von_mises, CellFields, ElementError, ElementOutput, ReferenceGeometry};
+use crate::element::{element_cell_fields, element_von_mises, CellFields, ElementError, ElementOutput, Formulation, ReferenceGeometry};
 use crate::gpu::types::{Coefficients, DofOut, DofStep};
 use crate::gpu::{ElementFailure, Evaluation, GpuError, WorldBody};
 use crate::material::Model;
@@ -60,7 +60,7 @@ pub enum StepFailure {
     Linear { body: String, error: String },
     /// `bodies` names the bodies that iterated together (coupled by contact); `unmet` says which
     /// convergence criteria the last iteration still missed.
-    #[error("{bodies}: Newton did not converge in {iterations} iterations ({unmet})")]
+    #[error("{bodies}: Newton did not converge in {iterations} iterations ({unmet}); a residual that stalls above its tolerance while the increment has converged is round-off: raise solver.residual_tolerance; one that falls slowly needs solver.max_iterations or a smaller time.dt")]
     NotConverged { bodies: String, iterations: usize, unmet: String },
     #[error("body `{body}`: the residual is not finite")]
     NotFinite { body: String },
@@ -100,6 +100,8 @@ pub struct Body {
     pub mesh: Mesh,
     pub geometry: ReferenceGeometry,
     pub model: Model,
+    /// How the elements take the volume change (F-bar for nearly incompressible materials).
+    pub formulation: Formulation,
     pub dim: usize,
     /// Lumped mass of each dof.
     pub mass: Vec<Real>,
@@ -115,6 +117,9 @@ pub struct Body {
     length_scale: Real,
     /// Largest dof mass: with `length_scale`, sets the residual floor below round-off.
     max_mass: Real,
+    /// Largest element stiffness `(K + 4G/3) h^(dim-2)`: with `length_scale`, the round-off a
+    /// stiff volumetric term leaves in the internal forces ([`Body::residual_floor`]).
+    stiffness_scale: Real,
     solver: CholeskySolver,
     values: Vec<Real>,
     /// Which element results sum into each stiffness value and each dof.
@@ -177,6 +182,10 @@ impl EvaluatedAt {
 /// than `solver.max_iterations` allows, and refactorising costs less than a few extra ones.
 pub const REFACTOR_CONTRACTION: Real = 0.1;
 
+/// Round-off per dof of the internal force, in units of `(K + 4G/3) h^(dim-1)`: a few ε (the
+/// error of `J` times the few terms a node sums).
+pub const STIFFNESS_ROUND_OFF: Real = 4.0 * Real::EPSILON;
+
 impl Body {
     /// `initial_velocity(node) -> velocity` gives the free motion at t = 0; prescribed dofs start
     /// at their prescribed velocity. `topology` is built for its mesh and prescribed dofs, and
@@ -187,6 +196,7 @@ impl Body {
         mesh: Mesh,
         geometry: ReferenceGeometry,
         model: Model,
+        formulation: Formulation,
         density: Real,
         prescribed: Vec<Prescribed>,
         initial_velocity: impl Fn([Real; 3]) -> [Real; 3],
@@ -212,11 +222,14 @@ impl Body {
         let reactions = vec![0.0; prescribed.len()];
         let length_scale = mesh.min_edge_length();
         let max_mass = mass.iter().cloned().fold(0.0, Real::max);
+        let (k, g) = model.bulk_shear();
+        let stiffness_scale = (k + 4.0 * g / 3.0) * length_scale.powi(dim as i32 - 2);
         Self {
             name,
             mesh,
             geometry,
             model,
+            formulation,
             dim,
             mass,
             dofs,
@@ -227,6 +240,7 @@ impl Body {
             reactions,
             length_scale,
             max_mass,
+            stiffness_scale,
             solver,
             values,
             gather,
@@ -250,7 +264,7 @@ impl Body {
 
     /// What the GPU world uploads of the body.
     pub fn world_body(&self) -> WorldBody<'_> {
-        WorldBody { mesh: &self.mesh, geometry: &self.geometry, model: &self.model, pattern: &self.pattern, gather: &self.gather }
+        WorldBody { mesh: &self.mesh, geometry: &self.geometry, model: &self.model, formulation: self.formulation, pattern: &self.pattern, gather: &self.gather }
     }
 
     /// The step's start values of every dof (after [`Body::begin_step`]).
@@ -267,7 +281,7 @@ impl Body {
     /// (forces only without the tangent).
     fn cpu_elements(&mut self, u: &[Real], with_tangent: bool, times: &mut PhaseTimes) -> Result<(), StepFailure> {
         let t0 = Instant::now();
-        let result = dispatch_element_force_tangent(&self.model, &self.mesh, &self.geometry, u, with_tangent, &mut self.element_results)
+        let result = dispatch_element_force_tangent(&self.model, &self.mesh, &self.geometry, self.formulation, u, with_tangent, &mut self.element_results)
             .map_err(|(element, error)| StepFailure::Element { body: self.name.clone(), element, error });
         times.elements += t0.elapsed().as_secs_f64();
         result
@@ -280,7 +294,7 @@ impl Body {
             ElementFailure::NonFinite(e) => (e, ElementError::NonFinite),
         };
         let ue = self.mesh.element_displacements(u, element);
-        let error = element_force_tangent(&self.model, self.geometry.element_points(element), &ue, self.dim, true, &mut ElementOutput::default()).err().unwrap_or(fallback);
+        let error = element_force_tangent(&self.model, self.geometry.element_points(element), &ue, self.dim, self.formulation, true, &mut ElementOutput::default()).err().unwrap_or(fallback);
         StepFailure::Element { body: self.name.clone(), element, error }
     }
 
@@ -440,23 +454,37 @@ impl Body {
         let increment_ok = self.last_increment.is_none_or(|du| du <= allowed);
         self.unmet.clear();
         if residual > tolerance {
-            self.unmet.push(format!("`{}`: residual {residual:.3e} > {tolerance:.3e}", self.name));
+            let (floor, scale) = (self.residual_floor(p), self.force_scale);
+            self.unmet.push(format!(
+                "`{}`: residual {residual:.3e} > {tolerance:.3e} = solver.residual_tolerance {:.1e} x force scale {scale:.3e} + round-off floor {floor:.3e}",
+                self.name, p.residual_tolerance
+            ));
         }
         if let Some(du) = self.last_increment.filter(|_| !increment_ok) {
-            self.unmet.push(format!("`{}`: last increment {du:.3e} > {allowed:.3e}", self.name));
+            self.unmet.push(format!("`{}`: last increment {du:.3e} > {allowed:.3e} (solver.increment_tolerance {:.1e} of the step's displacement)", self.name, p.increment_tolerance));
         }
         Ok(self.unmet.is_empty())
     }
 
-    /// The residual's tolerance: `residual_tolerance` times the force scale, plus a floor below
-    /// which only round-off remains.
+    /// The residual's tolerance: `residual_tolerance` times the force scale, plus the floor
+    /// below which only round-off remains ([`Body::residual_floor`]).
     fn residual_tolerance(&self, p: &StepParams) -> Real {
+        p.residual_tolerance * self.force_scale + self.residual_floor(p)
+    }
+
+    /// The round-off floor of the residual. The inertia term `M (u - u_t - dt v_t) c1` is a
+    /// difference of terms as large as `M u c1`: a body that has travelled far (a grain, many
+    /// sizes from its start) carries their round-off (regression test
+    /// `newton_converges_for_a_small_body_far_from_its_start`). The internal force of a nearly
+    /// incompressible material is a sum of stresses `K (J - 1)` whose `J` is known to ε: each
+    /// dof carries about `ε (K + 4G/3) h^(dim-1)` of round-off, `√n` of them over the body
+    /// (regression test `newton_converges_at_k_over_g_one_hundred_thousand`: at K/G = 1e5 the
+    /// residual stalled at 1.6e-8 against a tolerance of 1.3e-8).
+    fn residual_floor(&self, p: &StepParams) -> Real {
         let c1 = 1.0 / (p.theta * p.dt * p.dt);
-        // The inertia term `M (u - u_t - dt v_t) c1` is a difference of terms as large as
-        // `M u c1`: a body that has travelled far (a grain, many sizes from its start) carries
-        // their round-off (regression test `newton_converges_for_a_small_body_far_from_its_start`).
         let travel = self.trial.u.iter().fold(0.0, |m: Real, u| m.max(u.abs()));
-        p.residual_tolerance * self.force_scale + 1e-14 * c1 * self.max_mass * self.length_scale + 1e-13 * c1 * self.max_mass * travel
+        let free = (self.dofs.free_count as Real).sqrt();
+        1e-14 * c1 * self.max_mass * self.length_scale + 1e-13 * c1 * self.max_mass * travel + STIFFNESS_ROUND_OFF * free * p.xi * self.stiffness_scale * self.length_scale
     }
 
     /// The criteria the last convergence test found unmet (empty when it passed).
@@ -618,7 +646,7 @@ impl Body {
         if self.state.strain_at_u && bytemuck::cast_slice::<Real, u8>(&self.trial.u) == bytemuck::cast_slice::<Real, u8>(&self.state.u) {
             return self.state.strain;
         }
-        (0..self.mesh.element_count()).map(|e| element_energy(&self.model, self.geometry.element_points(e), &self.mesh.element_displacements(&self.trial.u, e))).sum()
+        (0..self.mesh.element_count()).map(|e| element_energy(&self.model, self.geometry.element_points(e), &self.mesh.element_displacements(&self.trial.u, e), self.dim, self.formulation)).sum()
     }
 
     /// Current position of a node.
@@ -644,7 +672,7 @@ impl Body {
     pub fn von_mises(&self, elements: &[usize]) -> Real {
         let sum: Real = elements
             .iter()
-            .map(|&e| element_von_mises(&self.model, self.geometry.element_points(e), &self.mesh.element_displacements(&self.state.u, e)))
+            .map(|&e| element_von_mises(&self.model, self.geometry.element_points(e), &self.mesh.element_displacements(&self.state.u, e), self.dim, self.formulation))
             .sum();
         sum / elements.len().max(1) as Real
     }
@@ -652,7 +680,7 @@ impl Body {
     /// Stress and volume ratio of every element at the committed state.
     pub fn cell_fields(&self) -> Vec<CellFields> {
         (0..self.mesh.element_count())
-            .map(|e| element_cell_fields(&self.model, self.geometry.element_points(e), &self.mesh.element_displacements(&self.state.u, e)))
+            .map(|e| element_cell_fields(&self.model, self.geometry.element_points(e), &self.mesh.element_displacements(&self.state.u, e), self.dim, self.formulation))
             .collect()
     }
 }

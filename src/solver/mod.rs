@@ -193,6 +193,8 @@ struct Attempt {
 }
 
 pub struct Simulation {
+    /// What set-up found worth a warning (a material that will lock on its elements).
+    pub notices: Vec<String>,
     pub dim: usize,
     pub bodies: Vec<Body>,
     pub sets: Vec<BoundarySet>,

@@ -9,15 +9,44 @@ use super::{body_overlaps, node_positions};
 use crate::contact::overlap::{Host, Overlap};
 use crate::contact::pairs::{BodyPairs, Rank};
 use crate::contact::{ContactModel, Motion, Obstacle, Settings, Surface};
-use crate::element::ReferenceGeometry;
+use crate::element::{Formulation, ReferenceGeometry, FBAR_ABOVE_K_OVER_G};
 use crate::material::{BlatzKo, Lvf, Model, NeoHookean};
-use crate::mesh::{generate, gmsh, Mesh};
+use crate::mesh::{generate, gmsh, ElementKind, Mesh};
 use crate::precision::Real;
 use crate::scene::SceneErrorKind::{Invalid, Mesh as MeshError, Reference};
 use crate::scene::LARGEST_INPUT;
-use crate::scene::{AngularVelocity, Axis, Generator, Interpolation, LoadedScene, MaterialSpec, MeshSpec, ModelName, ObstacleShape, SceneError};
+use crate::scene::{AngularVelocity, Axis, FormulationChoice, Generator, Interpolation, LoadedScene, MaterialSpec, MeshSpec, ModelName, ObstacleShape, SceneError};
 use std::collections::HashMap;
 use rayon::prelude::*;
+
+/// A body's element formulation: the scene's choice, or for `auto` F-bar where it applies and
+/// K/G exceeds [`FBAR_ABOVE_K_OVER_G`]. A nearly incompressible body of simplices (which F-bar
+/// cannot help) gets a notice that it will be too stiff.
+fn formulation_of(loaded: &LoadedScene, body: &str, material: &str, choice: FormulationChoice, kind: ElementKind, model: &Model, notices: &mut Vec<String>) -> Result<Formulation, SceneError> {
+    let (k, g) = model.bulk_shear();
+    let ratio = k / g;
+    let applies = Formulation::fbar_applies(kind);
+    Ok(match choice {
+        FormulationChoice::Displacement => Formulation::Displacement,
+        FormulationChoice::Fbar if applies => Formulation::Fbar,
+        FormulationChoice::Fbar => {
+            return Err(loaded.error(Invalid, &format!("body.{body}.formulation"), format!("F-bar needs an element with several quadrature points (quad4, hex8); this body's mesh is {}.", kind.name())));
+        }
+        FormulationChoice::Auto if ratio > FBAR_ABOVE_K_OVER_G && applies => Formulation::Fbar,
+        FormulationChoice::Auto => {
+            if ratio > FBAR_ABOVE_K_OVER_G {
+                let notice = format!(
+                    "material `{material}` (K/G = {ratio:.3e}) on {} elements locks: the bodies will be too stiff (F-bar needs quad4 or hex8 meshes)",
+                    kind.name()
+                );
+                if !notices.contains(&notice) {
+                    notices.push(notice);
+                }
+            }
+            Formulation::Displacement
+        }
+    })
+}
 
 pub fn model_of(m: &MaterialSpec) -> Model {
     let g = m.G.unwrap_or_default();
@@ -88,6 +117,7 @@ fn within_range(v: &[Real]) -> bool {
 pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> {
     let scene = &loaded.scene;
     let mut meshes = Vec::new();
+    let mut notices = Vec::new();
     let mut dim = None;
     for (name, spec) in &scene.body {
         let key = format!("body.{name}.mesh");
@@ -102,7 +132,8 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
         }
         let geometry = ReferenceGeometry::new(&mesh)
             .map_err(|e| loaded.error(MeshError, &where_, format!("{e}; the mesh must have positive element volumes at t = 0.")))?;
-        meshes.push((name.clone(), mesh, geometry));
+        let formulation = formulation_of(loaded, name, &spec.material, spec.formulation.unwrap_or_default(), mesh.kind, &model_of(&scene.material[&spec.material]), &mut notices)?;
+        meshes.push((name.clone(), mesh, geometry, formulation));
     }
     let dim = dim.expect("a scene has a body");
     let range_check = |key: &str, v: &[Real]| {
@@ -170,7 +201,7 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
     // One topology per distinct body (connectivity and prescribed dofs), built in parallel and
     // shared; a failure is reported for the first body in the scene's order that has it.
     let ordering = scene.solver.ordering;
-    let keys: Vec<Option<TopologyKey>> = meshes.par_iter().zip(&prescribed).map(|((_, mesh, _), p)| Topology::key(mesh, p, ordering)).collect();
+    let keys: Vec<Option<TopologyKey>> = meshes.par_iter().zip(&prescribed).map(|((_, mesh, _, _), p)| Topology::key(mesh, p, ordering)).collect();
     let mut first_of: HashMap<&TopologyKey, usize> = HashMap::new();
     let owner_of: Vec<usize> = keys.iter().enumerate().map(|(b, key)| key.as_ref().map_or(b, |k| *first_of.entry(k).or_insert(b))).collect();
     let built_topologies: HashMap<usize, Result<Topology, String>> = owner_of
@@ -188,7 +219,7 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
     // first failing one in the scene's order reported.
     let specs: Vec<_> = scene.body.values().collect();
     let inputs = meshes.into_par_iter().zip(specs).zip(std::mem::take(&mut prescribed)).zip(topologies);
-    let built: Vec<Result<Body, SceneError>> = inputs.map(|((((name, mesh, geometry), spec), prescribed), topology)| {
+    let built: Vec<Result<Body, SceneError>> = inputs.map(|((((name, mesh, geometry, formulation), spec), prescribed), topology)| {
         let key = format!("body.{name}");
         let material = &scene.material[&spec.material];
         let v0 = spec.initial_velocity.clone().unwrap_or_else(|| vec![0.0; dim]);
@@ -216,7 +247,7 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
             [v[0] + omega[1] * r[2] - omega[2] * r[1], v[1] + omega[2] * r[0] - omega[0] * r[2], v[2] + omega[0] * r[1] - omega[1] * r[0]]
         };
         let topology = topology.as_ref().map_err(|e| loaded.error(MeshError, &format!("{key}.mesh"), e.clone()))?;
-        let mut body = Body::new(name.clone(), mesh, geometry, model_of(material), material.density, prescribed, initial, topology);
+        let mut body = Body::new(name.clone(), mesh, geometry, model_of(material), formulation, material.density, prescribed, initial, topology);
         body.reuse_factorization = scene.solver.reuse_factorization;
         Ok(body)
     }).collect();
@@ -261,6 +292,7 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
         }
     }
     Ok(Simulation {
+        notices,
         dim,
         bodies,
         sets,

@@ -1,0 +1,197 @@
+//! The F-bar element of nearly incompressible materials (Quad4, Hex8): the energy
+//! `Π_e = Σ_q dV_q W(Ē(F̄_q))` with `F̄ = α F`, `α = (θ / J)^(1/n)`, `θ = Σ_q J_q dV_q / V_e`
+//! the element's mean dilatation and `n` the dimension (in plane strain only the in-plane block
+//! of F is scaled, so that `det F̄ = θ` in both). Each point keeps its own distortion while the
+//! volume change is one per element, which removes volumetric locking; for an energy split
+//! into isochoric and volumetric parts it is the mean-dilatation (Q1/P0) element of Simo,
+//! Taylor and Pister (1985). The force and tangent are the first and second derivatives of
+//! `Π_e`, so the tangent is symmetric and the energy balance stays exact (doc/method.md §7).
+
+use super::GaussPoint;
+use crate::material::tensor::{Mat3, VOIGT};
+use crate::material::Hyperelastic;
+use crate::precision::Real;
+use nalgebra::Vector6;
+
+use super::kernel::{deformation_gradient, ElementError, ElementOutput};
+
+/// The element's mean dilatation `θ` and each point's `F` and `J`, or the first failure.
+fn dilatation(points: &[GaussPoint], u: &[[Real; 3]]) -> Result<(Vec<Mat3>, Vec<Real>, Real), ElementError> {
+    let (mut volume, mut big_theta) = (0.0, 0.0);
+    let mut fs = Vec::with_capacity(points.len());
+    let mut js = Vec::with_capacity(points.len());
+    for gp in points {
+        let f = deformation_gradient(gp, u);
+        let j = f.determinant();
+        if j.is_nan() {
+            return Err(ElementError::NonFinite);
+        }
+        if !(j > 0.0) {
+            return Err(ElementError::Inverted(j));
+        }
+        volume += gp.dv;
+        big_theta += gp.dv * j;
+        fs.push(f);
+        js.push(j);
+    }
+    Ok((fs, js, big_theta / volume))
+}
+
+/// `F̄ = α F` on the first `dim` rows and columns, and `α²` (`fbar_alpha` and `fbar_scale` of
+/// `shaders/include/fbar.wgsl`).
+fn bar(f: &Mat3, theta: Real, j: Real, dim: usize) -> (Mat3, Real) {
+    let alpha = if dim == 2 { (theta / j).sqrt() } else { (theta / j).cbrt() };
+    let alpha2 = alpha * alpha;
+    let mut fbar = *f;
+    for r in 0..dim {
+        for c in 0..dim {
+            fbar[(r, c)] *= alpha;
+        }
+    }
+    (fbar, alpha2)
+}
+
+/// The gradient each point's stress sees: `F̄` (the element's mean dilatation, its own distortion).
+pub(super) fn fbar_gradients(points: &[GaussPoint], u: &[[Real; 3]], dim: usize) -> Vec<Mat3> {
+    match dilatation(points, u) {
+        Ok((fs, js, theta)) => fs.iter().zip(&js).map(|(f, &j)| bar(f, theta, j, dim).0).collect(),
+        // An inverted point has no F̄; its plain F says so to whoever reads it.
+        Err(_) => points.iter().map(|gp| deformation_gradient(gp, u)).collect(),
+    }
+}
+
+/// Internal force and tangent stiffness of one F-bar element (see the module comment).
+pub(super) fn fbar_force_tangent<M: Hyperelastic>(material: &M, points: &[GaussPoint], u: &[[Real; 3]], dim: usize, with_tangent: bool, out: &mut ElementOutput) -> Result<(), ElementError> {
+    let nen = u.len();
+    let ndof = nen * dim;
+    let n = dim as Real;
+    out.force.clear();
+    out.force.resize(ndof, 0.0);
+    out.tangent.clear();
+    if with_tangent {
+        out.tangent.resize(ndof * ndof, 0.0);
+    }
+    let (fs, js, theta) = dilatation(points, u)?;
+    let big_theta: Real = points.iter().zip(&js).map(|(gp, j)| gp.dv * j).sum();
+    // h_a = F⁻ᵀ dN_a/dX (the spatial gradient, δJ/J = Σ_a δu_a · h_a) at every point, per dof.
+    let h: Vec<Vec<Real>> = points
+        .iter()
+        .zip(&fs)
+        .map(|(gp, f)| {
+            let inv_t = f.try_inverse().expect("det F > 0").transpose();
+            (0..ndof).map(|r| (inv_t.row(r % dim) * nalgebra::Vector3::new(gp.dn_dx[r / dim][0], gp.dn_dx[r / dim][1], gp.dn_dx[r / dim][2]))[0]).collect()
+        })
+        .collect();
+    // θ̂ = (dθ/du) / θ.
+    let mut theta_hat = vec![0.0; ndof];
+    for ((gp, j), hq) in points.iter().zip(&js).zip(&h) {
+        for (t, hr) in theta_hat.iter_mut().zip(hq) {
+            *t += gp.dv * j * hr / big_theta;
+        }
+    }
+    // (d²θ/du²) / θ, with the entries of node pairs whose components differ.
+    let mut theta_hess = Vec::new();
+    if with_tangent {
+        theta_hess.resize(ndof * ndof, 0.0);
+        for ((gp, j), hq) in points.iter().zip(&js).zip(&h) {
+            let w = gp.dv * j / big_theta;
+            for r in 0..ndof {
+                let (a, i) = (r / dim, r % dim);
+                for c in 0..ndof {
+                    let (b, jj) = (c / dim, c % dim);
+                    theta_hess[r * ndof + c] += w * (hq[r] * hq[c] - hq[a * dim + jj] * hq[b * dim + i]);
+                }
+            }
+        }
+    }
+    let mut beta = vec![0.0; ndof];
+    let mut r_vec = vec![0.0; ndof];
+    let mut bbar = vec![Vector6::<Real>::zeros(); ndof];
+    let mut db = vec![Vector6::<Real>::zeros(); ndof];
+    for (q, gp) in points.iter().enumerate() {
+        let (f, hq) = (&fs[q], &h[q]);
+        let (fbar, alpha2) = bar(f, theta, js[q], dim);
+        let ebar = crate::material::tensor::green_lagrange(&fbar);
+        let (s, d) = if with_tangent {
+            let (s, d) = material.stress_tangent(&ebar);
+            (s, Some(d))
+        } else {
+            (material.stress(&ebar), None)
+        };
+        let c = f.transpose() * f;
+        // t = S̄ : C over the scaled block; β = d ln α / du; r = (F S̄ g_a)_i = S̄ : dE/du.
+        let mut t = 0.0;
+        for k in 0..dim {
+            for l in 0..dim {
+                t += s[(k, l)] * c[(k, l)];
+            }
+        }
+        let fs_ = f * s;
+        for r in 0..ndof {
+            let (a, i) = (r / dim, r % dim);
+            let g = &gp.dn_dx[a];
+            beta[r] = (theta_hat[r] - hq[r]) / n;
+            r_vec[r] = fs_[(i, 0)] * g[0] + fs_[(i, 1)] * g[1] + fs_[(i, 2)] * g[2];
+            out.force[r] += gp.dv * alpha2 * (r_vec[r] + t * beta[r]);
+        }
+        let Some(d) = d else { continue };
+        if !d.iter().all(|v| v.is_finite()) {
+            return Err(ElementError::NonFinite);
+        }
+        // B̄ = dĒ/du = α² (B + c βᵀ), c = C in engineering Voigt form over the scaled block.
+        let c_voigt = Vector6::from_fn(|k, _| {
+            let (p, m) = VOIGT[k];
+            if p >= dim || m >= dim {
+                0.0
+            } else if p == m {
+                c[(p, m)]
+            } else {
+                2.0 * c[(p, m)]
+            }
+        });
+        for r in 0..ndof {
+            let (a, i) = (r / dim, r % dim);
+            let g = &gp.dn_dx[a];
+            let b = Vector6::from_fn(|k, _| {
+                let (p, m) = VOIGT[k];
+                if p == m {
+                    f[(i, p)] * g[p]
+                } else {
+                    f[(i, p)] * g[m] + f[(i, m)] * g[p]
+                }
+            });
+            bbar[r] = (b + c_voigt * beta[r]) * alpha2;
+        }
+        for (dbr, br) in db.iter_mut().zip(&bbar) {
+            *dbr = d * br * gp.dv;
+        }
+        let w = gp.dv * alpha2;
+        for col in 0..ndof {
+            let (bn, jj) = (col / dim, col % dim);
+            let gb = &gp.dn_dx[bn];
+            let sgb = s * nalgebra::Vector3::new(gb[0], gb[1], gb[2]);
+            for row in 0..=col {
+                let (a, i) = (row / dim, row % dim);
+                // d²(ln α)/du², from ln θ and ln J.
+                let beta2 = (theta_hess[row * ndof + col] - theta_hat[row] * theta_hat[col] + hq[a * dim + jj] * hq[bn * dim + i]) / n;
+                let mut k = bbar[row].dot(&db[col]) + w * (t * (2.0 * beta[row] * beta[col] + beta2) + 2.0 * (beta[row] * r_vec[col] + r_vec[row] * beta[col]));
+                if i == jj {
+                    let ga = &gp.dn_dx[a];
+                    k += w * (sgb[0] * ga[0] + sgb[1] * ga[1] + sgb[2] * ga[2]);
+                }
+                out.tangent[row * ndof + col] += k;
+            }
+        }
+    }
+    if with_tangent {
+        for col in 0..ndof {
+            for row in col + 1..ndof {
+                out.tangent[row * ndof + col] = out.tangent[col * ndof + row];
+            }
+        }
+    }
+    if !out.force.iter().all(|v| v.is_finite()) {
+        return Err(ElementError::NonFinite);
+    }
+    Ok(())
+}
