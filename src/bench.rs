@@ -608,7 +608,7 @@ fn uzawa_sweep_rows(options: &BenchOptions, gpus: &[Arc<Gpu>], row: &mut impl Fn
 /// The table `bifirst bench` prints.
 pub fn table_header() -> String {
     format!(
-        "{:<32} {:<6} {:<12} {:>8} {:<8} {:>12} {:>12} {:>12} {:>10} {:>9} {:>9} {:>7} {:>7}",
+        "{:<32} {:<10} {:<12} {:>8} {:<8} {:>12} {:>12} {:>12} {:>10} {:>9} {:>9} {:>7} {:>7}",
         "kernel", "elem", "material", "items", "backend", "time/call", "items/s", "bytes/call", "max rel err", "GB/s", "GFLOP/s", "%bw", "%flop"
     )
 }
@@ -647,7 +647,7 @@ impl BenchRow {
     pub fn line(&self) -> String {
         let column = |x: Option<f64>, scale: f64| x.map_or("-".to_string(), |v| format!("{:.1}", v * scale));
         format!(
-            "{:<32} {:<6} {:<12} {:>8} {:<8} {:>10.3}ms {:>12.3e} {:>12} {:>10.1e} {:>9} {:>9} {:>7} {:>7}",
+            "{:<32} {:<10} {:<12} {:>8} {:<8} {:>10.3}ms {:>12.3e} {:>12} {:>10.1e} {:>9} {:>9} {:>7} {:>7}",
             self.kernel,
             self.element,
             self.material,
