@@ -7,13 +7,12 @@
 //! Taylor and Pister (1985). The force and tangent are the first and second derivatives of
 //! `Π_e`, so the tangent is symmetric and the energy balance stays exact (doc/method.md §7).
 
+use super::kernel::{checked_determinant, deformation_gradient, finish, ElementError, ElementOutput};
 use super::GaussPoint;
-use crate::material::tensor::{Mat3, VOIGT};
+use crate::material::tensor::{green_lagrange, Mat3, VOIGT};
 use crate::material::Hyperelastic;
 use crate::precision::Real;
-use nalgebra::Vector6;
-
-use super::kernel::{deformation_gradient, ElementError, ElementOutput};
+use nalgebra::{Vector3, Vector6};
 
 /// The element's mean dilatation `θ` and each point's `F` and `J`, or the first failure.
 fn dilatation(points: &[GaussPoint], u: &[[Real; 3]]) -> Result<(Vec<Mat3>, Vec<Real>, Real), ElementError> {
@@ -22,13 +21,7 @@ fn dilatation(points: &[GaussPoint], u: &[[Real; 3]]) -> Result<(Vec<Mat3>, Vec<
     let mut js = Vec::with_capacity(points.len());
     for gp in points {
         let f = deformation_gradient(gp, u);
-        let j = f.determinant();
-        if j.is_nan() {
-            return Err(ElementError::NonFinite);
-        }
-        if !(j > 0.0) {
-            return Err(ElementError::Inverted(j));
-        }
+        let j = checked_determinant(&f)?;
         volume += gp.dv;
         big_theta += gp.dv * j;
         fs.push(f);
@@ -79,7 +72,8 @@ pub(super) fn fbar_force_tangent<M: Hyperelastic>(material: &M, points: &[GaussP
         .zip(&fs)
         .map(|(gp, f)| {
             let inv_t = f.try_inverse().expect("det F > 0").transpose();
-            (0..ndof).map(|r| (inv_t.row(r % dim) * nalgebra::Vector3::new(gp.dn_dx[r / dim][0], gp.dn_dx[r / dim][1], gp.dn_dx[r / dim][2]))[0]).collect()
+            let h: Vec<Vector3<Real>> = gp.dn_dx.iter().map(|g| inv_t * Vector3::new(g[0], g[1], g[2])).collect();
+            (0..ndof).map(|r| h[r / dim][r % dim]).collect()
         })
         .collect();
     // θ̂ = (dθ/du) / θ.
@@ -111,7 +105,7 @@ pub(super) fn fbar_force_tangent<M: Hyperelastic>(material: &M, points: &[GaussP
     for (q, gp) in points.iter().enumerate() {
         let (f, hq) = (&fs[q], &h[q]);
         let (fbar, alpha2) = bar(f, theta, js[q], dim);
-        let ebar = crate::material::tensor::green_lagrange(&fbar);
+        let ebar = green_lagrange(&fbar);
         let (s, d) = if with_tangent {
             let (s, d) = material.stress_tangent(&ebar);
             (s, Some(d))
@@ -126,12 +120,12 @@ pub(super) fn fbar_force_tangent<M: Hyperelastic>(material: &M, points: &[GaussP
                 t += s[(k, l)] * c[(k, l)];
             }
         }
-        let fs_ = f * s;
+        let f_s = f * s;
         for r in 0..ndof {
             let (a, i) = (r / dim, r % dim);
             let g = &gp.dn_dx[a];
             beta[r] = (theta_hat[r] - hq[r]) / n;
-            r_vec[r] = fs_[(i, 0)] * g[0] + fs_[(i, 1)] * g[1] + fs_[(i, 2)] * g[2];
+            r_vec[r] = f_s[(i, 0)] * g[0] + f_s[(i, 1)] * g[1] + f_s[(i, 2)] * g[2];
             out.force[r] += gp.dv * alpha2 * (r_vec[r] + t * beta[r]);
         }
         let Some(d) = d else { continue };
@@ -169,7 +163,7 @@ pub(super) fn fbar_force_tangent<M: Hyperelastic>(material: &M, points: &[GaussP
         for col in 0..ndof {
             let (bn, jj) = (col / dim, col % dim);
             let gb = &gp.dn_dx[bn];
-            let sgb = s * nalgebra::Vector3::new(gb[0], gb[1], gb[2]);
+            let sgb = s * Vector3::new(gb[0], gb[1], gb[2]);
             for row in 0..=col {
                 let (a, i) = (row / dim, row % dim);
                 // d²(ln α)/du², from ln θ and ln J.
@@ -183,15 +177,5 @@ pub(super) fn fbar_force_tangent<M: Hyperelastic>(material: &M, points: &[GaussP
             }
         }
     }
-    if with_tangent {
-        for col in 0..ndof {
-            for row in col + 1..ndof {
-                out.tangent[row * ndof + col] = out.tangent[col * ndof + row];
-            }
-        }
-    }
-    if !out.force.iter().all(|v| v.is_finite()) {
-        return Err(ElementError::NonFinite);
-    }
-    Ok(())
+    finish(out, ndof, with_tangent)
 }

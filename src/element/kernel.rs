@@ -75,14 +75,7 @@ pub fn element_force_tangent<M: Hyperelastic>(
     out.db.resize(ndof, Vector6::zeros());
     for gp in points {
         let f = deformation_gradient(gp, u);
-        let det = f.determinant();
-        // A state that is not finite is not an inverted element (it was reported as one).
-        if det.is_nan() {
-            return Err(ElementError::NonFinite);
-        }
-        if !(det > 0.0) {
-            return Err(ElementError::Inverted(det));
-        }
+        checked_determinant(&f)?;
         let e = green_lagrange(&f);
         // Stress and tangent from one material call when the tangent is wanted.
         let (s, d) = if with_tangent {
@@ -134,6 +127,12 @@ pub fn element_force_tangent<M: Hyperelastic>(
             }
         }
     }
+    finish(out, ndof, with_tangent)
+}
+
+/// Fills the lower triangle of the tangent from its integrated upper one, and rejects a
+/// non-finite force.
+pub(super) fn finish(out: &mut ElementOutput, ndof: usize, with_tangent: bool) -> Result<(), ElementError> {
     if with_tangent {
         for col in 0..ndof {
             for row in col + 1..ndof {
@@ -145,6 +144,18 @@ pub fn element_force_tangent<M: Hyperelastic>(
         return Err(ElementError::NonFinite);
     }
     Ok(())
+}
+
+/// `det F`, or why the point fails: a state that is not finite is not an inverted element.
+pub(super) fn checked_determinant(f: &Mat3) -> Result<Real, ElementError> {
+    let det = f.determinant();
+    if det.is_nan() {
+        return Err(ElementError::NonFinite);
+    }
+    if !(det > 0.0) {
+        return Err(ElementError::Inverted(det));
+    }
+    Ok(det)
 }
 
 /// Strain energy of one element.
