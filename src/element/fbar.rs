@@ -14,8 +14,9 @@ use crate::material::Hyperelastic;
 use crate::precision::Real;
 use nalgebra::{Vector3, Vector6};
 
-/// The element's mean dilatation `θ` and each point's `F` and `J`, or the first failure.
-fn dilatation(points: &[GaussPoint], u: &[[Real; 3]]) -> Result<(Vec<Mat3>, Vec<Real>, Real), ElementError> {
+/// Each point's `F` and `J`, the element's mean dilatation `θ` and its deformed volume
+/// `Σ_q J_q dV_q` (θ times the reference volume), or the first failure.
+fn dilatation(points: &[GaussPoint], u: &[[Real; 3]]) -> Result<(Vec<Mat3>, Vec<Real>, Real, Real), ElementError> {
     let (mut volume, mut big_theta) = (0.0, 0.0);
     let mut fs = Vec::with_capacity(points.len());
     let mut js = Vec::with_capacity(points.len());
@@ -27,7 +28,7 @@ fn dilatation(points: &[GaussPoint], u: &[[Real; 3]]) -> Result<(Vec<Mat3>, Vec<
         fs.push(f);
         js.push(j);
     }
-    Ok((fs, js, big_theta / volume))
+    Ok((fs, js, big_theta / volume, big_theta))
 }
 
 /// `F̄ = α F` on the first `dim` rows and columns, and `α²` (`fbar_alpha` and `fbar_scale` of
@@ -47,7 +48,7 @@ fn bar(f: &Mat3, theta: Real, j: Real, dim: usize) -> (Mat3, Real) {
 /// The gradient each point's stress sees: `F̄` (the element's mean dilatation, its own distortion).
 pub(super) fn fbar_gradients(points: &[GaussPoint], u: &[[Real; 3]], dim: usize) -> Vec<Mat3> {
     match dilatation(points, u) {
-        Ok((fs, js, theta)) => fs.iter().zip(&js).map(|(f, &j)| bar(f, theta, j, dim).0).collect(),
+        Ok((fs, js, theta, _)) => fs.iter().zip(&js).map(|(f, &j)| bar(f, theta, j, dim).0).collect(),
         // An inverted point has no F̄; its plain F says so to whoever reads it.
         Err(_) => points.iter().map(|gp| deformation_gradient(gp, u)).collect(),
     }
@@ -64,8 +65,7 @@ pub(super) fn fbar_force_tangent<M: Hyperelastic>(material: &M, points: &[GaussP
     if with_tangent {
         out.tangent.resize(ndof * ndof, 0.0);
     }
-    let (fs, js, theta) = dilatation(points, u)?;
-    let big_theta: Real = points.iter().zip(&js).map(|(gp, j)| gp.dv * j).sum();
+    let (fs, js, theta, big_theta) = dilatation(points, u)?;
     // h_a = F⁻ᵀ dN_a/dX (the spatial gradient, δJ/J = Σ_a δu_a · h_a) at every point, per dof.
     let h: Vec<Vec<Real>> = points
         .iter()
