@@ -15,7 +15,7 @@ use bifirst::stability::Budget;
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::io::IsTerminal;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::Arc;
@@ -140,10 +140,10 @@ enum Command {
         #[arg(long)]
         out: Option<PathBuf>,
         /// Runs per variant; the median wall time is reported.
-        #[arg(long, default_value_t = 1)]
-        repeat: usize,
+        #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
+        repeat: u64,
         /// The error to reach: the cheapest variant within it is named.
-        #[arg(long, default_value_t = 0.01)]
+        #[arg(long, default_value_t = 0.01, value_parser = parse_positive)]
         target: f64,
         #[command(flatten)]
         backend: BackendArgs,
@@ -392,6 +392,15 @@ fn parse_uzawa(s: &str) -> Result<UzawaPlacement, String> {
     s.parse()
 }
 
+/// A finite number above zero.
+fn parse_positive(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(x) if x.is_finite() && x > 0.0 => Ok(x),
+        Ok(x) => Err(format!("{x} is not a finite number above zero")),
+        Err(e) => Err(e.to_string()),
+    }
+}
+
 fn parse_precision(s: &str) -> Result<Precision, String> {
     s.parse()
 }
@@ -409,6 +418,32 @@ struct RunArgs {
     json: bool,
 }
 
+/// An error and its causes, each said once: many messages already name their cause, which
+/// anyhow's `{:#}` would print again after them ("X: X").
+fn error_text(e: &anyhow::Error) -> String {
+    let mut text = String::new();
+    for cause in e.chain() {
+        let part = cause.to_string();
+        if !text.contains(&part) {
+            if !text.is_empty() {
+                text.push_str(": ");
+            }
+            text.push_str(&part);
+        }
+    }
+    text
+}
+
+/// Whether `a` and `b` name one file (through links, `..` or another spelling); false when
+/// either does not exist.
+fn same_file(a: &Path, b: &Path) -> bool {
+    use std::os::unix::fs::MetadataExt;
+    match (std::fs::metadata(a), std::fs::metadata(b)) {
+        (Ok(a), Ok(b)) => (a.dev(), a.ino()) == (b.dev(), b.ino()),
+        _ => false,
+    }
+}
+
 /// Exit status of a run that finished but created more energy than `solver.max_energy_gain`.
 const ENERGY_CREATED_EXIT: u8 = 3;
 
@@ -417,6 +452,9 @@ fn run(args: RunArgs) -> Result<ExitCode> {
         (Some(log), _) => {
             let (loaded, state) = bifirst::run::restart_from(log, args.at, &args.sets)?;
             let out = args.out.clone().unwrap_or_else(|| log.with_file_name(format!("{}_restart.mcap", log.file_stem().map_or("run".into(), |s| s.to_string_lossy()))));
+            if same_file(log, &out) {
+                anyhow::bail!("--out `{}` is the log the run continues from, and would be emptied; write the continued run to another file", out.display());
+            }
             if !args.quiet {
                 eprintln!("restart: from t = {:.6e} (step {}) of {}", state.t, state.step, log.display());
             }
@@ -586,7 +624,7 @@ struct AccuracyArgs {
     sets: Vec<String>,
     measure: Option<String>,
     out: Option<PathBuf>,
-    repeat: usize,
+    repeat: u64,
     target: f64,
     backend: BackendRequest,
     json: bool,
@@ -597,9 +635,9 @@ fn accuracy_command(args: AccuracyArgs) -> Result<ExitCode> {
     let study = Study::plan(&args.scene, args.measure.as_deref(), &args.sets, &args.over, &args.backend)?;
     let out = args.out.unwrap_or_else(|| PathBuf::from(format!("{}_accuracy", study.name)));
     let count = study.variant_count();
-    eprintln!("bifirst {}: accuracy of `{}` against `{}`, {count} variants one at a time ({} runs each), into {}", env!("CARGO_PKG_VERSION"), study.name, study.measure, args.repeat.max(1), out.display());
+    eprintln!("bifirst {}: accuracy of `{}` against `{}`, {count} variants one at a time ({} runs each), into {}", env!("CARGO_PKG_VERSION"), study.name, study.measure, args.repeat, out.display());
     let interrupt = interrupt_flags()?.0;
-    let rows = study.run(&out, args.repeat, Some(interrupt), |r| eprintln!("[{}/{count}] {}: {} in {:.3} s, error {:.3e}", r.index + 1, r.label, r.status, r.wall_s, r.error))?;
+    let rows = study.run(&out, args.repeat as usize, Some(interrupt), |r| eprintln!("[{}/{count}] {}: {} in {:.3} s, error {:.3e}", r.index + 1, r.label, r.status, r.wall_s, r.error))?;
     let csv_path = out.join("accuracy.csv");
     std::fs::write(&csv_path, csv(&study.axes, &rows)).map_err(|e| anyhow::anyhow!("cannot write `{}`: {e}", csv_path.display()))?;
     let png = out.join("accuracy.png");
@@ -610,7 +648,8 @@ fn accuracy_command(args: AccuracyArgs) -> Result<ExitCode> {
     } else {
         print!("{}", table(&rows));
         for (key, between, slope) in convergence_slopes(&study.axes, &rows) {
-            println!("order along {key}, {between}: d log(error) / d log(value) = {slope:.2}");
+            // + 0.0: equal errors give -0 along a falling axis.
+            println!("order along {key}, {between}: d log(error) / d log(value) = {:.2}", slope + 0.0);
         }
         match cheapest_within(&rows, args.target) {
             Some(r) => println!("cheapest within {:.1e}: variant {} ({}), {:.3} s, error {:.3e}", args.target, r.index, r.label, r.wall_s, r.error),
@@ -838,7 +877,7 @@ fn main() -> ExitCode {
     match result {
         Ok(code) => code,
         Err(e) => {
-            eprintln!("error: {e:#}");
+            eprintln!("error: {}", error_text(&e));
             ExitCode::from(2)
         }
     }

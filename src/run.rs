@@ -88,7 +88,10 @@ pub struct RunSummary {
     pub precision: String,
     /// The GPU adapter, when the kernels ran on one.
     pub adapter: Option<String>,
+    /// Steps this run took (a restarted run counts from its state).
     pub steps: usize,
+    /// The index of the last step, counted from t = 0 across restarts.
+    pub last_step: usize,
     pub t_end: Real,
     pub cutbacks: usize,
     pub newton_iterations: usize,
@@ -218,6 +221,7 @@ impl Logger {
             backend: backend.name().to_string(),
             precision: backend.precision().to_string(),
             adapter: backend.adapter(),
+            first_step: sim.first_step.1,
             batched_bodies: batched.contains(&true).then(|| {
                 let (names, mass) = sim.bodies.iter().zip(&batched).filter(|(_, batched)| **batched).map(|(b, _)| (b.name.clone(), b.metrics().mass)).unzip();
                 BatchedBodies { names, mass }
@@ -472,7 +476,7 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
         loaded.name,
         loaded.path.display(),
         crate::output::counted(sim.bodies.len(), "body", "bodies"),
-        crate::output::counted(sim.step_count(), "step", "steps"),
+        crate::output::counted(sim.step_count() - sim.first_step.1, "step", "steps"),
         sim.dt,
         backend.describe(),
         crate::output::counted(rayon::current_num_threads(), "thread", "threads")
@@ -514,7 +518,8 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
         backend: backend.name().to_string(),
         precision: backend.precision().to_string(),
         adapter: backend.adapter(),
-        steps: sim.step,
+        steps: sim.step - sim.first_step.1,
+        last_step: sim.step,
         t_end: sim.t,
         cutbacks: totals.cutbacks,
         newton_iterations: totals.newton,
@@ -645,8 +650,8 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
 pub enum RestartError {
     #[error(transparent)]
     Read(#[from] crate::output::ReadError),
-    #[error("`{0}` holds no `/state` to continue from (written by bifirst since run --restart exists)")]
-    NoState(PathBuf),
+    #[error("`{path}` holds no `/state` to continue from: {why}")]
+    NoState { path: PathBuf, why: &'static str },
     #[error("`{path}` holds no state at or before t = {at} (the first is at t = {first})")]
     NoStateAt { path: PathBuf, at: Real, first: Real },
     #[error("`{0}` does not record its scene and scene file (`/run`)")]
@@ -680,7 +685,14 @@ pub fn restart_from(log: &Path, at: Option<Real>, sets: &[String]) -> Result<(Lo
     };
     let chosen = match (chosen, states.first()) {
         (Some(s), _) => s,
-        (None, None) => return Err(RestartError::NoState(log.into())),
+        (None, None) => {
+            let why = if record.has_summary {
+                "it was written by a bifirst older than `run --restart`, or not by bifirst"
+            } else {
+                "the run was cut short before it logged one (`output.state_every = N` logs one every N steps)"
+            };
+            return Err(RestartError::NoState { path: log.into(), why });
+        }
         (None, Some(first)) => return Err(RestartError::NoStateAt { path: log.into(), at: at.unwrap_or_default(), first: first["t"].as_f64().unwrap_or(f64::NAN) }),
     };
     let state: SavedState = serde_json::from_value(chosen.clone()).map_err(|e| RestartError::BadState { path: log.into(), message: e.to_string() })?;

@@ -29,7 +29,7 @@ fn run_log_has_every_channel_of_the_contract() {
     let log = run("uniaxial_blatz_ko", &["time.end=0.1"], "contract");
     let steps = 10;
     let expected: &[(&str, &str, &[&str], usize)] = &[
-        ("/run", "bifirst.Run", &["version", "git_revision", "scene_name", "scene", "scene_file", "backend", "precision", "adapter", "batched_bodies"], 1),
+        ("/run", "bifirst.Run", &["version", "git_revision", "scene_name", "scene", "scene_file", "backend", "precision", "adapter", "first_step", "batched_bodies"], 1),
         ("/energy", "bifirst.Energy", &["t", "kinetic", "strain", "potential", "external_work", "friction_dissipation", "numerical_dissipation", "contact_correction", "total", "energy_balance_error"], steps + 1),
         (
             "/solver",
@@ -45,7 +45,7 @@ fn run_log_has_every_channel_of_the_contract() {
             "/summary",
             "bifirst.Summary",
             &[
-                "scene", "status", "message", "backend", "precision", "adapter", "steps", "t_end", "cutbacks", "newton_iterations", "uzawa_iterations",
+                "scene", "status", "message", "backend", "precision", "adapter", "steps", "last_step", "t_end", "cutbacks", "newton_iterations", "uzawa_iterations",
                 "bodies_iterated", "factorizations", "max_penetration", "max_overlap", "max_overlap_ratio", "energy_gain_steps", "max_energy_gain", "overlap_retries", "energy_retries", "kept_beyond_bounds", "energy_created", "wall_s", "wall_by_phase", "bytes_moved", "device_submits", "energy", "output",
             ],
             1,

@@ -52,25 +52,39 @@ pub fn known_answer(name: &str, loaded: &LoadedScene) -> Result<Box<dyn KnownAns
     let material = scene.material.get(&body.material).ok_or_else(|| missing("the body's material"))?;
     let velocity = |axis: usize| body.initial_velocity.as_ref().and_then(|v| v.get(axis).copied()).ok_or_else(|| missing(&format!("body.{body_name}.initial_velocity")));
     let moduli = |m: &MaterialSpec| Ok::<_, AccuracyError>((m.G.ok_or_else(|| missing("material G"))?, m.K.ok_or_else(|| missing("material K"))?));
+    // A closed form that is infinite, zero or NaN here (no friction, no speed) has no relative
+    // error to offer: refused before anything runs.
+    let expected = |quantity: &'static str, value: f64, hint: &'static str| {
+        if value.is_finite() && value > 0.0 {
+            Ok(value)
+        } else {
+            Err(AccuracyError::Expected { measure: name.to_string(), quantity, value, hint })
+        }
+    };
     Ok(match name {
         "bar_impact" => {
             let (g, k) = moduli(material)?;
             let length = body.mesh.size.as_ref().and_then(|s| s.first().copied()).ok_or_else(|| missing("the bar's mesh size"))?;
             let wave_speed = ((k + 4.0 * g / 3.0) / material.density).sqrt();
-            Box::new(BarImpact { duration: 2.0 * length / wave_speed, speed: velocity(0)?.abs(), touching: None, rebound: f64::NAN })
+            let duration = expected("contact duration", 2.0 * length / wave_speed, "the bar's length, moduli and density")?;
+            let speed = expected("rebound speed", velocity(0)?.abs(), "the bar's initial velocity")?;
+            Box::new(BarImpact { duration, speed, touching: None, rebound: f64::NAN })
         }
         "sliding_block" => {
             let floor = scene.obstacle.values().next().ok_or_else(|| missing("a floor obstacle"))?;
             let friction = floor.friction.unwrap_or(scene.contact.friction);
             let gravity = scene.gravity.as_ref().and_then(|g| g.get(1).copied()).ok_or_else(|| missing("gravity"))?.abs();
-            Box::new(SlidingBlock { speed: velocity(0)?.abs(), friction, gravity, start: None, end: None })
+            let speed = velocity(0)?.abs();
+            expected("stopping distance", speed * speed / (2.0 * friction * gravity), "a block stops only with friction, gravity and an initial speed above zero")?;
+            Box::new(SlidingBlock { speed, friction, gravity, start: None, end: None })
         }
         "hertz_cylinder" => {
             let (g, k) = moduli(material)?;
             if !scene.obstacle.contains_key("floor") {
                 return Err(missing("an obstacle named `floor`"));
             }
-            Box::new(Hertz { contact_modulus: plane_strain_contact_modulus(g, k), end: None })
+            let contact_modulus = expected("contact modulus", plane_strain_contact_modulus(g, k), "the material's G and K")?;
+            Box::new(Hertz { contact_modulus, end: None })
         }
         "free_vibration_2d" | "free_vibration_3d" => {
             let (g, k) = moduli(material)?;
@@ -85,7 +99,8 @@ pub fn known_answer(name: &str, loaded: &LoadedScene) -> Result<Box<dyn KnownAns
             let (length, depth) = (size[0], size[axis]);
             // Euler-Bernoulli: ω = 1.8751² / L² √(E I / (ρ A)), I / A = depth² / 12.
             let omega = 1.875_104_068_711_961_f64.powi(2) / (length * length) * depth * (modulus / (12.0 * material.density)).sqrt();
-            Box::new(Vibration { drift: EnergyDrift { initial: None, drift: 0.0 }, axis, period: 2.0 * std::f64::consts::PI / omega, last: None, crossings: vec![0.0] })
+            let period = expected("bending period", 2.0 * std::f64::consts::PI / omega, "the beam's size, moduli and density")?;
+            Box::new(Vibration { drift: EnergyDrift { initial: None, drift: 0.0 }, axis, period, last: None, crossings: vec![0.0] })
         }
         "free_flight_3d" => Box::new(MomentumDrift { initial: None, linear: 0.0, angular: 0.0 }),
         _ => return Err(AccuracyError::UnknownMeasure(name.to_string())),

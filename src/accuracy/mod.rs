@@ -28,6 +28,10 @@ pub enum AccuracyError {
     Parameter { measure: String, what: String },
     #[error("`--over {key}`: {message}")]
     RunKey { key: String, message: String },
+    #[error("measure `{measure}`: the expected {quantity} is {value} with these parameters ({hint}); it has no error to measure")]
+    Expected { measure: String, quantity: &'static str, value: f64, hint: &'static str },
+    #[error("variant {label}: {source}")]
+    Variant { label: String, source: Box<AccuracyError> },
     #[error(transparent)]
     Sweep(#[from] SweepError),
     #[error("variant {label}: {source}")]
@@ -105,7 +109,7 @@ impl Study {
                 }
             }
             let loaded = load_scene(scene, &scene_sets).map_err(|source| AccuracyError::Scene { label: variant.label.clone(), source })?;
-            known_answer(&measure, &loaded)?;
+            known_answer(&measure, &loaded).map_err(|e| AccuracyError::Variant { label: variant.label.clone(), source: Box::new(e) })?;
             runs.push((variant, loaded, request));
         }
         Ok(Self { name: loaded.name, measure, axes: axes.to_vec(), runs })
@@ -137,7 +141,7 @@ impl Study {
                 first.get_or_insert((summary, message, measure.errors()));
             }
             let (summary, message, errors) = first.expect("one run or more");
-            let error = errors.iter().map(|e| e.error).fold(0.0, f64::max);
+            let error = row_error(&errors);
             let values = self.axes.iter().map(|a| variant.value(&a.key).to_string()).collect();
             let row = Row {
                 index: variant.index,
@@ -165,6 +169,12 @@ impl Study {
         mark_front(&mut rows);
         Ok(rows)
     }
+}
+
+/// A row's error: the largest of its terms; NaN if any is NaN (`f64::max` would drop it and
+/// put a run without a measurable answer on the front).
+fn row_error(errors: &[ErrorTerm]) -> f64 {
+    errors.iter().map(|e| e.error).fold(0.0, |a: f64, e| if a.is_nan() || e.is_nan() { f64::NAN } else { a.max(e) })
 }
 
 fn median(values: &[f64]) -> f64 {
@@ -221,6 +231,9 @@ pub fn convergence_slopes(axes: &[SweepAxis], rows: &[Row]) -> Vec<(String, Stri
             let Some(next) = next.filter(|n| n.status == "finished" && row.status == "finished") else { continue };
             let (v0, v1) = (numeric(&row.values[a]).unwrap_or(f64::NAN), numeric(next_value).unwrap_or(f64::NAN));
             let slope = (next.error / row.error).ln() / (v1 / v0).ln();
+            if !slope.is_finite() {
+                continue;
+            }
             let others: Vec<String> = row.values.iter().enumerate().filter(|(k, _)| *k != a).map(|(k, v)| format!("{}={v}", axes[k].key)).collect();
             let between = format!("{} -> {}{}", row.values[a], next_value, if others.is_empty() { String::new() } else { format!(" ({})", others.join(", ")) });
             slopes.push((axis.key.clone(), between, slope));
@@ -298,6 +311,18 @@ mod tests {
         );
         assert_eq!(cheapest_within(&rows, 0.02).map(|r| r.wall_s), Some(2.0));
         assert!(cheapest_within(&rows, 1e-3).is_none());
+    }
+
+    /// Caught: a NaN error term was dropped by `f64::max` and its variant put on the front.
+    #[test]
+    fn a_nan_error_term_keeps_its_row_off_the_front() {
+        let term = |error: f64| ErrorTerm { quantity: "q", computed: 1.0, expected: 1.0, error };
+        assert_eq!(row_error(&[term(0.1), term(0.3)]), 0.3);
+        let error = row_error(&[term(f64::NAN), term(0.1)]);
+        assert!(error.is_nan());
+        let mut rows = vec![row(1.0, error, "finished"), row(2.0, 0.2, "finished")];
+        mark_front(&mut rows);
+        assert_eq!(rows.iter().map(|r| r.pareto).collect::<Vec<_>>(), [false, true]);
     }
 
     #[test]

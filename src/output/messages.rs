@@ -26,6 +26,8 @@ pub struct RunMessage {
     pub precision: String,
     /// The GPU adapter, or null on the CPU.
     pub adapter: Option<String>,
+    /// The step the run starts from: 0, or a restarted run's state's step.
+    pub first_step: usize,
     /// The bodies logged together on `/bodies` (`output.bodies`), or null when every body has
     /// its own `/body/<name>` channel.
     pub batched_bodies: Option<BatchedBodies>,

@@ -99,8 +99,9 @@ fn from_steps(record: &RunRecord) -> (Value, &'static str) {
         wall.insert(p.to_string(), phase(p).into());
     }
     let last = solver.last();
+    let first = record.messages("/run").first().map_or(0, |m| count(&m["first_step"]));
     let summary = serde_json::json!({
-        "steps": last.map_or(0, |m| count(&m["step"])),
+        "steps": last.map_or(0, |m| count(&m["step"]).saturating_sub(first)),
         "t_end": last.map_or(0.0, |m| number(&m["t"])),
         "cutbacks": sum("cutbacks"),
         "newton_iterations": sum("newton_iterations"),

@@ -178,6 +178,9 @@ pub const OVERLAP_GROWTH: Real = 1.25;
 /// Steps in a row without a retry after which the sub-step doubles back.
 pub const GROW_AFTER: usize = 4;
 
+/// Relative round-off allowed between the time left and a whole step (see `step_dt`).
+const GRID_ROUND_OFF: Real = 1e-9;
+
 /// How an attempt at a step is solved and judged.
 #[derive(Debug, Clone, Copy, Default)]
 struct Attempt {
@@ -250,7 +253,19 @@ impl Simulation {
     /// counted from t = 0, or from a restored state with the steps before it.
     pub fn step_count(&self) -> usize {
         let (t0, step0) = self.first_step;
-        step0 + (((self.end - t0) / self.dt) - 1e-9).ceil().max(1.0) as usize
+        step0 + (((self.end - t0) / self.dt) - GRID_ROUND_OFF).ceil().max(1.0) as usize
+    }
+
+    /// The next step's length: `dt`, or what is left to `end` when that is a shorter step. A step
+    /// that lands within round-off of `end` is a whole `dt`, so that a run ends on the same time
+    /// grid as a longer run of the scene, and continues on it bit for bit (`--restart`).
+    fn step_dt(&self) -> Real {
+        let left = self.end - self.t;
+        if left >= self.dt * (1.0 - GRID_ROUND_OFF) {
+            self.dt
+        } else {
+            left.max(self.dt * GRID_ROUND_OFF)
+        }
     }
 
     pub fn finished(&self) -> bool {
@@ -263,7 +278,7 @@ impl Simulation {
     /// used; [`GROW_AFTER`] steps in a row without one take the level back up by one.
     pub fn advance(&mut self) -> Result<StepReport, RunFailure> {
         let started = std::time::Instant::now();
-        let dt = self.dt.min(self.end - self.t).max(self.dt * 1e-9);
+        let dt = self.step_dt();
         let mut report = StepReport { step: self.step + 1, dt, ..Default::default() };
         let submits = self.world.as_ref().map_or(0, GpuWorld::submits);
         let level = self.level.min(self.max_cutbacks);

@@ -45,6 +45,53 @@ pub struct SavedBody {
     pub reactions: Vec<Real>,
     /// The effective stiffness of the factorisation the body keeps across steps, if any.
     pub factor: Option<SavedFactor>,
+    /// What the state was computed on (absent in logs written before restarts checked it).
+    #[serde(default)]
+    pub fingerprint: Option<Fingerprint>,
+}
+
+/// Hashes (FNV-1a, 16 hex digits) of what a body's saved state is only valid for: a restart
+/// onto a changed mesh or material would run on with forces and energies of another body.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
+pub struct Fingerprint {
+    /// Element kind, reference node coordinates and connectivity.
+    pub mesh: String,
+    /// Material model and parameters, element formulation and nodal masses (density).
+    pub material: String,
+}
+
+impl Fingerprint {
+    fn of(body: &super::Body) -> Self {
+        let mut mesh = Fnv::default();
+        mesh.bytes(body.mesh.kind.name().as_bytes());
+        body.mesh.nodes.iter().flatten().for_each(|x| mesh.bytes(&x.to_le_bytes()));
+        body.mesh.connectivity.iter().for_each(|i| mesh.bytes(&i.to_le_bytes()));
+        let mut material = Fnv::default();
+        material.bytes(format!("{:?} {:?}", body.model, body.formulation).as_bytes());
+        body.mass.iter().for_each(|m| material.bytes(&m.to_le_bytes()));
+        Self { mesh: mesh.hex(), material: material.hex() }
+    }
+}
+
+/// FNV-1a, 64 bits: stable across builds and platforms, unlike the standard library's hasher.
+struct Fnv(u64);
+
+impl Default for Fnv {
+    fn default() -> Self {
+        Self(0xcbf2_9ce4_8422_2325)
+    }
+}
+
+impl Fnv {
+    fn bytes(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.0 = (self.0 ^ u64::from(b)).wrapping_mul(0x0100_0000_01b3);
+        }
+    }
+
+    fn hex(&self) -> String {
+        format!("{:016x}", self.0)
+    }
 }
 
 /// The values `K̄ = ξ K + c1 M` a kept factorisation was made from: factorised again on restart,
@@ -78,6 +125,10 @@ pub enum RestoreError {
     Ended { end: Real, t: Real },
     #[error("body `{name}`: the saved factorisation does not fit ({message})")]
     Factor { name: String, message: String },
+    #[error("body `{name}`: its {what} differs from the run's that saved the state; a restart continues the same bodies (start a new run to change them)")]
+    Changed { name: String, what: &'static str },
+    #[error("the state's {what} is {value}: not a state a run can continue from")]
+    BadValue { what: String, value: Real },
 }
 
 impl Simulation {
@@ -105,6 +156,7 @@ impl Simulation {
                     strain: b.state.strain,
                     reactions: b.reactions.clone(),
                     factor: b.kept_factor().map(|(c1, values)| SavedFactor { c1, values: values.to_vec() }),
+                    fingerprint: Some(Fingerprint::of(b)),
                 })
                 .collect(),
             contact: {
@@ -145,7 +197,17 @@ impl Simulation {
             if [s.u.len(), s.v.len(), s.f_int.len()].iter().any(|&len| len != n) || s.reactions.len() != b.reactions.len() {
                 return Err(RestoreError::Dofs { name: b.name.clone(), saved: s.u.len(), scene: n });
             }
+            if let Some(saved) = &s.fingerprint {
+                let scene = Fingerprint::of(b);
+                if saved.mesh != scene.mesh {
+                    return Err(RestoreError::Changed { name: b.name.clone(), what: "mesh (element kind, node coordinates or connectivity)" });
+                }
+                if saved.material != scene.material {
+                    return Err(RestoreError::Changed { name: b.name.clone(), what: "material, formulation or density" });
+                }
+            }
         }
+        check_values(saved)?;
         for (b, s) in self.bodies.iter_mut().zip(&saved.bodies) {
             b.state.u.clone_from(&s.u);
             b.state.v.clone_from(&s.v);
@@ -165,6 +227,13 @@ impl Simulation {
         (self.level, self.easy_steps, self.last_overlap) = (saved.step_level, saved.easy_steps, saved.last_overlap);
         self.obstacle_reactions.clone_from(&saved.obstacle_reactions);
         self.restored_warm_start = Some(saved.contact.iter().map(|c| ((c.slave_body, c.slave_node, c.master), (c.r, c.rho))).collect());
+        // Finite values can still overflow the energies (a velocity of 1e308).
+        let energies = self.energies();
+        for (what, value) in [("kinetic energy", energies.kinetic), ("strain energy", energies.strain), ("total energy", energies.total)] {
+            if !value.is_finite() {
+                return Err(RestoreError::BadValue { what: what.into(), value });
+            }
+        }
         Ok(())
     }
 
@@ -175,4 +244,44 @@ impl Simulation {
             None => self.contact_points.iter().map(|c| (c.key(), (c.r, c.rho))).collect(),
         }
     }
+}
+
+/// Refuses a state with a negative or non-finite time, or any non-finite value.
+fn check_values(saved: &SavedState) -> Result<(), RestoreError> {
+    let bad = |what: String, value: Real| Err(RestoreError::BadValue { what, value });
+    if !saved.t.is_finite() || saved.t < 0.0 {
+        return bad("time t".into(), saved.t);
+    }
+    let scalars = [
+        ("initial_energy", saved.initial_energy),
+        ("external_work", saved.external_work),
+        ("friction_dissipation", saved.friction_dissipation),
+        ("numerical_dissipation", saved.numerical_dissipation),
+        ("contact_correction", saved.contact_correction),
+        ("last_overlap", saved.last_overlap),
+    ];
+    if let Some((what, value)) = scalars.into_iter().find(|(_, x)| !x.is_finite()) {
+        return bad(what.into(), value);
+    }
+    for b in &saved.bodies {
+        let fields = [("u", &b.u), ("v", &b.v), ("f_int", &b.f_int), ("reactions", &b.reactions)];
+        for (field, values) in fields {
+            if let Some((i, &x)) = values.iter().enumerate().find(|(_, x)| !x.is_finite()) {
+                return bad(format!("body `{}` {field}[{i}]", b.name), x);
+            }
+        }
+        if !b.strain.is_finite() {
+            return bad(format!("body `{}` strain", b.name), b.strain);
+        }
+        if let Some((i, &x)) = b.factor.iter().flat_map(|f| std::iter::once(&f.c1).chain(&f.values)).enumerate().find(|(_, x)| !x.is_finite()) {
+            return bad(format!("body `{}` factor value {i}", b.name), x);
+        }
+    }
+    if let Some(c) = saved.contact.iter().find(|c| !(c.rho.is_finite() && c.r.iter().all(|x| x.is_finite()))) {
+        return bad(format!("contact reaction at node {} of body {}", c.slave_node, c.slave_body), c.r.iter().copied().find(|x| !x.is_finite()).unwrap_or(c.rho));
+    }
+    if let Some(r) = saved.obstacle_reactions.iter().flatten().find(|x| !x.is_finite()) {
+        return bad("obstacle reaction".into(), *r);
+    }
+    Ok(())
 }

@@ -28,6 +28,8 @@ pub enum SweepError {
     Index { index: usize, count: usize },
     #[error("`--sbatch {0}`: expected KEY=VALUE or KEY, the key made of letters, digits and `-`, the value on one line")]
     Sbatch(String),
+    #[error("`--sbatch {0}` needs a value (`--sbatch {0}=...`); only flags such as `exclusive` stand alone")]
+    SbatchValue(String),
     #[error("variant {label}: {source}")]
     Scene { label: String, source: SceneError },
     #[error("cannot find the scene `{path}`: {source}")]

@@ -6,7 +6,13 @@ use super::{Sweep, SweepError};
 use std::fmt::Write;
 use std::path::PathBuf;
 
-/// `--sbatch KEY=VALUE` (or a bare `KEY`, such as `exclusive`): one `#SBATCH --KEY=VALUE` line.
+/// The sbatch options that may stand without a value (`--sbatch exclusive`); every other
+/// option needs one (a bare `time` would write `#SBATCH --time`, which sbatch rejects at submit).
+const SBATCH_FLAGS: [&str; 17] = [
+    "exclusive", "requeue", "no-requeue", "hold", "overcommit", "oversubscribe", "contiguous", "spread-job", "use-min-nodes", "nice", "propagate", "get-user-env", "test-only", "wait", "parsable", "quiet", "verbose",
+];
+
+/// `--sbatch KEY=VALUE` (or a bare flag, such as `exclusive`): one `#SBATCH --KEY=VALUE` line.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SbatchOption {
     pub key: String,
@@ -26,6 +32,9 @@ impl std::str::FromStr for SbatchOption {
         let bad_key = key.is_empty() || !key.chars().all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_');
         if bad_key || value.as_ref().is_some_and(|v| v.is_empty() || v.chars().any(char::is_control)) {
             return Err(SweepError::Sbatch(spec.to_string()));
+        }
+        if value.is_none() && !SBATCH_FLAGS.contains(&key) {
+            return Err(SweepError::SbatchValue(key.to_string()));
         }
         Ok(Self { key: key.to_string(), value })
     }

@@ -35,6 +35,8 @@ pub enum PlotError {
     Create { path: PathBuf, source: std::io::Error },
     #[error("cannot draw `{path}`: {message}")]
     Draw { path: PathBuf, message: String },
+    #[error("`{path}` logs no probe `{probe}` ({known})")]
+    NoProbe { path: PathBuf, probe: String, known: String },
 }
 
 /// One panel: a quantity against time, one line per run.
@@ -248,7 +250,11 @@ pub fn plot_runs(runs: &[RunRecord], out: &Path, options: &PlotOptions) -> Resul
 /// A probe's reference position (its position minus its displacement at the first message).
 fn reference(run: &RunRecord, probe: &str) -> Result<[f64; 3], PlotError> {
     let topic = format!("/probe/{probe}");
-    let first = run.require(&topic)?.first().ok_or_else(|| PlotError::Read(ReadError::Missing { path: run.path.clone(), topic: topic.clone() }))?;
+    let Some(first) = run.messages(&topic).first() else {
+        let probes = run.names_under("/probe/");
+        let known = if probes.is_empty() { "it has none".to_string() } else { format!("it has {}", probes.join(", ")) };
+        return Err(PlotError::NoProbe { path: run.path.clone(), probe: probe.into(), known });
+    };
     let at = |field: &str, i: usize| first[field][i].as_f64().unwrap_or(0.0);
     Ok([0, 1, 2].map(|i| at("position", i) - at("displacement", i)))
 }
