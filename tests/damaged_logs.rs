@@ -100,10 +100,10 @@ fn a_restart_onto_another_mesh_or_material_is_refused() {
     let dir = fresh_dir("restart_changed");
     let log = sliding_log(&dir, 20);
     let out = dir.join("continued.mcap");
-    for (set, what) in [("body.block.mesh.size=[0.4,0.1]", "mesh"), ("material.steel_like.G=2.0e7", "material")] {
+    for (set, what) in [("body.block.mesh.size=[0.4,0.1]", "meshes"), ("material.steel_like.G=2.0e7", "materials")] {
         let o = bifirst(&["run", "--restart", p(&log), "--quiet", "--set", "time.end=0.03", "--set", set, "--out", p(&out)]);
         assert_eq!(exit_of(&o), 2, "{set}: {}", text(&o));
-        assert!(text(&o).contains(&format!("its {what}")), "{set}: {}", text(&o));
+        assert!(text(&o).contains(&format!("the bodies' {what}")), "{set}: {}", text(&o));
         let o = bifirst(&["run", "--restart", p(&log), "--quiet", "--set", "time.end=0.03", "--set", set, "--out", p(&out)]);
         assert_eq!(text(&o).matches("a restart continues the same bodies").count(), 1, "said once: {}", text(&o));
     }

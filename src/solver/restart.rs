@@ -28,6 +28,9 @@ pub struct SavedState {
     /// The deepest overlap the last step left, in element sizes (step control's reference).
     #[serde(default)]
     pub last_overlap: Real,
+    /// What the state was computed on (absent in logs written before restarts checked it).
+    #[serde(default)]
+    pub fingerprint: Option<Fingerprint>,
     pub bodies: Vec<SavedBody>,
     pub contact: Vec<SavedReaction>,
     pub obstacle_reactions: Vec<[Real; 3]>,
@@ -45,30 +48,29 @@ pub struct SavedBody {
     pub reactions: Vec<Real>,
     /// The effective stiffness of the factorisation the body keeps across steps, if any.
     pub factor: Option<SavedFactor>,
-    /// What the state was computed on (absent in logs written before restarts checked it).
-    #[serde(default)]
-    pub fingerprint: Option<Fingerprint>,
 }
 
-/// Hashes (FNV-1a, 16 hex digits) of what a body's saved state is only valid for: a restart
-/// onto a changed mesh or material would run on with forces and energies of another body.
+/// Hashes (FNV-1a, 16 hex digits) of what a saved state is only valid for, over every body in
+/// order: a restart onto a changed mesh or material would run on with the forces and energies
+/// of other bodies. Two hashes per state, not per body: a packing's log stays its size.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, schemars::JsonSchema)]
 pub struct Fingerprint {
-    /// Element kind, reference node coordinates and connectivity.
+    /// Element kinds, reference node coordinates and connectivity.
     pub mesh: String,
-    /// Material model and parameters, element formulation and nodal masses (density).
+    /// Material models and parameters, element formulations and nodal masses (density).
     pub material: String,
 }
 
 impl Fingerprint {
-    fn of(body: &super::Body) -> Self {
-        let mut mesh = Fnv::default();
-        mesh.bytes(body.mesh.kind.name().as_bytes());
-        body.mesh.nodes.iter().flatten().for_each(|x| mesh.bytes(&x.to_le_bytes()));
-        body.mesh.connectivity.iter().for_each(|i| mesh.bytes(&i.to_le_bytes()));
-        let mut material = Fnv::default();
-        material.bytes(format!("{:?} {:?}", body.model, body.formulation).as_bytes());
-        body.mass.iter().for_each(|m| material.bytes(&m.to_le_bytes()));
+    fn of(bodies: &[super::Body]) -> Self {
+        let (mut mesh, mut material) = (Fnv::default(), Fnv::default());
+        for body in bodies {
+            mesh.bytes(body.mesh.kind.name().as_bytes());
+            body.mesh.nodes.iter().flatten().for_each(|x| mesh.bytes(&x.to_le_bytes()));
+            body.mesh.connectivity.iter().for_each(|i| mesh.bytes(&i.to_le_bytes()));
+            material.bytes(format!("{:?} {:?}", body.model, body.formulation).as_bytes());
+            body.mass.iter().for_each(|m| material.bytes(&m.to_le_bytes()));
+        }
         Self { mesh: mesh.hex(), material: material.hex() }
     }
 }
@@ -125,8 +127,8 @@ pub enum RestoreError {
     Ended { end: Real, t: Real },
     #[error("body `{name}`: the saved factorisation does not fit ({message})")]
     Factor { name: String, message: String },
-    #[error("body `{name}`: its {what} differs from the run's that saved the state; a restart continues the same bodies (start a new run to change them)")]
-    Changed { name: String, what: &'static str },
+    #[error("the bodies' {what} differ from those of the run that saved the state; a restart continues the same bodies (start a new run to change them)")]
+    Changed { what: &'static str },
     #[error("the state's {what} is {value}: not a state a run can continue from")]
     BadValue { what: String, value: Real },
 }
@@ -145,6 +147,7 @@ impl Simulation {
             step_level: self.level,
             easy_steps: self.easy_steps,
             last_overlap: self.last_overlap,
+            fingerprint: Some(Fingerprint::of(&self.bodies)),
             bodies: self
                 .bodies
                 .iter()
@@ -156,7 +159,6 @@ impl Simulation {
                     strain: b.state.strain,
                     reactions: b.reactions.clone(),
                     factor: b.kept_factor().map(|(c1, values)| SavedFactor { c1, values: values.to_vec() }),
-                    fingerprint: Some(Fingerprint::of(b)),
                 })
                 .collect(),
             contact: {
@@ -197,14 +199,14 @@ impl Simulation {
             if [s.u.len(), s.v.len(), s.f_int.len()].iter().any(|&len| len != n) || s.reactions.len() != b.reactions.len() {
                 return Err(RestoreError::Dofs { name: b.name.clone(), saved: s.u.len(), scene: n });
             }
-            if let Some(saved) = &s.fingerprint {
-                let scene = Fingerprint::of(b);
-                if saved.mesh != scene.mesh {
-                    return Err(RestoreError::Changed { name: b.name.clone(), what: "mesh (element kind, node coordinates or connectivity)" });
-                }
-                if saved.material != scene.material {
-                    return Err(RestoreError::Changed { name: b.name.clone(), what: "material, formulation or density" });
-                }
+        }
+        if let Some(saved) = &saved.fingerprint {
+            let scene = Fingerprint::of(&self.bodies);
+            if saved.mesh != scene.mesh {
+                return Err(RestoreError::Changed { what: "meshes (element kinds, node coordinates or connectivity)" });
+            }
+            if saved.material != scene.material {
+                return Err(RestoreError::Changed { what: "materials, formulations or densities" });
             }
         }
         check_values(saved)?;
