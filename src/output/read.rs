@@ -1,4 +1,5 @@
-//! Reading a run log back (for `bifirst plot` and `bifirst summary`, and the tests).
+//! Reading a run log back: the one reader of every command that takes a log (`summary`, `plot`,
+//! `state`, `run --restart`, `sweep-report`, `accuracy`), and of the tests.
 
 use mcap::records::Record;
 use serde_json::Value;
