@@ -77,7 +77,7 @@ fn backend_and_precision_are_axes_and_unknown_scenes_are_refused() {
     let o = bifirst().args(["accuracy", "scenes/grains_many.toml", "--over", "time.dt=1e-3"]).output().unwrap();
     assert_eq!(o.status.code(), Some(2));
     let stderr = String::from_utf8_lossy(&o.stderr);
-    assert!(stderr.contains("no known answer named `grains_many`; the measures are bar_impact, sliding_block, hertz_cylinder, free_vibration_2d, free_vibration_3d, free_flight_3d"), "{stderr}");
+    assert!(stderr.contains("no known answer named `grains_many`; the measures are bar_impact, sliding_block, hertz_cylinder, thick_cylinder, free_vibration_2d, free_vibration_3d, free_flight_3d"), "{stderr}");
     let o = bifirst().args(["accuracy", "scenes/sliding_block.toml", "--over", "backend=cpu,tpu"]).output().unwrap();
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("`--over backend`: unknown backend `tpu`"), "{}", String::from_utf8_lossy(&o.stderr));

@@ -310,3 +310,25 @@ fn inputs_too_large_for_finite_energies() {
     let sets = ["material.rubber.density=1e100", "body.block.mesh.size=[1e60, 1e60]", "body.block.initial_velocity=[1e100, 0.0]"];
     assert_error("infinite_initial_energy", GOOD, &sets, "body.block", Some(11), "non-finite energy (kinetic inf");
 }
+
+#[test]
+fn a_bad_load_names_its_key() {
+    let with_load = |load: &str| format!("{GOOD}\n[load.pull]\nbody = \"block\"\n{load}\n");
+    let line = |scene: &str, text: &str| scene.lines().position(|l| l.contains(text)).map(|i| i + 1);
+    let both = with_load("nodes = \"y_max\"\ntraction = [0.0, 1.0]\npressure = 1.0");
+    assert_error("load_both", &both, &[], "load.pull", None, "either a `traction`");
+    let short = with_load("nodes = \"y_max\"\ntraction = [1.0]");
+    assert_error("load_short", &short, &[], "load.pull.traction", line(&short, "traction = [1.0]"), "2 components");
+    let ramp = with_load("nodes = \"y_max\"\npressure = 1.0\nramp = -1.0");
+    assert_error("load_ramp", &ramp, &[], "load.pull.ramp", line(&ramp, "ramp = -1.0"), "zero or a positive number");
+    let set = with_load("nodes = \"top\"\npressure = 1.0");
+    assert_error("load_set", &set, &[], "load.pull.nodes", None, "no node set `top`");
+    // A disk's centre: a node set with no boundary facet.
+    let disk = with_load("nodes = \"center\"\npressure = 1.0")
+        .replace(r#"{ generator = "rectangle", element = "quad4", size = [1.0, 1.0], divisions = [2, 2] }"#, r#"{ generator = "disk", element = "quad4", radius = 1.0, divisions = [2] }"#)
+        .replace("nodes = \"y_min\"", "nodes = \"boundary\"");
+    assert_error("load_nothing", &disk, &[], "load.pull.nodes", None, "the load would act on nothing");
+    let nothing = with_load("nodes = \"all\"\npressure = 1.0");
+    let (code, stderr, _) = check("load_all", &nothing, &[]);
+    assert_eq!(code, 0, "a load on every boundary facet is valid: {stderr}");
+}

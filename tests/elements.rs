@@ -148,6 +148,23 @@ fn lumped_masses_sum_to_the_body_mass() {
 }
 
 #[test]
+fn annulus_mesh_is_positive_closes_on_itself_and_names_its_edges() {
+    for kind in [ElementKind::Quad4, ElementKind::Tri3] {
+        let ring = generate::annulus([1.0, -1.0], [1.0, 2.0], 360.0, [4, 32], kind);
+        assert_eq!(ring.nodes.len(), 32 * 5, "{kind:?}: the full ring shares its first and last spokes");
+        let area: f64 = ReferenceGeometry::new(&ring).expect("positive elements").volumes.iter().sum();
+        let exact = 3.0 * std::f64::consts::PI;
+        assert!((area / exact - 1.0).abs() < 0.01, "{kind:?}: area {area} vs {exact}");
+        assert!(!ring.node_sets.contains_key("start") && ring.node_sets["inner"].len() == 32);
+        let quarter = generate::annulus([0.0, 0.0], [1.0, 2.0], 90.0, [4, 8], kind);
+        let geometry = ReferenceGeometry::new(&quarter).expect("positive elements");
+        assert_eq!((quarter.node_sets["start"].len(), quarter.node_sets["end"].len(), quarter.node_sets["outer"].len()), (5, 5, 9));
+        assert!(quarter.node_sets["end"].iter().all(|&n| quarter.nodes[n as usize][0].abs() < 1e-12), "`end` lies on the y axis");
+        assert!(geometry.volumes.iter().sum::<f64>() < exact / 4.0);
+    }
+}
+
+#[test]
 fn polygon_mesh_is_conforming_positive_and_fills_the_outline() {
     let hexagon: Vec<[f64; 2]> = (0..6).map(|i| (i as f64 * -std::f64::consts::FRAC_PI_3 + 0.2).sin_cos()).map(|(s, c)| [1.0 + c, 2.0 + s]).collect();
     let outlines = [vec![[0.0, 0.0], [2.0, 0.0], [0.5, 1.5]], vec![[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]], hexagon];

@@ -8,10 +8,11 @@ use crate::scene::{LoadedScene, MaterialSpec};
 use crate::solver::Simulation;
 
 /// The scenes with a known answer, by measure name (the scene's `name` picks its measure).
-pub const KNOWN_ANSWERS: [(&str, &str); 6] = [
+pub const KNOWN_ANSWERS: [(&str, &str); 7] = [
     ("bar_impact", "contact duration against 2 L / c and rebound velocity against V (1D wave theory)"),
     ("sliding_block", "stopping distance against v0^2 / (2 mu g) and friction dissipation against m v0^2 / 2"),
     ("hertz_cylinder", "contact half-width and peak pressure against Hertz's line contact"),
+    ("thick_cylinder", "radial displacement of the inner and outer surfaces of a pressurised tube against Lamé's plane-strain solution"),
     ("free_vibration_2d", "largest drift of the total energy, relative to the initial energy; the first probe's period against the Euler-Bernoulli cantilever (plane-strain modulus)"),
     ("free_vibration_3d", "largest drift of the total energy; the first probe's period against the Euler-Bernoulli cantilever"),
     ("free_flight_3d", "largest drift of the linear and angular momentum, relative to their initial values"),
@@ -101,6 +102,18 @@ pub fn known_answer(name: &str, loaded: &LoadedScene) -> Result<Box<dyn KnownAns
             let omega = 1.875_104_068_711_961_f64.powi(2) / (length * length) * depth * (modulus / (12.0 * material.density)).sqrt();
             let period = expected("bending period", 2.0 * std::f64::consts::PI / omega, "the beam's size, moduli and density")?;
             Box::new(Vibration { drift: EnergyDrift { initial: None, drift: 0.0 }, axis, period, last: None, crossings: vec![0.0] })
+        }
+        "thick_cylinder" => {
+            let (g, k) = moduli(material)?;
+            let radii = body.mesh.radii.as_ref().filter(|r| r.len() == 2).ok_or_else(|| missing("an annulus mesh (`radii`)"))?;
+            let pressure = scene.load.values().find(|l| l.body == *body_name).and_then(|l| l.pressure).ok_or_else(|| missing("a pressure load on the tube"))?;
+            let center = body.mesh.center.clone().unwrap_or_else(|| vec![0.0, 0.0]);
+            let (a, b) = (radii[0], radii[1]);
+            let (e, nu) = (9.0 * k * g / (3.0 * k + g), (3.0 * k - 2.0 * g) / (2.0 * (3.0 * k + g)));
+            // Lamé, plane strain: u_r(r) = (1 + ν) p a² / (E (b² - a²)) ((1 - 2ν) r + b² / r).
+            let radial = |r: f64| (1.0 + nu) * pressure * a * a / (e * (b * b - a * a)) * ((1.0 - 2.0 * nu) * r + b * b / r);
+            let inner = expected("inner radial displacement", radial(a).abs(), "the pressure, radii and moduli")?.copysign(pressure);
+            Box::new(Tube { center: [center[0], center[1]], radii: [a, b], expected: [inner, radial(b)], computed: [f64::NAN; 2] })
         }
         "free_flight_3d" => Box::new(MomentumDrift { initial: None, linear: 0.0, angular: 0.0 }),
         _ => return Err(AccuracyError::UnknownMeasure(name.to_string())),
@@ -251,6 +264,30 @@ impl KnownAnswer for Vibration {
         // Successive crossings are half a period apart.
         let measured = if n >= 2 { 2.0 * (self.crossings[n - 1] - self.crossings[0]) / (n - 1) as f64 } else { f64::NAN };
         vec![ErrorTerm::drift("energy drift", self.drift.drift), ErrorTerm::relative("first bending period", measured, self.period)]
+    }
+}
+
+/// A pressurised tube: the radial displacement of the nodes on the x axis at the inner and
+/// outer radius, at the last state (the load held, the vibrations damped).
+struct Tube {
+    center: [f64; 2],
+    radii: [f64; 2],
+    expected: [f64; 2],
+    computed: [f64; 2],
+}
+
+impl KnownAnswer for Tube {
+    fn observe(&mut self, sim: &Simulation) {
+        let body = &sim.bodies[0];
+        for (k, r) in self.radii.iter().enumerate() {
+            let at = [self.center[0] + r, self.center[1]];
+            let distance = |x: &[f64; 3]| (x[0] - at[0]).powi(2) + (x[1] - at[1]).powi(2);
+            let node = (0..body.mesh.nodes.len()).min_by(|&i, &j| distance(&body.mesh.nodes[i]).total_cmp(&distance(&body.mesh.nodes[j]))).expect("a mesh has nodes");
+            self.computed[k] = body.state.u[node * body.dim];
+        }
+    }
+    fn errors(&self) -> Vec<ErrorTerm> {
+        vec![ErrorTerm::relative("inner radial displacement", self.computed[0], self.expected[0]), ErrorTerm::relative("outer radial displacement", self.computed[1], self.expected[1])]
     }
 }
 

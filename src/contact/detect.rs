@@ -295,7 +295,7 @@ fn body_pairs(model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, margin:
 }
 
 /// Outward normal of a facet, scaled by its area (length in 2D).
-fn facet_normal(p: &[Vec3]) -> Vec3 {
+pub fn facet_normal(p: &[Vec3]) -> Vec3 {
     match p.len() {
         2 => {
             let d = sub(p[1], p[0]);

@@ -25,6 +25,8 @@ pub struct Scene {
     #[serde(default)]
     pub boundary: BTreeMap<String, BoundarySpec>,
     #[serde(default)]
+    pub load: BTreeMap<String, LoadSpec>,
+    #[serde(default)]
     pub probe: BTreeMap<String, ProbeSpec>,
     #[serde(default)]
     pub contact: ContactSpec,
@@ -176,6 +178,7 @@ pub enum AngularVelocity {
 pub enum Generator {
     Rectangle,
     Disk,
+    Annulus,
     Polygon,
     Box,
     Ball,
@@ -197,6 +200,10 @@ pub struct MeshSpec {
     /// Disk and ball: centre and radius.
     pub center: Option<Vec<Real>>,
     pub radius: Option<Real>,
+    /// Annulus: inner and outer radius.
+    pub radii: Option<Vec<Real>>,
+    /// Annulus: the sector's opening in degrees, from the x axis counter-clockwise (default 360).
+    pub angle: Option<Real>,
     /// Polygon: the vertices of a convex outline, `[[x, y], ...]`.
     pub points: Option<Vec<Vec<Real>>>,
     /// Mesh file: only the elements of this physical group (one file, several bodies).
@@ -280,6 +287,23 @@ pub struct BoundarySpec {
     pub components: Option<Vec<Axis>>,
     /// Prescribed velocity (all components, as many as the dimension); zero when absent.
     pub velocity: Option<Vec<Real>>,
+}
+
+/// A dead surface load on the boundary facets of a node set (the facets whose nodes all belong
+/// to it), as nodal forces: a traction (force per unit reference area; per unit length and
+/// thickness in 2D) or a pressure (along the inward reference normal).
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct LoadSpec {
+    pub body: String,
+    /// A named node set of the body's mesh.
+    pub nodes: String,
+    pub traction: Option<Vec<Real>>,
+    pub pressure: Option<Real>,
+    /// The load grows linearly from zero at t = 0 to full at t = `ramp`, then holds; 0 (the
+    /// default): full from the start.
+    #[serde(default)]
+    pub ramp: Real,
 }
 
 /// A probe follows the mesh node nearest to `point` (reference configuration).

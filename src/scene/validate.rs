@@ -42,7 +42,7 @@ fn finite_vec(key: &str, v: &[Real], len: Option<usize>) -> Result<(), Failure> 
 /// Spatial dimension implied by a body's generator, if it has one.
 pub(super) fn generator_dim(mesh: &MeshSpec) -> Option<usize> {
     mesh.generator.map(|g| match g {
-        Generator::Rectangle | Generator::Disk | Generator::Polygon => 2,
+        Generator::Rectangle | Generator::Disk | Generator::Annulus | Generator::Polygon => 2,
         Generator::Box | Generator::Ball => 3,
     })
 }
@@ -91,7 +91,7 @@ pub(super) fn validate(s: &Scene) -> Result<(), Failure> {
         let message = format!("`channels` gives each of the scene's {} bodies its own MCAP channel, and a log holds at most {} of them; use \"auto\" or \"batched\" (one `/bodies` message per step).", s.body.len(), BodyLog::MAX_CHANNELS);
         fail(Invalid, "output.bodies", message)?;
     }
-    let named = [("material", names_of(&s.material)), ("body", names_of(&s.body)), ("boundary", names_of(&s.boundary)), ("probe", names_of(&s.probe)), ("obstacle", names_of(&s.obstacle))];
+    let named = [("material", names_of(&s.material)), ("body", names_of(&s.body)), ("boundary", names_of(&s.boundary)), ("load", names_of(&s.load)), ("probe", names_of(&s.probe)), ("obstacle", names_of(&s.obstacle))];
     for (section, list) in named {
         // Names become MCAP topics and file names.
         if let Some(bad) = list.into_iter().find(|n| n.is_empty() || !n.chars().all(|c| c.is_ascii_alphanumeric() || "_-.".contains(c))) {
@@ -156,12 +156,31 @@ pub(super) fn validate(s: &Scene) -> Result<(), Failure> {
         }
         validate_obstacle(s, &format!("obstacle.{name}"), o, dim)?;
     }
+    for (name, load) in &s.load {
+        validate_load(s, &format!("load.{name}"), load, dim)?;
+    }
     for (name, p) in &s.probe {
         let key = format!("probe.{name}");
         if !s.body.contains_key(&p.body) {
             fail(Reference, format!("{key}.body"), format!("unknown body `{}` (the scene defines: {}).", p.body, names(s.body.keys())))?;
         }
         finite_vec(&format!("{key}.point"), &p.point, dim)?;
+    }
+    Ok(())
+}
+
+fn validate_load(s: &Scene, key: &str, load: &LoadSpec, dim: Option<usize>) -> Result<(), Failure> {
+    if !s.body.contains_key(&load.body) {
+        fail(Reference, format!("{key}.body"), format!("unknown body `{}` (the scene defines: {}).", load.body, names(s.body.keys())))?;
+    }
+    match (&load.traction, load.pressure) {
+        (Some(t), None) => finite_vec(&format!("{key}.traction"), t, dim)?,
+        (None, Some(p)) if !p.is_finite() => fail(Invalid, format!("{key}.pressure"), "not a finite number.")?,
+        (None, Some(_)) => {}
+        _ => fail(Invalid, key, "a load is either a `traction` (a vector) or a `pressure` (a number).")?,
+    }
+    if !(load.ramp.is_finite() && load.ramp >= 0.0) {
+        fail(Invalid, format!("{key}.ramp"), format!("the ramp time must be zero or a positive number (got {}).", load.ramp))?;
     }
     Ok(())
 }
@@ -212,6 +231,8 @@ fn validate_mesh(key: &str, m: &MeshSpec) -> Result<(), Failure> {
             ("divisions", m.divisions.is_some()),
             ("center", m.center.is_some()),
             ("radius", m.radius.is_some()),
+            ("radii", m.radii.is_some()),
+            ("angle", m.angle.is_some()),
             ("points", m.points.is_some()),
             ("rotation", m.rotation.is_some()),
         ] {
@@ -272,6 +293,25 @@ fn validate_mesh(key: &str, m: &MeshSpec) -> Result<(), Failure> {
                 _ => fail(Invalid, format!("{key}.divisions"), "a disk or ball takes one positive number of cells per radius, e.g. [4].")?,
             }
         }
+        Generator::Annulus => {
+            need("radii", m.radii.is_some())?;
+            match m.radii.as_deref() {
+                Some(&[a, b]) if a.is_finite() && b.is_finite() && 0.0 < a && a < b => {}
+                _ => fail(Invalid, format!("{key}.radii"), "an annulus takes [inner, outer] radii with 0 < inner < outer.")?,
+            }
+            if let Some(angle) = m.angle {
+                if !(angle > 0.0 && angle <= 360.0) {
+                    fail(Invalid, format!("{key}.angle"), format!("the sector's opening must lie in (0, 360] degrees (got {angle})."))?;
+                }
+            }
+            if let Some(c) = &m.center {
+                finite_vec(&format!("{key}.center"), c, Some(2))?;
+            }
+            match m.divisions.as_deref() {
+                Some([nr, nt]) if *nr > 0 && *nt > 0 => {}
+                _ => fail(Invalid, format!("{key}.divisions"), "an annulus takes [radial, circumferential] numbers of cells, e.g. [8, 16].")?,
+            }
+        }
         Generator::Polygon => {
             if kind != crate::mesh::ElementKind::Tri3 {
                 fail(Invalid, format!("{key}.element"), "the polygon generator makes tri3 meshes.")?;
@@ -302,7 +342,7 @@ fn generated_elements(m: &MeshSpec) -> u128 {
     };
     match m.generator {
         None => 0,
-        Some(Generator::Rectangle | Generator::Box) => product.saturating_mul(per_cell),
+        Some(Generator::Rectangle | Generator::Box | Generator::Annulus) => product.saturating_mul(per_cell),
         // A disk is a (2n) x (2n) grid mapped onto the circle; a polygon has n² triangles per edge.
         Some(Generator::Disk) => div.first().map_or(0, |&n| (2 * n).saturating_mul(2 * n).saturating_mul(per_cell)),
         Some(Generator::Ball) => div.first().map_or(0, |&n| (2 * n).saturating_mul(2 * n).saturating_mul(2 * n).saturating_mul(per_cell)),

@@ -10,7 +10,7 @@ mod restart;
 mod setup;
 pub mod topology;
 
-pub use body::{Body, StepFailure};
+pub use body::{Body, NodalLoad, StepFailure};
 pub use restart::{RestoreError, SavedBody, SavedFactor, SavedReaction, SavedState};
 pub use setup::build_simulation;
 
@@ -383,7 +383,10 @@ impl Simulation {
         report.wall.contact += started.elapsed().as_secs_f64();
         let settings = self.contact.as_ref().map(|c| c.settings.clone());
         let gravity = self.gravity;
-        self.bodies.par_iter_mut().for_each(|body| body.begin_step(&p, &gravity));
+        // The load of a step at the time the scheme weighs the step's end forces by (exact for
+        // a linear ramp: (1 - ξ) λ_t + ξ λ_{t+dt}).
+        let load_time = self.t + p.xi * dt;
+        self.bodies.par_iter_mut().for_each(|body| body.begin_step(&p, &gravity, load_time));
         if let Some(world) = &mut self.world {
             let steps: Vec<_> = self.bodies.iter().enumerate().map(|(b, body)| (b, body.step_inputs())).collect();
             world.begin_step(&steps);
@@ -515,7 +518,7 @@ impl Simulation {
         };
         let energies: Vec<_> = self.bodies.par_iter_mut().zip(strains).map(|(body, strain)| body.finish_step(p, strain)).collect();
         for e in energies {
-            self.external_work += e.support_work;
+            self.external_work += e.support_work + e.load_work;
             self.numerical_dissipation += e.theta_dissipation + e.force_dissipation;
         }
         let dim = self.dim;

@@ -1,7 +1,7 @@
 //! Builds a [`Simulation`] from a validated scene: meshes, materials, constraints, probes.
 //! Every failure here is a [`SceneError`] pointing at the key responsible.
 
-use super::body::{Body, Prescribed};
+use super::body::{Body, NodalLoad, Prescribed};
 use super::topology::{Topology, TopologyKey};
 use super::{BoundarySet, Probe, Simulation};
 use crate::contact::obstacle::Shape;
@@ -15,7 +15,7 @@ use crate::mesh::{generate, gmsh, ElementKind, Mesh};
 use crate::precision::Real;
 use crate::scene::SceneErrorKind::{Invalid, Mesh as MeshError, Reference};
 use crate::scene::LARGEST_INPUT;
-use crate::scene::{AngularVelocity, Axis, FormulationChoice, Generator, Interpolation, LoadedScene, MaterialSpec, MeshSpec, ModelName, ObstacleShape, SceneError};
+use crate::scene::{AngularVelocity, Axis, FormulationChoice, Generator, Interpolation, LoadSpec, LoadedScene, MaterialSpec, MeshSpec, ModelName, ObstacleShape, SceneError};
 use std::collections::HashMap;
 use rayon::prelude::*;
 
@@ -80,6 +80,10 @@ fn build_mesh(loaded: &LoadedScene, key: &str, spec: &MeshSpec) -> Result<Mesh, 
             spec.divisions.as_ref().expect("validated")[0],
             kind.expect("validated"),
         ),
+        (Some(Generator::Annulus), _) => {
+            let (r, d) = (spec.radii.as_ref().expect("validated"), spec.divisions.as_ref().expect("validated"));
+            generate::annulus([v(&spec.center, 0), v(&spec.center, 1)], [r[0], r[1]], spec.angle.unwrap_or(360.0), [d[0], d[1]], kind.expect("validated"))
+        }
         (Some(Generator::Polygon), _) => {
             let points: Vec<[Real; 2]> = spec.points.as_ref().expect("validated").iter().map(|p| [p[0], p[1]]).collect();
             generate::polygon(&points, spec.divisions.as_ref().expect("validated")[0])
@@ -111,6 +115,46 @@ const RANGE_WHY: &str = " (energies multiply such numbers and must stay finite)"
 
 fn within_range(v: &[Real]) -> bool {
     v.iter().all(|x| x.abs() <= LARGEST_INPUT)
+}
+
+/// The nodal forces of a surface load: each boundary facet whose nodes all belong to the load's
+/// node set carries its area times the traction (or the pressure against its outward normal),
+/// in equal shares to its nodes (the consistent forces of a segment or a triangle, and of a
+/// parallelogram).
+fn nodal_load(loaded: &LoadedScene, key: &str, spec: &LoadSpec, mesh: &Mesh) -> Result<NodalLoad, SceneError> {
+    let nodes = mesh.node_sets.get(&spec.nodes).ok_or_else(|| {
+        let known: Vec<&str> = mesh.node_sets.keys().map(String::as_str).collect();
+        loaded.error(Reference, &format!("{key}.nodes"), format!("body `{}` has no node set `{}` (it has: {}).", spec.body, spec.nodes, known.join(", ")))
+    })?;
+    let dim = mesh.dim();
+    let surface = Surface::of(mesh);
+    let mut force = vec![0.0; mesh.nodes.len() * dim];
+    let mut loaded_facets = 0;
+    for f in 0..surface.facet_count() {
+        let facet = surface.facet(f);
+        if !facet.iter().all(|n| nodes.binary_search(n).is_ok()) {
+            continue;
+        }
+        loaded_facets += 1;
+        let (points, count) = surface.facet_points(&mesh.nodes, f);
+        let normal = crate::contact::detect::facet_normal(&points[..count]);
+        let area = normal.iter().map(|x| x * x).sum::<Real>().sqrt();
+        let total: [Real; 3] = match (&spec.traction, spec.pressure) {
+            (Some(t), _) => std::array::from_fn(|i| t.get(i).map_or(0.0, |ti| ti * area)),
+            (None, Some(p)) => normal.map(|n| -p * n),
+            (None, None) => unreachable!("validated: a traction or a pressure"),
+        };
+        for &n in facet {
+            for i in 0..dim {
+                force[n as usize * dim + i] += total[i] / count as Real;
+            }
+        }
+    }
+    if loaded_facets == 0 {
+        return Err(loaded.error(Invalid, &format!("{key}.nodes"), format!("no boundary facet of body `{}` has all its nodes in `{}`: the load would act on nothing.", spec.body, spec.nodes)));
+    }
+    let forces = force.into_iter().enumerate().filter(|(_, f)| *f != 0.0).collect();
+    Ok(NodalLoad { forces, ramp: spec.ramp })
 }
 
 /// Sets up every body, boundary set and probe of the scene.
@@ -252,6 +296,11 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
         Ok(body)
     }).collect();
     let mut bodies = built.into_iter().collect::<Result<Vec<_>, _>>()?;
+    for (name, spec) in &scene.load {
+        let b = body_index[spec.body.as_str()];
+        let load = nodal_load(loaded, &format!("load.{name}"), spec, &bodies[b].mesh)?;
+        bodies[b].loads.push(load);
+    }
 
     let mut probes = Vec::new();
     for (name, p) in &scene.probe {
