@@ -254,3 +254,54 @@ fn a_homogeneous_deformation_of_a_distorted_patch_is_in_equilibrium() {
         }
     }
 }
+
+/// Internal forces of a whole mesh (every element, assembled) at nodal displacements `u`.
+fn assembled_forces(mesh: &Mesh, geometry: &ReferenceGeometry, model: &Model, u: &[[f64; 3]], formulation: Formulation) -> Vec<f64> {
+    let dim = mesh.dim();
+    let mut f = vec![0.0; mesh.nodes.len() * dim];
+    let mut out = ElementOutput::default();
+    for e in 0..mesh.element_count() {
+        let nodes = mesh.element(e);
+        let ue: Vec<[f64; 3]> = nodes.iter().map(|&n| u[n as usize]).collect();
+        element_force_tangent(model, geometry.element_points(e), &ue, dim, formulation, false, &mut out).expect("valid deformation");
+        for (a, &n) in nodes.iter().enumerate() {
+            for i in 0..dim {
+                f[n as usize * dim + i] += out.force[a * dim + i];
+            }
+        }
+    }
+    f
+}
+
+/// F-bar on Tri3 and Tet4 runs the Quad4 and Hex8 kernels on the cells the simplices split
+/// (`ReferenceGeometry::simplex_patches`): with the displacement formulation those cells must
+/// give the simplices' own forces and masses exactly, and with F-bar a homogeneous deformation
+/// must stay the displacement element's (θ = J).
+#[test]
+fn simplex_patches_are_the_simplices_and_fbar_on_them_passes_the_patch_test() {
+    let mut r = rng(29);
+    let model = Model::NeoHookean(NeoHookean { g: 1000.0, k: 50_000.0 });
+    let meshes = [
+        (generate::annulus([0.0, 0.0], [1.0, 2.0], 90.0, [3, 4], ElementKind::Tri3), generate::annulus([0.0, 0.0], [1.0, 2.0], 90.0, [3, 4], ElementKind::Quad4)),
+        (generate::ball([0.0; 3], 1.0, 1, ElementKind::Tet4), generate::ball([0.0; 3], 1.0, 1, ElementKind::Hex8)),
+    ];
+    for (simplices, cells) in meshes {
+        let kind = simplices.kind;
+        assert_eq!(simplices.nodes, cells.nodes, "{kind:?}: the same nodes");
+        let (plain, patches) = (ReferenceGeometry::new(&simplices).unwrap(), ReferenceGeometry::simplex_patches(&cells).unwrap());
+        let (m0, m1) = (plain.lumped_masses(&simplices, 2.0), patches.lumped_masses(&cells, 2.0));
+        assert!(m0.iter().zip(&m1).all(|(a, b)| (a - b).abs() < 1e-13 * a.abs().max(1e-300)), "{kind:?}: lumped masses");
+        let dim = kind.dim();
+        let u: Vec<[f64; 3]> = simplices.nodes.iter().map(|_| std::array::from_fn(|i| if i < dim { r.random_range(-0.03..0.03) } else { 0.0 })).collect();
+        let (f0, f1) = (assembled_forces(&simplices, &plain, &model, &u, Formulation::Displacement), assembled_forces(&cells, &patches, &model, &u, Formulation::Displacement));
+        let scale = f0.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        assert!(f0.iter().zip(&f1).all(|(a, b)| (a - b).abs() < 1e-12 * scale), "{kind:?}: forces of the cells integrated as simplices");
+        // A homogeneous deformation: every simplex has J = θ, so F-bar changes nothing.
+        let f = random_f(&mut r);
+        let f = if dim == 2 { plane_strain(f) } else { f };
+        let homogeneous: Vec<[f64; 3]> = cells.nodes.iter().map(|x| std::array::from_fn(|i| (0..3).map(|j| (f[(i, j)] - if i == j { 1.0 } else { 0.0 }) * x[j]).sum())).collect();
+        let (fd, fb) = (assembled_forces(&cells, &patches, &model, &homogeneous, Formulation::Displacement), assembled_forces(&cells, &patches, &model, &homogeneous, Formulation::Fbar));
+        let scale = fd.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        assert!(fd.iter().zip(&fb).all(|(a, b)| (a - b).abs() < 1e-10 * scale), "{kind:?}: F-bar patches under a homogeneous deformation");
+    }
+}

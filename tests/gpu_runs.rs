@@ -107,21 +107,26 @@ fn an_fbar_bar_impact_on_the_gpu_matches_the_cpu_backend() {
     compare_backends("bar_impact_fbar_gpu", &scene_path("bar_impact"), &["material.bar.K=60000.0", "time.end=0.01", "output.every=1", "output.scene_every=0"]);
 }
 
-/// A surface load reaches the device through the external forces: the pressurised F-bar tube.
+/// A surface load reaches the device through the external forces: the pressurised F-bar tube,
+/// of Quad4 and of Tri3 patches.
 #[test]
 fn a_pressurised_tube_on_the_gpu_matches_the_cpu_backend() {
     let test = "a_pressurised_tube_on_the_gpu_matches_the_cpu_backend";
     if !gpu_available(test) {
         return;
     }
-    let (path, sets) = (scene_path("thick_cylinder"), ["body.tube.mesh.divisions=[4,8]", "output.scene_every=0"]);
-    let cpu = run_with(&path, &sets, "tube_cpu", &options(BackendChoice::Cpu, None));
-    let gpu = run_with(&path, &sets, "tube_gpu", &options(BackendChoice::Gpu, Some(Precision::F64)));
-    assert_eq!(gpu.topics["/run"][0]["backend"], "gpu");
-    let inner = |log: &Log| log.vectors("/probe/inner", "displacement").last().unwrap()[0];
-    let (a, b) = (inner(&cpu), inner(&gpu));
-    assert!(a > 0.0 && ((a - b) / a).abs() < 1e-9, "inner radial displacement: CPU {a:e}, GPU {b:e}");
-    assert!(energy_difference(&cpu, &gpu) < 1e-9);
+    // Quad4, and Tri3 as F-bar patches (the Quad4 kernels on the triangles' geometry).
+    for element in ["quad4", "tri3"] {
+        let set = format!("body.tube.mesh.element=\"{element}\"");
+        let (path, sets) = (scene_path("thick_cylinder"), ["body.tube.mesh.divisions=[4,8]", "output.scene_every=0", set.as_str()]);
+        let cpu = run_with(&path, &sets, &format!("tube_{element}_cpu"), &options(BackendChoice::Cpu, None));
+        let gpu = run_with(&path, &sets, &format!("tube_{element}_gpu"), &options(BackendChoice::Gpu, Some(Precision::F64)));
+        assert_eq!(gpu.topics["/run"][0]["backend"], "gpu");
+        let inner = |log: &Log| log.vectors("/probe/inner", "displacement").last().unwrap()[0];
+        let (a, b) = (inner(&cpu), inner(&gpu));
+        assert!(a > 0.0 && ((a - b) / a).abs() < 1e-9, "{element}: inner radial displacement: CPU {a:e}, GPU {b:e}");
+        assert!(energy_difference(&cpu, &gpu) < 1e-9, "{element}");
+    }
 }
 
 #[test]

@@ -1,6 +1,7 @@
-//! Nearly incompressible rubber (K/G up to 1e5): the F-bar element keeps a cantilever's bending
-//! period where the displacement element locks, Newton converges down to its round-off floor,
-//! and a locking mesh says so.
+//! Nearly incompressible rubber (K/G up to 1e5): the F-bar element (on Quad4 and Hex8, and on
+//! the cells of generated Tri3 and Tet4 meshes) keeps a cantilever's bending period and Lamé's
+//! tube where the displacement element locks, Newton converges down to its round-off floor, and
+//! a locking mesh says so.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -61,17 +62,48 @@ fn newton_converges_at_k_over_g_one_hundred_thousand() {
     }
 }
 
+/// Tri3 and Tet4 locked (the Tet4 beam 68 % off at K/G = 1e4); F-bar on the cells their
+/// generator split keeps the period (doc/results.md, section 4).
 #[test]
-fn a_nearly_incompressible_tet4_body_is_told_it_locks_and_cannot_take_fbar() {
-    let out = out_dir("incompressible_tet4.mcap");
-    let o = bifirst(&["run", "scenes/free_vibration_3d.toml", "--backend", "cpu", "--set", "body.beam.mesh.element=\"tet4\"", "--set", "material.rubber.K=1e7", "--set", "time.end=0.02", "--out", out.to_str().unwrap()]);
+fn nearly_incompressible_tri3_and_tet4_beams_keep_their_period_as_fbar_patches() {
+    for (scene, element) in [("scenes/free_vibration_2d.toml", "tri3"), ("scenes/free_vibration_3d.toml", "tet4")] {
+        let set = format!("body.beam.mesh.element=\"{element}\"");
+        let rows = periods(scene, &["--set", &set, "--set", "material.rubber.K=1e7", "--over", "body.beam.formulation=\"auto\",\"displacement\""], &format!("incompressible_{element}"));
+        assert!(rows[0].0 == "finished" && rows[0].2 < 0.08, "{element}, auto (F-bar patches): {rows:?}");
+        assert!(rows[1].2 > 0.5, "{element}, displacement: locks: {rows:?}");
+    }
+}
+
+/// A scene whose Tri3 body is a polygon (no cells to patch) at K/G = 1e4.
+const POLYGON: &str = r#"
+[time]
+end = 0.02
+dt = 0.01
+
+[material.rubber]
+model = "neo_hookean"
+G = 1000.0
+K = 1.0e7
+density = 1.0
+
+[body.plate]
+material = "rubber"
+mesh = { generator = "polygon", element = "tri3", points = [[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [0.0, 1.0]], divisions = [2] }
+"#;
+
+#[test]
+fn a_nearly_incompressible_body_without_cells_is_told_it_locks_and_cannot_take_fbar() {
+    let scene = out_dir("incompressible_polygon.toml");
+    std::fs::write(&scene, POLYGON).unwrap();
+    let out = out_dir("incompressible_polygon.mcap");
+    let o = bifirst(&["run", scene.to_str().unwrap(), "--backend", "cpu", "--out", out.to_str().unwrap()]);
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{stderr}");
-    assert!(stderr.contains("material `rubber` (K/G = 1.000e4) on tet4 elements locks"), "{stderr}");
-    let o = bifirst(&["run", "scenes/free_vibration_3d.toml", "--set", "body.beam.mesh.element=\"tet4\"", "--set", "body.beam.formulation=\"fbar\"", "--out", out.to_str().unwrap()]);
+    assert!(stderr.contains("material `rubber` (K/G = 1.000e4) on tri3 elements locks"), "{stderr}");
+    let o = bifirst(&["run", scene.to_str().unwrap(), "--set", "body.plate.formulation=\"fbar\"", "--out", out.to_str().unwrap()]);
     let stderr = String::from_utf8_lossy(&o.stderr);
     assert_eq!(o.status.code(), Some(2), "{stderr}");
-    assert!(stderr.contains("body.beam.formulation") && stderr.contains("F-bar needs an element with several quadrature points"), "{stderr}");
+    assert!(stderr.contains("body.plate.formulation") && stderr.contains("from a polygon or a mesh file"), "{stderr}");
 }
 
 /// `bifirst accuracy` of the pressurised tube: per variant, (status, inner error, outer error).
@@ -102,6 +134,8 @@ fn a_pressurised_nearly_incompressible_tube_matches_lame() {
     }
     let locked = tube_errors(&["--over", "body.tube.formulation=\"displacement\""], "tube_locked");
     assert!(locked[0].1 > 0.5, "the displacement element locks: {locked:?}");
+    let tri3 = tube_errors(&["--set", "body.tube.mesh.element=\"tri3\"", "--over", "body.tube.formulation=\"auto\""], "tube_tri3_patches");
+    assert!(tri3[0].1 < 0.02 && tri3[0].2 < 0.02, "Tri3 as F-bar patches: {tri3:?}");
 }
 
 /// Found with the tube: a Tri3 tube at K/G = 5000, its pressure held after the ramp, failed at

@@ -20,7 +20,8 @@ pub enum Formulation {
     /// Every quadrature point's own `F` (locks when `K/G` is large).
     #[default]
     Displacement,
-    /// `F̄`: the element's mean dilatation with each point's distortion (`fbar.rs`); Quad4 and Hex8.
+    /// `F̄`: the element's mean dilatation with each point's distortion (`fbar.rs`); Quad4 and
+    /// Hex8, and the cells of generated Tri3 and Tet4 meshes ([`ReferenceGeometry::simplex_patches`]).
     Fbar,
 }
 
@@ -30,7 +31,8 @@ pub enum Formulation {
 pub const FBAR_ABOVE_K_OVER_G: Real = 10.0;
 
 impl Formulation {
-    /// Whether F-bar applies to an element kind: it needs more than one quadrature point.
+    /// Whether F-bar applies to an element kind of its own: it needs more than one quadrature
+    /// point (simplices take it on the cells they split).
     pub fn fbar_applies(kind: ElementKind) -> bool {
         matches!(kind, ElementKind::Quad4 | ElementKind::Hex8)
     }
@@ -43,6 +45,15 @@ impl Formulation {
     }
 }
 
+/// The two triangles a quadrilateral cell `[0, 1, 2, 3]` splits into (counter-clockwise).
+pub const QUAD_TRIANGLES: [[usize; 3]; 2] = [[0, 1, 2], [0, 2, 3]];
+
+/// The six tetrahedra of the Kuhn split of a hexahedral cell along its diagonal 0-6, each a path
+/// 0 -> a -> b -> 6 through the cube, ordered for a positive volume.
+pub const CUBE_TETRAHEDRA: [[usize; 4]; 6] = [[0, 1, 2, 6], [0, 2, 3, 6], [0, 3, 7, 6], [0, 7, 4, 6], [0, 4, 5, 6], [0, 5, 1, 6]];
+
+const CUBE_TETRAHEDRA_SLICES: [&[usize]; 6] = [&CUBE_TETRAHEDRA[0], &CUBE_TETRAHEDRA[1], &CUBE_TETRAHEDRA[2], &CUBE_TETRAHEDRA[3], &CUBE_TETRAHEDRA[4], &CUBE_TETRAHEDRA[5]];
+
 /// Reference-configuration data of one quadrature point.
 #[derive(Debug, Clone)]
 pub struct GaussPoint {
@@ -50,6 +61,8 @@ pub struct GaussPoint {
     pub dn_dx: Vec<[Real; 3]>,
     /// Quadrature weight times reference Jacobian determinant (volume, or area per unit thickness).
     pub dv: Real,
+    /// `N_a` at the point, for the lumped masses.
+    pub n: Vec<Real>,
 }
 
 /// Reference geometry of every element of a mesh, with the lumped nodal masses.
@@ -106,7 +119,7 @@ impl ReferenceGeometry {
                     .collect();
                 let dv = qp.weight * det;
                 volume += dv;
-                points.push(GaussPoint { dn_dx, dv });
+                points.push(GaussPoint { dn_dx, dv, n: shape::values(kind, qp.xi) });
             }
             volumes.push(volume);
         }
@@ -120,16 +133,54 @@ impl ReferenceGeometry {
     /// Row-sum lumped nodal masses `m_a = ρ ∫ N_a dV` (the row sums of the consistent mass;
     /// positive for all four linear elements).
     pub fn lumped_masses(&self, mesh: &Mesh, density: Real) -> Vec<Real> {
-        let rule = shape::quadrature(self.kind);
-        let values: Vec<Vec<Real>> = rule.iter().map(|qp| shape::values(self.kind, qp.xi)).collect();
         let mut m = vec![0.0; mesh.nodes.len()];
         for e in 0..mesh.element_count() {
-            for (gp, n) in self.element_points(e).iter().zip(&values) {
-                for (&node, na) in mesh.element(e).iter().zip(n) {
+            for gp in self.element_points(e) {
+                for (&node, na) in mesh.element(e).iter().zip(&gp.n) {
                     m[node as usize] += density * na * gp.dv;
                 }
             }
         }
         m
+    }
+
+    /// The geometry of a Quad4 or Hex8 mesh whose cells are patches of the simplices they split
+    /// into (two triangles, six Kuhn tetrahedra: [`QUAD_TRIANGLES`], [`CUBE_TETRAHEDRA`], the
+    /// generators' splits): each "quadrature point" is one simplex, its constant gradients
+    /// over the cell's nodes and its volume; the cell's remaining points have no volume. The
+    /// kernels then compute the Tri3 or Tet4 body exactly, and F-bar on it averages the volume
+    /// change over each patch (de Souza Neto, Pires and Owen 2005, "F-bar-based linear
+    /// triangles and tetrahedra").
+    pub fn simplex_patches(mesh: &Mesh) -> Result<Self, BadReferenceElement> {
+        let (kind, split): (ElementKind, &[&[usize]]) = match mesh.kind {
+            ElementKind::Quad4 => (ElementKind::Tri3, &[&QUAD_TRIANGLES[0], &QUAD_TRIANGLES[1]]),
+            ElementKind::Hex8 => (ElementKind::Tet4, &CUBE_TETRAHEDRA_SLICES),
+            other => panic!("simplex patches are cells of quad4 or hex8, not {}", other.name()),
+        };
+        let per_element = shape::quadrature(mesh.kind).len();
+        let cell_nodes = mesh.kind.nodes();
+        let mut points = Vec::with_capacity(per_element * mesh.element_count());
+        let mut volumes = Vec::with_capacity(mesh.element_count());
+        for e in 0..mesh.element_count() {
+            let cell = mesh.element(e);
+            let mut volume = 0.0;
+            for local in split {
+                let simplex = Mesh { kind, nodes: local.iter().map(|&a| mesh.nodes[cell[a] as usize]).collect(), connectivity: (0..local.len() as u32).collect(), node_sets: Default::default() };
+                let one = Self::new(&simplex).map_err(|bad| BadReferenceElement { element: e, ..bad })?;
+                let gp = &one.points[0];
+                let (mut dn_dx, mut n) = (vec![[0.0; 3]; cell_nodes], vec![0.0; cell_nodes]);
+                for (k, &a) in local.iter().enumerate() {
+                    dn_dx[a] = gp.dn_dx[k];
+                    n[a] = gp.n[k];
+                }
+                volume += gp.dv;
+                points.push(GaussPoint { dn_dx, dv: gp.dv, n });
+            }
+            for _ in split.len()..per_element {
+                points.push(GaussPoint { dn_dx: vec![[0.0; 3]; cell_nodes], dv: 0.0, n: vec![0.0; cell_nodes] });
+            }
+            volumes.push(volume);
+        }
+        Ok(Self { kind: mesh.kind, points, points_per_element: per_element, volumes })
     }
 }

@@ -1,9 +1,12 @@
-//! Structured mesh generators: rectangle, disk and convex polygon in 2D, box in 3D.
+//! Structured mesh generators: rectangle, disk, annulus and convex polygon in 2D, box and ball
+//! in 3D.
 //!
 //! Node sets: `all` always; rectangle and box add `x_min`, `x_max`, `y_min`, `y_max`
-//! (and `z_min`, `z_max`); the disk and the polygon add `boundary` and `center`.
+//! (and `z_min`, `z_max`); the disk and the polygon add `boundary` and `center`; the annulus
+//! adds `inner`, `outer` and, for a sector, `start` and `end` (its straight edges).
 
 use super::{ElementKind, Mesh};
+use crate::element::{CUBE_TETRAHEDRA, QUAD_TRIANGLES};
 use crate::precision::Real;
 use std::collections::BTreeMap;
 
@@ -33,9 +36,10 @@ fn quad_grid_cells(nx: usize, ny: usize, kind: ElementKind, id: impl Fn(usize, u
     for j in 0..ny {
         for i in 0..nx {
             let (a, b, c, d) = (id(i, j), id(i + 1, j), id(i + 1, j + 1), id(i, j + 1));
+            let cell = [a, b, c, d];
             match kind {
-                ElementKind::Quad4 => conn.extend([a, b, c, d]),
-                _ => conn.extend([a, b, c, a, c, d]),
+                ElementKind::Quad4 => conn.extend(cell),
+                _ => conn.extend(QUAD_TRIANGLES.iter().flatten().map(|&k| cell[k])),
             }
         }
     }
@@ -66,6 +70,35 @@ pub fn disk(center: [Real; 2], radius: Real, n: usize, kind: ElementKind) -> Mes
     let mut sets = BTreeMap::new();
     sets.insert("boundary".into(), boundary);
     sets.insert("center".into(), vec![id(n, n)]);
+    let mut mesh = Mesh { kind, nodes, connectivity, node_sets: sets };
+    mesh.finish_sets();
+    mesh
+}
+
+/// Annulus (or a sector of one) about `center`: radii `[a, b]`, opening `angle` in degrees
+/// from the x axis counter-clockwise, `[nr, nt]` cells across and around. A full ring (360°)
+/// closes on itself.
+pub fn annulus(center: [Real; 2], [a, b]: [Real; 2], angle: Real, [nr, nt]: [usize; 2], kind: ElementKind) -> Mesh {
+    let full = angle >= 360.0;
+    let columns = if full { nt } else { nt + 1 };
+    let id = |i: usize, j: usize| ((j % columns) * (nr + 1) + i) as u32;
+    let mut nodes = Vec::with_capacity(columns * (nr + 1));
+    for j in 0..columns {
+        let phi = angle.to_radians() * j as Real / nt as Real;
+        for i in 0..=nr {
+            let r = a + (b - a) * i as Real / nr as Real;
+            nodes.push([center[0] + r * phi.cos(), center[1] + r * phi.sin(), 0.0]);
+        }
+    }
+    // Cells run outwards (i) then counter-clockwise (j): counter-clockwise corners.
+    let connectivity = quad_grid_cells(nr, nt, kind, |i, j| id(i, j));
+    let mut sets = BTreeMap::new();
+    sets.insert("inner".into(), (0..columns).map(|j| id(0, j)).collect());
+    sets.insert("outer".into(), (0..columns).map(|j| id(nr, j)).collect());
+    if !full {
+        sets.insert("start".into(), (0..=nr).map(|i| id(i, 0)).collect());
+        sets.insert("end".into(), (0..=nr).map(|i| id(i, nt)).collect());
+    }
     let mut mesh = Mesh { kind, nodes, connectivity, node_sets: sets };
     mesh.finish_sets();
     mesh
@@ -142,13 +175,7 @@ pub fn cuboid(origin: [Real; 3], size: [Real; 3], div: [usize; 3], kind: Element
                 ];
                 match kind {
                     ElementKind::Hex8 => conn.extend(c),
-                    _ => {
-                        // Kuhn split along the diagonal c0-c6; each path 0 -> 6 through the cube
-                        // gives one tetrahedron, ordered for a positive volume.
-                        for [a, b] in [[1, 2], [2, 3], [3, 7], [7, 4], [4, 5], [5, 1]] {
-                            conn.extend([c[0], c[a], c[b], c[6]]);
-                        }
-                    }
+                    _ => conn.extend(CUBE_TETRAHEDRA.iter().flatten().map(|&k| c[k])),
                 }
             }
         }

@@ -22,21 +22,21 @@ use rayon::prelude::*;
 /// A body's element formulation: the scene's choice, or for `auto` F-bar where it applies and
 /// K/G exceeds [`FBAR_ABOVE_K_OVER_G`]. A nearly incompressible body of simplices (which F-bar
 /// cannot help) gets a notice that it will be too stiff.
-fn formulation_of(loaded: &LoadedScene, body: &str, material: &str, choice: FormulationChoice, kind: ElementKind, model: &Model, notices: &mut Vec<String>) -> Result<Formulation, SceneError> {
+fn formulation_of(loaded: &LoadedScene, body: &str, material: &str, choice: FormulationChoice, kind: ElementKind, patchable: bool, model: &Model, notices: &mut Vec<String>) -> Result<Formulation, SceneError> {
     let (k, g) = model.bulk_shear();
     let ratio = k / g;
-    let applies = Formulation::fbar_applies(kind);
+    let applies = Formulation::fbar_applies(kind) || patchable;
     Ok(match choice {
         FormulationChoice::Displacement => Formulation::Displacement,
         FormulationChoice::Fbar if applies => Formulation::Fbar,
         FormulationChoice::Fbar => {
-            return Err(loaded.error(Invalid, &format!("body.{body}.formulation"), format!("F-bar needs an element with several quadrature points (quad4, hex8); this body's mesh is {}.", kind.name())));
+            return Err(loaded.error(Invalid, &format!("body.{body}.formulation"), format!("F-bar needs quad4 or hex8 elements, or tri3 or tet4 from a generator that splits cells (rectangle, disk, annulus, box, ball); this body's mesh is {} from a polygon or a mesh file.", kind.name())));
         }
         FormulationChoice::Auto if ratio > FBAR_ABOVE_K_OVER_G && applies => Formulation::Fbar,
         FormulationChoice::Auto => {
             if ratio > FBAR_ABOVE_K_OVER_G {
                 let notice = format!(
-                    "material `{material}` (K/G = {ratio:.3e}) on {} elements locks: the bodies will be too stiff (F-bar needs quad4 or hex8 meshes)",
+                    "material `{material}` (K/G = {ratio:.3e}) on {} elements locks: the bodies will be too stiff (F-bar needs quad4 or hex8 meshes, or simplices from a generator's cells)",
                     kind.name()
                 );
                 if !notices.contains(&notice) {
@@ -46,6 +46,17 @@ fn formulation_of(loaded: &LoadedScene, body: &str, material: &str, choice: Form
             Formulation::Displacement
         }
     })
+}
+
+/// The cell kind a generated Tri3 or Tet4 mesh splits (its F-bar patches), if it has cells:
+/// rectangles, disks and annuli split quadrilaterals, boxes and balls hexahedra.
+fn simplex_cells(spec: &MeshSpec, kind: ElementKind) -> Option<ElementKind> {
+    let cells = matches!(spec.generator, Some(Generator::Rectangle | Generator::Disk | Generator::Annulus | Generator::Box | Generator::Ball));
+    match kind {
+        ElementKind::Tri3 if cells => Some(ElementKind::Quad4),
+        ElementKind::Tet4 if cells => Some(ElementKind::Hex8),
+        _ => None,
+    }
 }
 
 pub fn model_of(m: &MaterialSpec) -> Model {
@@ -174,9 +185,22 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
         if let Some((n, x)) = mesh.nodes.iter().enumerate().find(|(_, x)| !within_range(&x[..])) {
             return Err(loaded.error(Invalid, &where_, format!("node {n} is at {x:?}, beyond ±{LARGEST_INPUT:e}{RANGE_WHY}.")));
         }
-        let geometry = ReferenceGeometry::new(&mesh)
-            .map_err(|e| loaded.error(MeshError, &where_, format!("{e}; the mesh must have positive element volumes at t = 0.")))?;
-        let formulation = formulation_of(loaded, name, &spec.material, spec.formulation.unwrap_or_default(), mesh.kind, &model_of(&scene.material[&spec.material]), &mut notices)?;
+        let cells = simplex_cells(&spec.mesh, mesh.kind);
+        let formulation = formulation_of(loaded, name, &spec.material, spec.formulation.unwrap_or_default(), mesh.kind, cells.is_some(), &model_of(&scene.material[&spec.material]), &mut notices)?;
+        let bad_geometry = |e: crate::element::BadReferenceElement| loaded.error(MeshError, &where_, format!("{e}; the mesh must have positive element volumes at t = 0."));
+        // F-bar on simplices averages the volume change over the cells they split: the body is
+        // meshed by its cells, each integrated as its simplices.
+        let (mesh, geometry) = match (formulation, cells) {
+            (Formulation::Fbar, Some(cell)) => {
+                let cells = build_mesh(loaded, &key, &MeshSpec { element: Some(cell), ..spec.mesh.clone() })?;
+                let geometry = ReferenceGeometry::simplex_patches(&cells).map_err(bad_geometry)?;
+                (cells, geometry)
+            }
+            _ => {
+                let geometry = ReferenceGeometry::new(&mesh).map_err(bad_geometry)?;
+                (mesh, geometry)
+            }
+        };
         meshes.push((name.clone(), mesh, geometry, formulation));
     }
     let dim = dim.expect("a scene has a body");
