@@ -14,8 +14,9 @@ fn out_dir(name: &str) -> PathBuf {
     Path::new(env!("CARGO_TARGET_TMPDIR")).join(name)
 }
 
-/// `bifirst accuracy` of a vibration scene: per variant, (status, period, period error).
-fn periods(scene: &str, args: &[&str], tag: &str) -> Vec<(String, f64, f64)> {
+/// `bifirst accuracy` of `scene`: per variant, its status and the values of `columns` of
+/// `accuracy.csv`.
+fn accuracy_rows(scene: &str, args: &[&str], tag: &str, columns: [&str; 2]) -> Vec<(String, f64, f64)> {
     let out = out_dir(tag);
     let _ = std::fs::remove_dir_all(&out);
     let mut all = vec!["accuracy", scene, "--backend", "cpu", "--out"];
@@ -26,8 +27,13 @@ fn periods(scene: &str, args: &[&str], tag: &str) -> Vec<(String, f64, f64)> {
     let csv = std::fs::read_to_string(out.join("accuracy.csv")).unwrap();
     let rows: Vec<Vec<&str>> = csv.lines().map(|l| l.split(',').collect()).collect();
     let col = |name: &str| rows[0].iter().position(|h| *h == name).unwrap_or_else(|| panic!("no column {name}: {:?}", rows[0]));
-    let (status, period, error) = (col("status"), col("first bending period"), col("first bending period error"));
-    rows[1..].iter().map(|r| (r[status].to_string(), r[period].parse().unwrap(), r[error].parse().unwrap())).collect()
+    let (status, a, b) = (col("status"), col(columns[0]), col(columns[1]));
+    rows[1..].iter().map(|r| (r[status].to_string(), r[a].parse().unwrap(), r[b].parse().unwrap())).collect()
+}
+
+/// A vibration scene per variant: (status, period, period error).
+fn periods(scene: &str, args: &[&str], tag: &str) -> Vec<(String, f64, f64)> {
+    accuracy_rows(scene, args, tag, ["first bending period", "first bending period error"])
 }
 
 /// The table: the Quad4 beam was 9 times too stiff at K/G = 1e4 (period 0.52 for 1.59).
@@ -106,20 +112,9 @@ fn a_nearly_incompressible_body_without_cells_is_told_it_locks_and_cannot_take_f
     assert!(stderr.contains("body.plate.formulation") && stderr.contains("from a polygon or a mesh file"), "{stderr}");
 }
 
-/// `bifirst accuracy` of the pressurised tube: per variant, (status, inner error, outer error).
+/// The pressurised tube per variant: (status, inner error, outer error).
 fn tube_errors(args: &[&str], tag: &str) -> Vec<(String, f64, f64)> {
-    let out = out_dir(tag);
-    let _ = std::fs::remove_dir_all(&out);
-    let mut all = vec!["accuracy", "scenes/thick_cylinder.toml", "--backend", "cpu", "--out"];
-    all.push(out.to_str().unwrap());
-    all.extend_from_slice(args);
-    let o = bifirst(&all);
-    assert!(o.status.success(), "{}\n{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr));
-    let csv = std::fs::read_to_string(out.join("accuracy.csv")).unwrap();
-    let rows: Vec<Vec<&str>> = csv.lines().map(|l| l.split(',').collect()).collect();
-    let col = |name: &str| rows[0].iter().position(|h| *h == name).unwrap_or_else(|| panic!("no column {name}: {:?}", rows[0]));
-    let (status, inner, outer) = (col("status"), col("inner radial displacement error"), col("outer radial displacement error"));
-    rows[1..].iter().map(|r| (r[status].to_string(), r[inner].parse().unwrap(), r[outer].parse().unwrap())).collect()
+    accuracy_rows("scenes/thick_cylinder.toml", args, tag, ["inner radial displacement error", "outer radial displacement error"])
 }
 
 /// A known answer for nearly incompressible rubber (ν = 0.4999): Lamé's thick tube under internal
