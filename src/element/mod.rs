@@ -61,8 +61,6 @@ pub struct GaussPoint {
     pub dn_dx: Vec<[Real; 3]>,
     /// Quadrature weight times reference Jacobian determinant (volume, or area per unit thickness).
     pub dv: Real,
-    /// `N_a` at the point, for the lumped masses.
-    pub n: Vec<Real>,
 }
 
 /// Reference geometry of every element of a mesh, with the lumped nodal masses.
@@ -74,6 +72,8 @@ pub struct ReferenceGeometry {
     pub points_per_element: usize,
     /// Reference volume of each element.
     pub volumes: Vec<Real>,
+    /// For F-bar patches, the simplices each cell's points stand for (local node lists).
+    pub simplices: Option<&'static [&'static [usize]]>,
 }
 
 #[derive(Debug, Error)]
@@ -119,11 +119,11 @@ impl ReferenceGeometry {
                     .collect();
                 let dv = qp.weight * det;
                 volume += dv;
-                points.push(GaussPoint { dn_dx, dv, n: shape::values(kind, qp.xi) });
+                points.push(GaussPoint { dn_dx, dv });
             }
             volumes.push(volume);
         }
-        Ok(Self { kind, points, points_per_element: rule.len(), volumes })
+        Ok(Self { kind, points, points_per_element: rule.len(), volumes, simplices: None })
     }
 
     pub fn element_points(&self, e: usize) -> &[GaussPoint] {
@@ -133,11 +133,26 @@ impl ReferenceGeometry {
     /// Row-sum lumped nodal masses `m_a = ρ ∫ N_a dV` (the row sums of the consistent mass;
     /// positive for all four linear elements).
     pub fn lumped_masses(&self, mesh: &Mesh, density: Real) -> Vec<Real> {
+        let values: Vec<Vec<Real>> = shape::quadrature(self.kind).iter().map(|qp| shape::values(self.kind, qp.xi)).collect();
         let mut m = vec![0.0; mesh.nodes.len()];
         for e in 0..mesh.element_count() {
-            for gp in self.element_points(e) {
-                for (&node, na) in mesh.element(e).iter().zip(&gp.n) {
-                    m[node as usize] += density * na * gp.dv;
+            let nodes = mesh.element(e);
+            match self.simplices {
+                // A linear simplex integrates each of its shape functions to its volume over its
+                // node count.
+                Some(split) => {
+                    for (gp, local) in self.element_points(e).iter().zip(split) {
+                        for &a in *local {
+                            m[nodes[a] as usize] += density * gp.dv / local.len() as Real;
+                        }
+                    }
+                }
+                None => {
+                    for (gp, n) in self.element_points(e).iter().zip(&values) {
+                        for (&node, na) in nodes.iter().zip(n) {
+                            m[node as usize] += density * na * gp.dv;
+                        }
+                    }
                 }
             }
         }
@@ -168,19 +183,18 @@ impl ReferenceGeometry {
                 let simplex = Mesh { kind, nodes: local.iter().map(|&a| mesh.nodes[cell[a] as usize]).collect(), connectivity: (0..local.len() as u32).collect(), node_sets: Default::default() };
                 let one = Self::new(&simplex).map_err(|bad| BadReferenceElement { element: e, ..bad })?;
                 let gp = &one.points[0];
-                let (mut dn_dx, mut n) = (vec![[0.0; 3]; cell_nodes], vec![0.0; cell_nodes]);
+                let mut dn_dx = vec![[0.0; 3]; cell_nodes];
                 for (k, &a) in local.iter().enumerate() {
                     dn_dx[a] = gp.dn_dx[k];
-                    n[a] = gp.n[k];
                 }
                 volume += gp.dv;
-                points.push(GaussPoint { dn_dx, dv: gp.dv, n });
+                points.push(GaussPoint { dn_dx, dv: gp.dv });
             }
             for _ in split.len()..per_element {
-                points.push(GaussPoint { dn_dx: vec![[0.0; 3]; cell_nodes], dv: 0.0, n: vec![0.0; cell_nodes] });
+                points.push(GaussPoint { dn_dx: vec![[0.0; 3]; cell_nodes], dv: 0.0 });
             }
             volumes.push(volume);
         }
-        Ok(Self { kind: mesh.kind, points, points_per_element: per_element, volumes })
+        Ok(Self { kind: mesh.kind, points, points_per_element: per_element, volumes, simplices: Some(split) })
     }
 }

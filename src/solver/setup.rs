@@ -17,6 +17,7 @@ use crate::scene::SceneErrorKind::{Invalid, Mesh as MeshError, Reference};
 use crate::scene::LARGEST_INPUT;
 use crate::scene::{AngularVelocity, Axis, FormulationChoice, Generator, Interpolation, LoadSpec, LoadedScene, MaterialSpec, MeshSpec, ModelName, ObstacleShape, SceneError};
 use std::collections::HashMap;
+use std::sync::Arc;
 use rayon::prelude::*;
 
 /// A body's element formulation: the scene's choice, or for `auto` F-bar where it applies and
@@ -501,7 +502,12 @@ fn build_contact(loaded: &LoadedScene, bodies: &[Body], dim: usize) -> Result<Op
     let n = bodies.len();
     // Slave/master roles: the pair's `slave`, else the finer mesh, then the one with more
     // boundary nodes, then the first in the scene; with two passes, the other way round too.
-    let surfaces: Vec<Surface> = bodies.par_iter().map(|b| Surface::of(&b.mesh)).collect();
+    // A surface depends on the connectivity only: bodies that share a topology (a packing's
+    // grains of one shape) share the boundary search of one of them.
+    let mut first_of: HashMap<*const crate::assembly::StiffnessPattern, usize> = HashMap::new();
+    let firsts: Vec<usize> = bodies.iter().enumerate().map(|(b, body)| *first_of.entry(Arc::as_ptr(&body.pattern)).or_insert(b)).collect();
+    let searched: HashMap<usize, Surface> = first_of.into_values().collect::<Vec<_>>().into_par_iter().map(|b| (b, Surface::of(&bodies[b].mesh))).collect();
+    let surfaces: Vec<Surface> = firsts.iter().map(|b| searched[b].clone()).collect();
     let ranks = bodies.iter().zip(&surfaces).map(|(b, s)| Rank { length_scale: b.length_scale(), boundary_nodes: s.nodes.len() }).collect();
     let mut pairs = BodyPairs::new(ranks, spec.all_pairs.then_some(spec.friction), spec.two_pass);
     for pair in spec.pair.values() {
