@@ -11,11 +11,10 @@ pub use known_answers::{known_answer, ErrorTerm, KnownAnswer, KNOWN_ANSWERS};
 pub use plot::pareto_png;
 
 use crate::backend::BackendRequest;
-use crate::output::plot::PlotError;
-use crate::run::{run_scene, Monitor, RunError, RunOptions};
-use crate::scene::{load_scene, LoadedScene, SceneError};
+use crate::run::{run_scene, Monitor, RunOptions};
+use crate::scene::{load_scene, LoadedScene};
 use crate::solver::Simulation;
-use crate::sweep::{numbers_of, variants, SweepAxis, SweepError, Variant};
+use crate::sweep::{numbers_of, variants, StudyError, SweepAxis, Variant};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
@@ -33,15 +32,7 @@ pub enum AccuracyError {
     #[error("variant {label}: {source}")]
     Variant { label: String, source: Box<AccuracyError> },
     #[error(transparent)]
-    Sweep(#[from] SweepError),
-    #[error("variant {label}: {source}")]
-    Scene { label: String, source: SceneError },
-    #[error("variant {label}: {source}")]
-    Run { label: String, source: Box<RunError> },
-    #[error("cannot write `{path}`: {source}")]
-    Write { path: PathBuf, source: std::io::Error },
-    #[error(transparent)]
-    Plot(#[from] PlotError),
+    Study(#[from] StudyError),
 }
 
 /// A grid over a known-answer scene, every variant validated.
@@ -91,11 +82,11 @@ impl Study {
     /// Loads the scene with `sets`, picks its measure (`measure`, else the scene's name) and
     /// validates every variant of the grid of `axes`.
     pub fn plan(scene: &Path, measure: Option<&str>, sets: &[String], axes: &[SweepAxis], base: &BackendRequest) -> Result<Self, AccuracyError> {
-        let loaded = load_scene(scene, sets).map_err(|source| AccuracyError::Scene { label: "base".into(), source })?;
+        let loaded = load_scene(scene, sets).map_err(|source| StudyError::Scene { label: "base".into(), source })?;
         let measure = measure.unwrap_or(&loaded.name).to_string();
         known_answer(&measure, &loaded)?;
         let mut runs = Vec::new();
-        for variant in variants(&loaded.name, axes)? {
+        for variant in variants(&loaded.name, axes).map_err(StudyError::from)? {
             let mut request = base.clone();
             let mut scene_sets = sets.to_vec();
             for set in &variant.sets {
@@ -108,7 +99,7 @@ impl Study {
                     _ => scene_sets.push(set.clone()),
                 }
             }
-            let loaded = load_scene(scene, &scene_sets).map_err(|source| AccuracyError::Scene { label: variant.label.clone(), source })?;
+            let loaded = load_scene(scene, &scene_sets).map_err(|source| StudyError::Scene { label: variant.label.clone(), source })?;
             known_answer(&measure, &loaded).map_err(|e| AccuracyError::Variant { label: variant.label.clone(), source: Box::new(e) })?;
             runs.push((variant, loaded, request));
         }
@@ -122,7 +113,7 @@ impl Study {
     /// Runs every variant `repeat` times into `out_dir/<stem>.mcap`, one at a time; `done` sees
     /// each row as it is measured. The rows come back in grid order with the front marked.
     pub fn run(&self, out_dir: &Path, repeat: usize, interrupt: Option<Arc<AtomicBool>>, mut done: impl FnMut(&Row)) -> Result<Vec<Row>, AccuracyError> {
-        std::fs::create_dir_all(out_dir).map_err(|source| AccuracyError::Write { path: out_dir.into(), source })?;
+        std::fs::create_dir_all(out_dir).map_err(|source| StudyError::Write { path: out_dir.into(), source })?;
         let mut rows = Vec::new();
         for (variant, loaded, request) in &self.runs {
             let log = out_dir.join(format!("{}.mcap", variant.stem));
@@ -132,11 +123,8 @@ impl Study {
             for _ in 0..repeat.max(1) {
                 let mut measure = known_answer(&self.measure, loaded)?;
                 let result = run_scene(loaded, &log, &options, &mut Observer(measure.as_mut()));
-                let (summary, message) = match result {
-                    Ok(s) => (s, None),
-                    Err(RunError::Stopped { reason, summary }) => (summary, Some(reason.to_string())),
-                    Err(e) => return Err(AccuracyError::Run { label: variant.label.clone(), source: Box::new(e) }),
-                };
+                let (summary, stop) = StudyError::outcome(&variant.label, result)?;
+                let message = stop.map(|reason| reason.to_string());
                 walls.push(summary.wall_s);
                 first.get_or_insert((summary, message, measure.errors()));
             }

@@ -8,9 +8,9 @@ mod plot;
 pub use plot::map_png;
 
 use crate::backend::BackendRequest;
-use crate::run::{run_scene, RunError, RunOptions, RunSummary, Silent, Stop, ENERGY_CREATED};
-use crate::scene::{load_scene, LoadedScene, SceneError};
-use crate::sweep::{numbers_of, variants, SweepAxis, SweepError, Variant};
+use crate::run::{run_scene, RunOptions, RunSummary, Silent, Stop, ENERGY_CREATED};
+use crate::scene::{load_scene, LoadedScene};
+use crate::sweep::{numbers_of, variants, StudyError, SweepAxis, Variant};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -19,20 +19,6 @@ use std::time::{Duration, Instant};
 /// The overlap a stable run stays within, in element sizes (the contact bound of the step
 /// control's default, whatever the scene sets).
 pub const STABLE_OVERLAP: f64 = 0.01;
-
-#[derive(Debug, thiserror::Error)]
-pub enum StabilityError {
-    #[error(transparent)]
-    Sweep(#[from] SweepError),
-    #[error("variant {label}: {source}")]
-    Scene { label: String, source: SceneError },
-    #[error("variant {label}: {source}")]
-    Run { label: String, source: Box<RunError> },
-    #[error("cannot write `{path}`: {source}")]
-    Write { path: PathBuf, source: std::io::Error },
-    #[error(transparent)]
-    Plot(#[from] crate::output::plot::PlotError),
-}
 
 /// How a variant fared.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, serde::Serialize)]
@@ -99,12 +85,12 @@ pub struct Study {
 impl Study {
     /// Loads the scene with `sets` and validates every variant of the grid of `axes` before
     /// any runs.
-    pub fn plan(scene: &Path, sets: &[String], axes: &[SweepAxis]) -> Result<Self, StabilityError> {
-        let base = load_scene(scene, sets).map_err(|source| StabilityError::Scene { label: "base".into(), source })?;
+    pub fn plan(scene: &Path, sets: &[String], axes: &[SweepAxis]) -> Result<Self, StudyError> {
+        let base = load_scene(scene, sets).map_err(|source| StudyError::Scene { label: "base".into(), source })?;
         let mut runs = Vec::new();
         for variant in variants(&base.name, axes)? {
             let all: Vec<String> = sets.iter().chain(&variant.sets).cloned().collect();
-            let loaded = load_scene(scene, &all).map_err(|source| StabilityError::Scene { label: variant.label.clone(), source })?;
+            let loaded = load_scene(scene, &all).map_err(|source| StudyError::Scene { label: variant.label.clone(), source })?;
             runs.push((variant, loaded));
         }
         Ok(Self { name: base.name, axes: axes.to_vec(), runs })
@@ -117,8 +103,8 @@ impl Study {
     /// Runs every variant into `out_dir/<stem>.mcap`, one at a time (their wall times do not
     /// compete), each stopped at the wall budget; `done` sees each row. Stops early, with the
     /// rows so far, when `interrupt` is set.
-    pub fn run(&self, out_dir: &Path, budget: Budget, backend: &BackendRequest, interrupt: Option<Arc<AtomicBool>>, mut done: impl FnMut(&Row)) -> Result<Vec<Row>, StabilityError> {
-        std::fs::create_dir_all(out_dir).map_err(|source| StabilityError::Write { path: out_dir.into(), source })?;
+    pub fn run(&self, out_dir: &Path, budget: Budget, backend: &BackendRequest, interrupt: Option<Arc<AtomicBool>>, mut done: impl FnMut(&Row)) -> Result<Vec<Row>, StudyError> {
+        std::fs::create_dir_all(out_dir).map_err(|source| StudyError::Write { path: out_dir.into(), source })?;
         let mut rows = Vec::new();
         for (variant, loaded) in &self.runs {
             if interrupt.as_ref().is_some_and(|f| f.load(Ordering::SeqCst)) {
@@ -131,11 +117,7 @@ impl Study {
             // Ends the watchdog.
             flag.store(true, Ordering::SeqCst);
             watchdog.join().expect("the watchdog does not panic");
-            let (summary, stop) = match result {
-                Ok(s) => (s, None),
-                Err(RunError::Stopped { reason, summary }) => (summary, Some(reason)),
-                Err(e) => return Err(StabilityError::Run { label: variant.label.clone(), source: Box::new(e) }),
-            };
+            let (summary, stop) = StudyError::outcome(&variant.label, result)?;
             let values = self.axes.iter().map(|a| variant.value(&a.key).to_string()).collect();
             let (class, reasons) = classify(&summary, stop.as_ref(), over_time.load(Ordering::SeqCst), budget);
             let row = Row {

@@ -10,7 +10,7 @@ pub use manifest::MANIFEST_FILE;
 pub use report::{report, Report, ReportEntry};
 pub use slurm::{SbatchOption, SlurmJob};
 
-use crate::run::{run_scene, RunError, RunOptions, RunSummary, Silent};
+use crate::run::{run_scene, RunError, RunOptions, RunSummary, Silent, Stop};
 use crate::scene::{load_scene, LoadedScene, SceneError};
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -40,6 +40,31 @@ pub enum SweepError {
     Read { path: PathBuf, message: String },
     #[error("`{path}` describes another sweep ({difference}); give this one its own `--out` directory, or remove the file")]
     OtherSweep { path: PathBuf, difference: String },
+}
+
+/// What stops a study that runs a grid's variants one at a time (`accuracy`, `stability`).
+#[derive(Debug, thiserror::Error)]
+pub enum StudyError {
+    #[error(transparent)]
+    Sweep(#[from] SweepError),
+    #[error("variant {label}: {source}")]
+    Scene { label: String, source: SceneError },
+    #[error("variant {label}: {source}")]
+    Run { label: String, source: Box<RunError> },
+    #[error("cannot write `{path}`: {source}")]
+    Write { path: PathBuf, source: std::io::Error },
+}
+
+impl StudyError {
+    /// A variant's run as a study reads it: its summary, and why it stopped if it stopped
+    /// early; a run that left no summary (its log could not be written) stops the study.
+    pub fn outcome(label: &str, result: Result<RunSummary, RunError>) -> Result<(RunSummary, Option<Stop>), Self> {
+        match result {
+            Ok(summary) => Ok((summary, None)),
+            Err(RunError::Stopped { reason, summary }) => Ok((summary, Some(reason))),
+            Err(e) => Err(Self::Run { label: label.to_string(), source: Box::new(e) }),
+        }
+    }
 }
 
 /// One swept key and its values (TOML literals, as `--set` takes them).
