@@ -71,14 +71,8 @@ enum Command {
     /// Run a scene over a grid of values (`--over KEY=V1,V2,...`, several make a grid), the
     /// variants in parallel, one MCAP log each, then overlaid plots and a summary table.
     Sweep {
-        scene: PathBuf,
-        /// A scene key and its values, as `--set` takes them; commas inside brackets belong to
-        /// a value (`--over body.b.initial_velocity=[1,0],[2,0]`).
-        #[arg(long = "over", value_name = "KEY=V1,V2,...", required = true)]
-        over: Vec<SweepAxis>,
-        /// Overrides applied to every variant before its own.
-        #[arg(long = "set", value_name = "KEY=VALUE")]
-        sets: Vec<String>,
+        #[command(flatten)]
+        grid: GridArgs,
         /// Directory for the logs (`<stem>.mcap`) and `plots/` (default: `<scene name>_sweep`).
         #[arg(long)]
         out: Option<PathBuf>,
@@ -126,13 +120,8 @@ enum Command {
     /// Run time against error for a known-answer scene over a grid of settings (scene keys, and
     /// `backend`, `precision` and `uzawa`): a table, a CSV and a PNG with the Pareto front marked.
     Accuracy {
-        scene: PathBuf,
-        /// A scene key (or `backend`, `precision`, `uzawa`) and its values, as for `sweep`.
-        #[arg(long = "over", value_name = "KEY=V1,V2,...", required = true)]
-        over: Vec<SweepAxis>,
-        /// Overrides applied to every variant before its own.
-        #[arg(long = "set", value_name = "KEY=VALUE")]
-        sets: Vec<String>,
+        #[command(flatten)]
+        grid: GridArgs,
         /// The known answer to measure against (default: the scene's name).
         #[arg(long, value_name = "NAME")]
         measure: Option<String>,
@@ -156,13 +145,8 @@ enum Command {
     /// failed or too slow; a table, `stability.csv`, `stability.png` (a map over the first two
     /// axes) and the largest stable value along each axis. Exit 0 when every variant is stable.
     Stability {
-        scene: PathBuf,
-        /// A scene key and its values, as for `sweep`.
-        #[arg(long = "over", value_name = "KEY=V1,V2,...", required = true)]
-        over: Vec<SweepAxis>,
-        /// Overrides applied to every variant before its own.
-        #[arg(long = "set", value_name = "KEY=VALUE")]
-        sets: Vec<String>,
+        #[command(flatten)]
+        grid: GridArgs,
         /// Directory for the logs, `stability.csv` and `stability.png` (default: `<scene name>_stability`).
         #[arg(long)]
         out: Option<PathBuf>,
@@ -240,6 +224,19 @@ enum Command {
     },
     /// Print the version, build and compute backends.
     Info,
+}
+
+/// A scene and the grid of variants over it (`sweep`, `accuracy`, `stability`).
+#[derive(clap::Args)]
+struct GridArgs {
+    scene: PathBuf,
+    /// A scene key and its values, as `--set` takes them (several make a grid); commas inside
+    /// brackets belong to a value (`--over body.b.initial_velocity=[1,0],[2,0]`).
+    #[arg(long = "over", value_name = "KEY=V1,V2,...", required = true)]
+    over: Vec<SweepAxis>,
+    /// Overrides applied to every variant before its own.
+    #[arg(long = "set", value_name = "KEY=VALUE")]
+    sets: Vec<String>,
 }
 
 /// Where a run's kernels go (`run` and `sweep`).
@@ -526,9 +523,7 @@ fn parse_trace(s: &str) -> Result<[String; 3], String> {
 }
 
 struct SweepArgs {
-    scene: PathBuf,
-    over: Vec<SweepAxis>,
-    sets: Vec<String>,
+    grid: GridArgs,
     out: Option<PathBuf>,
     jobs: Option<usize>,
     trace: Option<[String; 3]>,
@@ -543,7 +538,7 @@ struct SweepArgs {
 }
 
 fn sweep_command(args: SweepArgs) -> Result<ExitCode> {
-    let sweep = Sweep::plan(&args.scene, &args.sets, &args.over)?;
+    let sweep = Sweep::plan(&args.grid.scene, &args.grid.sets, &args.grid.over)?;
     let out = args.out.clone().unwrap_or_else(|| PathBuf::from(format!("{}_sweep", sweep.name)));
     let count = sweep.variants.len();
     if let Some(script) = &args.slurm {
@@ -619,9 +614,7 @@ fn slurm_command(sweep: &Sweep, out: &std::path::Path, script: &std::path::Path,
 }
 
 struct AccuracyArgs {
-    scene: PathBuf,
-    over: Vec<SweepAxis>,
-    sets: Vec<String>,
+    grid: GridArgs,
     measure: Option<String>,
     out: Option<PathBuf>,
     repeat: u64,
@@ -632,7 +625,7 @@ struct AccuracyArgs {
 
 fn accuracy_command(args: AccuracyArgs) -> Result<ExitCode> {
     use bifirst::accuracy::{cheapest_within, convergence_slopes, csv, pareto_png, table, Study};
-    let study = Study::plan(&args.scene, args.measure.as_deref(), &args.sets, &args.over, &args.backend)?;
+    let study = Study::plan(&args.grid.scene, args.measure.as_deref(), &args.grid.sets, &args.grid.over, &args.backend)?;
     let out = args.out.unwrap_or_else(|| PathBuf::from(format!("{}_accuracy", study.name)));
     let count = study.variant_count();
     eprintln!("bifirst {}: accuracy of `{}` against `{}`, {count} variants one at a time ({} runs each), into {}", env!("CARGO_PKG_VERSION"), study.name, study.measure, args.repeat, out.display());
@@ -660,9 +653,9 @@ fn accuracy_command(args: AccuracyArgs) -> Result<ExitCode> {
     Ok(if rows.len() == count && rows.iter().all(|r| r.status == "finished") { ExitCode::SUCCESS } else { ExitCode::FAILURE })
 }
 
-fn stability_command(scene: &std::path::Path, over: &[SweepAxis], sets: &[String], out: Option<PathBuf>, budget: Budget, backend: BackendRequest, json: bool) -> Result<ExitCode> {
+fn stability_command(grid: &GridArgs, out: Option<PathBuf>, budget: Budget, backend: BackendRequest, json: bool) -> Result<ExitCode> {
     use bifirst::stability::{csv, largest_stable, map_png, table, Class, Study};
-    let study = Study::plan(scene, sets, over)?;
+    let study = Study::plan(&grid.scene, &grid.sets, &grid.over)?;
     let out = out.unwrap_or_else(|| PathBuf::from(format!("{}_stability", study.name)));
     let count = study.variant_count();
     eprintln!("bifirst {}: stability of `{}`, {count} variants one at a time (budget {} sweeps per step, {} s each), into {}", env!("CARGO_PKG_VERSION"), study.name, budget.sweeps_per_step, budget.wall_s, out.display());
@@ -809,15 +802,15 @@ fn main() -> ExitCode {
     }
     let result = match cli.command {
         Command::Run { scene, restart, at, out, sets, vtu, contour, quiet, json, backend } => run(RunArgs { backend: backend.into(), scene, restart, at, out, sets, vtu, contour, quiet, json }),
-        Command::Sweep { scene, over, sets, out, jobs, trace, backend, json, shard, index, list, slurm, sbatch } => {
-            sweep_command(SweepArgs { scene, over, sets, out, jobs, trace, backend: backend.into(), json, shard, index, list, slurm, sbatch, threads: cli.threads })
+        Command::Sweep { grid, out, jobs, trace, backend, json, shard, index, list, slurm, sbatch } => {
+            sweep_command(SweepArgs { grid, out, jobs, trace, backend: backend.into(), json, shard, index, list, slurm, sbatch, threads: cli.threads })
         }
         Command::SweepReport { dir, json, trace } => report(&dir).map_err(anyhow::Error::from).and_then(|r| print_report(r, json, trace)),
-        Command::Accuracy { scene, over, sets, measure, out, repeat, target, backend, json } => {
-            accuracy_command(AccuracyArgs { scene, over, sets, measure, out, repeat, target, backend: backend.into(), json })
+        Command::Accuracy { grid, measure, out, repeat, target, backend, json } => {
+            accuracy_command(AccuracyArgs { grid, measure, out, repeat, target, backend: backend.into(), json })
         }
-        Command::Stability { scene, over, sets, out, max_sweeps, max_wall, backend, json } => {
-            stability_command(&scene, &over, &sets, out, Budget { sweeps_per_step: max_sweeps, wall_s: max_wall }, backend.into(), json)
+        Command::Stability { grid, out, max_sweeps, max_wall, backend, json } => {
+            stability_command(&grid, out, Budget { sweeps_per_step: max_sweeps, wall_s: max_wall }, backend.into(), json)
         }
         Command::State { run, at, contour, vtu } => state_command(run, at, contour, vtu),
         Command::Plot { runs, out, trace } => plot_command(runs, out, trace),
