@@ -106,9 +106,9 @@ pub fn thin_second_pass(model: &ContactModel, positions: &[Vec<Vec3>], points: &
         facets.get(&c.slave_node).is_some_and(|list| {
             let mut h = Real::INFINITY;
             let flat = list.iter().all(|&f| {
-                let p: Vec<Vec3> = surface.facet(f).iter().map(|&n| x[n as usize]).collect();
-                h = h.min(facet_size(&p));
-                geometry::dot(geometry::normalize(facet_normal(&p)), c.frame[0]) < -FLAT
+                let (p, count) = surface.facet_points(x, f);
+                h = h.min(facet_size(&p[..count]));
+                geometry::dot(geometry::normalize(facet_normal(&p[..count])), c.frame[0]) < -FLAT
             });
             flat && c.gap > -KEPT_DEPTH * h
         })

@@ -184,8 +184,8 @@ fn in_tetrahedron(p: [Vec3; 4], x: Vec3) -> bool {
 fn to_surface(surface: &super::Surface, positions: &[Vec3], x: Vec3) -> (Real, Vec3) {
     let mut best = (Real::INFINITY, [0.0; 3]);
     for f in 0..surface.facet_count() {
-        let p: Vec<Vec3> = surface.facet(f).iter().map(|&n| positions[n as usize]).collect();
-        let closest = match p.len() {
+        let (p, count) = surface.facet_points(positions, f);
+        let closest = match count {
             2 => on_segment(x, p[0], p[1]),
             3 => on_triangle(x, p[0], p[1], p[2]),
             _ => {
