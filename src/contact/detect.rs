@@ -53,6 +53,42 @@ fn project(x: Vec3, f: &[Vec3]) -> Option<Projection> {
     }
 }
 
+/// How a master facet a node projects onto stands to the node's own surface.
+enum Candidate {
+    /// The facet faces the node's surface (their normals are opposed).
+    Facing,
+    /// It does not, and the node is over the facet itself: a coarse grain's corner, or an edge
+    /// sliding along a face, has a normal square to or turned away from the facet it meets.
+    /// Taken only when no facet of the master faces the node: where one does (the corner of a
+    /// bar pressed on another's end, over the end of its side face with a zero gap), the askew
+    /// facet would hold the node in the wrong direction.
+    Askew,
+    /// It does not, and the node is only over the band beyond its edges (`EDGE_TOLERANCE`):
+    /// a corner on the extension of the master's side facets, never a contact.
+    Extension,
+}
+
+impl Candidate {
+    fn of(node_normal: Vec3, p: &Projection, within: impl FnOnce() -> bool) -> Self {
+        if geometry::dot(node_normal, p.normal) < 0.0 {
+            Self::Facing
+        } else if within() {
+            Self::Askew
+        } else {
+            Self::Extension
+        }
+    }
+}
+
+/// Whether `x` projects onto the facet `f` itself, not onto the band beyond its edges.
+fn project_within(x: Vec3, f: &[Vec3]) -> bool {
+    match f.len() {
+        2 => geometry::on_segment(x, f[0], f[1], 0.0).is_some(),
+        3 => geometry::on_triangle(x, f[0], f[1], f[2], 0.0).is_some(),
+        _ => geometry::on_quad(x, [f[0], f[1], f[2], f[3]], 0.0).is_some(),
+    }
+}
+
 /// All contact points of the configuration `positions` (current node positions per body) at
 /// time `t`, for a step of length `dt`. A point is kept when its gap is at most `margin`.
 pub fn detect(model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, t: Real, dt: Real, margin: Real) -> Vec<ContactPoint> {
@@ -245,8 +281,9 @@ fn body_pairs(model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, margin:
                 return points;
             }
             let normals = node_normals(&surfaces[s], &positions[s]);
-            // Best facet per master body for the current node, among this slave's masters.
-            let mut best: Vec<Option<(Real, usize, Projection)>> = vec![None; masters[s].len()];
+            // Best facet per master body for the current node, among this slave's masters: one
+            // that faces the node's own surface, else one that does not (`Candidate`).
+            let mut best: Vec<[Option<(Real, usize, Projection)>; 2]> = vec![[None, None]; masters[s].len()];
             let mut xs: Vec<Vec3> = Vec::with_capacity(4);
             for &node in &surfaces[s].nodes {
                 let x = positions[s][node as usize];
@@ -260,22 +297,24 @@ fn body_pairs(model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, margin:
                         xs.clear();
                         xs.extend(facet.iter().map(|&n| positions[m][n as usize]));
                         let Some(p) = project(x, &xs) else { return };
-                        // Only facets that face the node's own surface: a corner node lies on the
-                        // extension of the master's side facets with a zero gap, and must not take them.
-                        if geometry::dot(normals[node as usize], p.normal) >= 0.0 {
-                            return;
-                        }
                         // Penetrations deeper than half a facet are the far side of the master body.
                         if p.gap > margin || p.gap < -0.5 * size {
                             return;
                         }
-                        if best[k].as_ref().is_none_or(|(g, _, _)| p.gap.abs() < g.abs()) {
-                            best[k] = Some((p.gap, f, p));
+                        let tier = match Candidate::of(normals[node as usize], &p, || project_within(x, &xs)) {
+                            Candidate::Facing => 0,
+                            Candidate::Askew => 1,
+                            Candidate::Extension => return,
+                        };
+                        let slot = &mut best[k][tier];
+                        if slot.as_ref().is_none_or(|(g, _, _)| p.gap.abs() < g.abs()) {
+                            *slot = Some((p.gap, f, p));
                         }
                     });
                 }
                 for (k, &m) in masters[s].iter().enumerate() {
-                    let Some((gap, f, p)) = best[k].take() else { continue };
+                    let [facing, askew] = std::mem::take(&mut best[k]);
+                    let Some((gap, f, p)) = facing.or(askew) else { continue };
                     let m = m as usize;
                     let facet = surfaces[m].facet(f);
                     let mu = model.pairs.friction(s, m).expect("pair checked");
