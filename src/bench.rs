@@ -11,7 +11,7 @@ use crate::gpu::uzawa_step::{UzawaPoint, UzawaStepKernel};
 use crate::gpu::uzawa_sweep::UzawaSweeps;
 use crate::gpu::peak::{measure as measure_peaks, Peaks, FMA_FLOPS_PER_VALUE};
 use crate::gpu::{Evaluation, Gpu, GpuError, GpuWorld, WorldKernel};
-use crate::material::{BlatzKo, Lvf, Model, NeoHookean};
+use crate::material::{ArrudaBoyce, BlatzKo, Decoupled, Gent, Lvf, Model, MooneyRivlin, NeoHookean, Yeoh};
 use crate::mesh::{generate, ElementKind, Mesh};
 use crate::precision::{Precision, Real};
 use crate::solver::PhaseTimes;
@@ -19,11 +19,15 @@ use std::sync::Arc;
 use std::time::Instant;
 
 /// The element kinds and materials the kernels are built for, with the parameters benchmarks use.
-pub fn bench_models() -> [Model; 3] {
+pub fn bench_models() -> [Model; 7] {
     [
         Model::BlatzKo(BlatzKo { g: 1000.0 }),
         Model::Lvf(Lvf { g: 5000.0, k: 3333.0, a1: 50.0, a2: 50.0, a3: 0.0, a4: 2000.0, a5: 100.0 }),
         Model::NeoHookean(NeoHookean { g: 1000.0, k: 3000.0 }),
+        Model::MooneyRivlin(Decoupled { law: MooneyRivlin { c10: 400.0, c01: 100.0 }, k: 3000.0 }),
+        Model::Yeoh(Decoupled { law: Yeoh { c10: 500.0, c20: -50.0, c30: 5.0 }, k: 3000.0 }),
+        Model::Gent(Decoupled { law: Gent { g: 1000.0, jm: 50.0 }, k: 3000.0 }),
+        Model::ArrudaBoyce(Decoupled { law: ArrudaBoyce { mu: 900.0, lambda_m: 3.0 }, k: 3000.0 }),
     ]
 }
 
@@ -346,6 +350,9 @@ fn material_flops(model: &Model) -> (f64, f64) {
         Model::BlatzKo(_) => (600.0, 80.0),
         Model::Lvf(_) => (700.0, 90.0),
         Model::NeoHookean(_) => (350.0, 110.0),
+        // The decoupled models share their kinematics (C, C², C⁻¹, a cube root, a logarithm and
+        // nine 6x6 outer products); their isochoric laws add a few dozen.
+        Model::MooneyRivlin(_) | Model::Yeoh(_) | Model::Gent(_) | Model::ArrudaBoyce(_) => (950.0, 160.0),
     }
 }
 

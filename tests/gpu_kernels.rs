@@ -8,11 +8,11 @@ use bifirst::assembly::{element_out_stride, DofMap, GatherMap, StiffnessPattern}
 use bifirst::contact::Status;
 use bifirst::cpu;
 use bifirst::element::{ElementOutput, Formulation, ReferenceGeometry};
-use bifirst::gpu::shaders::{is_element_kernel, validate, ElementVariant, SHADERS};
+use bifirst::gpu::shaders::{is_element_kernel, validate, ElementVariant, DECOUPLED, SHADERS};
 use bifirst::gpu::types::{Coefficients, DofOut, DofStep, MaterialParams};
 use bifirst::gpu::uzawa_step::{UzawaPoint, UzawaStepKernel};
 use bifirst::gpu::{ElementFailure, Evaluation, GpuWorld, WorldBody};
-use bifirst::material::{BlatzKo, Lvf, Model, NeoHookean};
+use bifirst::material::{ArrudaBoyce, BlatzKo, Decoupled, Gent, Lvf, Model, MooneyRivlin, NeoHookean, Yeoh};
 use bifirst::mesh::{generate, ElementKind, Mesh};
 use bifirst::precision::Precision;
 use rand::Rng;
@@ -264,6 +264,10 @@ fn model_of(material: &str) -> Model {
         "blatz_ko" => Model::BlatzKo(BlatzKo { g: 1000.0 }),
         "lvf" => Model::Lvf(Lvf { g: 5000.0, k: 3333.0, a1: 50.0, a2: 50.0, a3: 10.0, a4: 2000.0, a5: 100.0 }),
         "neo_hookean" => Model::NeoHookean(NeoHookean { g: 1000.0, k: 3000.0 }),
+        "mooney_rivlin" => Model::MooneyRivlin(Decoupled { law: MooneyRivlin { c10: 400.0, c01: 100.0 }, k: 3000.0 }),
+        "yeoh" => Model::Yeoh(Decoupled { law: Yeoh { c10: 500.0, c20: -50.0, c30: 5.0 }, k: 3000.0 }),
+        "gent" => Model::Gent(Decoupled { law: Gent { g: 1000.0, jm: 20.0 }, k: 3000.0 }),
+        "arruda_boyce" => Model::ArrudaBoyce(Decoupled { law: ArrudaBoyce { mu: 900.0, lambda_m: 2.5 }, k: 3000.0 }),
         other => panic!("material {other}"),
     }
 }
@@ -356,6 +360,10 @@ fn two_bodies(variant: ElementVariant, seed: u64) -> [Case; 2] {
         Model::BlatzKo(m) => Model::BlatzKo(BlatzKo { g: 2.0 * m.g }),
         Model::Lvf(m) => Model::Lvf(Lvf { g: 2.0 * m.g, a4: 0.5 * m.a4, ..m }),
         Model::NeoHookean(m) => Model::NeoHookean(NeoHookean { g: 2.0 * m.g, k: 1.5 * m.k }),
+        Model::MooneyRivlin(m) => Model::MooneyRivlin(Decoupled { law: MooneyRivlin { c10: 2.0 * m.law.c10, c01: 0.5 * m.law.c01 }, k: 1.5 * m.k }),
+        Model::Yeoh(m) => Model::Yeoh(Decoupled { law: Yeoh { c20: 2.0 * m.law.c20, ..m.law }, k: 1.5 * m.k }),
+        Model::Gent(m) => Model::Gent(Decoupled { law: Gent { g: 2.0 * m.law.g, jm: 0.5 * m.law.jm }, k: 1.5 * m.k }),
+        Model::ArrudaBoyce(m) => Model::ArrudaBoyce(Decoupled { law: ArrudaBoyce { mu: 2.0 * m.law.mu, lambda_m: 1.2 * m.law.lambda_m }, k: 1.5 * m.k }),
     };
     [case(variant, seed), second]
 }
@@ -389,6 +397,7 @@ fn relative_error(a: &[f64], b: &[f64]) -> f64 {
 }
 
 const TOLERANCES: [(Precision, f64); 2] = [(Precision::F64, 1e-12), (Precision::F32, 1e-5)];
+const F32_DECOUPLED_ENERGY: f64 = 1e-4;
 
 #[test]
 fn element_force_tangent_kernel_matches_its_cpu_twin() {
@@ -507,6 +516,10 @@ fn element_energy_kernel_matches_its_cpu_twin() {
             for (c, energies) in cases.iter().zip(&energies) {
                 let expected: Vec<f64> = (0..c.mesh.element_count()).map(|e| cpu::element_energy(&c.model, c.geometry.element_points(e), &c.element_u(e), c.mesh.dim(), c.formulation)).collect();
                 let error = energies.iter().zip(&expected).map(|(a, b)| (a - b).abs() / b.abs().max(1e-300)).fold(0.0, f64::max);
+                // In f32 the decoupled models lose digits in `Ī₁ - 3` and `Ī₂ - 3` (an
+                // isochoric strain small beside the volume change): their energies are held to
+                // 1e-4 there, their forces and tangents to the common bound.
+                let tolerance = if precision == Precision::F32 && DECOUPLED.contains(&variant.material) { F32_DECOUPLED_ENERGY } else { tolerance };
                 assert!(error <= tolerance, "{variant:?} {}: element energy {error:.3e}", precision.name());
             }
         }

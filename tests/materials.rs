@@ -6,7 +6,7 @@
 mod common_random;
 
 use bifirst::material::tensor::{green_lagrange, to_voigt, Mat3, Tangent, VOIGT};
-use bifirst::material::{BlatzKo, Hyperelastic, Lvf, Model, NeoHookean};
+use bifirst::material::{ArrudaBoyce, BlatzKo, Decoupled, Gent, Hyperelastic, Lvf, Model, MooneyRivlin, NeoHookean, Yeoh};
 use common_random::{random_f, rng};
 
 fn models() -> Vec<(&'static str, Model)> {
@@ -15,6 +15,11 @@ fn models() -> Vec<(&'static str, Model)> {
         ("neo_hookean", Model::NeoHookean(NeoHookean { g: 2.0, k: 7.0 })),
         // The paper's Love-Laursen parameters, with a3 non-zero so its terms are exercised.
         ("lvf", Model::Lvf(Lvf { g: 5000.0, k: 3333.0, a1: 50.0, a2: 50.0, a3: 400.0, a4: 2000.0, a5: 100.0 })),
+        // The decoupled rubber models, every term of their laws non-zero.
+        ("mooney_rivlin", Model::MooneyRivlin(Decoupled { law: MooneyRivlin { c10: 1.5, c01: 0.4 }, k: 9.0 })),
+        ("yeoh", Model::Yeoh(Decoupled { law: Yeoh { c10: 1.5, c20: -0.2, c30: 0.05 }, k: 9.0 })),
+        ("gent", Model::Gent(Decoupled { law: Gent { g: 3.0, jm: 8.0 }, k: 9.0 })),
+        ("arruda_boyce", Model::ArrudaBoyce(Decoupled { law: ArrudaBoyce { mu: 2.5, lambda_m: 1.8 }, k: 9.0 })),
     ]
 }
 

@@ -24,18 +24,27 @@ pub const SHADERS: &[(&str, &str)] = &[
 pub const INCLUDES: &[(&str, &str)] = &[
     ("batch", include_str!("../../shaders/include/batch.wgsl")),
     ("contact_law", include_str!("../../shaders/include/contact_law.wgsl")),
+    ("decoupled", include_str!("../../shaders/include/decoupled.wgsl")),
     ("element", include_str!("../../shaders/include/element.wgsl")),
     ("fbar", include_str!("../../shaders/include/fbar.wgsl")),
     ("math_f32", include_str!("../../shaders/include/math_f32.wgsl")),
     ("math_f64", include_str!("../../shaders/include/math_f64.wgsl")),
+    ("material_arruda_boyce", include_str!("../../shaders/include/material_arruda_boyce.wgsl")),
     ("material_blatz_ko", include_str!("../../shaders/include/material_blatz_ko.wgsl")),
+    ("material_gent", include_str!("../../shaders/include/material_gent.wgsl")),
     ("material_lvf", include_str!("../../shaders/include/material_lvf.wgsl")),
+    ("material_mooney_rivlin", include_str!("../../shaders/include/material_mooney_rivlin.wgsl")),
     ("material_neo_hookean", include_str!("../../shaders/include/material_neo_hookean.wgsl")),
+    ("material_yeoh", include_str!("../../shaders/include/material_yeoh.wgsl")),
     ("tensor", include_str!("../../shaders/include/tensor.wgsl")),
 ];
 
 /// The materials the element kernels can be built for (`Model::name`).
-pub const MATERIALS: [&str; 3] = ["blatz_ko", "lvf", "neo_hookean"];
+pub const MATERIALS: [&str; 7] = ["blatz_ko", "lvf", "neo_hookean", "mooney_rivlin", "yeoh", "gent", "arruda_boyce"];
+
+/// The materials written as `Ŵ(Ī₁, Ī₂) + U(J)`: their include gives `Ŵ` alone, and
+/// `include/decoupled.wgsl` the stress and tangent.
+pub const DECOUPLED: [&str; 4] = ["mooney_rivlin", "yeoh", "gent", "arruda_boyce"];
 
 /// The element, formulation and material an element kernel is built for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -100,6 +109,9 @@ pub fn source(kernel: &str, precision: Precision, variant: Option<ElementVariant
             module += include("tensor")?;
             module += include("element")?;
             module += include("fbar")?;
+            if DECOUPLED.contains(&v.material) {
+                module += include("decoupled")?;
+            }
             module += include(&format!("material_{}", v.material))?;
         }
     }

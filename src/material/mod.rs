@@ -3,13 +3,17 @@
 //! entry in [`Model`].
 
 mod blatz_ko;
+pub mod decoupled;
 mod lvf;
 mod neo_hookean;
+pub mod rubber;
 pub mod tensor;
 
 pub use blatz_ko::BlatzKo;
+pub use decoupled::{Decoupled, IsochoricLaw};
 pub use lvf::Lvf;
 pub use neo_hookean::NeoHookean;
+pub use rubber::{ArrudaBoyce, Gent, MooneyRivlin, Yeoh};
 
 use crate::precision::Real;
 use tensor::{Mat3, Tangent};
@@ -37,6 +41,25 @@ pub enum Model {
     BlatzKo(BlatzKo),
     Lvf(Lvf),
     NeoHookean(NeoHookean),
+    MooneyRivlin(Decoupled<MooneyRivlin>),
+    Yeoh(Decoupled<Yeoh>),
+    Gent(Decoupled<Gent>),
+    ArrudaBoyce(Decoupled<ArrudaBoyce>),
+}
+
+/// `$body` with `$m` bound to the model inside whichever variant `$model` is.
+macro_rules! each_model {
+    ($model:expr, $m:ident => $body:expr) => {
+        match $model {
+            Model::BlatzKo($m) => $body,
+            Model::Lvf($m) => $body,
+            Model::NeoHookean($m) => $body,
+            Model::MooneyRivlin($m) => $body,
+            Model::Yeoh($m) => $body,
+            Model::Gent($m) => $body,
+            Model::ArrudaBoyce($m) => $body,
+        }
+    };
 }
 
 impl Model {
@@ -46,16 +69,34 @@ impl Model {
             Model::BlatzKo(_) => "blatz_ko",
             Model::Lvf(_) => "lvf",
             Model::NeoHookean(_) => "neo_hookean",
+            Model::MooneyRivlin(_) => "mooney_rivlin",
+            Model::Yeoh(_) => "yeoh",
+            Model::Gent(_) => "gent",
+            Model::ArrudaBoyce(_) => "arruda_boyce",
         }
     }
 
     /// Every parameter in the order of the kernels' `MaterialParams`: G, K, a1..a5 (zero where
-    /// the model has none).
+    /// the model has none). The decoupled models put their small-strain G first and their own
+    /// parameters in a1.. (`shaders/include/material_<name>.wgsl` reads them there).
     pub fn parameters(&self) -> [Real; 7] {
+        let g = self.bulk_shear().1;
         match self {
             Model::BlatzKo(m) => [m.g, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
             Model::Lvf(m) => [m.g, m.k, m.a1, m.a2, m.a3, m.a4, m.a5],
             Model::NeoHookean(m) => [m.g, m.k, 0.0, 0.0, 0.0, 0.0, 0.0],
+            Model::MooneyRivlin(m) => [g, m.k, m.law.c10, m.law.c01, 0.0, 0.0, 0.0],
+            Model::Yeoh(m) => [g, m.k, m.law.c10, m.law.c20, m.law.c30, 0.0, 0.0],
+            Model::Gent(m) => [g, m.k, m.law.jm, 0.0, 0.0, 0.0, 0.0],
+            Model::ArrudaBoyce(m) => [g, m.k, m.law.mu, m.law.lambda_m, 0.0, 0.0, 0.0],
+        }
+    }
+
+    /// What a non-finite stress means for this model beyond a bad state: a limit of the law.
+    pub fn limit(&self) -> Option<&'static str> {
+        match self {
+            Model::Gent(_) => Some("the Gent model's limit Ī₁ - 3 = Jm is reached there: the rubber's chains are fully stretched (raise `Jm`, or load it less)"),
+            _ => None,
         }
     }
 
@@ -65,6 +106,10 @@ impl Model {
             Model::BlatzKo(m) => (5.0 * m.g / 3.0, m.g),
             Model::Lvf(m) => (m.k, m.g),
             Model::NeoHookean(m) => (m.k, m.g),
+            Model::MooneyRivlin(m) => (m.k, m.law.shear_modulus()),
+            Model::Yeoh(m) => (m.k, m.law.shear_modulus()),
+            Model::Gent(m) => (m.k, m.law.shear_modulus()),
+            Model::ArrudaBoyce(m) => (m.k, m.law.shear_modulus()),
         }
     }
 
@@ -79,24 +124,12 @@ impl Model {
 
 impl Hyperelastic for Model {
     fn energy(&self, e: &Mat3) -> Real {
-        match self {
-            Model::BlatzKo(m) => m.energy(e),
-            Model::Lvf(m) => m.energy(e),
-            Model::NeoHookean(m) => m.energy(e),
-        }
+        each_model!(self, m => m.energy(e))
     }
     fn stress(&self, e: &Mat3) -> Mat3 {
-        match self {
-            Model::BlatzKo(m) => m.stress(e),
-            Model::Lvf(m) => m.stress(e),
-            Model::NeoHookean(m) => m.stress(e),
-        }
+        each_model!(self, m => m.stress(e))
     }
     fn stress_tangent(&self, e: &Mat3) -> (Mat3, Tangent) {
-        match self {
-            Model::BlatzKo(m) => m.stress_tangent(e),
-            Model::Lvf(m) => m.stress_tangent(e),
-            Model::NeoHookean(m) => m.stress_tangent(e),
-        }
+        each_model!(self, m => m.stress_tangent(e))
     }
 }

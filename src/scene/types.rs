@@ -124,6 +124,10 @@ pub enum ModelName {
     BlatzKo,
     Lvf,
     NeoHookean,
+    MooneyRivlin,
+    Yeoh,
+    Gent,
+    ArrudaBoyce,
 }
 
 /// A material: its model, density and the model's parameters (each model takes exactly its own).
@@ -140,6 +144,16 @@ pub struct MaterialSpec {
     pub a3: Option<Real>,
     pub a4: Option<Real>,
     pub a5: Option<Real>,
+    /// Mooney-Rivlin and Yeoh coefficients.
+    pub C10: Option<Real>,
+    pub C01: Option<Real>,
+    pub C20: Option<Real>,
+    pub C30: Option<Real>,
+    /// Gent's limit of `Ī₁ - 3`.
+    pub Jm: Option<Real>,
+    /// Arruda-Boyce's chain modulus and locking stretch.
+    pub mu: Option<Real>,
+    pub lambda_m: Option<Real>,
 }
 
 #[derive(Debug, Clone, Deserialize, Serialize)]

@@ -200,21 +200,54 @@ pub(super) fn names<'a>(it: impl Iterator<Item = &'a String>) -> String {
 
 fn validate_material(key: &str, m: &MaterialSpec) -> Result<(), Failure> {
     positive(format!("{key}.density"), "the density", m.density)?;
+    // Parameters that must be above zero (moduli, limits), and the others the model takes.
     let (required, allowed): (&[&str], &[&str]) = match m.model {
         ModelName::BlatzKo => (&["G"], &["G"]),
         ModelName::NeoHookean => (&["G", "K"], &["G", "K"]),
         ModelName::Lvf => (&["G", "K"], &["G", "K", "a1", "a2", "a3", "a4", "a5"]),
+        ModelName::MooneyRivlin => (&["K"], &["K", "C10", "C01"]),
+        ModelName::Yeoh => (&["K", "C10"], &["K", "C10", "C20", "C30"]),
+        ModelName::Gent => (&["G", "K", "Jm"], &["G", "K", "Jm"]),
+        ModelName::ArrudaBoyce => (&["K", "mu", "lambda_m"], &["K", "mu", "lambda_m"]),
     };
-    let params = [("G", m.G), ("K", m.K), ("a1", m.a1), ("a2", m.a2), ("a3", m.a3), ("a4", m.a4), ("a5", m.a5)];
+    let params = [
+        ("G", m.G),
+        ("K", m.K),
+        ("a1", m.a1),
+        ("a2", m.a2),
+        ("a3", m.a3),
+        ("a4", m.a4),
+        ("a5", m.a5),
+        ("C10", m.C10),
+        ("C01", m.C01),
+        ("C20", m.C20),
+        ("C30", m.C30),
+        ("Jm", m.Jm),
+        ("mu", m.mu),
+        ("lambda_m", m.lambda_m),
+    ];
     let model = serde_json::to_value(m.model).ok().and_then(|v| v.as_str().map(str::to_owned)).unwrap_or_default();
     for (p, v) in params {
         match v {
             Some(_) if !allowed.contains(&p) => fail(Invalid, format!("{key}.{p}"), format!("`{p}` is not a parameter of the {model} model (it takes {}).", allowed.join(", ")))?,
             None if required.contains(&p) => fail(Invalid, format!("{key}.{p}"), format!("the {model} model needs `{p}`."))?,
-            Some(v) if required.contains(&p) => positive(format!("{key}.{p}"), &format!("the modulus {p}"), v)?,
+            Some(v) if required.contains(&p) => positive(format!("{key}.{p}"), &format!("the {} {p}", if matches!(p, "G" | "K") { "modulus" } else { "parameter" }), v)?,
             Some(v) if !v.is_finite() => fail(Invalid, format!("{key}.{p}"), "not a finite number.")?,
             _ => {}
         }
+    }
+    // Drucker stability at small strain: a positive shear modulus.
+    match m.model {
+        ModelName::MooneyRivlin => {
+            let (c10, c01) = (m.C10.unwrap_or(0.0), m.C01.unwrap_or(0.0));
+            if !(c10 + c01 > 0.0) {
+                fail(Invalid, format!("{key}.C10"), format!("the small-strain shear modulus G = 2 (C10 + C01) must be above zero (C10 = {c10}, C01 = {c01})."))?;
+            }
+        }
+        ModelName::ArrudaBoyce if m.lambda_m.is_some_and(|l| l <= 1.0) => {
+            fail(Invalid, format!("{key}.lambda_m"), format!("the locking stretch must be above 1 (got {}).", m.lambda_m.unwrap_or_default()))?;
+        }
+        _ => {}
     }
     Ok(())
 }

@@ -54,8 +54,9 @@ pub struct StepParams {
 /// Why a step failed (it is then retried with a smaller time step).
 #[derive(Debug, Clone, thiserror::Error)]
 pub enum StepFailure {
-    #[error("body `{body}`: element {element}: {error}")]
-    Element { body: String, element: usize, error: ElementError },
+    /// `limit`: what a non-finite stress means for the body's material ([`Model::limit`]).
+    #[error("body `{body}`: element {element}: {error}{}", limit.map(|l| format!("; {l}")).unwrap_or_default())]
+    Element { body: String, element: usize, error: ElementError, limit: Option<&'static str> },
     #[error("body `{body}`: {error}")]
     Linear { body: String, error: String },
     /// `bodies` names the bodies that iterated together (coupled by contact); `unmet` says which
@@ -310,7 +311,7 @@ impl Body {
     fn cpu_elements(&mut self, u: &[Real], with_tangent: bool, times: &mut PhaseTimes) -> Result<(), StepFailure> {
         let t0 = Instant::now();
         let result = dispatch_element_force_tangent(&self.model, &self.mesh, &self.geometry, self.formulation, u, with_tangent, &mut self.element_results)
-            .map_err(|(element, error)| StepFailure::Element { body: self.name.clone(), element, error });
+            .map_err(|(element, error)| self.element_error(element, error));
         times.elements += t0.elapsed().as_secs_f64();
         result
     }
@@ -323,7 +324,12 @@ impl Body {
         };
         let ue = self.mesh.element_displacements(u, element);
         let error = element_force_tangent(&self.model, self.geometry.element_points(element), &ue, self.dim, self.formulation, true, &mut ElementOutput::default()).err().unwrap_or(fallback);
-        StepFailure::Element { body: self.name.clone(), element, error }
+        self.element_error(element, error)
+    }
+
+    fn element_error(&self, element: usize, error: ElementError) -> StepFailure {
+        let limit = if error == ElementError::NonFinite { self.model.limit() } else { None };
+        StepFailure::Element { body: self.name.clone(), element, error, limit }
     }
 
     /// Starts a step of length `p.dt`: external forces (gravity, and the surface loads at

@@ -19,7 +19,7 @@ use crate::contact::overlap::{overlaps, Overlap, Worst};
 use crate::contact::{ContactModel, ContactPoint, ContactStats, Master};
 use crate::gpu::GpuWorld;
 use crate::precision::{Precision, Real};
-use body::StepParams;
+pub use body::StepParams;
 use group::solve_groups;
 use rayon::prelude::*;
 use std::collections::HashMap;

@@ -10,7 +10,7 @@ use crate::contact::overlap::{Host, Overlap};
 use crate::contact::pairs::{BodyPairs, Rank};
 use crate::contact::{ContactModel, Motion, Obstacle, Settings, Surface};
 use crate::element::{Formulation, ReferenceGeometry, FBAR_ABOVE_K_OVER_G};
-use crate::material::{BlatzKo, Lvf, Model, NeoHookean};
+use crate::material::{ArrudaBoyce, BlatzKo, Decoupled, Gent, Lvf, Model, MooneyRivlin, NeoHookean, Yeoh};
 use crate::mesh::{generate, gmsh, ElementKind, Mesh};
 use crate::precision::Real;
 use crate::scene::SceneErrorKind::{Invalid, Mesh as MeshError, Reference};
@@ -75,6 +75,10 @@ pub fn model_of(m: &MaterialSpec) -> Model {
             a4: m.a4.unwrap_or(0.0),
             a5: m.a5.unwrap_or(0.0),
         }),
+        ModelName::MooneyRivlin => Model::MooneyRivlin(Decoupled { law: MooneyRivlin { c10: m.C10.unwrap_or(0.0), c01: m.C01.unwrap_or(0.0) }, k }),
+        ModelName::Yeoh => Model::Yeoh(Decoupled { law: Yeoh { c10: m.C10.unwrap_or(0.0), c20: m.C20.unwrap_or(0.0), c30: m.C30.unwrap_or(0.0) }, k }),
+        ModelName::Gent => Model::Gent(Decoupled { law: Gent { g, jm: m.Jm.unwrap_or_default() }, k }),
+        ModelName::ArrudaBoyce => Model::ArrudaBoyce(Decoupled { law: ArrudaBoyce { mu: m.mu.unwrap_or_default(), lambda_m: m.lambda_m.unwrap_or_default() }, k }),
     }
 }
 
