@@ -45,11 +45,13 @@ fn facet_size(x: &[Vec3]) -> Real {
     geometry::edge_range(x).1
 }
 
-fn project(x: Vec3, f: &[Vec3]) -> Option<Projection> {
+/// Projection onto a facet (segment, triangle or quadrilateral), its foot at most `tol`
+/// (relative) beyond the edges.
+fn project(x: Vec3, f: &[Vec3], tol: Real) -> Option<Projection> {
     match f.len() {
-        2 => geometry::on_segment(x, f[0], f[1], EDGE_TOLERANCE),
-        3 => geometry::on_triangle(x, f[0], f[1], f[2], EDGE_TOLERANCE),
-        _ => geometry::on_quad(x, [f[0], f[1], f[2], f[3]], EDGE_TOLERANCE),
+        2 => geometry::on_segment(x, f[0], f[1], tol),
+        3 => geometry::on_triangle(x, f[0], f[1], f[2], tol),
+        _ => geometry::on_quad(x, [f[0], f[1], f[2], f[3]], tol),
     }
 }
 
@@ -77,15 +79,6 @@ impl Candidate {
         } else {
             Self::Extension
         }
-    }
-}
-
-/// Whether `x` projects onto the facet `f` itself, not onto the band beyond its edges.
-fn project_within(x: Vec3, f: &[Vec3]) -> bool {
-    match f.len() {
-        2 => geometry::on_segment(x, f[0], f[1], 0.0).is_some(),
-        3 => geometry::on_triangle(x, f[0], f[1], f[2], 0.0).is_some(),
-        _ => geometry::on_quad(x, [f[0], f[1], f[2], f[3]], 0.0).is_some(),
     }
 }
 
@@ -296,12 +289,12 @@ fn body_pairs(model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, margin:
                         let facet = surfaces[m].facet(f);
                         xs.clear();
                         xs.extend(facet.iter().map(|&n| positions[m][n as usize]));
-                        let Some(p) = project(x, &xs) else { return };
+                        let Some(p) = project(x, &xs, EDGE_TOLERANCE) else { return };
                         // Penetrations deeper than half a facet are the far side of the master body.
                         if p.gap > margin || p.gap < -0.5 * size {
                             return;
                         }
-                        let tier = match Candidate::of(normals[node as usize], &p, || project_within(x, &xs)) {
+                        let tier = match Candidate::of(normals[node as usize], &p, || project(x, &xs, 0.0).is_some()) {
                             Candidate::Facing => 0,
                             Candidate::Askew => 1,
                             Candidate::Extension => return,
