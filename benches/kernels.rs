@@ -72,7 +72,7 @@ fn newton_iteration(c: &mut Criterion) {
     let prescribed: Vec<Prescribed> = mesh.node_sets["z_min"].iter().flat_map(|&n| (0..3).map(move |i| Prescribed { dof: n as usize * 3 + i, velocity: 0.0, set: 0 })).collect();
     let model = Model::NeoHookean(NeoHookean { g: 1000.0, k: 3000.0 });
     let topology = Topology::new(&mesh, &prescribed, Default::default()).unwrap();
-    let mut body = Body::new("block".into(), mesh.clone(), geometry, model, Formulation::Displacement, 1.0, prescribed, |_| [0.0; 3], &topology);
+    let mut body = Body::new("block".into(), mesh.clone(), None, geometry, model, Formulation::Displacement, 1.0, prescribed, |_| [0.0; 3], &topology);
     let u: Vec<f64> = mesh.nodes.iter().flat_map(|&x| deform(x)).collect();
     let (dt, theta, xi) = (1e-3, 0.5, 0.5);
     let c1 = 1.0 / (theta * dt * dt);

@@ -5,7 +5,7 @@
 #[path = "common/random.rs"]
 mod common_random;
 
-use bifirst::element::{element_energy, element_force_tangent, element_stresses, ElementOutput, Formulation, ReferenceGeometry};
+use bifirst::element::{element_energy, element_force_tangent, element_stresses, ElementOutput, Formulation, Patches, ReferenceGeometry};
 use bifirst::material::tensor::{green_lagrange, to_voigt, Mat3};
 use bifirst::material::{BlatzKo, Hyperelastic, Lvf, Model, NeoHookean};
 use bifirst::mesh::{generate, ElementKind, Mesh};
@@ -303,5 +303,158 @@ fn simplex_patches_are_the_simplices_and_fbar_on_them_passes_the_patch_test() {
         let (fd, fb) = (assembled_forces(&cells, &patches, &model, &homogeneous, Formulation::Displacement), assembled_forces(&cells, &patches, &model, &homogeneous, Formulation::Fbar));
         let scale = fd.iter().fold(0.0f64, |m, x| m.max(x.abs()));
         assert!(fd.iter().zip(&fb).all(|(a, b)| (a - b).abs() < 1e-10 * scale), "{kind:?}: F-bar patches under a homogeneous deformation");
+    }
+}
+
+/// A Gmsh mesh of `tests/data`.
+fn gmsh_mesh(file: &str) -> Mesh {
+    let bytes = std::fs::read(std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data").join(file)).unwrap();
+    bifirst::mesh::gmsh::read(&bytes, None).unwrap()
+}
+
+/// Simplices without generator cells (a polygon's fan, Gmsh files): `Patches::group` gathers
+/// neighbours into Quad4 or Hex8 cells. Every simplex is in one patch, with its nodes; the
+/// patches integrate the simplices' own masses and forces; F-bar on them passes the patch test
+/// and its tangent is the derivative of its force, repeated padding nodes included.
+#[test]
+fn grouped_patches_are_the_simplices_and_fbar_on_them_passes_the_patch_test() {
+    let mut r = rng(30);
+    let model = Model::NeoHookean(NeoHookean { g: 1000.0, k: 50_000.0 });
+    let hexagon: Vec<[f64; 2]> = (0..6).map(|k| std::f64::consts::FRAC_PI_3 * k as f64).map(|a| [a.cos(), a.sin()]).collect();
+    // Simplices per patch, at least (2 and 8 at most).
+    for (mesh, fill) in [(generate::polygon(&hexagon, 6), 1.9), (gmsh_mesh("beam_tri3.msh"), 1.9), (gmsh_mesh("beam_tet4.msh"), 4.0)] {
+        let kind = mesh.kind;
+        let dim = kind.dim();
+        let patches = Patches::group(&mesh);
+        let cells = &patches.cells;
+        let mut taken = vec![false; cells.element_count() * patches.points_per_cell];
+        for e in 0..mesh.element_count() {
+            let (patch, point) = patches.slot(e);
+            assert!(!std::mem::replace(&mut taken[patch * patches.points_per_cell + point], true), "{kind:?}: simplex {e} shares its point");
+            assert!(mesh.element(e).iter().all(|n| cells.element(patch).contains(n)), "{kind:?}: simplex {e}'s nodes in its patch");
+        }
+        let per_patch = mesh.element_count() as f64 / cells.element_count() as f64;
+        assert!(per_patch >= fill, "{kind:?}: {per_patch:.2} simplices per patch");
+        let plain = ReferenceGeometry::new(&mesh).unwrap();
+        let grouped = ReferenceGeometry::grouped(&plain, &mesh, &patches);
+        let (m0, m1) = (plain.lumped_masses(&mesh, 2.0), grouped.lumped_masses(cells, 2.0));
+        assert!(m0.iter().zip(&m1).all(|(a, b)| (a - b).abs() < 1e-13 * a.abs()), "{kind:?}: lumped masses");
+        let u: Vec<[f64; 3]> = mesh.nodes.iter().map(|_| std::array::from_fn(|i| if i < dim { r.random_range(-0.01..0.01) } else { 0.0 })).collect();
+        let (f0, f1) = (assembled_forces(&mesh, &plain, &model, &u, Formulation::Displacement), assembled_forces(cells, &grouped, &model, &u, Formulation::Displacement));
+        let scale = f0.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        assert!(f0.iter().zip(&f1).all(|(a, b)| (a - b).abs() < 1e-12 * scale), "{kind:?}: forces of the patches");
+        let f = random_f(&mut r);
+        let f = if dim == 2 { plane_strain(f) } else { f };
+        let homogeneous: Vec<[f64; 3]> = mesh.nodes.iter().map(|x| std::array::from_fn(|i| (0..3).map(|j| (f[(i, j)] - if i == j { 1.0 } else { 0.0 }) * x[j]).sum())).collect();
+        let (fd, fb) = (assembled_forces(cells, &grouped, &model, &homogeneous, Formulation::Displacement), assembled_forces(cells, &grouped, &model, &homogeneous, Formulation::Fbar));
+        let scale = fd.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        assert!(fd.iter().zip(&fb).all(|(a, b)| (a - b).abs() < 1e-10 * scale), "{kind:?}: F-bar patches under a homogeneous deformation");
+        // The tangent of the first patches, against central differences of the force.
+        let (mut out, mut plus, mut minus) = (ElementOutput::default(), ElementOutput::default(), ElementOutput::default());
+        for p in 0..3 {
+            let points = grouped.element_points(p);
+            let ue: Vec<[f64; 3]> = cells.element(p).iter().map(|&n| u[n as usize]).collect();
+            element_force_tangent(&model, points, &ue, dim, Formulation::Fbar, true, &mut out).unwrap();
+            let n = ue.len() * dim;
+            let h = 1e-7;
+            let mut worst: f64 = 0.0;
+            for j in 0..n {
+                let (mut up, mut um) = (ue.clone(), ue.clone());
+                up[j / dim][j % dim] += h;
+                um[j / dim][j % dim] -= h;
+                element_force_tangent(&model, points, &up, dim, Formulation::Fbar, false, &mut plus).unwrap();
+                element_force_tangent(&model, points, &um, dim, Formulation::Fbar, false, &mut minus).unwrap();
+                for i in 0..n {
+                    worst = worst.max(((plus.force[i] - minus.force[i]) / (2.0 * h) - out.tangent[i * n + j]).abs());
+                }
+            }
+            let scale = out.tangent.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+            assert!(worst < 1e-6 * scale, "{kind:?}: patch {p}'s tangent is {:.2e} from the force's differences", worst / scale);
+        }
+    }
+}
+
+/// Strain energy of the mesh whose boundary nodes (on its bounding box) are held at `u` and
+/// whose other nodes are in equilibrium, linearised about the reference state.
+fn held_boundary_energy(mesh: &Mesh, geometry: &ReferenceGeometry, model: &Model, formulation: Formulation, u: &[[f64; 3]]) -> f64 {
+    let dim = mesh.dim();
+    let (lo, hi): (Vec<f64>, Vec<f64>) = (0..dim).map(|i| (mesh.nodes.iter().map(|x| x[i]).fold(f64::MAX, f64::min), mesh.nodes.iter().map(|x| x[i]).fold(f64::MIN, f64::max))).unzip();
+    let on_boundary = |x: &[f64; 3]| (0..dim).any(|i| (x[i] - lo[i]).abs() < 1e-9 || (x[i] - hi[i]).abs() < 1e-9);
+    let mut free = vec![usize::MAX; mesh.nodes.len() * dim];
+    let mut count = 0;
+    for (n, x) in mesh.nodes.iter().enumerate() {
+        if !on_boundary(x) {
+            for i in 0..dim {
+                free[n * dim + i] = count;
+                count += 1;
+            }
+        }
+    }
+    let full: Vec<f64> = mesh.nodes.iter().enumerate().flat_map(|(n, _)| (0..dim).map(move |i| (n, i))).map(|(n, i)| u[n][i]).collect();
+    let (mut k, mut rhs) = (nalgebra::DMatrix::<f64>::zeros(count, count), nalgebra::DVector::<f64>::zeros(count));
+    let mut out = ElementOutput::default();
+    for e in 0..mesh.element_count() {
+        let nodes = mesh.element(e);
+        element_force_tangent(model, geometry.element_points(e), &vec![[0.0; 3]; nodes.len()], dim, formulation, true, &mut out).unwrap();
+        let n = nodes.len() * dim;
+        let dof = |a: usize| nodes[a / dim] as usize * dim + a % dim;
+        for a in 0..n {
+            let r = free[dof(a)];
+            if r == usize::MAX {
+                continue;
+            }
+            for b in 0..n {
+                match free[dof(b)] {
+                    usize::MAX => rhs[r] -= out.tangent[a * n + b] * full[dof(b)],
+                    c => k[(r, c)] += out.tangent[a * n + b],
+                }
+            }
+        }
+    }
+    let solved = k.cholesky().expect("positive definite").solve(&rhs);
+    let mut x = full.clone();
+    for (d, &f) in free.iter().enumerate() {
+        if f != usize::MAX {
+            x[d] = solved[f];
+        }
+    }
+    (0..mesh.element_count())
+        .map(|e| {
+            let ue: Vec<[f64; 3]> = mesh.element(e).iter().map(|&n| std::array::from_fn(|i| if i < dim { x[n as usize * dim + i] } else { 0.0 })).collect();
+            element_energy(model, geometry.element_points(e), &ue, dim, formulation)
+        })
+        .sum()
+}
+
+/// Pure bending `u = κ (-x y, (x² + y²) / 2)` held on a rectangle's boundary: nearly
+/// incompressible, the body between bends with energy `2 G κ² ∫ y² dA` (the pressure `2 G κ y`
+/// keeps it in equilibrium). Displacement Tri3 lock, their energy growing with K; F-bar on the
+/// grouped patches of a polygon's fan and of a Gmsh mesh stays where it was at K/G = 100.
+/// (Tet4 patches are checked by their beam's period, `tests/incompressible.rs`: in this test,
+/// with every boundary node held, a coarse Tet4 mesh has about as many patches as free dofs.)
+#[test]
+fn grouped_fbar_patches_bend_without_locking() {
+    let (g, kappa) = (1000.0, 1e-6);
+    let rectangle = [[0.0, 0.0], [4.0, 0.0], [4.0, 1.0], [0.0, 1.0]];
+    // The F-bar energy's bound against the exact one: the fan's triangles are long and thin.
+    for (name, mesh, bound) in [("polygon fan", generate::polygon(&rectangle, 8), 1.7), ("gmsh tri3", gmsh_mesh("beam_tri3.msh"), 1.02)] {
+        let plain = ReferenceGeometry::new(&mesh).unwrap();
+        let patches = Patches::group(&mesh);
+        let grouped = ReferenceGeometry::grouped(&plain, &mesh, &patches);
+        let area: f64 = plain.volumes.iter().sum();
+        let u: Vec<[f64; 3]> = mesh.nodes.iter().map(|x| {
+            let (x, y) = (x[0], x[1] - 0.5);
+            [-kappa * x * y, kappa * (x * x + y * y) / 2.0, 0.0]
+        }).collect();
+        // ∫ y² dA of a 4 x 1 rectangle: its area / 12.
+        let exact = 2.0 * g * kappa * kappa * area / 12.0;
+        let energies = |k: f64| {
+            let model = Model::NeoHookean(NeoHookean { g, k });
+            (held_boundary_energy(&mesh, &plain, &model, Formulation::Displacement, &u), held_boundary_energy(&patches.cells, &grouped, &model, Formulation::Fbar, &u))
+        };
+        let ((locked_100, fbar_100), (locked, fbar)) = (energies(1e5), energies(1e8));
+        assert!(locked > 100.0 * locked_100, "{name}: the displacement element locks ({locked:.3e} at K/G = 1e5, {locked_100:.3e} at 1e2)");
+        assert!(fbar < 1.05 * fbar_100, "{name}: F-bar patches stiffen with K ({fbar:.3e} at K/G = 1e5, {fbar_100:.3e} at 1e2)");
+        assert!(fbar > exact && fbar < bound * exact, "{name}: F-bar patches give {:.3} of the bending energy", fbar / exact);
     }
 }

@@ -7,7 +7,7 @@ mod random;
 use bifirst::assembly::{element_out_stride, DofMap, GatherMap, StiffnessPattern};
 use bifirst::contact::Status;
 use bifirst::cpu;
-use bifirst::element::{ElementOutput, Formulation, ReferenceGeometry};
+use bifirst::element::{ElementOutput, Formulation, Patches, ReferenceGeometry};
 use bifirst::gpu::shaders::{is_element_kernel, validate, ElementVariant, DECOUPLED, SHADERS};
 use bifirst::gpu::types::{Coefficients, DofOut, DofStep, MaterialParams};
 use bifirst::gpu::uzawa_step::{UzawaPoint, UzawaStepKernel};
@@ -425,6 +425,43 @@ fn element_force_tangent_kernel_matches_its_cpu_twin() {
                 eprintln!("{} {} {} {} tangent {tangent}: max relative error {worst:.2e}", precision.name(), variant.kind.name(), variant.formulation.name(), variant.material);
                 assert!(worst <= tolerance, "{variant:?} {} tangent {tangent}: {worst:.3e}", precision.name());
             }
+        }
+    }
+}
+
+/// Simplices grouped into F-bar patches (padded Quad4 and Hex8 cells whose repeated nodes have
+/// no gradient): a polygon's fan and a Gmsh Tet4 beam, deformed, through the element kernel.
+#[test]
+fn grouped_patches_in_the_element_kernel_match_its_cpu_twin() {
+    let hexagon: Vec<[f64; 2]> = (0..6).map(|k| std::f64::consts::FRAC_PI_3 * k as f64).map(|a| [a.cos(), a.sin()]).collect();
+    let gmsh = std::fs::read(std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/beam_tet4.msh")).unwrap();
+    let simplices = [generate::polygon(&hexagon, 4), bifirst::mesh::gmsh::read(&gmsh, None).unwrap()];
+    for (precision, tolerance) in TOLERANCES {
+        let Some(gpu) = gpu_or_skip("grouped_patches_in_the_element_kernel_match_its_cpu_twin", precision) else { continue };
+        let gpu = Arc::new(gpu);
+        for (k, mesh) in simplices.iter().enumerate() {
+            let dim = mesh.dim();
+            let patches = Patches::group(mesh);
+            let geometry = ReferenceGeometry::grouped(&ReferenceGeometry::new(mesh).unwrap(), mesh, &patches);
+            let cells = patches.cells;
+            let dofs = DofMap::new(dim, &vec![false; cells.nodes.len() * dim]);
+            let pattern = StiffnessPattern::new(&cells, &dofs);
+            let gather = GatherMap::new(&cells, dim, &pattern);
+            let mut rng = random::rng(300 + k as u64);
+            let u = (0..cells.nodes.len() * dim).map(|_| rng.random_range(-0.02..0.02)).collect();
+            let cases = [Case { mesh: cells, model: model_of("neo_hookean"), formulation: Formulation::Fbar, geometry, pattern, gather, u }];
+            let mut world = world_of(&gpu, &cases);
+            let (mut values, mut dof_out) = buffers_for(&cases);
+            let failures = evaluate_all(&mut world, &cases, true, &mut values, &mut dof_out, Coefficients { factor: 0.5, c1: 1.0 });
+            assert_eq!(failures, [None], "{:?}", mesh.kind);
+            let on_gpu = world.element_results(0).expect("read back");
+            let stride = element_out_stride(cases[0].pattern.element_dofs);
+            let worst = (0..cases[0].mesh.element_count()).map(|e| {
+                let expected = cases[0].cpu_results(e, true);
+                relative_error(&on_gpu[e * stride..e * stride + expected.len()], &expected)
+            }).fold(0.0, f64::max);
+            eprintln!("{} grouped {}: max relative error {worst:.2e}", precision.name(), mesh.kind.name());
+            assert!(worst <= tolerance, "{:?} {}: {worst:.3e}", mesh.kind, precision.name());
         }
     }
 }

@@ -129,6 +129,27 @@ fn a_pressurised_tube_on_the_gpu_matches_the_cpu_backend() {
     }
 }
 
+/// Unstructured simplices from Gmsh files as grouped F-bar patches (padded Quad4 and Hex8
+/// cells) on the device: the beams of `tests/data` at K/G = 1e4.
+#[test]
+fn gmsh_beams_of_fbar_patches_on_the_gpu_match_the_cpu_backend() {
+    let test = "gmsh_beams_of_fbar_patches_on_the_gpu_match_the_cpu_backend";
+    if !gpu_available(test) {
+        return;
+    }
+    for dim in ["2d", "3d"] {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("tests/data/free_vibration_{dim}_gmsh.toml"));
+        let sets = ["material.rubber.K=1e7", "time.end=0.1", "output.scene_every=0"];
+        let cpu = run_with(&path, &sets, &format!("gmsh_beam_{dim}_cpu"), &options(BackendChoice::Cpu, None));
+        let gpu = run_with(&path, &sets, &format!("gmsh_beam_{dim}_gpu"), &options(BackendChoice::Gpu, Some(Precision::F64)));
+        assert_eq!(gpu.topics["/run"][0]["backend"], "gpu");
+        let tip = |log: &Log| log.vectors("/probe/tip", "displacement").last().unwrap()[1];
+        let (a, b) = (tip(&cpu), tip(&gpu));
+        assert!(a > 0.0 && ((a - b) / a).abs() < 1e-9, "{dim}: tip deflection: CPU {a:e}, GPU {b:e}");
+        assert!(energy_difference(&cpu, &gpu) < 1e-9, "{dim}");
+    }
+}
+
 #[test]
 fn grains_3d_on_the_gpu_match_the_cpu_backend() {
     compare_backends("grains_3d_gpu", &scene_path("grains_3d"), &["packing.count=27", "time.end=0.15", "packing.wall_velocity=2.0", "output.every=1", "output.scene_every=0"]);

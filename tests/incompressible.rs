@@ -1,7 +1,7 @@
-//! Nearly incompressible rubber (K/G up to 1e5): the F-bar element (on Quad4 and Hex8, and on
-//! the cells of generated Tri3 and Tet4 meshes) keeps a cantilever's bending period and Lamé's
-//! tube where the displacement element locks, Newton converges down to its round-off floor, and
-//! a locking mesh says so.
+//! Nearly incompressible rubber (K/G up to 1e5): the F-bar element (on Quad4 and Hex8, on the
+//! cells of generated Tri3 and Tet4 meshes, and on patches of any other simplices) keeps a
+//! cantilever's bending period and Lamé's tube where the displacement element locks, Newton
+//! converges down to its round-off floor, and displacement elements chosen by hand are warned of.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -80,7 +80,23 @@ fn nearly_incompressible_tri3_and_tet4_beams_keep_their_period_as_fbar_patches()
     }
 }
 
-/// A scene whose Tri3 body is a polygon (no cells to patch) at K/G = 1e4.
+/// Tri3 and Tet4 from Gmsh files have no generator cells: F-bar groups them into patches
+/// (`Patches::group`). The displacement elements locked (48 % and 72 % off at K/G = 1e4).
+#[test]
+fn nearly_incompressible_beams_from_gmsh_files_keep_their_period() {
+    for dim in ["2d", "3d"] {
+        let scene = format!("tests/data/free_vibration_{dim}_gmsh.toml");
+        let rows = periods(&scene, &["--over", "material.rubber.K=1e5,1e7", "--over", "body.beam.formulation=\"auto\",\"displacement\""], &format!("incompressible_gmsh_{dim}"));
+        for (status, period, error) in [&rows[0], &rows[2]] {
+            assert!(status == "finished" && *error < 0.08, "{dim}, F-bar patches: period {period} is {error:.3} from Euler-Bernoulli: {rows:?}");
+        }
+        assert!(rows[3].2 > 0.4, "{dim}, displacement: locks: {rows:?}");
+        // The period does not move between K/G = 100 and 1e4 (a locking element's shortens).
+        assert!((rows[2].1 / rows[0].1 - 1.0).abs() < 0.01, "{dim}: {rows:?}");
+    }
+}
+
+/// A scene whose Tri3 body is a polygon (a fan, no cells) at K/G = 1e4.
 const POLYGON: &str = r#"
 [time]
 end = 0.02
@@ -97,19 +113,21 @@ material = "rubber"
 mesh = { generator = "polygon", element = "tri3", points = [[0.0, 0.0], [2.0, 0.0], [2.0, 1.0], [0.0, 1.0]], divisions = [2] }
 "#;
 
+/// A polygon's fan was refused F-bar (a scene error) and locked under `auto` with a warning;
+/// it now takes F-bar patches, and only displacement elements chosen by hand are warned of.
 #[test]
-fn a_nearly_incompressible_body_without_cells_is_told_it_locks_and_cannot_take_fbar() {
+fn a_nearly_incompressible_polygon_takes_fbar_patches_and_displacement_is_warned_of() {
     let scene = out_dir("incompressible_polygon.toml");
     std::fs::write(&scene, POLYGON).unwrap();
     let out = out_dir("incompressible_polygon.mcap");
-    let o = bifirst(&["run", scene.to_str().unwrap(), "--backend", "cpu", "--out", out.to_str().unwrap()]);
-    let stderr = String::from_utf8_lossy(&o.stderr);
-    assert!(o.status.success(), "{stderr}");
-    assert!(stderr.contains("material `rubber` (K/G = 1.000e4) on tri3 elements locks"), "{stderr}");
-    let o = bifirst(&["run", scene.to_str().unwrap(), "--set", "body.plate.formulation=\"fbar\"", "--out", out.to_str().unwrap()]);
-    let stderr = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(o.status.code(), Some(2), "{stderr}");
-    assert!(stderr.contains("body.plate.formulation") && stderr.contains("from a polygon or a mesh file"), "{stderr}");
+    for formulation in ["\"auto\"", "\"fbar\"", "\"displacement\""] {
+        let set = format!("body.plate.formulation={formulation}");
+        let o = bifirst(&["run", scene.to_str().unwrap(), "--backend", "cpu", "--set", &set, "--out", out.to_str().unwrap()]);
+        let stderr = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success(), "{formulation}: {stderr}");
+        let warned = stderr.contains("material `rubber` (K/G = 1.000e4) on displacement elements locks");
+        assert_eq!(warned, formulation.contains("displacement"), "{formulation}: {stderr}");
+    }
 }
 
 /// The pressurised tube per variant: (status, inner error, outer error).

@@ -5,7 +5,7 @@
 use super::AccuracyError;
 use crate::contact::{Master, Status};
 use crate::scene::{LoadedScene, MaterialSpec};
-use crate::solver::Simulation;
+use crate::solver::{build_mesh, Simulation};
 
 /// The scenes with a known answer, by measure name (the scene's `name` picks its measure).
 pub const KNOWN_ANSWERS: [(&str, &str); 7] = [
@@ -89,7 +89,17 @@ pub fn known_answer(name: &str, loaded: &LoadedScene) -> Result<Box<dyn KnownAns
         }
         "free_vibration_2d" | "free_vibration_3d" => {
             let (g, k) = moduli(material)?;
-            let size = body.mesh.size.as_ref().filter(|s| s.len() >= 2).ok_or_else(|| missing("the beam's mesh size"))?;
+            // A generated beam's `size`, or the extent of a mesh file's nodes.
+            let size = match &body.mesh.size {
+                Some(s) => s.clone(),
+                None => {
+                    let mesh = build_mesh(loaded, &format!("body.{body_name}.mesh"), &body.mesh).map_err(|_| missing("the beam's mesh size (or a mesh file that reads)"))?;
+                    (0..mesh.dim()).map(|i| mesh.nodes.iter().map(|x| x[i]).fold(f64::MIN, f64::max) - mesh.nodes.iter().map(|x| x[i]).fold(f64::MAX, f64::min)).collect()
+                }
+            };
+            if size.len() < 2 {
+                return Err(missing("the beam's mesh size"));
+            }
             let v0 = body.initial_velocity.as_ref().ok_or_else(|| missing(&format!("body.{body_name}.initial_velocity")))?;
             let axis = (1..v0.len()).max_by(|&i, &j| v0[i].abs().total_cmp(&v0[j].abs())).ok_or_else(|| missing("a transverse initial velocity"))?;
             if scene.probe.is_empty() {

@@ -190,17 +190,27 @@ pub struct CellFields {
 
 /// Volume-averaged Cauchy stress, von Mises stress and `J` of one element.
 pub fn element_cell_fields<M: Hyperelastic>(material: &M, points: &[GaussPoint], u: &[[Real; 3]], dim: usize, formulation: Formulation) -> CellFields {
-    let (mut cauchy, mut vm, mut jacobian, mut vol) = (Mat3::zeros(), 0.0, 0.0, 0.0);
-    for (gp, f) in points.iter().zip(point_gradients(points, u, dim, formulation)) {
-        let s = material.stress(&green_lagrange(&f));
-        let j = f.determinant();
-        cauchy += f * s * f.transpose() * (gp.dv / j);
-        vm += gp.dv * von_mises(&f, &s);
-        jacobian += gp.dv * j;
+    let (mut cauchy, mut vm, mut jacobian, mut vol) = ([0.0; 9], 0.0, 0.0, 0.0);
+    for (gp, f) in points.iter().zip(element_point_fields(material, points, u, dim, formulation)) {
+        cauchy.iter_mut().zip(&f.cauchy).for_each(|(c, v)| *c += gp.dv * v);
+        vm += gp.dv * f.von_mises;
+        jacobian += gp.dv * f.jacobian;
         vol += gp.dv;
     }
-    let cauchy = cauchy / vol;
-    CellFields { cauchy: std::array::from_fn(|k| cauchy[(k / 3, k % 3)]), von_mises: vm / vol, jacobian: jacobian / vol }
+    CellFields { cauchy: cauchy.map(|c| c / vol), von_mises: vm / vol, jacobian: jacobian / vol }
+}
+
+/// [`CellFields`] at each quadrature point of one element (each simplex of an F-bar patch).
+pub fn element_point_fields<M: Hyperelastic>(material: &M, points: &[GaussPoint], u: &[[Real; 3]], dim: usize, formulation: Formulation) -> Vec<CellFields> {
+    point_gradients(points, u, dim, formulation)
+        .iter()
+        .map(|f| {
+            let s = material.stress(&green_lagrange(f));
+            let j = f.determinant();
+            let cauchy = f * s * f.transpose() / j;
+            CellFields { cauchy: std::array::from_fn(|k| cauchy[(k / 3, k % 3)]), von_mises: von_mises(f, &s), jacobian: j }
+        })
+        .collect()
 }
 
 /// Second Piola-Kirchhoff stress at each quadrature point, Voigt order (for closed-form checks).

@@ -3,9 +3,11 @@
 
 mod fbar;
 mod kernel;
+mod patches;
 pub mod shape;
 
-pub use kernel::{element_cell_fields, element_energy, element_force_tangent, element_stresses, element_von_mises, CellFields, ElementError, ElementOutput};
+pub use patches::Patches;
+pub use kernel::{element_cell_fields, element_point_fields, element_energy, element_force_tangent, element_stresses, element_von_mises, CellFields, ElementError, ElementOutput};
 
 
 use crate::mesh::{ElementKind, Mesh};
@@ -21,18 +23,19 @@ pub enum Formulation {
     #[default]
     Displacement,
     /// `F̄`: the element's mean dilatation with each point's distortion (`fbar.rs`); Quad4 and
-    /// Hex8, and the cells of generated Tri3 and Tet4 meshes ([`ReferenceGeometry::simplex_patches`]).
+    /// Hex8, the cells of generated Tri3 and Tet4 meshes ([`ReferenceGeometry::simplex_patches`]),
+    /// and patches of other simplices ([`Patches`]).
     Fbar,
 }
 
-/// Above this small-strain K/G (Poisson's ratio 0.45), a body's `auto` formulation is F-bar on
-/// Quad4 and Hex8: below it the displacement element's volumetric stiffening is under the
+/// Above this small-strain K/G (Poisson's ratio 0.45), a body's `auto` formulation is F-bar
+/// (simplices as patches): below it the displacement element's volumetric stiffening is under the
 /// discretisation error (doc/results.md, "Nearly incompressible rubber").
 pub const FBAR_ABOVE_K_OVER_G: Real = 10.0;
 
 impl Formulation {
     /// Whether F-bar applies to an element kind of its own: it needs more than one quadrature
-    /// point (simplices take it on the cells they split).
+    /// point (simplices take it on the cells they split, or on [`Patches`]).
     pub fn fbar_applies(kind: ElementKind) -> bool {
         matches!(kind, ElementKind::Quad4 | ElementKind::Hex8)
     }
@@ -72,8 +75,9 @@ pub struct ReferenceGeometry {
     pub points_per_element: usize,
     /// Reference volume of each element.
     pub volumes: Vec<Real>,
-    /// For F-bar patches, the simplices each cell's points stand for (local node lists).
-    pub simplices: Option<&'static [&'static [usize]]>,
+    /// Each element is an F-bar patch whose points are simplices (a point's gradients are
+    /// non-zero at its simplex's nodes only).
+    pub patched: bool,
 }
 
 #[derive(Debug, Error)]
@@ -123,7 +127,7 @@ impl ReferenceGeometry {
             }
             volumes.push(volume);
         }
-        Ok(Self { kind, points, points_per_element: rule.len(), volumes, simplices: None })
+        Ok(Self { kind, points, points_per_element: rule.len(), volumes, patched: false })
     }
 
     pub fn element_points(&self, e: usize) -> &[GaussPoint] {
@@ -137,17 +141,20 @@ impl ReferenceGeometry {
         let mut m = vec![0.0; mesh.nodes.len()];
         for e in 0..mesh.element_count() {
             let nodes = mesh.element(e);
-            match self.simplices {
+            match self.patched {
                 // A linear simplex integrates each of its shape functions to its volume over its
                 // node count.
-                Some(split) => {
-                    for (gp, local) in self.element_points(e).iter().zip(split) {
-                        for &a in *local {
-                            m[nodes[a] as usize] += density * gp.dv / local.len() as Real;
+                true => {
+                    for gp in self.element_points(e) {
+                        let simplex_nodes = gp.dn_dx.iter().filter(|g| g.iter().any(|&c| c != 0.0)).count();
+                        for (&node, g) in nodes.iter().zip(&gp.dn_dx) {
+                            if g.iter().any(|&c| c != 0.0) {
+                                m[node as usize] += density * gp.dv / simplex_nodes as Real;
+                            }
                         }
                     }
                 }
-                None => {
+                false => {
                     for (gp, n) in self.element_points(e).iter().zip(&values) {
                         for (&node, na) in nodes.iter().zip(n) {
                             m[node as usize] += density * na * gp.dv;
@@ -195,6 +202,29 @@ impl ReferenceGeometry {
             }
             volumes.push(volume);
         }
-        Ok(Self { kind: mesh.kind, points, points_per_element: per_element, volumes, simplices: Some(split) })
+        Ok(Self { kind: mesh.kind, points, points_per_element: per_element, volumes, patched: true })
+    }
+
+    /// The geometry of unstructured simplices grouped into [`Patches`], from the simplices' own
+    /// geometry: each patch's points are its simplices' gradients on the patch's nodes.
+    pub fn grouped(simplices: &Self, mesh: &Mesh, patches: &Patches) -> Self {
+        let cells = &patches.cells;
+        let cell_nodes = cells.kind.nodes();
+        let per_cell = patches.points_per_cell;
+        let mut points = vec![GaussPoint { dn_dx: vec![[0.0; 3]; cell_nodes], dv: 0.0 }; per_cell * cells.element_count()];
+        let mut volumes = vec![0.0; cells.element_count()];
+        for e in 0..mesh.element_count() {
+            let (patch, point) = patches.slot(e);
+            let cell = cells.element(patch);
+            let gp = &simplices.element_points(e)[0];
+            let target = &mut points[patch * per_cell + point];
+            for (&node, g) in mesh.element(e).iter().zip(&gp.dn_dx) {
+                let local = cell.iter().position(|&n| n == node).expect("a patch holds its simplices' nodes");
+                target.dn_dx[local] = *g;
+            }
+            target.dv = gp.dv;
+            volumes[patch] += gp.dv;
+        }
+        Self { kind: cells.kind, points, points_per_element: per_cell, volumes, patched: true }
     }
 }

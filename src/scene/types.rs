@@ -165,8 +165,8 @@ pub struct BodySpec {
     pub initial_velocity: Option<Vec<Real>>,
     /// Rotation about the centre of mass at t = 0: a number (2D) or a vector (3D).
     pub angular_velocity: Option<AngularVelocity>,
-    /// How the elements take the volume change; `auto` (the default) is F-bar on Quad4 and
-    /// Hex8 when the material's K/G exceeds `element::FBAR_ABOVE_K_OVER_G`.
+    /// How the elements take the volume change; `auto` (the default) is F-bar (simplices as
+    /// patches) when the material's K/G exceeds `element::FBAR_ABOVE_K_OVER_G`.
     pub formulation: Option<FormulationChoice>,
 }
 

@@ -6,7 +6,7 @@ use super::PhaseTimes;
 use super::topology::Topology;
 use crate::assembly::{element_out_stride, DofMap, GatherMap, StiffnessPattern};
 use crate::cpu::{assemble_csr, assemble_residual, dispatch_element_force_tangent, element_energy, element_force_tangent};
-use crate::element::{element_cell_fields, element_von_mises, CellFields, ElementError, ElementOutput, Formulation, ReferenceGeometry};
+use crate::element::{element_cell_fields, element_point_fields, element_von_mises, CellFields, ElementError, ElementOutput, Formulation, Patches, ReferenceGeometry};
 use crate::gpu::types::{Coefficients, DofOut, DofStep};
 use crate::gpu::{ElementFailure, Evaluation, GpuError, WorldBody};
 use crate::material::Model;
@@ -122,6 +122,10 @@ impl NodalLoad {
 pub struct Body {
     pub name: String,
     pub mesh: Mesh,
+    /// The F-bar patches of an unstructured simplex mesh, which the element kernels integrate
+    /// instead of the mesh's own elements ([`Body::elements`]).
+    pub patches: Option<Patches>,
+    /// The geometry of what the element kernels integrate.
     pub geometry: ReferenceGeometry,
     pub model: Model,
     /// How the elements take the volume change (F-bar for nearly incompressible materials).
@@ -221,6 +225,7 @@ impl Body {
     pub fn new(
         name: String,
         mesh: Mesh,
+        patches: Option<Patches>,
         geometry: ReferenceGeometry,
         model: Model,
         formulation: Formulation,
@@ -231,7 +236,7 @@ impl Body {
     ) -> Self {
         let dim = mesh.dim();
         let ndof = mesh.nodes.len() * dim;
-        let nodal = geometry.lumped_masses(&mesh, density);
+        let nodal = geometry.lumped_masses(patches.as_ref().map_or(&mesh, |p| &p.cells), density);
         let mass: Vec<Real> = (0..ndof).map(|d| nodal[d / dim]).collect();
         let (dofs, pattern, gather) = (topology.dofs.clone(), topology.pattern.clone(), topology.gather.clone());
         let solver = CholeskySolver::with(topology.symbolic.clone());
@@ -245,7 +250,7 @@ impl Body {
         }
         let state = State { u: vec![0.0; ndof], v, f_int: vec![0.0; ndof], strain: 0.0, strain_at_u: false };
         let values = vec![0.0; pattern.nnz()];
-        let element_results = vec![0.0; mesh.element_count() * element_out_stride(pattern.element_dofs)];
+        let element_results = vec![0.0; geometry.volumes.len() * element_out_stride(pattern.element_dofs)];
         let reactions = vec![0.0; prescribed.len()];
         let length_scale = mesh.min_edge_length();
         let max_mass = mass.iter().cloned().fold(0.0, Real::max);
@@ -254,6 +259,7 @@ impl Body {
         Self {
             name,
             mesh,
+            patches,
             geometry,
             model,
             formulation,
@@ -291,9 +297,14 @@ impl Body {
         }
     }
 
+    /// What the element kernels integrate: the body's mesh, or its F-bar patches.
+    pub fn elements(&self) -> &Mesh {
+        self.patches.as_ref().map_or(&self.mesh, |p| &p.cells)
+    }
+
     /// What the GPU world uploads of the body.
     pub fn world_body(&self) -> WorldBody<'_> {
-        WorldBody { mesh: &self.mesh, geometry: &self.geometry, model: &self.model, formulation: self.formulation, pattern: &self.pattern, gather: &self.gather }
+        WorldBody { mesh: self.elements(), geometry: &self.geometry, model: &self.model, formulation: self.formulation, pattern: &self.pattern, gather: &self.gather }
     }
 
     /// The step's start values of every dof (after [`Body::begin_step`]).
@@ -310,7 +321,8 @@ impl Body {
     /// (forces only without the tangent).
     fn cpu_elements(&mut self, u: &[Real], with_tangent: bool, times: &mut PhaseTimes) -> Result<(), StepFailure> {
         let t0 = Instant::now();
-        let result = dispatch_element_force_tangent(&self.model, &self.mesh, &self.geometry, self.formulation, u, with_tangent, &mut self.element_results)
+        let elements = self.patches.as_ref().map_or(&self.mesh, |p| &p.cells);
+        let result = dispatch_element_force_tangent(&self.model, elements, &self.geometry, self.formulation, u, with_tangent, &mut self.element_results)
             .map_err(|(element, error)| self.element_error(element, error));
         times.elements += t0.elapsed().as_secs_f64();
         result
@@ -322,13 +334,19 @@ impl Body {
             ElementFailure::Inverted(e) => (e, ElementError::Inverted(Real::NAN)),
             ElementFailure::NonFinite(e) => (e, ElementError::NonFinite),
         };
-        let ue = self.mesh.element_displacements(u, element);
+        let ue = self.elements().element_displacements(u, element);
         let error = element_force_tangent(&self.model, self.geometry.element_points(element), &ue, self.dim, self.formulation, true, &mut ElementOutput::default()).err().unwrap_or(fallback);
         self.element_error(element, error)
     }
 
+    /// `element` is what the kernels integrate; a patch is named by its first simplex, so that
+    /// the message points into the mesh the user gave.
     fn element_error(&self, element: usize, error: ElementError) -> StepFailure {
         let limit = if error == ElementError::NonFinite { self.model.limit() } else { None };
+        let element = match &self.patches {
+            Some(patches) => (0..self.mesh.element_count()).find(|&e| patches.slot(e).0 == element).unwrap_or(element),
+            None => element,
+        };
         StepFailure::Element { body: self.name.clone(), element, error, limit }
     }
 
@@ -698,7 +716,8 @@ impl Body {
         if self.state.strain_at_u && bytemuck::cast_slice::<Real, u8>(&self.trial.u) == bytemuck::cast_slice::<Real, u8>(&self.state.u) {
             return self.state.strain;
         }
-        (0..self.mesh.element_count()).map(|e| element_energy(&self.model, self.geometry.element_points(e), &self.mesh.element_displacements(&self.trial.u, e), self.dim, self.formulation)).sum()
+        let elements = self.elements();
+        (0..elements.element_count()).map(|e| element_energy(&self.model, self.geometry.element_points(e), &elements.element_displacements(&self.trial.u, e), self.dim, self.formulation)).sum()
     }
 
     /// Current position of a node.
@@ -724,15 +743,35 @@ impl Body {
     pub fn von_mises(&self, elements: &[usize]) -> Real {
         let sum: Real = elements
             .iter()
-            .map(|&e| element_von_mises(&self.model, self.geometry.element_points(e), &self.mesh.element_displacements(&self.state.u, e), self.dim, self.formulation))
+            .map(|&e| match &self.patches {
+                Some(patches) => {
+                    let (patch, point) = patches.slot(e);
+                    self.patch_point_fields(patch)[point].von_mises
+                }
+                None => element_von_mises(&self.model, self.geometry.element_points(e), &self.mesh.element_displacements(&self.state.u, e), self.dim, self.formulation),
+            })
             .sum();
         sum / elements.len().max(1) as Real
     }
 
-    /// Stress and volume ratio of every element at the committed state.
+    /// Stress and volume ratio of every element of the mesh at the committed state (a patched
+    /// simplex's are its own point's, with its patch's volume change).
     pub fn cell_fields(&self) -> Vec<CellFields> {
-        (0..self.mesh.element_count())
-            .map(|e| element_cell_fields(&self.model, self.geometry.element_points(e), &self.mesh.element_displacements(&self.state.u, e), self.dim, self.formulation))
-            .collect()
+        match &self.patches {
+            Some(patches) => {
+                let per_patch: Vec<Vec<CellFields>> = (0..patches.cells.element_count()).map(|p| self.patch_point_fields(p)).collect();
+                (0..self.mesh.element_count()).map(|e| {
+                    let (patch, point) = patches.slot(e);
+                    per_patch[patch][point]
+                }).collect()
+            }
+            None => (0..self.mesh.element_count())
+                .map(|e| element_cell_fields(&self.model, self.geometry.element_points(e), &self.mesh.element_displacements(&self.state.u, e), self.dim, self.formulation))
+                .collect(),
+        }
+    }
+
+    fn patch_point_fields(&self, patch: usize) -> Vec<CellFields> {
+        element_point_fields(&self.model, self.geometry.element_points(patch), &self.elements().element_displacements(&self.state.u, patch), self.dim, self.formulation)
     }
 }

@@ -12,7 +12,7 @@ pub mod topology;
 
 pub use body::{Body, NodalLoad, StepFailure};
 pub use restart::{RestoreError, SavedBody, SavedFactor, SavedReaction, SavedState};
-pub use setup::build_simulation;
+pub use setup::{build_mesh, build_simulation};
 
 use crate::contact::detect::{detect, thin_second_pass};
 use crate::contact::overlap::{overlaps, Overlap, Worst};
@@ -196,7 +196,8 @@ struct Attempt {
 }
 
 pub struct Simulation {
-    /// What set-up found worth a warning (a material that will lock on its elements).
+    /// What set-up found worth a warning (a nearly incompressible material on displacement
+    /// elements).
     pub notices: Vec<String>,
     pub dim: usize,
     pub bodies: Vec<Body>,

@@ -9,7 +9,7 @@ use super::{body_overlaps, node_positions};
 use crate::contact::overlap::{Host, Overlap};
 use crate::contact::pairs::{BodyPairs, Rank};
 use crate::contact::{ContactModel, Motion, Obstacle, Settings, Surface};
-use crate::element::{Formulation, ReferenceGeometry, FBAR_ABOVE_K_OVER_G};
+use crate::element::{Formulation, Patches, ReferenceGeometry, FBAR_ABOVE_K_OVER_G};
 use crate::material::{ArrudaBoyce, BlatzKo, Decoupled, Gent, Lvf, Model, MooneyRivlin, NeoHookean, Yeoh};
 use crate::mesh::{generate, gmsh, ElementKind, Mesh};
 use crate::precision::Real;
@@ -20,33 +20,27 @@ use std::collections::HashMap;
 use std::sync::Arc;
 use rayon::prelude::*;
 
-/// A body's element formulation: the scene's choice, or for `auto` F-bar where it applies and
-/// K/G exceeds [`FBAR_ABOVE_K_OVER_G`]. A nearly incompressible body of simplices (which F-bar
-/// cannot help) gets a notice that it will be too stiff.
-fn formulation_of(loaded: &LoadedScene, body: &str, material: &str, choice: FormulationChoice, kind: ElementKind, patchable: bool, model: &Model, notices: &mut Vec<String>) -> Result<Formulation, SceneError> {
+/// A body's element formulation: the scene's choice, or for `auto` F-bar where K/G exceeds
+/// [`FBAR_ABOVE_K_OVER_G`] (on Quad4 and Hex8 elements, on the cells a generator split into
+/// simplices, or on patches of any other simplices). Displacement elements chosen for a nearly
+/// incompressible material get a notice that they lock.
+fn formulation_of(material: &str, choice: FormulationChoice, model: &Model, notices: &mut Vec<String>) -> Formulation {
     let (k, g) = model.bulk_shear();
     let ratio = k / g;
-    let applies = Formulation::fbar_applies(kind) || patchable;
-    Ok(match choice {
-        FormulationChoice::Displacement => Formulation::Displacement,
-        FormulationChoice::Fbar if applies => Formulation::Fbar,
-        FormulationChoice::Fbar => {
-            return Err(loaded.error(Invalid, &format!("body.{body}.formulation"), format!("F-bar needs quad4 or hex8 elements, or tri3 or tet4 from a generator that splits cells (rectangle, disk, annulus, box, ball); this body's mesh is {} from a polygon or a mesh file.", kind.name())));
-        }
-        FormulationChoice::Auto if ratio > FBAR_ABOVE_K_OVER_G && applies => Formulation::Fbar,
-        FormulationChoice::Auto => {
+    match choice {
+        FormulationChoice::Fbar => Formulation::Fbar,
+        FormulationChoice::Auto if ratio > FBAR_ABOVE_K_OVER_G => Formulation::Fbar,
+        FormulationChoice::Auto => Formulation::Displacement,
+        FormulationChoice::Displacement => {
             if ratio > FBAR_ABOVE_K_OVER_G {
-                let notice = format!(
-                    "material `{material}` (K/G = {ratio:.3e}) on {} elements locks: the bodies will be too stiff (F-bar needs quad4 or hex8 meshes, or simplices from a generator's cells)",
-                    kind.name()
-                );
+                let notice = format!("material `{material}` (K/G = {ratio:.3e}) on displacement elements locks: the bodies will be too stiff (formulation = \"auto\" takes F-bar)");
                 if !notices.contains(&notice) {
                     notices.push(notice);
                 }
             }
             Formulation::Displacement
         }
-    })
+    }
 }
 
 /// The cell kind a generated Tri3 or Tet4 mesh splits (its F-bar patches), if it has cells:
@@ -82,7 +76,8 @@ pub fn model_of(m: &MaterialSpec) -> Model {
     }
 }
 
-fn build_mesh(loaded: &LoadedScene, key: &str, spec: &MeshSpec) -> Result<Mesh, SceneError> {
+/// The mesh a body's `mesh` table describes (generated, or read from its file).
+pub fn build_mesh(loaded: &LoadedScene, key: &str, spec: &MeshSpec) -> Result<Mesh, SceneError> {
     let v = |o: &Option<Vec<Real>>, i: usize| o.as_ref().map(|x| x[i]).unwrap_or(0.0);
     let kind = spec.element;
     let mut mesh = match (spec.generator, &spec.file) {
@@ -191,22 +186,29 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
             return Err(loaded.error(Invalid, &where_, format!("node {n} is at {x:?}, beyond ±{LARGEST_INPUT:e}{RANGE_WHY}.")));
         }
         let cells = simplex_cells(&spec.mesh, mesh.kind);
-        let formulation = formulation_of(loaded, name, &spec.material, spec.formulation.unwrap_or_default(), mesh.kind, cells.is_some(), &model_of(&scene.material[&spec.material]), &mut notices)?;
+        let formulation = formulation_of(&spec.material, spec.formulation.unwrap_or_default(), &model_of(&scene.material[&spec.material]), &mut notices);
         let bad_geometry = |e: crate::element::BadReferenceElement| loaded.error(MeshError, &where_, format!("{e}; the mesh must have positive element volumes at t = 0."));
-        // F-bar on simplices averages the volume change over the cells they split: the body is
-        // meshed by its cells, each integrated as its simplices.
-        let (mesh, geometry) = match (formulation, cells) {
+        // F-bar on simplices averages the volume change over the cells a generator split (the
+        // body is meshed by its cells, each integrated as its simplices), or over patches of
+        // neighbouring simplices.
+        let (mesh, patches, geometry) = match (formulation, cells) {
             (Formulation::Fbar, Some(cell)) => {
                 let cells = build_mesh(loaded, &key, &MeshSpec { element: Some(cell), ..spec.mesh.clone() })?;
                 let geometry = ReferenceGeometry::simplex_patches(&cells).map_err(bad_geometry)?;
-                (cells, geometry)
+                (cells, None, geometry)
+            }
+            (Formulation::Fbar, None) if !Formulation::fbar_applies(mesh.kind) => {
+                let simplices = ReferenceGeometry::new(&mesh).map_err(bad_geometry)?;
+                let patches = Patches::group(&mesh);
+                let geometry = ReferenceGeometry::grouped(&simplices, &mesh, &patches);
+                (mesh, Some(patches), geometry)
             }
             _ => {
                 let geometry = ReferenceGeometry::new(&mesh).map_err(bad_geometry)?;
-                (mesh, geometry)
+                (mesh, None, geometry)
             }
         };
-        meshes.push((name.clone(), mesh, geometry, formulation));
+        meshes.push((name.clone(), mesh, patches, geometry, formulation));
     }
     let dim = dim.expect("a scene has a body");
     let range_check = |key: &str, v: &[Real]| {
@@ -274,7 +276,8 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
     // One topology per distinct body (connectivity and prescribed dofs), built in parallel and
     // shared; a failure is reported for the first body in the scene's order that has it.
     let ordering = scene.solver.ordering;
-    let keys: Vec<Option<TopologyKey>> = meshes.par_iter().zip(&prescribed).map(|((_, mesh, _, _), p)| Topology::key(mesh, p, ordering)).collect();
+    let elements = |b: usize| meshes[b].2.as_ref().map_or(&meshes[b].1, |p: &Patches| &p.cells);
+    let keys: Vec<Option<TopologyKey>> = (0..meshes.len()).into_par_iter().map(|b| Topology::key(elements(b), &prescribed[b], ordering)).collect();
     let mut first_of: HashMap<&TopologyKey, usize> = HashMap::new();
     let owner_of: Vec<usize> = keys.iter().enumerate().map(|(b, key)| key.as_ref().map_or(b, |k| *first_of.entry(k).or_insert(b))).collect();
     let built_topologies: HashMap<usize, Result<Topology, String>> = owner_of
@@ -284,7 +287,7 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
         .map(|(b, _)| b)
         .collect::<Vec<_>>()
         .into_par_iter()
-        .map(|b| (b, Topology::new(&meshes[b].1, &prescribed[b], ordering).map_err(|e| e.to_string())))
+        .map(|b| (b, Topology::new(elements(b), &prescribed[b], ordering).map_err(|e| e.to_string())))
         .collect();
     let topologies: Vec<&Result<Topology, String>> = owner_of.iter().map(|o| &built_topologies[o]).collect();
 
@@ -292,7 +295,7 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
     // first failing one in the scene's order reported.
     let specs: Vec<_> = scene.body.values().collect();
     let inputs = meshes.into_par_iter().zip(specs).zip(std::mem::take(&mut prescribed)).zip(topologies);
-    let built: Vec<Result<Body, SceneError>> = inputs.map(|((((name, mesh, geometry, formulation), spec), prescribed), topology)| {
+    let built: Vec<Result<Body, SceneError>> = inputs.map(|((((name, mesh, patches, geometry, formulation), spec), prescribed), topology)| {
         let key = format!("body.{name}");
         let material = &scene.material[&spec.material];
         let v0 = spec.initial_velocity.clone().unwrap_or_else(|| vec![0.0; dim]);
@@ -305,7 +308,7 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
             _ => return Err(loaded.error(Invalid, &format!("{key}.angular_velocity"), "give one number in 2D and a vector of 3 components in 3D.")),
         };
         range_check(&format!("{key}.angular_velocity"), &omega)?;
-        let masses = geometry.lumped_masses(&mesh, material.density);
+        let masses = geometry.lumped_masses(patches.as_ref().map_or(&mesh, |p| &p.cells), material.density);
         let total: Real = masses.iter().sum();
         let mut c = [0.0; 3];
         for (m, x) in masses.iter().zip(&mesh.nodes) {
@@ -320,7 +323,7 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
             [v[0] + omega[1] * r[2] - omega[2] * r[1], v[1] + omega[2] * r[0] - omega[0] * r[2], v[2] + omega[0] * r[1] - omega[1] * r[0]]
         };
         let topology = topology.as_ref().map_err(|e| loaded.error(MeshError, &format!("{key}.mesh"), e.clone()))?;
-        let mut body = Body::new(name.clone(), mesh, geometry, model_of(material), formulation, material.density, prescribed, initial, topology);
+        let mut body = Body::new(name.clone(), mesh, patches, geometry, model_of(material), formulation, material.density, prescribed, initial, topology);
         body.reuse_factorization = scene.solver.reuse_factorization;
         Ok(body)
     }).collect();
