@@ -11,7 +11,7 @@ use crate::gpu::uzawa_step::{UzawaPoint, UzawaStepKernel};
 use crate::gpu::uzawa_sweep::UzawaSweeps;
 use crate::gpu::peak::{measure as measure_peaks, Peaks, FMA_FLOPS_PER_VALUE};
 use crate::gpu::{Evaluation, Gpu, GpuError, GpuWorld, WorldKernel};
-use crate::material::{ArrudaBoyce, BlatzKo, Decoupled, Gent, Lvf, Model, MooneyRivlin, NeoHookean, Yeoh};
+use crate::material::{ArrudaBoyce, BlatzKo, Decoupled, Gent, Lvf, Model, MooneyRivlin, NeoHookean, Ogden, Yeoh};
 use crate::mesh::{generate, ElementKind, Mesh};
 use crate::precision::{Precision, Real};
 use crate::solver::PhaseTimes;
@@ -19,7 +19,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 /// The element kinds and materials the kernels are built for, with the parameters benchmarks use.
-pub fn bench_models() -> [Model; 7] {
+pub fn bench_models() -> [Model; 8] {
     [
         Model::BlatzKo(BlatzKo { g: 1000.0 }),
         Model::Lvf(Lvf { g: 5000.0, k: 3333.0, a1: 50.0, a2: 50.0, a3: 0.0, a4: 2000.0, a5: 100.0 }),
@@ -28,6 +28,8 @@ pub fn bench_models() -> [Model; 7] {
         Model::Yeoh(Decoupled { law: Yeoh { c10: 500.0, c20: -50.0, c30: 5.0 }, k: 3000.0 }),
         Model::Gent(Decoupled { law: Gent { g: 1000.0, jm: 50.0 }, k: 3000.0 }),
         Model::ArrudaBoyce(Decoupled { law: ArrudaBoyce { mu: 900.0, lambda_m: 3.0 }, k: 3000.0 }),
+        // Ogden's three-term fit of Treloar's data (1972), in kPa.
+        Model::Ogden(Ogden { mu: [630.0, 1.2, -10.0], alpha: [1.3, 5.0, -2.0], k: 3000.0 }),
     ]
 }
 
@@ -353,6 +355,9 @@ fn material_flops(model: &Model) -> (f64, f64) {
         // The decoupled models share their kinematics (C, C², C⁻¹, a cube root, a logarithm and
         // nine 6x6 outer products); their isochoric laws add a few dozen.
         Model::MooneyRivlin(_) | Model::Yeoh(_) | Model::Gent(_) | Model::ArrudaBoyce(_) => (950.0, 160.0),
+        // Jacobi rotations (about 6 sweeps of 3), an exponential per stretch and term, and the
+        // spectral tangent's 36 entries of 9 eigenvector products each.
+        Model::Ogden(_) => (4500.0, 1400.0),
     }
 }
 

@@ -12,11 +12,11 @@ fn rows(args: &[&str]) -> Vec<Value> {
 #[test]
 fn bench_reports_every_kernel_on_the_cpu() {
     let rows = rows(&["--backend", "cpu"]);
-    // 6 elements (4 kinds, and F-bar on quad4 and hex8) x 7 materials x 3 kernel groups,
+    // 6 elements (4 kinds, and F-bar on quad4 and hex8) x 8 materials x 3 kernel groups,
     // uzawa_step, uzawa_sweep, and the two peak kernels.
-    assert_eq!(rows.len(), 6 * 7 * 3 + 2 + 2);
+    assert_eq!(rows.len(), 6 * 8 * 3 + 2 + 2);
     let materials: std::collections::BTreeSet<&str> = rows.iter().filter_map(|r| r["material"].as_str()).filter(|m| *m != "-").collect();
-    assert_eq!(materials.len(), 7, "{materials:?}");
+    assert_eq!(materials.len(), 8, "{materials:?}");
     let elements: std::collections::BTreeSet<&str> = rows.iter().filter_map(|r| r["element"].as_str()).collect();
     assert!(elements.contains("quad4+fbar") && elements.contains("hex8+fbar"), "{elements:?}");
     for r in &rows {
@@ -34,7 +34,7 @@ fn bench_reports_every_kernel_on_the_cpu() {
 /// ("energy"), so a row's full name selected none of its rows.
 #[test]
 fn bench_kernel_filter_takes_a_rows_full_name() {
-    for (filter, rows_expected) in [("element_energy", 6 * 7), ("assemble_csr+assemble_residual", 6 * 7), ("element_force_tangent", 6 * 7), ("peak_fma", 1), ("peak_copy", 1)] {
+    for (filter, rows_expected) in [("element_energy", 6 * 8), ("assemble_csr+assemble_residual", 6 * 8), ("element_force_tangent", 6 * 8), ("peak_fma", 1), ("peak_copy", 1)] {
         let rows = self::rows(&["--backend", "cpu", "--kernel", filter]);
         assert_eq!(rows.len(), rows_expected, "--kernel {filter}");
         assert!(rows.iter().all(|r| r["kernel"] == filter), "--kernel {filter}: {rows:?}");

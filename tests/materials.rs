@@ -6,7 +6,7 @@
 mod common_random;
 
 use bifirst::material::tensor::{green_lagrange, to_voigt, Mat3, Tangent, VOIGT};
-use bifirst::material::{ArrudaBoyce, BlatzKo, Decoupled, Gent, Hyperelastic, Lvf, Model, MooneyRivlin, NeoHookean, Yeoh};
+use bifirst::material::{ArrudaBoyce, BlatzKo, Decoupled, Gent, Hyperelastic, Lvf, Model, MooneyRivlin, NeoHookean, Ogden, Yeoh};
 use common_random::{random_f, rng};
 
 fn models() -> Vec<(&'static str, Model)> {
@@ -20,6 +20,8 @@ fn models() -> Vec<(&'static str, Model)> {
         ("yeoh", Model::Yeoh(Decoupled { law: Yeoh { c10: 1.5, c20: -0.2, c30: 0.05 }, k: 9.0 })),
         ("gent", Model::Gent(Decoupled { law: Gent { g: 3.0, jm: 8.0 }, k: 9.0 })),
         ("arruda_boyce", Model::ArrudaBoyce(Decoupled { law: ArrudaBoyce { mu: 2.5, lambda_m: 1.8 }, k: 9.0 })),
+        // Three terms, of both signs of α.
+        ("ogden", Model::Ogden(Ogden { mu: [1.5, 0.02, -0.1], alpha: [1.3, 5.0, -2.0], k: 9.0 })),
     ]
 }
 
@@ -152,4 +154,29 @@ fn closed_form_principal_stresses() {
     let s = m.stress(&(Mat3::identity() * eps));
     let expected = z * (3.0 * m.k + m.a2 * z + m.a4 * z * z) / 3f64.sqrt();
     assert!((s - Mat3::identity() * expected).norm() < 1e-10 * expected);
+}
+
+/// Ogden's stress and tangent go through the eigenvectors of C, which are arbitrary where two
+/// stretches coincide: the tangent's limit there (and near it, on either side of the switch at
+/// `ogden::COINCIDENT`) must still be the derivative of the stress, as at the undeformed state.
+#[test]
+fn ogden_tangent_holds_where_stretches_coincide() {
+    let m = Model::Ogden(Ogden { mu: [1.5, 0.02, -0.1], alpha: [1.3, 5.0, -2.0], k: 9.0 });
+    let mut r = rng(13);
+    for gap in [0.0, 1e-9, 1e-6, 2e-5, 1e-3] {
+        for three in [false, true] {
+            // Principal stretches (1.2, 1.2 + gap, 0.9 or 1.2 + 2 gap) in a random frame.
+            let q = nalgebra::Rotation3::from_scaled_axis(nalgebra::Vector3::from_fn(|_, _| rand::Rng::random_range(&mut r, -3.0..3.0))).into_inner();
+            let third = if three { 1.2 + 2.0 * gap } else { 0.9 };
+            let f = q * Mat3::from_diagonal(&nalgebra::Vector3::new(1.2, 1.2 + gap, third)) * q.transpose();
+            let e = green_lagrange(&f);
+            let (s, d) = m.stress_tangent(&e);
+            let h = 1e-6;
+            let fd = Tangent::from_fn(|i, j| (to_voigt(&m.stress(&perturb(&e, j, h)))[i] - to_voigt(&m.stress(&perturb(&e, j, -h)))[i]) / (2.0 * h));
+            let err = (fd - d).norm() / d.norm();
+            assert!(err < 1e-6, "gap {gap:e}, three equal {three}: |D - dS/dE| / |D| = {err:e}");
+            let fd_s = nalgebra::Vector6::from_fn(|j, _| (m.energy(&perturb(&e, j, h)) - m.energy(&perturb(&e, j, -h))) / (2.0 * h));
+            assert!((fd_s - to_voigt(&s)).norm() < 1e-7 * to_voigt(&s).norm(), "gap {gap:e}: stress");
+        }
+    }
 }

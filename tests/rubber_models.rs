@@ -1,4 +1,4 @@
-//! The decoupled rubber models (Mooney-Rivlin, Yeoh, Gent, Arruda-Boyce): Young's modulus from a
+//! The rubber models (Mooney-Rivlin, Yeoh, Gent, Arruda-Boyce, Ogden): Young's modulus from a
 //! 0.1 % pull, a stretch to 1.5 in `scenes/uniaxial_blatz_ko.toml` against each model's
 //! uniaxial-stress closed form, the models that coincide, Gent's limit, and the scene keys.
 //! Finite-difference checks of their stress and tangent are in `tests/materials.rs`, GPU parity
@@ -8,7 +8,7 @@
 mod common_run;
 use bifirst::material::rubber::ARRUDA_BOYCE;
 use bifirst::material::tensor::{green_lagrange, Mat3};
-use bifirst::material::{ArrudaBoyce, Decoupled, Gent, Hyperelastic, Model, MooneyRivlin, Yeoh};
+use bifirst::material::{ArrudaBoyce, Decoupled, Gent, Hyperelastic, Model, MooneyRivlin, Ogden, Yeoh};
 use bifirst::run::{run_scene, Silent};
 use bifirst::scene::parse_scene;
 use common_run::{read_log, scene_path, temp_path};
@@ -23,12 +23,27 @@ fn arruda_boyce_mu(g: f64, lambda_m: f64) -> f64 {
 }
 
 /// A rubber of each model with G = 1000, K = 2000: its scene block, the engine's model, and
-/// its isochoric energy Ŵ(Ī₁, Ī₂) written out here, independently of the engine.
+/// its isochoric energy in the isochoric principal stretches λ̄ written out here, independently
+/// of the engine.
 struct Rubber {
     name: &'static str,
     toml: String,
     model: Model,
-    w_iso: Box<dyn Fn(f64, f64) -> f64>,
+    w_iso: Box<dyn Fn([f64; 3]) -> f64>,
+}
+
+/// `(Ī₁, Ī₂)` of the isochoric principal stretches.
+fn invariants(l: [f64; 3]) -> (f64, f64) {
+    let s = l.map(|x| x * x);
+    (s[0] + s[1] + s[2], s[0] * s[1] + s[1] * s[2] + s[0] * s[2])
+}
+
+/// Ogden's three-term fit of Treloar's data (μ in MPa: 0.63, 0.0012, -0.01; α: 1.3, 5, -2),
+/// scaled to G = 1000.
+fn ogden_terms() -> ([f64; 3], [f64; 3]) {
+    let (mu, alpha) = ([0.63, 0.0012, -0.01], [1.3, 5.0, -2.0]);
+    let g: f64 = 0.5 * (0..3).map(|p| mu[p] * alpha[p]).sum::<f64>();
+    (mu.map(|m| m * G / g), alpha)
 }
 
 fn rubbers() -> Vec<Rubber> {
@@ -39,25 +54,43 @@ fn rubbers() -> Vec<Rubber> {
             name: "mooney_rivlin",
             toml: format!("model = \"mooney_rivlin\"\nC10 = 350.0\nC01 = 150.0\nK = {K}"),
             model: Model::MooneyRivlin(Decoupled { law: MooneyRivlin { c10: 350.0, c01: 150.0 }, k: K }),
-            w_iso: Box::new(|i1, i2| 350.0 * (i1 - 3.0) + 150.0 * (i2 - 3.0)),
+            w_iso: Box::new(|l| {
+                let (i1, i2) = invariants(l);
+                350.0 * (i1 - 3.0) + 150.0 * (i2 - 3.0)
+            }),
         },
         Rubber {
             name: "yeoh",
             toml: format!("model = \"yeoh\"\nC10 = 500.0\nC20 = -20.0\nC30 = 2.0\nK = {K}"),
             model: Model::Yeoh(Decoupled { law: Yeoh { c10: 500.0, c20: -20.0, c30: 2.0 }, k: K }),
-            w_iso: Box::new(|i1, _| 500.0 * (i1 - 3.0) - 20.0 * (i1 - 3.0).powi(2) + 2.0 * (i1 - 3.0).powi(3)),
+            w_iso: Box::new(|l| {
+                let i1 = invariants(l).0;
+                500.0 * (i1 - 3.0) - 20.0 * (i1 - 3.0).powi(2) + 2.0 * (i1 - 3.0).powi(3)
+            }),
         },
         Rubber {
             name: "gent",
             toml: format!("model = \"gent\"\nG = {G}\nJm = 20.0\nK = {K}"),
             model: Model::Gent(Decoupled { law: Gent { g: G, jm: 20.0 }, k: K }),
-            w_iso: Box::new(|i1, _| -0.5 * G * 20.0 * (1.0 - (i1 - 3.0) / 20.0).ln()),
+            w_iso: Box::new(|l| -0.5 * G * 20.0 * (1.0 - (invariants(l).0 - 3.0) / 20.0).ln()),
         },
         Rubber {
             name: "arruda_boyce",
             toml: format!("model = \"arruda_boyce\"\nmu = {mu}\nlambda_m = {lambda_m}\nK = {K}"),
             model: Model::ArrudaBoyce(Decoupled { law: ArrudaBoyce { mu, lambda_m }, k: K }),
-            w_iso: Box::new(move |i1, _| (0..5).map(|i| mu * ARRUDA_BOYCE[i] / lambda_m.powi(2 * i as i32) * (i1.powi(i as i32 + 1) - 3f64.powi(i as i32 + 1))).sum()),
+            w_iso: Box::new(move |l| {
+                let i1 = invariants(l).0;
+                (0..5).map(|i| mu * ARRUDA_BOYCE[i] / lambda_m.powi(2 * i as i32) * (i1.powi(i as i32 + 1) - 3f64.powi(i as i32 + 1))).sum()
+            }),
+        },
+        Rubber {
+            name: "ogden",
+            toml: format!("model = \"ogden\"\nmu = {:?}\nalpha = {:?}\nK = {K}", ogden_terms().0, ogden_terms().1),
+            model: Model::Ogden(Ogden { mu: ogden_terms().0, alpha: ogden_terms().1, k: K }),
+            w_iso: Box::new(|l| {
+                let (mu, alpha) = ogden_terms();
+                (0..3).map(|p| mu[p] / alpha[p] * (l.iter().map(|x| x.powf(alpha[p])).sum::<f64>() - 3.0)).sum()
+            }),
         },
     ]
 }
@@ -76,14 +109,13 @@ fn bisect(f: impl Fn(f64) -> f64, mut lo: f64, mut hi: f64) -> f64 {
 }
 
 /// Nominal axial stress in uniaxial stress at stretch `l` from the closed form in principal
-/// stretches `(l, m, m)`: `W(l, m) = Ŵ(Ī₁, Ī₂) + K/2 (ln J)²`, `J = l m²`,
-/// `Ī₁ = J^(-2/3) (l² + 2m²)`, `Ī₂ = J^(-4/3) (2 l² m² + m⁴)`; the lateral stretch solves
-/// `∂W/∂m = 0`, and the stress is `∂W/∂l` (central differences).
-fn closed_form_nominal_stress(w_iso: &dyn Fn(f64, f64) -> f64, l: f64) -> f64 {
+/// stretches `(l, m, m)`: `W(l, m) = Ŵ(λ̄) + K/2 (ln J)²`, `J = l m²`, `λ̄ = J^(-1/3) (l, m, m)`;
+/// the lateral stretch solves `∂W/∂m = 0`, and the stress is `∂W/∂l` (central differences).
+fn closed_form_nominal_stress(w_iso: &dyn Fn([f64; 3]) -> f64, l: f64) -> f64 {
     let w = |l: f64, m: f64| {
         let j = l * m * m;
-        let (a, b) = (j.powf(-2.0 / 3.0), j.powf(-4.0 / 3.0));
-        w_iso(a * (l * l + 2.0 * m * m), b * (2.0 * l * l * m * m + m.powi(4))) + 0.5 * K * j.ln().powi(2)
+        let a = j.powf(-1.0 / 3.0);
+        w_iso([a * l, a * m, a * m]) + 0.5 * K * j.ln().powi(2)
     };
     let h = 1e-6;
     let m = bisect(|m| w(l, m + h) - w(l, m - h), 0.3, 1.5);
@@ -172,6 +204,18 @@ fn the_models_agree_where_their_forms_coincide() {
         last = gap;
     }
     assert!(last < 1e-4);
+
+    // Ogden with α = 2 and -2 is Mooney-Rivlin: μ/2 (Ī₁ - 3) - μ'/2 (Ī₂ - 3).
+    let mooney = Model::MooneyRivlin(Decoupled { law: MooneyRivlin { c10: 350.0, c01: 150.0 }, k: K });
+    let ogden = Model::Ogden(Ogden { mu: [700.0, -300.0, 0.0], alpha: [2.0, -2.0, 0.0], k: K });
+    for f in [Mat3::new(1.3, 0.2, 0.0, -0.1, 0.9, 0.3, 0.05, 0.0, 1.1), Mat3::identity() * 1.2] {
+        let e = green_lagrange(&f);
+        let (s0, d0) = mooney.stress_tangent(&e);
+        let (s1, d1) = ogden.stress_tangent(&e);
+        let scale = d0.norm();
+        assert!((mooney.energy(&e) - ogden.energy(&e)).abs() < 1e-12 * scale, "Ogden (2, -2) energy is Mooney-Rivlin's");
+        assert!((s0 - s1).norm() < 1e-12 * scale && (d0 - d1).norm() < 1e-11 * scale, "Ogden (2, -2) is Mooney-Rivlin: {:e}, {:e}", (s0 - s1).norm() / scale, (d0 - d1).norm() / scale);
+    }
 }
 
 /// Caught while adding Gent: beyond `Ī₁ - 3 = Jm` its energy is the log of a negative number,
@@ -213,6 +257,13 @@ fn rubber_parameters_are_checked_naming_the_key() {
         ("model = \"gent\"\nG = 1000.0\nJm = -1.0\nK = 2000.0", "Jm", "positive"),
         ("model = \"arruda_boyce\"\nmu = 900.0\nlambda_m = 0.9\nK = 2000.0", "lambda_m", "above 1"),
         ("model = \"arruda_boyce\"\nmu = 900.0\nlambda_m = 2.0\nK = 2000.0\nC30 = 1.0", "C30", "not a parameter"),
+        ("model = \"arruda_boyce\"\nmu = [900.0, 1.0]\nlambda_m = 2.0\nK = 2000.0", "mu", "positive"),
+        ("model = \"ogden\"\nmu = [600.0]\nK = 2000.0", "alpha", "needs `alpha`"),
+        ("model = \"ogden\"\nmu = [600.0, 1.0]\nalpha = [2.0]\nK = 2000.0", "alpha", "one exponent per term"),
+        ("model = \"ogden\"\nmu = [1.0, 2.0, 3.0, 4.0]\nalpha = [1.0, 2.0, 3.0, 4.0]\nK = 2000.0", "mu", "one to three terms"),
+        ("model = \"ogden\"\nmu = [600.0, 1.0]\nalpha = [2.0, 0.0]\nK = 2000.0", "alpha", "term 2 has the exponent 0"),
+        ("model = \"ogden\"\nmu = [-600.0]\nalpha = [2.0]\nK = 2000.0", "mu", "G = ½ Σ μₚ αₚ"),
+        ("model = \"ogden\"\nmu = [600.0]\nalpha = [2.0]\nK = 2000.0\nlambda_m = 2.0", "lambda_m", "not a parameter"),
     ];
     let text = std::fs::read_to_string(scene_path("uniaxial_blatz_ko")).unwrap();
     for (material, key, words) in bad {

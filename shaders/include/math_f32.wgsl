@@ -7,3 +7,8 @@ fn ln_real(x: real) -> real {
 fn cbrt_real(x: real) -> real {
     return pow(x, real(1.0) / real(3.0));
 }
+
+// Exponential in f32: the built-in.
+fn exp_real(x: real) -> real {
+    return exp(x);
+}

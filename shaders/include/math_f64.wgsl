@@ -34,3 +34,23 @@ fn cbrt_real(x: real) -> real {
     }
     return y;
 }
+
+// Exponential in f64 (Vulkan's `exp` is 32-bit only): x = k ln 2 + r with |r| <= ln 2 / 2, exp r
+// by its Taylor series (14 terms: 1e-17 at |r| = 0.35), times 2^k by exact doublings or halvings.
+fn exp_real(x: real) -> real {
+    let ln2 = real(0.6931471805599453);
+    let k = floor(x / ln2 + real(0.5));
+    let r = x - k * ln2;
+    var sum = real(1.0);
+    for (var n = 14; n > 0; n--) {
+        sum = real(1.0) + sum * r / real(n);
+    }
+    // The bounds stop the loops for infinity and NaN, as in `ln_real`.
+    for (var j = 0; j < 1100 && real(j) < k; j++) {
+        sum = sum * real(2.0);
+    }
+    for (var j = 0; j < 1100 && real(j) < -k; j++) {
+        sum = sum * real(0.5);
+    }
+    return sum;
+}

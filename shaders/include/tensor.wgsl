@@ -20,7 +20,7 @@ struct MaterialParams {
     a3: real,
     a4: real,
     a5: real,
-    unused: real,
+    a6: real,
 }
 
 // The index pair (i, j) of Voigt entry r: (0,0) (1,1) (2,2) (0,1) (1,2) (0,2). Arithmetic, not

@@ -35,12 +35,13 @@ pub const INCLUDES: &[(&str, &str)] = &[
     ("material_lvf", include_str!("../../shaders/include/material_lvf.wgsl")),
     ("material_mooney_rivlin", include_str!("../../shaders/include/material_mooney_rivlin.wgsl")),
     ("material_neo_hookean", include_str!("../../shaders/include/material_neo_hookean.wgsl")),
+    ("material_ogden", include_str!("../../shaders/include/material_ogden.wgsl")),
     ("material_yeoh", include_str!("../../shaders/include/material_yeoh.wgsl")),
     ("tensor", include_str!("../../shaders/include/tensor.wgsl")),
 ];
 
 /// The materials the element kernels can be built for (`Model::name`).
-pub const MATERIALS: [&str; 7] = ["blatz_ko", "lvf", "neo_hookean", "mooney_rivlin", "yeoh", "gent", "arruda_boyce"];
+pub const MATERIALS: [&str; 8] = ["blatz_ko", "lvf", "neo_hookean", "mooney_rivlin", "yeoh", "gent", "arruda_boyce", "ogden"];
 
 /// The materials written as `Ŵ(Ī₁, Ī₂) + U(J)`: their include gives `Ŵ` alone, and
 /// `include/decoupled.wgsl` the stress and tangent.

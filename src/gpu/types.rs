@@ -3,7 +3,7 @@
 
 use bytemuck::{Pod, Zeroable};
 
-/// `struct MaterialParams` of `shaders/include/tensor.wgsl`: G, K, a1..a5 and one unused slot
+/// `struct MaterialParams` of `shaders/include/tensor.wgsl`: G, K, a1..a6
 /// (zero where a model has no such parameter, see `Model::parameters`).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -15,7 +15,7 @@ pub struct MaterialParams<R> {
     pub a3: R,
     pub a4: R,
     pub a5: R,
-    pub unused: R,
+    pub a6: R,
 }
 
 /// `struct Coefficients` of the assembly kernels: `factor` (ξ) multiplies the tangent and the
@@ -58,8 +58,8 @@ pod!(MaterialParams, Coefficients, DofStep, DofOut);
 
 impl MaterialParams<f64> {
     pub fn of(model: &crate::material::Model) -> Self {
-        let [g, k, a1, a2, a3, a4, a5] = model.parameters();
-        Self { g, k, a1, a2, a3, a4, a5, unused: 0.0 }
+        let [g, k, a1, a2, a3, a4, a5, a6] = model.parameters();
+        Self { g, k, a1, a2, a3, a4, a5, a6 }
     }
 }
 

@@ -6,6 +6,7 @@ mod blatz_ko;
 pub mod decoupled;
 mod lvf;
 mod neo_hookean;
+pub mod ogden;
 pub mod rubber;
 pub mod tensor;
 
@@ -13,6 +14,7 @@ pub use blatz_ko::BlatzKo;
 pub use decoupled::{Decoupled, IsochoricLaw};
 pub use lvf::Lvf;
 pub use neo_hookean::NeoHookean;
+pub use ogden::Ogden;
 pub use rubber::{ArrudaBoyce, Gent, MooneyRivlin, Yeoh};
 
 use crate::precision::Real;
@@ -45,6 +47,7 @@ pub enum Model {
     Yeoh(Decoupled<Yeoh>),
     Gent(Decoupled<Gent>),
     ArrudaBoyce(Decoupled<ArrudaBoyce>),
+    Ogden(Ogden),
 }
 
 /// `$body` with `$m` bound to the model inside whichever variant `$model` is.
@@ -58,6 +61,7 @@ macro_rules! each_model {
             Model::Yeoh($m) => $body,
             Model::Gent($m) => $body,
             Model::ArrudaBoyce($m) => $body,
+            Model::Ogden($m) => $body,
         }
     };
 }
@@ -73,22 +77,24 @@ impl Model {
             Model::Yeoh(_) => "yeoh",
             Model::Gent(_) => "gent",
             Model::ArrudaBoyce(_) => "arruda_boyce",
+            Model::Ogden(_) => "ogden",
         }
     }
 
-    /// Every parameter in the order of the kernels' `MaterialParams`: G, K, a1..a5 (zero where
+    /// Every parameter in the order of the kernels' `MaterialParams`: G, K, a1..a6 (zero where
     /// the model has none). The decoupled models put their small-strain G first and their own
     /// parameters in a1.. (`shaders/include/material_<name>.wgsl` reads them there).
-    pub fn parameters(&self) -> [Real; 7] {
+    pub fn parameters(&self) -> [Real; 8] {
         let g = self.bulk_shear().1;
         match self {
-            Model::BlatzKo(m) => [m.g, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
-            Model::Lvf(m) => [m.g, m.k, m.a1, m.a2, m.a3, m.a4, m.a5],
-            Model::NeoHookean(m) => [m.g, m.k, 0.0, 0.0, 0.0, 0.0, 0.0],
-            Model::MooneyRivlin(m) => [g, m.k, m.law.c10, m.law.c01, 0.0, 0.0, 0.0],
-            Model::Yeoh(m) => [g, m.k, m.law.c10, m.law.c20, m.law.c30, 0.0, 0.0],
-            Model::Gent(m) => [g, m.k, m.law.jm, 0.0, 0.0, 0.0, 0.0],
-            Model::ArrudaBoyce(m) => [g, m.k, m.law.mu, m.law.lambda_m, 0.0, 0.0, 0.0],
+            Model::BlatzKo(m) => [m.g, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            Model::Lvf(m) => [m.g, m.k, m.a1, m.a2, m.a3, m.a4, m.a5, 0.0],
+            Model::NeoHookean(m) => [m.g, m.k, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+            Model::MooneyRivlin(m) => [g, m.k, m.law.c10, m.law.c01, 0.0, 0.0, 0.0, 0.0],
+            Model::Yeoh(m) => [g, m.k, m.law.c10, m.law.c20, m.law.c30, 0.0, 0.0, 0.0],
+            Model::Gent(m) => [g, m.k, m.law.jm, 0.0, 0.0, 0.0, 0.0, 0.0],
+            Model::ArrudaBoyce(m) => [g, m.k, m.law.mu, m.law.lambda_m, 0.0, 0.0, 0.0, 0.0],
+            Model::Ogden(m) => [g, m.k, m.mu[0], m.mu[1], m.mu[2], m.alpha[0], m.alpha[1], m.alpha[2]],
         }
     }
 
@@ -110,6 +116,7 @@ impl Model {
             Model::Yeoh(m) => (m.k, m.law.shear_modulus()),
             Model::Gent(m) => (m.k, m.law.shear_modulus()),
             Model::ArrudaBoyce(m) => (m.k, m.law.shear_modulus()),
+            Model::Ogden(m) => (m.k, m.shear_modulus()),
         }
     }
 

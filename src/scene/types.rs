@@ -128,6 +128,32 @@ pub enum ModelName {
     Yeoh,
     Gent,
     ArrudaBoyce,
+    Ogden,
+}
+
+/// A parameter given as one number or as a list (Ogden's terms).
+#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[serde(untagged)]
+pub enum Values {
+    One(Real),
+    Many(Vec<Real>),
+}
+
+impl Values {
+    pub fn as_slice(&self) -> &[Real] {
+        match self {
+            Values::One(v) => std::slice::from_ref(v),
+            Values::Many(v) => v,
+        }
+    }
+
+    /// The value when there is exactly one.
+    pub fn one(&self) -> Option<Real> {
+        match self.as_slice() {
+            [v] => Some(*v),
+            _ => None,
+        }
+    }
 }
 
 /// A material: its model, density and the model's parameters (each model takes exactly its own).
@@ -151,9 +177,12 @@ pub struct MaterialSpec {
     pub C30: Option<Real>,
     /// Gent's limit of `Ī₁ - 3`.
     pub Jm: Option<Real>,
-    /// Arruda-Boyce's chain modulus and locking stretch.
-    pub mu: Option<Real>,
+    /// Arruda-Boyce's chain modulus (one number), or Ogden's moduli (one per term).
+    pub mu: Option<Values>,
+    /// Arruda-Boyce's locking stretch.
     pub lambda_m: Option<Real>,
+    /// Ogden's exponents (one per term, as many as `mu`).
+    pub alpha: Option<Values>,
 }
 
 #[derive(Debug, Clone, Deserialize, Serialize)]

@@ -209,6 +209,13 @@ fn validate_material(key: &str, m: &MaterialSpec) -> Result<(), Failure> {
         ModelName::Yeoh => (&["K", "C10"], &["K", "C10", "C20", "C30"]),
         ModelName::Gent => (&["G", "K", "Jm"], &["G", "K", "Jm"]),
         ModelName::ArrudaBoyce => (&["K", "mu", "lambda_m"], &["K", "mu", "lambda_m"]),
+        ModelName::Ogden => (&["K"], &["K", "mu", "alpha"]),
+    };
+    // Arruda-Boyce's `mu` is one number; Ogden's `mu` and `alpha`, one per term (checked below).
+    let single = |v: &Option<Values>| v.as_ref().map(|v| v.one().unwrap_or(Real::NAN));
+    let (mu, alpha) = match m.model {
+        ModelName::Ogden => (None, None),
+        _ => (single(&m.mu), single(&m.alpha)),
     };
     let params = [
         ("G", m.G),
@@ -223,8 +230,9 @@ fn validate_material(key: &str, m: &MaterialSpec) -> Result<(), Failure> {
         ("C20", m.C20),
         ("C30", m.C30),
         ("Jm", m.Jm),
-        ("mu", m.mu),
+        ("mu", mu),
         ("lambda_m", m.lambda_m),
+        ("alpha", alpha),
     ];
     let model = serde_json::to_value(m.model).ok().and_then(|v| v.as_str().map(str::to_owned)).unwrap_or_default();
     for (p, v) in params {
@@ -244,10 +252,39 @@ fn validate_material(key: &str, m: &MaterialSpec) -> Result<(), Failure> {
                 fail(Invalid, format!("{key}.C10"), format!("the small-strain shear modulus G = 2 (C10 + C01) must be above zero (C10 = {c10}, C01 = {c01})."))?;
             }
         }
+        ModelName::Ogden => validate_ogden(key, m)?,
         ModelName::ArrudaBoyce if m.lambda_m.is_some_and(|l| l <= 1.0) => {
             fail(Invalid, format!("{key}.lambda_m"), format!("the locking stretch must be above 1 (got {}).", m.lambda_m.unwrap_or_default()))?;
         }
         _ => {}
+    }
+    Ok(())
+}
+
+/// Ogden's terms: `mu` and `alpha` lists of one to three numbers each, the same length, every
+/// exponent non-zero, and a positive small-strain shear modulus `½ Σ μₚ αₚ`.
+fn validate_ogden(key: &str, m: &MaterialSpec) -> Result<(), Failure> {
+    let list = |name: &str, v: &Option<Values>| -> Result<Vec<Real>, Failure> {
+        let Some(v) = v else { return Err((Invalid, format!("{key}.{name}"), format!("the ogden model needs `{name}` (a list of one to three numbers, one per term)."))) };
+        let v = v.as_slice().to_vec();
+        if v.is_empty() || v.len() > 3 {
+            return Err((Invalid, format!("{key}.{name}"), format!("give one to three terms (got {}).", v.len())));
+        }
+        if let Some(x) = v.iter().find(|x| !x.is_finite()) {
+            return Err((Invalid, format!("{key}.{name}"), format!("{x} is not a finite number.")));
+        }
+        Ok(v)
+    };
+    let (mu, alpha) = (list("mu", &m.mu)?, list("alpha", &m.alpha)?);
+    if mu.len() != alpha.len() {
+        return fail(Invalid, format!("{key}.alpha"), format!("one exponent per term: `mu` has {} terms, `alpha` {}.", mu.len(), alpha.len()));
+    }
+    if let Some(p) = alpha.iter().position(|&a| a == 0.0) {
+        return fail(Invalid, format!("{key}.alpha"), format!("term {} has the exponent 0 (its energy μ/α (λ^α - 1) is undefined).", p + 1));
+    }
+    let g: Real = 0.5 * mu.iter().zip(&alpha).map(|(m, a)| m * a).sum::<Real>();
+    if !(g > 0.0) {
+        return fail(Invalid, format!("{key}.mu"), format!("the small-strain shear modulus G = ½ Σ μₚ αₚ must be above zero (got {g})."));
     }
     Ok(())
 }

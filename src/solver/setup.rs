@@ -10,12 +10,12 @@ use crate::contact::overlap::{Host, Overlap};
 use crate::contact::pairs::{BodyPairs, Rank};
 use crate::contact::{ContactModel, Motion, Obstacle, Settings, Surface};
 use crate::element::{Formulation, Patches, ReferenceGeometry, FBAR_ABOVE_K_OVER_G};
-use crate::material::{ArrudaBoyce, BlatzKo, Decoupled, Gent, Lvf, Model, MooneyRivlin, NeoHookean, Yeoh};
+use crate::material::{ArrudaBoyce, BlatzKo, Decoupled, Gent, Lvf, Model, MooneyRivlin, NeoHookean, Ogden, Yeoh};
 use crate::mesh::{generate, gmsh, ElementKind, Mesh};
 use crate::precision::Real;
 use crate::scene::SceneErrorKind::{Invalid, Mesh as MeshError, Reference};
 use crate::scene::LARGEST_INPUT;
-use crate::scene::{AngularVelocity, Axis, FormulationChoice, Generator, Interpolation, LoadSpec, LoadedScene, MaterialSpec, MeshSpec, ModelName, ObstacleShape, SceneError};
+use crate::scene::{AngularVelocity, Axis, FormulationChoice, Generator, Interpolation, LoadSpec, LoadedScene, MaterialSpec, MeshSpec, ModelName, ObstacleShape, SceneError, Values};
 use std::collections::HashMap;
 use std::sync::Arc;
 use rayon::prelude::*;
@@ -72,7 +72,17 @@ pub fn model_of(m: &MaterialSpec) -> Model {
         ModelName::MooneyRivlin => Model::MooneyRivlin(Decoupled { law: MooneyRivlin { c10: m.C10.unwrap_or(0.0), c01: m.C01.unwrap_or(0.0) }, k }),
         ModelName::Yeoh => Model::Yeoh(Decoupled { law: Yeoh { c10: m.C10.unwrap_or(0.0), c20: m.C20.unwrap_or(0.0), c30: m.C30.unwrap_or(0.0) }, k }),
         ModelName::Gent => Model::Gent(Decoupled { law: Gent { g, jm: m.Jm.unwrap_or_default() }, k }),
-        ModelName::ArrudaBoyce => Model::ArrudaBoyce(Decoupled { law: ArrudaBoyce { mu: m.mu.unwrap_or_default(), lambda_m: m.lambda_m.unwrap_or_default() }, k }),
+        ModelName::ArrudaBoyce => Model::ArrudaBoyce(Decoupled { law: ArrudaBoyce { mu: m.mu.as_ref().and_then(Values::one).unwrap_or_default(), lambda_m: m.lambda_m.unwrap_or_default() }, k }),
+        ModelName::Ogden => {
+            let terms = |v: &Option<Values>| {
+                let mut out = [0.0; 3];
+                for (o, x) in out.iter_mut().zip(v.as_ref().map(Values::as_slice).unwrap_or_default()) {
+                    *o = *x;
+                }
+                out
+            };
+            Model::Ogden(Ogden { mu: terms(&m.mu), alpha: terms(&m.alpha), k })
+        }
     }
 }
 
