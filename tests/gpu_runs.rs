@@ -107,25 +107,29 @@ fn an_fbar_bar_impact_on_the_gpu_matches_the_cpu_backend() {
     compare_backends("bar_impact_fbar_gpu", &scene_path("bar_impact"), &["material.bar.K=60000.0", "time.end=0.01", "output.every=1", "output.scene_every=0"]);
 }
 
+/// Runs `path` on the CPU and on the GPU in f64: the last value of a probe's displacement
+/// component and every step's energies agree to 1e-9.
+fn compare_probe(path: &Path, sets: &[&str], tag: &str, probe: &str, component: usize) {
+    let cpu = run_with(path, sets, &format!("{tag}_cpu"), &options(BackendChoice::Cpu, None));
+    let gpu = run_with(path, sets, &format!("{tag}_gpu"), &options(BackendChoice::Gpu, Some(Precision::F64)));
+    assert_eq!(gpu.topics["/run"][0]["backend"], "gpu");
+    let last = |log: &Log| log.vectors(&format!("/probe/{probe}"), "displacement").last().unwrap()[component];
+    let (a, b) = (last(&cpu), last(&gpu));
+    assert!(a > 0.0 && ((a - b) / a).abs() < 1e-9, "{tag}: probe {probe}: CPU {a:e}, GPU {b:e}");
+    assert!(energy_difference(&cpu, &gpu) < 1e-9, "{tag}");
+}
+
 /// A surface load reaches the device through the external forces: the pressurised F-bar tube,
 /// of Quad4 and of Tri3 patches.
 #[test]
 fn a_pressurised_tube_on_the_gpu_matches_the_cpu_backend() {
-    let test = "a_pressurised_tube_on_the_gpu_matches_the_cpu_backend";
-    if !gpu_available(test) {
+    if !gpu_available("a_pressurised_tube_on_the_gpu_matches_the_cpu_backend") {
         return;
     }
     // Quad4, and Tri3 as F-bar patches (the Quad4 kernels on the triangles' geometry).
     for element in ["quad4", "tri3"] {
         let set = format!("body.tube.mesh.element=\"{element}\"");
-        let (path, sets) = (scene_path("thick_cylinder"), ["body.tube.mesh.divisions=[4,8]", "output.scene_every=0", set.as_str()]);
-        let cpu = run_with(&path, &sets, &format!("tube_{element}_cpu"), &options(BackendChoice::Cpu, None));
-        let gpu = run_with(&path, &sets, &format!("tube_{element}_gpu"), &options(BackendChoice::Gpu, Some(Precision::F64)));
-        assert_eq!(gpu.topics["/run"][0]["backend"], "gpu");
-        let inner = |log: &Log| log.vectors("/probe/inner", "displacement").last().unwrap()[0];
-        let (a, b) = (inner(&cpu), inner(&gpu));
-        assert!(a > 0.0 && ((a - b) / a).abs() < 1e-9, "{element}: inner radial displacement: CPU {a:e}, GPU {b:e}");
-        assert!(energy_difference(&cpu, &gpu) < 1e-9, "{element}");
+        compare_probe(&scene_path("thick_cylinder"), &["body.tube.mesh.divisions=[4,8]", "output.scene_every=0", &set], &format!("tube_{element}"), "inner", 0);
     }
 }
 
@@ -133,20 +137,12 @@ fn a_pressurised_tube_on_the_gpu_matches_the_cpu_backend() {
 /// cells) on the device: the beams of `tests/data` at K/G = 1e4.
 #[test]
 fn gmsh_beams_of_fbar_patches_on_the_gpu_match_the_cpu_backend() {
-    let test = "gmsh_beams_of_fbar_patches_on_the_gpu_match_the_cpu_backend";
-    if !gpu_available(test) {
+    if !gpu_available("gmsh_beams_of_fbar_patches_on_the_gpu_match_the_cpu_backend") {
         return;
     }
     for dim in ["2d", "3d"] {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("tests/data/free_vibration_{dim}_gmsh.toml"));
-        let sets = ["material.rubber.K=1e7", "time.end=0.1", "output.scene_every=0"];
-        let cpu = run_with(&path, &sets, &format!("gmsh_beam_{dim}_cpu"), &options(BackendChoice::Cpu, None));
-        let gpu = run_with(&path, &sets, &format!("gmsh_beam_{dim}_gpu"), &options(BackendChoice::Gpu, Some(Precision::F64)));
-        assert_eq!(gpu.topics["/run"][0]["backend"], "gpu");
-        let tip = |log: &Log| log.vectors("/probe/tip", "displacement").last().unwrap()[1];
-        let (a, b) = (tip(&cpu), tip(&gpu));
-        assert!(a > 0.0 && ((a - b) / a).abs() < 1e-9, "{dim}: tip deflection: CPU {a:e}, GPU {b:e}");
-        assert!(energy_difference(&cpu, &gpu) < 1e-9, "{dim}");
+        compare_probe(&path, &["material.rubber.K=1e7", "time.end=0.1", "output.scene_every=0"], &format!("gmsh_beam_{dim}"), "tip", 1);
     }
 }
 
