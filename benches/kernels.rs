@@ -55,7 +55,7 @@ fn element_kernels(c: &mut Criterion) {
                 let mut out = ElementOutput::default();
                 b.iter(|| {
                     for (e, ue) in u.iter().enumerate() {
-                        element_force_tangent(model, geometry.element_points(e), ue, kind.dim(), formulation, true, &mut out).unwrap();
+                        element_force_tangent(model, geometry.element_points(e), ue, kind.dim(), formulation, None, true, &mut out).unwrap();
                         black_box(&out);
                     }
                 })
@@ -69,7 +69,7 @@ fn newton_iteration(c: &mut Criterion) {
     // 24 x 24 x 28 cells: 25 * 25 * 29 nodes, 54 375 dofs, 1875 of them clamped on z = 0.
     let mesh = generate::cuboid([0.0; 3], [1.0, 1.0, 1.2], [24, 24, 28], ElementKind::Hex8);
     let geometry = ReferenceGeometry::new(&mesh).unwrap();
-    let prescribed: Vec<Prescribed> = mesh.node_sets["z_min"].iter().flat_map(|&n| (0..3).map(move |i| Prescribed { dof: n as usize * 3 + i, velocity: 0.0, set: 0 })).collect();
+    let prescribed: Vec<Prescribed> = mesh.node_sets["z_min"].iter().flat_map(|&n| (0..3).map(move |i| Prescribed { dof: n as usize * 3 + i, velocity: 0.0, set: 0, until: Real::INFINITY })).collect();
     let model = Model::NeoHookean(NeoHookean { g: 1000.0, k: 3000.0 });
     let topology = Topology::new(&mesh, &prescribed, Default::default()).unwrap();
     let mut body = Body::new("block".into(), mesh.clone(), None, geometry, model, Formulation::Displacement, 1.0, prescribed, |_| [0.0; 3], &topology);

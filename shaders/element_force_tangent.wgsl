@@ -4,8 +4,9 @@
 // workgroup so that no invocation holds a whole element matrix.
 // The prelude defines `real`, the element constants NEN (nodes), NQP (quadrature points), DIM,
 // NDOF = NEN * DIM, FBAR (the F-bar element, `include/fbar.wgsl`, or the displacement one), and
-// includes `element.wgsl`, `fbar.wgsl` and the material (`material_stress` and
-// `material_stress_tangent`, which read the private `material`).
+// includes `element.wgsl`, `fbar.wgsl`, the material (`material_stress` and
+// `material_stress_tangent`, which read the private `material`) and `viscous.wgsl` (the step's
+// relaxation of a member with a Prony series).
 //
 // Two entry points:
 //   `forces`: one element per invocation, the internal force only (Newton evaluations that keep
@@ -45,6 +46,8 @@ const NON_FINITE = 1u;
 @group(0) @binding(5) var<storage, read> members: array<MemberRange>;
 @group(0) @binding(6) var<storage, read> materials: array<MaterialParams>;
 @group(0) @binding(7) var<storage, read> jobs: array<Active>;
+// Per viscoelastic member, from its `MemberRange.history`: the step's c, then H of each point.
+@group(0) @binding(8) var<storage, read> history: array<real>;
 
 var<private> material: MaterialParams;
 
@@ -99,7 +102,7 @@ fn forces(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) wor
         if FBAR {
             // f_a = Σ_q dV α² (F S̄ g_a + (S̄ : C) β_a), β_a = (θ̂_a - h_a) / DIM.
             let alpha = fbar_alpha(theta, determinant(f));
-            let s = material_stress(green_lagrange(fbar_scale(f, alpha))) * point_volume(point);
+            let s = point_stress(range, local * NQP + q, green_lagrange(fbar_scale(f, alpha))) * point_volume(point);
             let t = scaled_trace(s, transpose(f) * f);
             let fs = f * s;
             let inv_t = transpose(inverse3(f));
@@ -112,7 +115,7 @@ fn forces(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) wor
                 }
             }
         } else {
-            let fs = f * material_stress(green_lagrange(f)) * point_volume(point);
+            let fs = f * point_stress(range, local * NQP + q, green_lagrange(f)) * point_volume(point);
             for (var a = 0u; a < NEN; a++) {
                 let g = fs * gradient(point, a);
                 for (var i = 0u; i < DIM; i++) {
@@ -129,6 +132,15 @@ fn forces(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) wor
     if !finite {
         fail(job.member, local, NON_FINITE);
     }
+}
+
+// The stress at the member's point `point` at strain `e`, relaxed if the member is viscoelastic.
+fn point_stress(range: MemberRange, point: u32, e: Mat3) -> Mat3 {
+    let s = material_stress(e);
+    if range.history == NO_HISTORY {
+        return s;
+    }
+    return relaxed_stress(s, e, step_relaxation(range.history), point_history(range.history, point));
 }
 
 // Row r of B_a (engineering shear), for the DIM components i of node a: dE_r / du_ai.
@@ -179,7 +191,11 @@ fn main(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workg
             }
             f = fbar_scale(f, fbar_alpha(mean_dilatation(e, fq), determinant(f)));
         }
-        let st = material_stress_tangent(green_lagrange(f));
+        let strain = green_lagrange(f);
+        var st = material_stress_tangent(strain);
+        if range.history != NO_HISTORY {
+            st = relax(st, strain, step_relaxation(range.history), point_history(range.history, point_element * NQP + lane % NQP));
+        }
         let dv = point_volume(point);
         point_s[lane] = st.s * dv;
         for (var r = 0u; r < 36u; r++) {

@@ -98,7 +98,7 @@ impl BenchCase {
 
     /// `element_force_tangent` of every element on the CPU.
     pub fn cpu_elements(&self, results: &mut [Real]) {
-        cpu::dispatch_element_force_tangent(&self.model, &self.mesh, &self.geometry, self.formulation, &self.u, true, results).expect("valid deformation");
+        cpu::dispatch_element_force_tangent(&self.model, &self.mesh, &self.geometry, self.formulation, None, &self.u, true, results).expect("valid deformation");
     }
 
     pub fn results_len(&self) -> usize {
@@ -107,7 +107,7 @@ impl BenchCase {
 
     /// A GPU world of this one body, with its step inputs uploaded.
     pub fn on(&self, gpu: &Arc<Gpu>) -> Result<GpuWorld, GpuError> {
-        let body = crate::gpu::WorldBody { mesh: &self.mesh, geometry: &self.geometry, model: &self.model, formulation: self.formulation, pattern: &self.pattern, gather: &self.gather };
+        let body = crate::gpu::WorldBody { mesh: &self.mesh, geometry: &self.geometry, model: &self.model, formulation: self.formulation, pattern: &self.pattern, gather: &self.gather, viscous: false };
         let mut world = GpuWorld::new(gpu.clone(), &[body])?;
         world.begin_step(&[(0, &self.step[..])]);
         world.take_traffic();

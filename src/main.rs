@@ -321,7 +321,7 @@ impl Monitor for Progress {
 
 fn print_summary(s: &RunSummary) {
     eprintln!(
-        "{}: {} steps to t = {:.6e}, {} Newton iterations, {} cut-backs, {:.2} s wall; dissipated by friction {:.4e}, numerically {:.4e}, energy balance error {:.1e}; log written to {}",
+        "{}: {} steps to t = {:.6e}, {} Newton iterations, {} cut-backs, {:.2} s wall; dissipated by friction {:.4e}, viscosity {:.4e}, numerically {:.4e}, energy balance error {:.1e}; log written to {}",
         s.scene,
         s.steps,
         s.t_end,
@@ -329,6 +329,7 @@ fn print_summary(s: &RunSummary) {
         s.cutbacks,
         s.wall_s,
         s.energy.friction_dissipation,
+        s.energy.viscous_dissipation,
         s.energy.numerical_dissipation,
         s.energy.energy_balance_error,
         s.output.display()

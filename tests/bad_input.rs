@@ -300,6 +300,8 @@ fn a_packing_of_huge_grains_is_rejected_at_once() {
 fn inputs_too_large_for_finite_energies() {
     assert_error("huge_gravity", GOOD, &["gravity=[0.0, 1e308]"], "gravity", None, "beyond ±1e100");
     assert_error("huge_initial_velocity", GOOD, &["body.block.initial_velocity=[0.0, 1e200]"], "body.block.initial_velocity", None, "beyond ±1e100");
+    assert_error("bulk_modulus_beyond_f64", GOOD, &["material.rubber.model=\"neo_hookean\"", "material.rubber.K=1e28"], "material.rubber.K", None, "round-off");
+    assert_error("boundary_stops_before_it_starts", GOOD, &["boundary.base.until=-1.0"], "boundary.base.until", None, "positive");
     // Node 4 of the Gmsh square moved to x = 1e300.
     let msh = common_gmsh::unit_square_msh(false).replace("0 1 0\n$EndNodes", "1e300 1 0\n$EndNodes");
     std::fs::write(dir().join("far_node.msh"), msh).unwrap();

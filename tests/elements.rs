@@ -105,7 +105,7 @@ fn force_is_the_gradient_of_the_energy_and_tangent_the_gradient_of_the_force() {
                 let geometry = ReferenceGeometry::new(&mesh).unwrap();
                 let points = geometry.element_points(0);
                 let u = random_displacements(&mesh, &mut r);
-                element_force_tangent(&model, points, &u, dim, formulation, true, &mut out).expect("valid deformation");
+                element_force_tangent(&model, points, &u, dim, formulation, None, true, &mut out).expect("valid deformation");
                 let n = u.len() * dim;
                 let h = 1e-6;
                 let (mut fd_force, mut fd_tangent) = (vec![0.0; n], vec![0.0; n * n]);
@@ -114,8 +114,8 @@ fn force_is_the_gradient_of_the_energy_and_tangent_the_gradient_of_the_force() {
                     up[j / dim][j % dim] += h;
                     um[j / dim][j % dim] -= h;
                     fd_force[j] = (element_energy(&model, points, &up, dim, formulation) - element_energy(&model, points, &um, dim, formulation)) / (2.0 * h);
-                    element_force_tangent(&model, points, &up, dim, formulation, false, &mut plus).unwrap();
-                    element_force_tangent(&model, points, &um, dim, formulation, false, &mut minus).unwrap();
+                    element_force_tangent(&model, points, &up, dim, formulation, None, false, &mut plus).unwrap();
+                    element_force_tangent(&model, points, &um, dim, formulation, None, false, &mut minus).unwrap();
                     for i in 0..n {
                         fd_tangent[i * n + j] = (plus.force[i] - minus.force[i]) / (2.0 * h);
                     }
@@ -201,10 +201,10 @@ fn a_non_finite_state_is_not_an_inverted_element() {
     let model = BlatzKo { g: 1000.0 };
     let mut u = vec![[0.0; 3]; 4];
     u[2][0] = f64::NAN;
-    let error = element_force_tangent(&model, geometry.element_points(0), &u, 2, Formulation::Displacement, true, &mut ElementOutput::default()).unwrap_err();
+    let error = element_force_tangent(&model, geometry.element_points(0), &u, 2, Formulation::Displacement, None, true, &mut ElementOutput::default()).unwrap_err();
     assert!(matches!(error, bifirst::element::ElementError::NonFinite), "{error:?}");
     u[2][0] = -3.0;
-    let error = element_force_tangent(&model, geometry.element_points(0), &u, 2, Formulation::Displacement, true, &mut ElementOutput::default()).unwrap_err();
+    let error = element_force_tangent(&model, geometry.element_points(0), &u, 2, Formulation::Displacement, None, true, &mut ElementOutput::default()).unwrap_err();
     assert!(matches!(error, bifirst::element::ElementError::Inverted(_)), "{error:?}");
 }
 
@@ -241,7 +241,7 @@ fn a_homogeneous_deformation_of_a_distorted_patch_is_in_equilibrium() {
             let mut force = vec![0.0; u.len()];
             let mut out = ElementOutput::default();
             for e in 0..mesh.element_count() {
-                element_force_tangent(&model, geometry.element_points(e), &mesh.element_displacements(&u, e), dim, formulation, false, &mut out).unwrap();
+                element_force_tangent(&model, geometry.element_points(e), &mesh.element_displacements(&u, e), dim, formulation, None, false, &mut out).unwrap();
                 for (a, &n) in mesh.element(e).iter().enumerate() {
                     for i in 0..dim {
                         force[n as usize * dim + i] += out.force[a * dim + i];
@@ -263,7 +263,7 @@ fn assembled_forces(mesh: &Mesh, geometry: &ReferenceGeometry, model: &Model, u:
     for e in 0..mesh.element_count() {
         let nodes = mesh.element(e);
         let ue: Vec<[f64; 3]> = nodes.iter().map(|&n| u[n as usize]).collect();
-        element_force_tangent(model, geometry.element_points(e), &ue, dim, formulation, false, &mut out).expect("valid deformation");
+        element_force_tangent(model, geometry.element_points(e), &ue, dim, formulation, None, false, &mut out).expect("valid deformation");
         for (a, &n) in nodes.iter().enumerate() {
             for i in 0..dim {
                 f[n as usize * dim + i] += out.force[a * dim + i];
@@ -354,7 +354,7 @@ fn grouped_patches_are_the_simplices_and_fbar_on_them_passes_the_patch_test() {
         for p in 0..3 {
             let points = grouped.element_points(p);
             let ue: Vec<[f64; 3]> = cells.element(p).iter().map(|&n| u[n as usize]).collect();
-            element_force_tangent(&model, points, &ue, dim, Formulation::Fbar, true, &mut out).unwrap();
+            element_force_tangent(&model, points, &ue, dim, Formulation::Fbar, None, true, &mut out).unwrap();
             let n = ue.len() * dim;
             let h = 1e-7;
             let mut worst: f64 = 0.0;
@@ -362,8 +362,8 @@ fn grouped_patches_are_the_simplices_and_fbar_on_them_passes_the_patch_test() {
                 let (mut up, mut um) = (ue.clone(), ue.clone());
                 up[j / dim][j % dim] += h;
                 um[j / dim][j % dim] -= h;
-                element_force_tangent(&model, points, &up, dim, Formulation::Fbar, false, &mut plus).unwrap();
-                element_force_tangent(&model, points, &um, dim, Formulation::Fbar, false, &mut minus).unwrap();
+                element_force_tangent(&model, points, &up, dim, Formulation::Fbar, None, false, &mut plus).unwrap();
+                element_force_tangent(&model, points, &um, dim, Formulation::Fbar, None, false, &mut minus).unwrap();
                 for i in 0..n {
                     worst = worst.max(((plus.force[i] - minus.force[i]) / (2.0 * h) - out.tangent[i * n + j]).abs());
                 }
@@ -395,7 +395,7 @@ fn held_boundary_energy(mesh: &Mesh, geometry: &ReferenceGeometry, model: &Model
     let mut out = ElementOutput::default();
     for e in 0..mesh.element_count() {
         let nodes = mesh.element(e);
-        element_force_tangent(model, geometry.element_points(e), &vec![[0.0; 3]; nodes.len()], dim, formulation, true, &mut out).unwrap();
+        element_force_tangent(model, geometry.element_points(e), &vec![[0.0; 3]; nodes.len()], dim, formulation, None, true, &mut out).unwrap();
         let n = nodes.len() * dim;
         let dof = |a: usize| nodes[a / dim] as usize * dim + a % dim;
         for a in 0..n {

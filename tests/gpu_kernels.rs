@@ -12,7 +12,7 @@ use bifirst::gpu::shaders::{is_element_kernel, validate, ElementVariant, DECOUPL
 use bifirst::gpu::types::{Coefficients, DofOut, DofStep, MaterialParams};
 use bifirst::gpu::uzawa_step::{UzawaPoint, UzawaStepKernel};
 use bifirst::gpu::{ElementFailure, Evaluation, GpuWorld, WorldBody};
-use bifirst::material::{ArrudaBoyce, BlatzKo, Decoupled, Gent, Lvf, Model, MooneyRivlin, NeoHookean, Ogden, Yeoh};
+use bifirst::material::{ArrudaBoyce, BlatzKo, Decoupled, Gent, Lvf, Model, MooneyRivlin, NeoHookean, Ogden, Relaxation, Yeoh};
 use bifirst::mesh::{generate, ElementKind, Mesh};
 use bifirst::precision::Precision;
 use rand::Rng;
@@ -128,7 +128,7 @@ fn kernel_structs_match_the_shader_layouts() {
 #[test]
 fn batch_structs_match_the_shader_layout() {
     use bifirst::gpu::types::{Active, MemberRange};
-    let range = ["element_start", "elements", "nonzero_start", "nonzeros", "dof_start", "dofs", "material", "unused"];
+    let range = ["element_start", "elements", "nonzero_start", "nonzeros", "dof_start", "dofs", "material", "history"];
     for precision in PRECISIONS {
         for kernel in SHADERS.iter().map(|(name, _)| *name).filter(|k| bifirst::gpu::shaders::is_batch_kernel(k)) {
             let variant = is_element_kernel(kernel).then_some(ElementVariant { kind: ElementKind::Tet4, formulation: Formulation::Displacement, material: "blatz_ko" });
@@ -140,7 +140,7 @@ fn batch_structs_match_the_shader_layout() {
             assert_eq!((members, span as usize), (vec![("member".to_string(), 0), ("mode".to_string(), 4)], std::mem::size_of::<Active>()), "{kernel}");
         }
     }
-    let r = MemberRange { element_start: 1, elements: 2, nonzero_start: 3, nonzeros: 4, dof_start: 5, dofs: 6, material: 7, unused: 8 };
+    let r = MemberRange { element_start: 1, elements: 2, nonzero_start: 3, nonzeros: 4, dof_start: 5, dofs: 6, material: 7, history: 8 };
     assert_eq!(bytemuck::cast::<_, [u32; 8]>(r), [1, 2, 3, 4, 5, 6, 7, 8], "field order");
     assert_eq!(bytemuck::cast::<_, [u32; 2]>(Active { member: 1, mode: 2 }), [1, 2], "field order");
 }
@@ -310,6 +310,8 @@ struct Case {
     pattern: StiffnessPattern,
     gather: GatherMap,
     u: Vec<f64>,
+    /// A step's viscoelastic relaxation `c` and every point's history `H`, if any.
+    relaxation: Option<(f64, Vec<f64>)>,
 }
 
 fn case(variant: ElementVariant, seed: u64) -> Case {
@@ -325,12 +327,12 @@ fn case(variant: ElementVariant, seed: u64) -> Case {
     let pattern = StiffnessPattern::new(&mesh, &dofs);
     let gather = GatherMap::new(&mesh, dim, &pattern);
     let geometry = ReferenceGeometry::new(&mesh).unwrap();
-    Case { model: model_of(variant.material), formulation: variant.formulation, mesh, geometry, pattern, gather, u }
+    Case { model: model_of(variant.material), formulation: variant.formulation, mesh, geometry, pattern, gather, u, relaxation: None }
 }
 
 impl Case {
     fn world_body(&self) -> WorldBody<'_> {
-        WorldBody { mesh: &self.mesh, geometry: &self.geometry, model: &self.model, formulation: self.formulation, pattern: &self.pattern, gather: &self.gather }
+        WorldBody { mesh: &self.mesh, geometry: &self.geometry, model: &self.model, formulation: self.formulation, pattern: &self.pattern, gather: &self.gather, viscous: self.relaxation.is_some() }
     }
 
     fn element_u(&self, e: usize) -> Vec<[f64; 3]> {
@@ -341,7 +343,8 @@ impl Case {
     /// triangle of the tangent (forces only without it).
     fn cpu_results(&self, e: usize, tangent: bool) -> Vec<f64> {
         let mut out = ElementOutput::default();
-        cpu::element_force_tangent(&self.model, self.geometry.element_points(e), &self.element_u(e), self.mesh.dim(), self.formulation, tangent, &mut out).unwrap();
+        let relaxation = self.relaxation.as_ref().map(|(c, history)| Relaxation { c: *c, history }.element(e, self.geometry.points_per_element));
+        cpu::element_force_tangent(&self.model, self.geometry.element_points(e), &self.element_u(e), self.mesh.dim(), self.formulation, relaxation, tangent, &mut out).unwrap();
         let ndof = out.force.len();
         let mut packed = out.force.clone();
         if tangent {
@@ -456,7 +459,7 @@ fn grouped_patches_in_the_element_kernel_match_its_cpu_twin() {
             let gather = GatherMap::new(&cells, dim, &pattern);
             let mut rng = random::rng(300 + k as u64);
             let u = (0..cells.nodes.len() * dim).map(|_| rng.random_range(-0.02..0.02)).collect();
-            let cases = [Case { mesh: cells, model: model_of("neo_hookean"), formulation: Formulation::Fbar, geometry, pattern, gather, u }];
+            let cases = [Case { mesh: cells, model: model_of("neo_hookean"), formulation: Formulation::Fbar, geometry, pattern, gather, u, relaxation: None }];
             let mut world = world_of(&gpu, &cases);
             let (mut values, mut dof_out) = buffers_for(&cases);
             let failures = evaluate_all(&mut world, &cases, true, &mut values, &mut dof_out, Coefficients { factor: 0.5, c1: 1.0 });
@@ -469,6 +472,51 @@ fn grouped_patches_in_the_element_kernel_match_its_cpu_twin() {
             }).fold(0.0, f64::max);
             eprintln!("{} grouped {}: max relative error {worst:.2e}", precision.name(), mesh.kind.name());
             assert!(worst <= tolerance, "{:?} {}: {worst:.3e}", mesh.kind, precision.name());
+        }
+    }
+}
+
+#[test]
+fn viscoelastic_relaxation_in_the_element_kernel_matches_its_cpu_twin() {
+    // A viscoelastic member (a step's c and a random history H per point) beside an elastic one
+    // in one batch, on every element kind and both formulations, split and coupled models.
+    let variants = [
+        (ElementKind::Tri3, Formulation::Displacement, "blatz_ko"),
+        (ElementKind::Quad4, Formulation::Fbar, "mooney_rivlin"),
+        (ElementKind::Tet4, Formulation::Displacement, "ogden"),
+        (ElementKind::Hex8, Formulation::Fbar, "neo_hookean"),
+        (ElementKind::Hex8, Formulation::Displacement, "yeoh"),
+    ];
+    for (precision, tolerance) in TOLERANCES {
+        let Some(gpu) = gpu_or_skip("viscoelastic_relaxation_in_the_element_kernel_matches_its_cpu_twin", precision) else { continue };
+        let gpu = Arc::new(gpu);
+        for (k, &(kind, formulation, material)) in variants.iter().enumerate() {
+            let mut cases = two_bodies(ElementVariant { kind, formulation, material }, 700 + k as u64);
+            let mut rng = random::rng(800 + k as u64);
+            let points = cases[1].geometry.points.len();
+            let scale = cases[1].model.bulk_shear().1 * 0.05;
+            cases[1].relaxation = Some((0.37, (0..6 * points).map(|_| rng.random_range(-scale..scale)).collect()));
+            let mut world = world_of(&gpu, &cases);
+            let (c, history) = cases[1].relaxation.clone().unwrap();
+            world.set_relaxation(1, Relaxation { c, history: &history });
+            let (mut values, mut dof_out) = buffers_for(&cases);
+            for tangent in [false, true] {
+                let failures = evaluate_all(&mut world, &cases, tangent, &mut values, &mut dof_out, Coefficients { factor: 0.5, c1: 1.0 });
+                assert_eq!(failures, [None, None], "{material} {kind:?}");
+                for (b, case) in cases.iter().enumerate() {
+                    let on_gpu = world.element_results(b).expect("read back");
+                    let stride = element_out_stride(case.pattern.element_dofs);
+                    let worst = (0..case.mesh.element_count())
+                        .map(|e| {
+                            let expected = case.cpu_results(e, tangent);
+                            relative_error(&on_gpu[e * stride..e * stride + expected.len()], &expected)
+                        })
+                        .fold(0.0, f64::max);
+                    eprintln!("{} {material} {kind:?} {formulation:?} member {b} tangent {tangent}: {worst:.2e}", precision.name());
+                    let allowed = if precision == Precision::F32 && DECOUPLED.contains(&material) { F32_DECOUPLED_FORCE } else { tolerance };
+                    assert!(worst <= allowed, "{material} {kind:?} member {b}: {worst:.3e}");
+                }
+            }
         }
     }
 }

@@ -84,7 +84,7 @@ fn compare_backends(test: &str, path: &Path, sets: &[&str]) {
 /// Largest difference of the kinetic, strain and total energies over all logged states, relative
 /// to the CPU run's largest total energy.
 fn energy_difference(cpu: &Log, gpu: &Log) -> f64 {
-    let fields = ["kinetic", "strain", "total"];
+    let fields = ["kinetic", "strain", "total", "viscous_dissipation"];
     let scale = cpu.series("/energy", "total").iter().fold(0.0f64, |m, x| m.max(x.abs()));
     assert_eq!(cpu.topics["/energy"].len(), gpu.topics["/energy"].len(), "same number of states");
     fields
@@ -117,6 +117,24 @@ fn compare_probe(path: &Path, sets: &[&str], tag: &str, probe: &str, component: 
     let (a, b) = (last(&cpu), last(&gpu));
     assert!(a > 0.0 && ((a - b) / a).abs() < 1e-9, "{tag}: probe {probe}: CPU {a:e}, GPU {b:e}");
     assert!(energy_difference(&cpu, &gpu) < 1e-9, "{tag}");
+}
+
+/// Viscoelastic bodies on the device (the step's relaxation and every point's history go up
+/// each step): the relaxation test's reaction and energies, and a viscoelastic bar impact.
+#[test]
+fn viscoelastic_runs_on_the_gpu_match_the_cpu_backend() {
+    if !gpu_available("viscoelastic_runs_on_the_gpu_match_the_cpu_backend") {
+        return;
+    }
+    let sets = ["time.end=0.2"];
+    let cpu = run_with(&scene_path("relaxation"), &sets, "relaxation_cpu", &options(BackendChoice::Cpu, None));
+    let gpu = run_with(&scene_path("relaxation"), &sets, "relaxation_gpu", &options(BackendChoice::Gpu, Some(Precision::F64)));
+    assert_eq!(gpu.topics["/run"][0]["backend"], "gpu");
+    let (a, b) = (cpu.vectors("/reaction/pull", "force"), gpu.vectors("/reaction/pull", "force"));
+    let worst = a.iter().zip(&b).map(|(a, b)| ((a[0] - b[0]) / a[0]).abs()).fold(0.0, f64::max);
+    assert!(worst < 1e-9, "reaction: {worst:e}");
+    assert!(energy_difference(&cpu, &gpu) < 1e-9);
+    compare_backends("bar_impact_viscous_gpu", &scene_path("bar_impact"), &["material.bar.viscoelastic=[{g=0.4, tau=0.005}]", "time.end=0.012", "output.scene_every=0"]);
 }
 
 /// A surface load reaches the device through the external forces: the pressurised F-bar tube,

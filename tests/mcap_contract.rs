@@ -30,7 +30,7 @@ fn run_log_has_every_channel_of_the_contract() {
     let steps = 10;
     let expected: &[(&str, &str, &[&str], usize)] = &[
         ("/run", "bifirst.Run", &["version", "git_revision", "scene_name", "scene", "scene_file", "backend", "precision", "adapter", "first_step", "batched_bodies"], 1),
-        ("/energy", "bifirst.Energy", &["t", "kinetic", "strain", "potential", "external_work", "friction_dissipation", "numerical_dissipation", "contact_correction", "total", "energy_balance_error"], steps + 1),
+        ("/energy", "bifirst.Energy", &["t", "kinetic", "strain", "potential", "external_work", "friction_dissipation", "viscous_dissipation", "numerical_dissipation", "contact_correction", "total", "energy_balance_error"], steps + 1),
         (
             "/solver",
             "bifirst.Solver",

@@ -257,13 +257,17 @@ fn rubber_parameters_are_checked_naming_the_key() {
         ("model = \"gent\"\nG = 1000.0\nJm = -1.0\nK = 2000.0", "Jm", "positive"),
         ("model = \"arruda_boyce\"\nmu = 900.0\nlambda_m = 0.9\nK = 2000.0", "lambda_m", "above 1"),
         ("model = \"arruda_boyce\"\nmu = 900.0\nlambda_m = 2.0\nK = 2000.0\nC30 = 1.0", "C30", "not a parameter"),
-        ("model = \"arruda_boyce\"\nmu = [900.0, 1.0]\nlambda_m = 2.0\nK = 2000.0", "mu", "positive"),
+        ("model = \"arruda_boyce\"\nmu = [900.0, 1.0]\nlambda_m = 2.0\nK = 2000.0", "mu", "one number"),
         ("model = \"ogden\"\nmu = [600.0]\nK = 2000.0", "alpha", "needs `alpha`"),
         ("model = \"ogden\"\nmu = [600.0, 1.0]\nalpha = [2.0]\nK = 2000.0", "alpha", "one exponent per term"),
         ("model = \"ogden\"\nmu = [1.0, 2.0, 3.0, 4.0]\nalpha = [1.0, 2.0, 3.0, 4.0]\nK = 2000.0", "mu", "one to three terms"),
         ("model = \"ogden\"\nmu = [600.0, 1.0]\nalpha = [2.0, 0.0]\nK = 2000.0", "alpha", "term 2 has the exponent 0"),
         ("model = \"ogden\"\nmu = [-600.0]\nalpha = [2.0]\nK = 2000.0", "mu", "G = ½ Σ μₚ αₚ"),
         ("model = \"ogden\"\nmu = [600.0]\nalpha = [2.0]\nK = 2000.0\nlambda_m = 2.0", "lambda_m", "not a parameter"),
+        ("model = \"mooney_rivlin\"\nC10 = 400.0\nK = 2000.0\nviscoelastic = []", "viscoelastic", "at least one term"),
+        ("model = \"mooney_rivlin\"\nC10 = 400.0\nK = 2000.0\nviscoelastic = [{ g = 0.6, tau = 1.0 }, { g = 0.4, tau = 2.0 }]", "viscoelastic", "sum to less than 1"),
+        ("model = \"mooney_rivlin\"\nC10 = 400.0\nK = 2000.0\nviscoelastic = [{ g = 0.3, tau = 0.0 }]", "viscoelastic[0].tau", "positive"),
+        ("model = \"mooney_rivlin\"\nC10 = 400.0\nK = 2000.0\nviscoelastic = [{ g = 0.3, tau = 1.0 }, { g = -0.1, tau = 1.0 }]", "viscoelastic[1].g", "positive"),
     ];
     let text = std::fs::read_to_string(scene_path("uniaxial_blatz_ko")).unwrap();
     for (material, key, words) in bad {

@@ -12,7 +12,9 @@ struct MemberRange {
     dof_start: u32,
     dofs: u32,
     material: u32,
-    unused: u32,
+    // Where the member's viscoelastic history starts in `history` (`include/viscous.wgsl`), or
+    // NO_HISTORY.
+    history: u32,
 }
 
 // An active member and what is asked of it.

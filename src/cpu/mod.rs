@@ -20,7 +20,7 @@ pub use crate::element::{element_energy, element_force_tangent};
 use crate::assembly::element_out_stride;
 use crate::element::{ElementError, ElementOutput, Formulation, ReferenceGeometry};
 use crate::gpu::types::{Coefficients, DofOut, DofStep};
-use crate::material::Hyperelastic;
+use crate::material::{Hyperelastic, Relaxation};
 use crate::mesh::Mesh;
 use crate::precision::Real;
 use rayon::prelude::*;
@@ -31,12 +31,15 @@ const ELEMENTS_PER_TASK: usize = 128;
 
 /// The grid of `element_force_tangent`: one call per element at displacement `u` (every dof),
 /// into `results` (`element_out_stride` entries per element; forces only without the tangent),
-/// on every thread of the pool. The error names the first element that failed.
+/// on every thread of the pool, with the body's viscoelastic `relaxation` if it has one. The
+/// error names the first element that failed.
+#[allow(clippy::too_many_arguments)]
 pub fn dispatch_element_force_tangent<M: Hyperelastic + Sync>(
     model: &M,
     mesh: &Mesh,
     geometry: &ReferenceGeometry,
     formulation: Formulation,
+    relaxation: Option<Relaxation>,
     u: &[Real],
     with_tangent: bool,
     results: &mut [Real],
@@ -49,7 +52,8 @@ pub fn dispatch_element_force_tangent<M: Hyperelastic + Sync>(
         for (k, out) in block.chunks_mut(stride).enumerate() {
             let e = task * ELEMENTS_PER_TASK + k;
             mesh.element_displacements_into(u, e, &mut ue);
-            if let Err(error) = element_force_tangent(model, geometry.element_points(e), &ue, dim, formulation, with_tangent, &mut scratch) {
+            let relaxation = relaxation.map(|r| r.element(e, geometry.points_per_element));
+            if let Err(error) = element_force_tangent(model, geometry.element_points(e), &ue, dim, formulation, relaxation, with_tangent, &mut scratch) {
                 return Some((e, error));
             }
             out[..ndof].copy_from_slice(&scratch.force);

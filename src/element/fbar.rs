@@ -7,10 +7,10 @@
 //! Taylor and Pister (1985). The force and tangent are the first and second derivatives of
 //! `Π_e`, so the tangent is symmetric and the energy balance stays exact (doc/method.md §7).
 
-use super::kernel::{checked_determinant, deformation_gradient, finish, ElementError, ElementOutput};
+use super::kernel::{checked_determinant, deformation_gradient, finish, point_stress_tangent, ElementError, ElementOutput};
 use super::GaussPoint;
 use crate::material::tensor::{green_lagrange, Mat3, VOIGT};
-use crate::material::Hyperelastic;
+use crate::material::{Hyperelastic, Relaxation};
 use crate::precision::Real;
 use nalgebra::{Vector3, Vector6};
 
@@ -55,7 +55,7 @@ pub(super) fn fbar_gradients(points: &[GaussPoint], u: &[[Real; 3]], dim: usize)
 }
 
 /// Internal force and tangent stiffness of one F-bar element (see the module comment).
-pub(super) fn fbar_force_tangent<M: Hyperelastic>(material: &M, points: &[GaussPoint], u: &[[Real; 3]], dim: usize, with_tangent: bool, out: &mut ElementOutput) -> Result<(), ElementError> {
+pub(super) fn fbar_force_tangent<M: Hyperelastic>(material: &M, points: &[GaussPoint], u: &[[Real; 3]], dim: usize, relaxation: Option<Relaxation>, with_tangent: bool, out: &mut ElementOutput) -> Result<(), ElementError> {
     let nen = u.len();
     let ndof = nen * dim;
     let n = dim as Real;
@@ -106,12 +106,7 @@ pub(super) fn fbar_force_tangent<M: Hyperelastic>(material: &M, points: &[GaussP
         let (f, hq) = (&fs[q], &h[q]);
         let (fbar, alpha2) = bar(f, theta, js[q], dim);
         let ebar = green_lagrange(&fbar);
-        let (s, d) = if with_tangent {
-            let (s, d) = material.stress_tangent(&ebar);
-            (s, Some(d))
-        } else {
-            (material.stress(&ebar), None)
-        };
+        let (s, d) = point_stress_tangent(material, &ebar, relaxation.map(|r| (r.c, r.point(q))), with_tangent);
         let c = f.transpose() * f;
         // t = S̄ : C over the scaled block; β = d ln α / du; r = (F S̄ g_a)_i = S̄ : dE/du.
         let mut t = 0.0;

@@ -3,8 +3,9 @@
 
 use super::fbar::{fbar_force_tangent, fbar_gradients};
 use super::{Formulation, GaussPoint};
-use crate::material::tensor::{green_lagrange, to_voigt, von_mises, Mat3, VOIGT};
-use crate::material::Hyperelastic;
+use crate::material::tensor::{green_lagrange, to_voigt, von_mises, Mat3, Tangent, VOIGT};
+use crate::material::viscous::relaxed_stress_tangent;
+use crate::material::{Hyperelastic, Relaxation};
 use crate::precision::Real;
 use nalgebra::Vector6;
 use thiserror::Error;
@@ -43,25 +44,28 @@ pub(super) fn deformation_gradient(gp: &GaussPoint, u: &[[Real; 3]]) -> Mat3 {
 }
 
 /// The gradient each quadrature point's stress sees: `F`, or `F̄` of the F-bar element.
-fn point_gradients(points: &[GaussPoint], u: &[[Real; 3]], dim: usize, formulation: Formulation) -> Vec<Mat3> {
+pub fn point_gradients(points: &[GaussPoint], u: &[[Real; 3]], dim: usize, formulation: Formulation) -> Vec<Mat3> {
     match formulation {
         Formulation::Displacement => points.iter().map(|gp| deformation_gradient(gp, u)).collect(),
         Formulation::Fbar => fbar_gradients(points, u, dim),
     }
 }
 
-/// Internal force and tangent stiffness of one element; `u` holds its nodal displacements.
+/// Internal force and tangent stiffness of one element; `u` holds its nodal displacements and
+/// `relaxation` the viscoelastic history of its points, if its material has a Prony series.
+#[allow(clippy::too_many_arguments)]
 pub fn element_force_tangent<M: Hyperelastic>(
     material: &M,
     points: &[GaussPoint],
     u: &[[Real; 3]],
     dim: usize,
     formulation: Formulation,
+    relaxation: Option<Relaxation>,
     with_tangent: bool,
     out: &mut ElementOutput,
 ) -> Result<(), ElementError> {
     if formulation == Formulation::Fbar {
-        return fbar_force_tangent(material, points, u, dim, with_tangent, out);
+        return fbar_force_tangent(material, points, u, dim, relaxation, with_tangent, out);
     }
     let nen = u.len();
     let ndof = nen * dim;
@@ -73,17 +77,11 @@ pub fn element_force_tangent<M: Hyperelastic>(
     }
     out.b.resize(ndof, Vector6::zeros());
     out.db.resize(ndof, Vector6::zeros());
-    for gp in points {
+    for (q, gp) in points.iter().enumerate() {
         let f = deformation_gradient(gp, u);
         checked_determinant(&f)?;
         let e = green_lagrange(&f);
-        // Stress and tangent from one material call when the tangent is wanted.
-        let (s, d) = if with_tangent {
-            let (s, d) = material.stress_tangent(&e);
-            (s, Some(d))
-        } else {
-            (material.stress(&e), None)
-        };
+        let (s, d) = point_stress_tangent(material, &e, relaxation.map(|r| (r.c, r.point(q))), with_tangent);
         let fs = f * s;
         for (a, g) in gp.dn_dx.iter().enumerate() {
             for i in 0..dim {
@@ -128,6 +126,21 @@ pub fn element_force_tangent<M: Hyperelastic>(
         }
     }
     finish(out, ndof, with_tangent)
+}
+
+/// The stress and (if wanted) the tangent at one point, from one material call, relaxed by the
+/// step's viscoelastic `(c, H)` of the point if there is one.
+pub(super) fn point_stress_tangent<M: Hyperelastic>(material: &M, e: &Mat3, relaxation: Option<(Real, &[Real])>, with_tangent: bool) -> (Mat3, Option<Tangent>) {
+    let (s, d) = if with_tangent {
+        let (s, d) = material.stress_tangent(e);
+        (s, Some(d))
+    } else {
+        (material.stress(e), None)
+    };
+    match relaxation {
+        Some((c, h)) => relaxed_stress_tangent(&s, d.as_ref(), e, c, h),
+        None => (s, d),
+    }
 }
 
 /// Fills the lower triangle of the tangent from its integrated upper one, and rejects a

@@ -7,7 +7,7 @@ mod patches;
 pub mod shape;
 
 pub use patches::Patches;
-pub use kernel::{element_cell_fields, element_point_fields, element_energy, element_force_tangent, element_stresses, element_von_mises, CellFields, ElementError, ElementOutput};
+pub use kernel::{element_cell_fields, element_point_fields, element_energy, element_force_tangent, element_stresses, element_von_mises, point_gradients, CellFields, ElementError, ElementOutput};
 
 
 use crate::mesh::{ElementKind, Mesh};

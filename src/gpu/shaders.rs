@@ -38,6 +38,7 @@ pub const INCLUDES: &[(&str, &str)] = &[
     ("material_ogden", include_str!("../../shaders/include/material_ogden.wgsl")),
     ("material_yeoh", include_str!("../../shaders/include/material_yeoh.wgsl")),
     ("tensor", include_str!("../../shaders/include/tensor.wgsl")),
+    ("viscous", include_str!("../../shaders/include/viscous.wgsl")),
 ];
 
 /// The materials the element kernels can be built for (`Model::name`).
@@ -114,6 +115,9 @@ pub fn source(kernel: &str, precision: Precision, variant: Option<ElementVariant
                 module += include("decoupled")?;
             }
             module += include(&format!("material_{}", v.material))?;
+            if kernel == "element_force_tangent" {
+                module += include("viscous")?;
+            }
         }
     }
     Ok(module + text)

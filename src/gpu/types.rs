@@ -75,8 +75,13 @@ pub struct MemberRange {
     pub dof_start: u32,
     pub dofs: u32,
     pub material: u32,
-    pub unused: u32,
+    /// Where the member's viscoelastic history starts in the batch's `history` buffer (the
+    /// step's `c`, then `H` of each point), or [`NO_HISTORY`].
+    pub history: u32,
 }
+
+/// `MemberRange.history` of a member without a Prony series.
+pub const NO_HISTORY: u32 = u32::MAX;
 
 /// `struct Active` of `shaders/include/batch.wgsl`: a member a dispatch works on, and what it
 /// asks of it ([`MODE_FORCES`] or [`MODE_TANGENT`]).

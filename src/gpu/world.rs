@@ -10,13 +10,14 @@
 //! was asked for (those that refactorise).
 
 use super::uzawa_sweep::UzawaSweeps;
-use super::types::{Active, Coefficients, DofOut, DofStep, MaterialParams, MemberRange, MODE_FORCES, MODE_TANGENT};
+use super::types::{Active, Coefficients, DofOut, DofStep, MaterialParams, MemberRange, MODE_FORCES, MODE_TANGENT, NO_HISTORY};
 use super::{ElementVariant, Gpu, GpuError};
 use crate::assembly::{element_out_stride, GatherMap, StiffnessPattern};
 use crate::backend::UzawaPlacement;
 use crate::contact::uzawa::{Outcome, Problem};
 use crate::element::{Formulation, ReferenceGeometry};
-use crate::material::Model;
+use crate::material::viscous::HISTORY;
+use crate::material::{Model, Relaxation};
 use crate::mesh::Mesh;
 use crate::precision::{Precision, Real};
 use crate::solver::PhaseTimes;
@@ -62,6 +63,8 @@ pub struct WorldBody<'a> {
     pub formulation: Formulation,
     pub pattern: &'a StiffnessPattern,
     pub gather: &'a GatherMap,
+    /// Whether its material has a Prony series (a history per quadrature point each step).
+    pub viscous: bool,
 }
 
 /// One body's share of an evaluation: its displacement in, its results out.
@@ -125,6 +128,8 @@ struct Batch {
     values: Buffer,
     dof_out: Buffer,
     energy: Buffer,
+    /// The viscoelastic members' step relaxation and point histories (`MemberRange.history`).
+    history: Buffer,
     forces: Pass,
     tangent: Deferred,
     csr: Pass,
@@ -355,6 +360,20 @@ impl GpuWorld {
             members.sort_unstable();
             self.upload_runs(batch, &members, Mirror::Step);
         }
+    }
+
+    /// A viscoelastic body's relaxation for the step (`c` and each point's history `H`), up with
+    /// the next submit.
+    pub fn set_relaxation(&mut self, body: usize, relaxation: Relaxation) {
+        let (b, m) = self.place[body];
+        let start = self.batches[b].members[m].history;
+        assert_ne!(start, NO_HISTORY, "body {body} was uploaded without a Prony series");
+        let mut reals = Vec::with_capacity(1 + relaxation.history.len());
+        reals.push(relaxation.c);
+        reals.extend_from_slice(relaxation.history);
+        let buffer = self.batches[b].history.clone();
+        let bytes = to_device(self.gpu.precision, &reals);
+        self.upload(&buffer, start as u64 * self.gpu.precision.size() as u64, &bytes);
     }
 
     /// Writes a host mirror's values of the listed members (sorted) to the device, one write
@@ -619,7 +638,7 @@ impl Batch {
         let mut materials: Vec<MaterialParams<Real>> = Vec::new();
         let (mut geometry, mut connectivity) = (Vec::new(), Vec::new());
         let (mut csr_start, mut csr, mut dof_start, mut dof) = (vec![0u32], Vec::new(), vec![0u32], Vec::new());
-        let (mut elements, mut dofs, mut nnz) = (0usize, 0usize, 0usize);
+        let (mut elements, mut dofs, mut nnz, mut history) = (0usize, 0usize, 0usize, 0usize);
         for &b in &members {
             let body = &bodies[b];
             let params = MaterialParams::of(body.model);
@@ -649,8 +668,11 @@ impl Batch {
                 dof_start: dofs as u32,
                 dofs: body_dofs as u32,
                 material: material as u32,
-                unused: 0,
+                history: if body.viscous { history as u32 } else { NO_HISTORY },
             });
+            if body.viscous {
+                history += 1 + HISTORY * body.geometry.points.len();
+            }
             elements += body.mesh.element_count();
             dofs += body_dofs;
             nnz += body.pattern.nnz();
@@ -680,8 +702,9 @@ impl Batch {
         let values = buffer(gpu, "values", nnz * real, copy_out);
         let dof_out = buffer(gpu, "dof_out", dofs * 2 * real, copy_out);
         let energy = buffer(gpu, "energy", elements * real, copy_out);
+        let history = buffer(gpu, "history", history * real, write);
         let v = Some(variant);
-        let element_buffers = [&geometry, &connectivity, &u, &element_out, &failure, &member_buffer, &material_buffer, &active];
+        let element_buffers = [&geometry, &connectivity, &u, &element_out, &failure, &member_buffer, &material_buffer, &active, &history];
         // The pipelines compile in parallel: a software adapter compiles each on the CPU.
         let tangent = {
             let (gpu, buffers) = (gpu.clone(), element_buffers.map(Buffer::clone));
@@ -709,6 +732,7 @@ impl Batch {
             values,
             dof_out,
             energy,
+            history,
             forces,
             tangent,
             csr: csr_pass,

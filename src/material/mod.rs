@@ -9,6 +9,7 @@ mod neo_hookean;
 pub mod ogden;
 pub mod rubber;
 pub mod tensor;
+pub mod viscous;
 
 pub use blatz_ko::BlatzKo;
 pub use decoupled::{Decoupled, IsochoricLaw};
@@ -16,6 +17,7 @@ pub use lvf::Lvf;
 pub use neo_hookean::NeoHookean;
 pub use ogden::Ogden;
 pub use rubber::{ArrudaBoyce, Gent, MooneyRivlin, Yeoh};
+pub use viscous::{Prony, Relaxation, Viscoelastic};
 
 use crate::precision::Real;
 use tensor::{Mat3, Tangent};

@@ -107,6 +107,6 @@ mod tests {
         assert_eq!(super::bodies(2)["properties"]["angular_momentum"]["items"]["type"], "number");
         let energy = energy();
         let fields: Vec<&String> = energy["properties"].as_object().unwrap().keys().collect();
-        assert!(fields.len() == 10 && fields.iter().any(|f| *f == "t") && fields.iter().any(|f| *f == "energy_balance_error"), "flattened: {fields:?}");
+        assert!(fields.len() == 11 && fields.iter().any(|f| *f == "t") && fields.iter().any(|f| *f == "energy_balance_error"), "flattened: {fields:?}");
     }
 }

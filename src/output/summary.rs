@@ -34,6 +34,10 @@ pub struct LogSummary {
     /// `energy_drift` relative to the largest of the initial and final total energies.
     pub relative_energy_drift: f64,
     pub energy_balance_error: f64,
+    /// Cumulative dissipation at the end: friction, and the viscoelastic branches (0 in logs
+    /// written before viscoelasticity).
+    pub friction_dissipation: f64,
+    pub viscous_dissipation: f64,
     pub max_penetration: f64,
     /// Deepest node inside another body or an obstacle, and that depth in local element sizes.
     pub max_overlap: f64,
@@ -149,6 +153,8 @@ pub fn summarize(record: &RunRecord) -> Result<LogSummary, ReadError> {
         energy_drift: drift,
         relative_energy_drift: drift / e0.abs().max(e1.abs()).max(f64::MIN_POSITIVE),
         energy_balance_error: number(&last["energy_balance_error"]),
+        friction_dissipation: number(&last["friction_dissipation"]),
+        viscous_dissipation: last["viscous_dissipation"].as_f64().unwrap_or(0.0),
         max_penetration: number(&s["max_penetration"]),
         max_overlap: number(&s["max_overlap"]),
         max_overlap_ratio: number(&s["max_overlap_ratio"]),
@@ -176,6 +182,7 @@ pub fn table(runs: &[LogSummary]) -> String {
         // Not a drift in every run: friction, a moving wall or a support change the energy on purpose.
         ("total energy, end - start".into(), runs.iter().map(|r| format!("{:.4e} ({:+.2e} rel.)", r.energy_drift, r.relative_energy_drift)).collect()),
         ("energy balance error".into(), runs.iter().map(|r| format!("{:.2e}", r.energy_balance_error)).collect()),
+        ("dissipated: friction, viscous".into(), runs.iter().map(|r| format!("{:.4e}, {:.4e}", r.friction_dissipation, r.viscous_dissipation)).collect()),
         ("max penetration".into(), runs.iter().map(|r| format!("{:.3e}", r.max_penetration)).collect()),
         ("steps creating energy".into(), runs.iter().map(|r| r.energy_gain_steps.to_string()).collect()),
         ("max overlap".into(), runs.iter().map(|r| format!("{:.3e} ({:.2}% of h)", r.max_overlap, 100.0 * r.max_overlap_ratio)).collect()),

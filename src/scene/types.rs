@@ -183,6 +183,18 @@ pub struct MaterialSpec {
     pub lambda_m: Option<Real>,
     /// Ogden's exponents (one per term, as many as `mu`).
     pub alpha: Option<Values>,
+    /// A Prony series on the isochoric stress, on any model (`material::viscous`): the model's
+    /// parameters are then its instantaneous response.
+    pub viscoelastic: Option<Vec<PronySpec>>,
+}
+
+/// One term of a Prony series: relative modulus `g` (the share of the isochoric stress that
+/// relaxes with this term) and relaxation time `tau`.
+#[derive(Debug, Clone, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct PronySpec {
+    pub g: Real,
+    pub tau: Real,
 }
 
 #[derive(Debug, Clone, Deserialize, Serialize)]
@@ -330,6 +342,9 @@ pub struct BoundarySpec {
     pub components: Option<Vec<Axis>>,
     /// Prescribed velocity (all components, as many as the dimension); zero when absent.
     pub velocity: Option<Vec<Real>>,
+    /// The nodes move at `velocity` until this time, then hold where they are (a stretch held:
+    /// relaxation tests); the whole run when absent.
+    pub until: Option<Real>,
 }
 
 /// A dead surface load on the boundary facets of a node set (the facets whose nodes all belong

@@ -137,6 +137,9 @@ pub(super) fn validate(s: &Scene) -> Result<(), Failure> {
         if !s.body.contains_key(&bc.body) {
             fail(Reference, format!("{key}.body"), format!("unknown body `{}` (the scene defines: {}).", bc.body, names(s.body.keys())))?;
         }
+        if let Some(until) = bc.until {
+            positive(format!("{key}.until"), "the time the motion stops", until)?;
+        }
         if let Some(v) = &bc.velocity {
             finite_vec(&format!("{key}.velocity"), v, dim)?;
         }
@@ -212,10 +215,17 @@ fn validate_material(key: &str, m: &MaterialSpec) -> Result<(), Failure> {
         ModelName::Ogden => (&["K"], &["K", "mu", "alpha"]),
     };
     // Arruda-Boyce's `mu` is one number; Ogden's `mu` and `alpha`, one per term (checked below).
-    let single = |v: &Option<Values>| v.as_ref().map(|v| v.one().unwrap_or(Real::NAN));
     let (mu, alpha) = match m.model {
         ModelName::Ogden => (None, None),
-        _ => (single(&m.mu), single(&m.alpha)),
+        _ => {
+            for (name, v) in [("mu", &m.mu), ("alpha", &m.alpha)] {
+                if v.as_ref().is_some_and(|v| v.one().is_none()) && allowed.contains(&name) {
+                    return fail(Invalid, format!("{key}.{name}"), format!("`{name}` of this model is one number (lists are Ogden's)."));
+                }
+            }
+            let single = |v: &Option<Values>| v.as_ref().map(|v| v.one().unwrap_or(Real::NAN));
+            (single(&m.mu), single(&m.alpha))
+        }
     };
     let params = [
         ("G", m.G),
@@ -257,6 +267,26 @@ fn validate_material(key: &str, m: &MaterialSpec) -> Result<(), Failure> {
             fail(Invalid, format!("{key}.lambda_m"), format!("the locking stretch must be above 1 (got {}).", m.lambda_m.unwrap_or_default()))?;
         }
         _ => {}
+    }
+    if let Some(terms) = &m.viscoelastic {
+        validate_prony(key, terms)?;
+    }
+    Ok(())
+}
+
+/// A Prony series: at least one term, each `g` above zero and `tau` above zero, and
+/// `Σ g < 1` (a positive long-term modulus).
+fn validate_prony(key: &str, terms: &[PronySpec]) -> Result<(), Failure> {
+    if terms.is_empty() {
+        return fail(Invalid, format!("{key}.viscoelastic"), "give at least one term `{ g = .., tau = .. }` (or leave `viscoelastic` out for an elastic material).");
+    }
+    for (i, t) in terms.iter().enumerate() {
+        positive(format!("{key}.viscoelastic[{i}].g"), "the relative modulus g", t.g)?;
+        positive(format!("{key}.viscoelastic[{i}].tau"), "the relaxation time tau", t.tau)?;
+    }
+    let sum: Real = terms.iter().map(|t| t.g).sum();
+    if !(sum < 1.0) {
+        return fail(Invalid, format!("{key}.viscoelastic"), format!("the relative moduli must sum to less than 1 (got Σ g = {sum}): 1 - Σ g is the share of the isochoric stress left after a long hold."));
     }
     Ok(())
 }

@@ -6,10 +6,13 @@ use super::PhaseTimes;
 use super::topology::Topology;
 use crate::assembly::{element_out_stride, DofMap, GatherMap, StiffnessPattern};
 use crate::cpu::{assemble_csr, assemble_residual, dispatch_element_force_tangent, element_energy, element_force_tangent};
-use crate::element::{element_cell_fields, element_point_fields, element_von_mises, CellFields, ElementError, ElementOutput, Formulation, Patches, ReferenceGeometry};
+use crate::element::{element_cell_fields, element_point_fields, element_von_mises, point_gradients, CellFields, ElementError, ElementOutput, Formulation, Patches, ReferenceGeometry};
 use crate::gpu::types::{Coefficients, DofOut, DofStep};
 use crate::gpu::{ElementFailure, Evaluation, GpuError, WorldBody};
-use crate::material::Model;
+use crate::material::tensor::green_lagrange;
+use crate::material::viscous::HISTORY;
+use crate::material::{Hyperelastic, Model, Relaxation, Viscoelastic};
+use rayon::prelude::*;
 use crate::mesh::Mesh;
 use crate::precision::Real;
 use std::sync::Arc;
@@ -25,14 +28,33 @@ pub struct State {
     pub strain: Real,
     /// `strain` was computed by `element_energy` at `u` (not set at t = 0 or by a restore).
     pub strain_at_u: bool,
+    /// What each quadrature point of a viscoelastic body keeps between steps
+    /// ([`Viscoelastic::advance`]); empty without a Prony series.
+    pub viscous: Vec<Real>,
+    /// What the Prony branches hold beyond `strain` ([`Viscoelastic::branch_energy`]).
+    pub branch_energy: Real,
 }
 
-/// A prescribed dof: its constant velocity and the boundary set that owns its reaction.
+/// A prescribed dof: its velocity, constant until `until` (then zero: the dof holds), and the
+/// boundary set that owns its reaction.
 #[derive(Debug, Clone, Copy)]
 pub struct Prescribed {
     pub dof: usize,
     pub velocity: Real,
     pub set: usize,
+    pub until: Real,
+}
+
+impl Prescribed {
+    /// How far the dof moves from `t` to `t + dt`.
+    fn travel(&self, t: Real, dt: Real) -> Real {
+        self.velocity * ((t + dt).min(self.until) - t.min(self.until))
+    }
+
+    /// The velocity just after time `t`.
+    fn velocity_after(&self, t: Real) -> Real {
+        if t < self.until { self.velocity } else { 0.0 }
+    }
 }
 
 /// The assembly coefficients of a step: `ξ` on the stiffness, `c1 = 1/(θ dt²)` on the mass.
@@ -96,6 +118,9 @@ pub struct StepEnergy {
     pub support_work: Real,
     /// Work of the surface loads, `Σ f_load Δu`.
     pub load_work: Real,
+    /// What the Prony branches dissipated: the work of the viscoelastic overstress (the stress
+    /// less the model's, which `force_dissipation` leaves out) less the change of what they hold.
+    pub viscous_dissipation: Real,
 }
 
 /// A surface load (`[load.*]`) as nodal forces: dead (reference configuration), scaled in time
@@ -128,6 +153,13 @@ pub struct Body {
     /// The geometry of what the element kernels integrate.
     pub geometry: ReferenceGeometry,
     pub model: Model,
+    /// The material's Prony series, if it has one.
+    pub viscoelastic: Option<Viscoelastic>,
+    /// When the step being solved ends.
+    step_end: Real,
+    /// The step's relaxation `c` and each quadrature point's history `H` ([`Body::begin_step`]).
+    relaxation_c: Real,
+    history: Vec<Real>,
     /// How the elements take the volume change (F-bar for nearly incompressible materials).
     pub formulation: Formulation,
     pub dim: usize,
@@ -246,9 +278,9 @@ impl Body {
             v[n * dim..(n + 1) * dim].copy_from_slice(&w[..dim]);
         }
         for p in &prescribed {
-            v[p.dof] = p.velocity;
+            v[p.dof] = p.velocity_after(0.0);
         }
-        let state = State { u: vec![0.0; ndof], v, f_int: vec![0.0; ndof], strain: 0.0, strain_at_u: false };
+        let state = State { u: vec![0.0; ndof], v, f_int: vec![0.0; ndof], strain: 0.0, strain_at_u: false, viscous: Vec::new(), branch_energy: 0.0 };
         let values = vec![0.0; pattern.nnz()];
         let element_results = vec![0.0; geometry.volumes.len() * element_out_stride(pattern.element_dofs)];
         let reactions = vec![0.0; prescribed.len()];
@@ -262,6 +294,10 @@ impl Body {
             patches,
             geometry,
             model,
+            viscoelastic: None,
+            step_end: 0.0,
+            relaxation_c: 0.0,
+            history: Vec::new(),
             formulation,
             dim,
             mass,
@@ -297,6 +333,20 @@ impl Body {
         }
     }
 
+    /// Gives the body's material a Prony series: its points start relaxed, at rest.
+    pub fn set_viscoelastic(&mut self, viscoelastic: Viscoelastic) {
+        let points = self.geometry.points.len();
+        self.state.viscous = vec![0.0; points * viscoelastic.kept_per_point()];
+        self.trial.viscous = self.state.viscous.clone();
+        self.history = vec![0.0; points * HISTORY];
+        self.viscoelastic = Some(viscoelastic);
+    }
+
+    /// The step's viscoelastic relaxation, if the body has a Prony series.
+    pub fn relaxation(&self) -> Option<Relaxation<'_>> {
+        self.viscoelastic.as_ref().map(|_| Relaxation { c: self.relaxation_c, history: &self.history })
+    }
+
     /// What the element kernels integrate: the body's mesh, or its F-bar patches.
     pub fn elements(&self) -> &Mesh {
         self.patches.as_ref().map_or(&self.mesh, |p| &p.cells)
@@ -304,7 +354,7 @@ impl Body {
 
     /// What the GPU world uploads of the body.
     pub fn world_body(&self) -> WorldBody<'_> {
-        WorldBody { mesh: self.elements(), geometry: &self.geometry, model: &self.model, formulation: self.formulation, pattern: &self.pattern, gather: &self.gather }
+        WorldBody { mesh: self.elements(), geometry: &self.geometry, model: &self.model, formulation: self.formulation, pattern: &self.pattern, gather: &self.gather, viscous: self.viscoelastic.is_some() }
     }
 
     /// The step's start values of every dof (after [`Body::begin_step`]).
@@ -322,7 +372,8 @@ impl Body {
     fn cpu_elements(&mut self, u: &[Real], with_tangent: bool, times: &mut PhaseTimes) -> Result<(), StepFailure> {
         let t0 = Instant::now();
         let elements = self.patches.as_ref().map_or(&self.mesh, |p| &p.cells);
-        let result = dispatch_element_force_tangent(&self.model, elements, &self.geometry, self.formulation, u, with_tangent, &mut self.element_results)
+        let relaxation = self.viscoelastic.as_ref().map(|_| Relaxation { c: self.relaxation_c, history: &self.history });
+        let result = dispatch_element_force_tangent(&self.model, elements, &self.geometry, self.formulation, relaxation, u, with_tangent, &mut self.element_results)
             .map_err(|(element, error)| self.element_error(element, error));
         times.elements += t0.elapsed().as_secs_f64();
         result
@@ -335,7 +386,8 @@ impl Body {
             ElementFailure::NonFinite(e) => (e, ElementError::NonFinite),
         };
         let ue = self.elements().element_displacements(u, element);
-        let error = element_force_tangent(&self.model, self.geometry.element_points(element), &ue, self.dim, self.formulation, true, &mut ElementOutput::default()).err().unwrap_or(fallback);
+        let relaxation = self.relaxation().map(|r| r.element(element, self.geometry.points_per_element));
+        let error = element_force_tangent(&self.model, self.geometry.element_points(element), &ue, self.dim, self.formulation, relaxation, true, &mut ElementOutput::default()).err().unwrap_or(fallback);
         self.element_error(element, error)
     }
 
@@ -350,11 +402,15 @@ impl Body {
         StepFailure::Element { body: self.name.clone(), element, error, limit }
     }
 
-    /// Starts a step of length `p.dt`: external forces (gravity, and the surface loads at
-    /// `load_time`), the predictor `u_t + dt v_t` (zero inertia residual) with the prescribed
-    /// dofs at their final values, no contact force.
-    pub fn begin_step(&mut self, p: &StepParams, gravity: &[Real; 3], load_time: Real) {
+    /// Starts a step of length `p.dt` from time `t`: external forces (gravity, and the surface
+    /// loads), the predictor `u_t + dt v_t` (zero inertia residual) with the prescribed dofs at
+    /// their final values, no contact force.
+    pub fn begin_step(&mut self, p: &StepParams, gravity: &[Real; 3], t: Real) {
         let dim = self.dim;
+        self.step_end = t + p.dt;
+        // The load of a step at the time the scheme weighs the step's end forces by (exact for
+        // a linear ramp: (1 - ξ) λ_t + ξ λ_{t+dt}).
+        let load_time = t + p.xi * p.dt;
         if !self.loads.is_empty() {
             self.f_load.clear();
             self.f_load.resize(self.mass.len(), 0.0);
@@ -371,10 +427,17 @@ impl Body {
             self.contact_force[d] = 0.0;
         }
         for pr in &self.prescribed {
-            self.trial.u[pr.dof] = self.state.u[pr.dof] + p.dt * pr.velocity;
+            self.trial.u[pr.dof] = self.state.u[pr.dof] + pr.travel(t, p.dt);
         }
         for (d, s) in self.step_inputs.iter_mut().enumerate() {
             *s = DofStep { mass: self.mass[d], u_pred: self.state.u[d] + p.dt * self.state.v[d], f_int_t: self.state.f_int[d], f_ext: self.f_ext[d] };
+        }
+        if let Some(viscoelastic) = &self.viscoelastic {
+            self.relaxation_c = viscoelastic.step_relaxation(p.dt);
+            let kept = viscoelastic.kept_per_point();
+            for (h, k) in self.history.chunks_mut(HISTORY).zip(self.state.viscous.chunks(kept)) {
+                viscoelastic.history(p.dt, k, h);
+            }
         }
         self.last_increment = None;
         self.previous_residual = None;
@@ -393,8 +456,9 @@ impl Body {
     fn evaluate_with(&mut self, p: &StepParams, with_tangent: bool, times: &mut PhaseTimes) -> Result<(), StepFailure> {
         let c = coefficients(p);
         // The same inputs, bit for bit, give the same results: a body at rest (a grain no
-        // other touches yet) is not evaluated again every step.
-        if !with_tangent && self.evaluated.holds(&self.trial.u, &self.step_inputs, c) {
+        // other touches yet) is not evaluated again every step. A viscoelastic body's stresses
+        // relax even at rest.
+        if !with_tangent && self.viscoelastic.is_none() && self.evaluated.holds(&self.trial.u, &self.step_inputs, c) {
             self.tangent_current = false;
             self.absorb_residual(p);
             return Ok(());
@@ -595,9 +659,15 @@ impl Body {
         let ndof = self.mass.len();
         let v: Vec<Real> = (0..ndof).map(|d| self.trial_velocity(p, d)).collect();
         self.trial.v = v;
+        let (mut stopping, mut prescribed_theta_term) = (0.0, 0.0);
         for (k, pr) in self.prescribed.iter().enumerate() {
-            self.trial.v[pr.dof] = pr.velocity;
+            self.trial.v[pr.dof] = pr.velocity_after(self.step_end);
             self.reactions[k] = self.g[pr.dof] - self.contact_force[pr.dof];
+            // A dof that stops (`until`) is stopped by its support, which takes its kinetic
+            // energy; the scheme's dissipation is that of the free dofs.
+            let (v0, v1) = (self.state.v[pr.dof], self.trial.v[pr.dof]);
+            stopping += 0.5 * self.mass[pr.dof] * (v1 * v1 - v0 * v0);
+            prescribed_theta_term += self.mass[pr.dof] * (v1 - v0).powi(2);
         }
         self.trial.strain = strain;
         self.trial.strain_at_u = true;
@@ -610,14 +680,67 @@ impl Body {
         for (pr, r) in self.prescribed.iter().zip(&self.reactions) {
             support_work += r * (self.trial.u[pr.dof] - self.state.u[pr.dof]);
         }
+        support_work += stopping;
         // The step's load is one value over the step, so its work is exact.
         let load_work = self.f_load.iter().enumerate().map(|(d, f)| f * (self.trial.u[d] - self.state.u[d])).sum();
+        let viscous_work = self.advance_viscous(p);
+        let viscous_dissipation = viscous_work - (self.trial.branch_energy - self.state.branch_energy);
         StepEnergy {
-            theta_dissipation: (p.theta - 0.5) * theta_term,
-            force_dissipation: force_work - (self.trial.strain - self.state.strain),
+            theta_dissipation: (p.theta - 0.5) * (theta_term - prescribed_theta_term),
+            force_dissipation: force_work - (self.trial.strain - self.state.strain) - viscous_work,
             support_work,
             load_work,
+            viscous_dissipation,
         }
+    }
+
+    /// The Prony branches at the end of a converged step (`trial.viscous` from `state.viscous`,
+    /// at each point's strain of the trial displacement, and their energy), and the work of
+    /// their overstress over it.
+    fn advance_viscous(&mut self, p: &StepParams) -> Real {
+        let Some(viscoelastic) = &self.viscoelastic else { return 0.0 };
+        let shear = self.model.bulk_shear().1;
+        self.trial.viscous.clone_from(&self.state.viscous);
+        let elements = self.patches.as_ref().map_or(&self.mesh, |p| &p.cells);
+        let per_element = self.geometry.points_per_element * viscoelastic.kept_per_point();
+        let (geometry, model, u, dim, formulation) = (&self.geometry, &self.model, &self.trial.u, self.dim, self.formulation);
+        let [work, energy] = self
+            .trial
+            .viscous
+            .par_chunks_mut(per_element)
+            .enumerate()
+            .map(|(e, kept)| {
+                let points = geometry.element_points(e);
+                let gradients = point_gradients(points, &elements.element_displacements(u, e), dim, formulation);
+                kept.chunks_mut(viscoelastic.kept_per_point())
+                    .zip(points.iter().zip(gradients))
+                    .map(|(k, (gp, f))| {
+                        let strain = green_lagrange(&f);
+                        let work = viscoelastic.advance(p.dt, p.xi, k, &strain, &model.stress(&strain));
+                        [gp.dv * work, gp.dv * viscoelastic.branch_energy(k, shear)]
+                    })
+                    .fold([0.0; 2], |a, b| [a[0] + b[0], a[1] + b[1]])
+            })
+            .collect::<Vec<[Real; 2]>>()
+            .iter()
+            .fold([0.0; 2], |a, b| [a[0] + b[0], a[1] + b[1]]);
+        self.trial.branch_energy = energy;
+        work
+    }
+
+    /// Recomputes what the Prony branches hold from what the points kept (after a restore).
+    pub fn refresh_branch_energy(&mut self) {
+        let Some(viscoelastic) = &self.viscoelastic else { return };
+        let (shear, kept) = (self.model.bulk_shear().1, viscoelastic.kept_per_point());
+        // Summed as `advance_viscous` sums it (per element, then over elements), to the bit.
+        let per_element = self.geometry.points_per_element;
+        self.state.branch_energy = self
+            .geometry
+            .points
+            .chunks(per_element)
+            .zip(self.state.viscous.chunks(per_element * kept))
+            .map(|(points, kept_e)| points.iter().zip(kept_e.chunks(kept)).fold(0.0, |sum, (gp, k)| sum + gp.dv * viscoelastic.branch_energy(k, shear)))
+            .fold(0.0, |a, b| a + b);
     }
 
     /// Makes sure a factorisation fit for the next Newton increment is there: refactorises
@@ -706,8 +829,9 @@ impl Body {
         0.5 * self.mass.iter().zip(&self.state.v).map(|(m, v)| m * v * v).sum::<Real>()
     }
 
+    /// The model's strain energy and what the Prony branches hold beyond it.
     pub fn strain_energy(&self) -> Real {
-        self.state.strain
+        self.state.strain + self.state.branch_energy
     }
 
     /// Strain energy at the trial displacement, `element_energy` on the CPU (the state's when

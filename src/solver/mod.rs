@@ -129,6 +129,10 @@ pub struct Energies {
     pub potential: Real,
     pub external_work: Real,
     pub friction_dissipation: Real,
+    /// Cumulative work of the viscoelastic overstress (the stress less the material model's,
+    /// `solver::body::StepEnergy::viscous_work`): what the Prony branches dissipate, counted
+    /// against the model's instantaneous strain energy (`strain`).
+    pub viscous_dissipation: Real,
     /// The scheme's own dissipation: theta and xi weighting, and the normal (impact) part of
     /// the contact work.
     pub numerical_dissipation: Real,
@@ -136,7 +140,7 @@ pub struct Energies {
     /// points (energy put in; see `coupling::shift`).
     pub contact_correction: Real,
     pub total: Real,
-    /// `|E(0) + W_ext + W_correction - E - D_friction - D_numerical| / scale` (see
+    /// `|E(0) + W_ext + W_correction - E - D_friction - D_viscous - D_numerical| / scale` (see
     /// [`Simulation::energies`]).
     pub energy_balance_error: Real,
 }
@@ -228,6 +232,8 @@ pub struct Simulation {
     /// Cumulative work of the reactions of prescribed sets and of moving obstacles.
     pub external_work: Real,
     pub friction_dissipation: Real,
+    /// Cumulative work of the viscoelastic overstress ([`Energies::viscous_dissipation`]).
+    pub viscous_dissipation: Real,
     pub numerical_dissipation: Real,
     pub contact_correction: Real,
     /// Total energy at t = 0 (set by [`Simulation::start`]).
@@ -384,13 +390,14 @@ impl Simulation {
         report.wall.contact += started.elapsed().as_secs_f64();
         let settings = self.contact.as_ref().map(|c| c.settings.clone());
         let gravity = self.gravity;
-        // The load of a step at the time the scheme weighs the step's end forces by (exact for
-        // a linear ramp: (1 - ξ) λ_t + ξ λ_{t+dt}).
-        let load_time = self.t + p.xi * dt;
-        self.bodies.par_iter_mut().for_each(|body| body.begin_step(&p, &gravity, load_time));
+        let t = self.t;
+        self.bodies.par_iter_mut().for_each(|body| body.begin_step(&p, &gravity, t));
         if let Some(world) = &mut self.world {
             let steps: Vec<_> = self.bodies.iter().enumerate().map(|(b, body)| (b, body.step_inputs())).collect();
             world.begin_step(&steps);
+            for (b, relaxation) in self.bodies.iter().enumerate().filter_map(|(b, body)| Some((b, body.relaxation()?))) {
+                world.set_relaxation(b, relaxation);
+            }
         }
         let stop = self.interrupt.as_deref();
         let (points, groups) = solve_groups(&mut self.bodies, points, &p, settings.as_ref(), &warm, velocity_scale, self.world.as_mut(), stop, &mut report.wall);
@@ -429,7 +436,7 @@ impl Simulation {
             return Err(StepFailure::Overlap { ratio: overlap.ratio, bound: self.max_overlap });
         }
         let stats = ContactStats::of(&points, dt);
-        let accumulators = (self.external_work, self.friction_dissipation, self.numerical_dissipation, self.contact_correction);
+        let accumulators = (self.external_work, self.friction_dissipation, self.numerical_dissipation, self.contact_correction, self.viscous_dissipation);
         self.book_step(&p, &points, stats.friction_dissipation_step, &mut report.wall)?;
         // Created energy: what the scheme dissipated, when negative. The drift correction's
         // input is booked apart and bounded by design (`coupling::shift`); the run's total
@@ -440,7 +447,7 @@ impl Simulation {
         let energy_scale = energy_scale.max(self.external_work.abs());
         let over_gain = created > self.max_step_energy_gain * energy_scale;
         if over_gain && !last {
-            (self.external_work, self.friction_dissipation, self.numerical_dissipation, self.contact_correction) = accumulators;
+            (self.external_work, self.friction_dissipation, self.numerical_dissipation, self.contact_correction, self.viscous_dissipation) = accumulators;
             let contact = points.iter().any(|c| c.r[0] > 0.0);
             return Err(StepFailure::EnergyGain { gain: created / energy_scale, bound: self.max_step_energy_gain, contact });
         }
@@ -521,6 +528,7 @@ impl Simulation {
         for e in energies {
             self.external_work += e.support_work + e.load_work;
             self.numerical_dissipation += e.theta_dissipation + e.force_dissipation;
+            self.viscous_dissipation += e.viscous_dissipation;
         }
         let dim = self.dim;
         let mut reactions = vec![[0.0; 3]; self.contact.as_ref().map_or(0, |c| c.obstacles.len())];
@@ -564,7 +572,7 @@ impl Simulation {
     /// scheme only dissipated.
     pub fn energy_created(&self) -> Real {
         let e = self.energies();
-        (e.total - self.initial_energy - e.external_work + e.friction_dissipation) / e.scale(self.initial_energy)
+        (e.total - self.initial_energy - e.external_work + e.friction_dissipation + e.viscous_dissipation) / e.scale(self.initial_energy)
     }
 
     /// Records the initial energy, the reference of the energy balance.
@@ -578,6 +586,7 @@ impl Simulation {
         let mut e = Energies {
             external_work: self.external_work,
             friction_dissipation: self.friction_dissipation,
+            viscous_dissipation: self.viscous_dissipation,
             numerical_dissipation: self.numerical_dissipation,
             contact_correction: self.contact_correction,
             ..Default::default()
@@ -591,11 +600,11 @@ impl Simulation {
         }
         e.total = e.kinetic + e.strain + e.potential;
         let e0 = self.initial_energy;
-        let scale = [e0, e.total, e.external_work, e.contact_correction, e.friction_dissipation, e.numerical_dissipation, e.kinetic, e.strain]
+        let scale = [e0, e.total, e.external_work, e.contact_correction, e.friction_dissipation, e.viscous_dissipation, e.numerical_dissipation, e.kinetic, e.strain]
             .iter()
             .map(|x| x.abs())
             .fold(Real::MIN_POSITIVE, Real::max);
-        e.energy_balance_error = (e0 + e.external_work + e.contact_correction - e.total - e.friction_dissipation - e.numerical_dissipation).abs() / scale;
+        e.energy_balance_error = (e0 + e.external_work + e.contact_correction - e.total - e.friction_dissipation - e.viscous_dissipation - e.numerical_dissipation).abs() / scale;
         e
     }
 

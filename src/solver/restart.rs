@@ -17,6 +17,10 @@ pub struct SavedState {
     pub initial_energy: Real,
     pub external_work: Real,
     pub friction_dissipation: Real,
+    /// Cumulative work of the viscoelastic overstress (absent in logs written before
+    /// viscoelasticity: 0).
+    #[serde(default)]
+    pub viscous_dissipation: Real,
     pub numerical_dissipation: Real,
     pub contact_correction: Real,
     /// Step control: the cut-back level the next step starts at and the easy steps taken at
@@ -48,6 +52,10 @@ pub struct SavedBody {
     pub reactions: Vec<Real>,
     /// The effective stiffness of the factorisation the body keeps across steps, if any.
     pub factor: Option<SavedFactor>,
+    /// What each quadrature point of a viscoelastic body keeps between steps (empty, or absent,
+    /// without a Prony series).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub viscous: Vec<Real>,
 }
 
 /// Hashes (FNV-1a, 16 hex digits) of what a saved state is only valid for, over every body in
@@ -69,6 +77,9 @@ impl Fingerprint {
             body.mesh.nodes.iter().flatten().for_each(|x| mesh.bytes(&x.to_le_bytes()));
             body.mesh.connectivity.iter().for_each(|i| mesh.bytes(&i.to_le_bytes()));
             material.bytes(format!("{:?} {:?}", body.model, body.formulation).as_bytes());
+            if let Some(v) = &body.viscoelastic {
+                material.bytes(format!(" {v:?}").as_bytes());
+            }
             body.mass.iter().for_each(|m| material.bytes(&m.to_le_bytes()));
         }
         Self { mesh: mesh.hex(), material: material.hex() }
@@ -129,6 +140,8 @@ pub enum RestoreError {
     Factor { name: String, message: String },
     #[error("the bodies' {what} differ from those of the run that saved the state; a restart continues the same bodies (start a new run to change them)")]
     Changed { what: &'static str },
+    #[error("body `{name}`: the state keeps {saved} viscoelastic values, the scene's body {scene} (its Prony series must not change on restart)")]
+    Viscous { name: String, saved: usize, scene: usize },
     #[error("the state's {what} is {value}: not a state a run can continue from")]
     BadValue { what: String, value: Real },
 }
@@ -142,6 +155,7 @@ impl Simulation {
             initial_energy: self.initial_energy,
             external_work: self.external_work,
             friction_dissipation: self.friction_dissipation,
+            viscous_dissipation: self.viscous_dissipation,
             numerical_dissipation: self.numerical_dissipation,
             contact_correction: self.contact_correction,
             step_level: self.level,
@@ -159,6 +173,7 @@ impl Simulation {
                     strain: b.state.strain,
                     reactions: b.reactions.clone(),
                     factor: b.kept_factor().map(|(c1, values)| SavedFactor { c1, values: values.to_vec() }),
+                    viscous: b.state.viscous.clone(),
                 })
                 .collect(),
             contact: {
@@ -199,6 +214,9 @@ impl Simulation {
             if [s.u.len(), s.v.len(), s.f_int.len()].iter().any(|&len| len != n) || s.reactions.len() != b.reactions.len() {
                 return Err(RestoreError::Dofs { name: b.name.clone(), saved: s.u.len(), scene: n });
             }
+            if s.viscous.len() != b.state.viscous.len() {
+                return Err(RestoreError::Viscous { name: b.name.clone(), saved: s.viscous.len(), scene: b.state.viscous.len() });
+            }
         }
         if let Some(saved) = &saved.fingerprint {
             let scene = Fingerprint::of(&self.bodies);
@@ -216,6 +234,8 @@ impl Simulation {
             b.state.f_int.clone_from(&s.f_int);
             b.state.strain = s.strain;
             b.state.strain_at_u = false;
+            b.state.viscous.clone_from(&s.viscous);
+            b.refresh_branch_energy();
             b.reactions.clone_from(&s.reactions);
         }
         self.t = saved.t;
@@ -224,6 +244,7 @@ impl Simulation {
         self.initial_energy = saved.initial_energy;
         self.external_work = saved.external_work;
         self.friction_dissipation = saved.friction_dissipation;
+        self.viscous_dissipation = saved.viscous_dissipation;
         self.numerical_dissipation = saved.numerical_dissipation;
         self.contact_correction = saved.contact_correction;
         (self.level, self.easy_steps, self.last_overlap) = (saved.step_level, saved.easy_steps, saved.last_overlap);
@@ -258,6 +279,7 @@ fn check_values(saved: &SavedState) -> Result<(), RestoreError> {
         ("initial_energy", saved.initial_energy),
         ("external_work", saved.external_work),
         ("friction_dissipation", saved.friction_dissipation),
+        ("viscous_dissipation", saved.viscous_dissipation),
         ("numerical_dissipation", saved.numerical_dissipation),
         ("contact_correction", saved.contact_correction),
         ("last_overlap", saved.last_overlap),
@@ -266,7 +288,7 @@ fn check_values(saved: &SavedState) -> Result<(), RestoreError> {
         return bad(what.into(), value);
     }
     for b in &saved.bodies {
-        let fields = [("u", &b.u), ("v", &b.v), ("f_int", &b.f_int), ("reactions", &b.reactions)];
+        let fields = [("u", &b.u), ("v", &b.v), ("f_int", &b.f_int), ("reactions", &b.reactions), ("viscous", &b.viscous)];
         for (field, values) in fields {
             if let Some((i, &x)) = values.iter().enumerate().find(|(_, x)| !x.is_finite()) {
                 return bad(format!("body `{}` {field}[{i}]", b.name), x);

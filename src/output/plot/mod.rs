@@ -207,6 +207,7 @@ pub fn plot_runs(runs: &[RunRecord], out: &Path, options: &PlotOptions) -> Resul
         energy("strain", "strain"),
         energy("total (kinetic + strain + potential)", "total"),
         energy("friction dissipation", "friction_dissipation"),
+        energy("viscous dissipation", "viscous_dissipation"),
         energy("numerical dissipation", "numerical_dissipation"),
         balance,
     ];
