@@ -26,7 +26,12 @@ fn double_dot(a: Mat3, b: Mat3) -> real {
 
 fn relaxed_stress(s: Mat3, e: Mat3, c: real, h: Mat3) -> Mat3 {
     let cg = identity3() + e * real(2.0);
-    return s * (real(1.0) - c) + inverse3(cg) * (c * double_dot(s, cg) / real(3.0)) + h;
+    return relaxed_from(s, inverse3(cg), double_dot(s, cg), c, h);
+}
+
+// `S - c Dev S + H` from `C⁻¹` and `t = S:C`.
+fn relaxed_from(s: Mat3, ci: Mat3, t: real, c: real, h: Mat3) -> Mat3 {
+    return s * (real(1.0) - c) + ci * (c * t / real(3.0)) + h;
 }
 
 // The relaxed stress and tangent of a material call.
@@ -55,5 +60,5 @@ fn relax(st: StressTangent, e: Mat3, c: real, h: Mat3) -> StressTangent {
     add_outer(&d, ci, x, c / real(6.0));
     add_outer(&d, x, ci, c / real(6.0));
     add_odot(&d, ci, ci, real(-2.0) * c * t / real(3.0));
-    return StressTangent(relaxed_stress(st.s, e, c, h), d);
+    return StressTangent(relaxed_from(st.s, ci, t, c, h), d);
 }

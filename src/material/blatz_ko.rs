@@ -1,7 +1,7 @@
 //! Blatz-Ko foam rubber, paper eqs. (2)-(3):
 //! `W = G/2 (I2/I3 + 2 sqrt(I3) - 5)`, `S = G (sqrt(I3) C⁻¹ - C⁻²)`, `C = 2E + I`.
 
-use super::tensor::{odot, outer, Mat3, Tangent};
+use super::tensor::{odot, outer, right_cauchy_green, Mat3, Tangent};
 use super::Hyperelastic;
 use crate::precision::Real;
 
@@ -9,10 +9,6 @@ use crate::precision::Real;
 pub struct BlatzKo {
     /// Shear modulus G.
     pub g: Real,
-}
-
-fn right_cauchy_green(e: &Mat3) -> Mat3 {
-    e * 2.0 + Mat3::identity()
 }
 
 impl Hyperelastic for BlatzKo {

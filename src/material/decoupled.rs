@@ -7,7 +7,7 @@
 //! `dS/dE = 4 [Σ Wᵢⱼ Vᵢ⊗Vⱼ + W₂ (I⊗I - 𝕀) + W₃ I₃ (C⁻¹⊗C⁻¹ - C⁻¹⊙C⁻¹)]`.
 //! GPU twin: `shaders/include/decoupled.wgsl`.
 
-use super::tensor::{identity4, odot, outer, Mat3, Tangent};
+use super::tensor::{identity4, odot, outer, right_cauchy_green, Mat3, Tangent};
 use super::Hyperelastic;
 use crate::precision::Real;
 
@@ -55,7 +55,7 @@ struct Kinematics {
 }
 
 fn kinematics(e: &Mat3) -> Kinematics {
-    let c = e * 2.0 + Mat3::identity();
+    let c = right_cauchy_green(e);
     let i1 = c.trace();
     let i2 = 0.5 * (i1 * i1 - (c * c).trace());
     let i3 = c.determinant();

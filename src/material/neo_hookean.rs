@@ -1,7 +1,7 @@
 //! Compressible Neo-Hookean:
 //! `W = G/2 (tr C - 3) - G ln J + λ/2 (ln J)²`, `λ = K - 2G/3`.
 
-use super::tensor::{odot, outer, Mat3, Tangent};
+use super::tensor::{odot, outer, right_cauchy_green, Mat3, Tangent};
 use super::Hyperelastic;
 use crate::precision::Real;
 
@@ -21,7 +21,7 @@ impl NeoHookean {
 
 impl Hyperelastic for NeoHookean {
     fn energy(&self, e: &Mat3) -> Real {
-        let c = e * 2.0 + Mat3::identity();
+        let c = right_cauchy_green(e);
         let ln_j = 0.5 * c.determinant().ln();
         0.5 * self.g * (c.trace() - 3.0) - self.g * ln_j + 0.5 * self.lambda() * ln_j * ln_j
     }
@@ -41,7 +41,7 @@ impl Hyperelastic for NeoHookean {
 
 /// `ln J` and `C⁻¹`: what the stress and the tangent share.
 fn log_volume_and_inverse(e: &Mat3) -> (Real, Mat3) {
-    let c = e * 2.0 + Mat3::identity();
+    let c = right_cauchy_green(e);
     let ln_j = 0.5 * c.determinant().ln();
     (ln_j, c.try_inverse().unwrap_or_else(|| Mat3::from_element(Real::NAN)))
 }

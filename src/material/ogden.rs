@@ -11,7 +11,7 @@
 //! eigenvectors come from cyclic Jacobi rotations, which need only square roots (the WGSL twin
 //! `shaders/include/material_ogden.wgsl` has no f64 eigen-solver or `pow` to call).
 
-use super::tensor::{Mat3, Tangent, VOIGT};
+use super::tensor::{right_cauchy_green, Mat3, Tangent, VOIGT};
 use super::Hyperelastic;
 use crate::precision::Real;
 
@@ -87,7 +87,7 @@ impl Ogden {
     }
 
     fn principal(&self, e: &Mat3) -> Principal {
-        let (c, n) = jacobi_eigen(&(e * 2.0 + Mat3::identity()));
+        let (c, n) = jacobi_eigen(&right_cauchy_green(e));
         let l = c.map(Real::ln);
         let mean = (l[0] + l[1] + l[2]) / 3.0;
         let ln_j = 0.5 * (l[0] + l[1] + l[2]);

@@ -50,6 +50,14 @@ pub fn dev(a: &Mat3) -> Mat3 {
     a - Mat3::identity() * (a.trace() / 3.0)
 }
 
+/// Right Cauchy-Green tensor `C = I + 2E` of a Green-Lagrange strain.
+pub fn right_cauchy_green(e: &Mat3) -> Mat3 {
+    e * 2.0 + Mat3::identity()
+}
+
+/// Weight of each Voigt entry in a full contraction `A : B`: a shear entry stands for two.
+pub const VOIGT_WEIGHT: [Real; 6] = [1.0, 1.0, 1.0, 2.0, 2.0, 2.0];
+
 /// Green-Lagrange strain `E = (FᵀF - I)/2`.
 pub fn green_lagrange(f: &Mat3) -> Mat3 {
     (f.transpose() * f - Mat3::identity()) * 0.5

@@ -17,7 +17,7 @@
 //! quadrature point's `H` ([`relaxed_stress_tangent`]); the host advances `Qᵢ` once a step has
 //! converged ([`Viscoelastic::advance`]).
 
-use super::tensor::{odot, outer, to_voigt, Mat3, Tangent, VOIGT};
+use super::tensor::{odot, outer, right_cauchy_green, to_voigt, Mat3, Tangent, VOIGT, VOIGT_WEIGHT};
 use crate::precision::Real;
 
 /// One term of the relaxation function: relative modulus `g` and relaxation time `tau`.
@@ -68,16 +68,6 @@ impl Viscoelastic {
         KEPT_Q + HISTORY * self.terms.len()
     }
 
-    /// The long-term share of the isochoric stress, `g∞ = 1 - Σ gᵢ`.
-    pub fn long_term(&self) -> Real {
-        1.0 - self.terms.iter().map(|t| t.g).sum::<Real>()
-    }
-
-    /// The relaxation function `g(t) = g∞ + Σ gᵢ exp(-t/τᵢ)`.
-    pub fn relaxation_function(&self, t: Real) -> Real {
-        self.long_term() + self.terms.iter().map(|p| p.g * (-t / p.tau).exp()).sum::<Real>()
-    }
-
     /// `ξᵢ = exp(-dt/(2τᵢ))` of each term.
     fn weights(&self, dt: Real) -> impl Iterator<Item = (Prony, Real)> + '_ {
         self.terms.iter().map(move |&p| (p, (-0.5 * dt / p.tau).exp()))
@@ -106,7 +96,7 @@ impl Viscoelastic {
     pub fn advance(&self, dt: Real, force_weight: Real, kept: &mut [Real], e: &Mat3, s: &Mat3) -> Real {
         let s_iso = to_voigt(&isochoric_part(s, e));
         let e_new = to_voigt(e);
-        let g_sum = 1.0 - self.long_term();
+        let g_sum: Real = self.terms.iter().map(|t| t.g).sum();
         let overstress = |kept: &[Real], r: usize| (0..self.terms.len()).map(|i| kept[KEPT_Q + HISTORY * i + r]).sum::<Real>() - g_sum * kept[KEPT_S + r];
         let before: [Real; 6] = std::array::from_fn(|r| overstress(kept, r));
         for (i, (p, xi)) in self.weights(dt).enumerate() {
@@ -118,23 +108,14 @@ impl Viscoelastic {
         }
         let mut work = 0.0;
         for r in 0..HISTORY {
-            let after = (0..self.terms.len()).map(|i| kept[KEPT_Q + HISTORY * i + r]).sum::<Real>() - g_sum * s_iso[r];
-            // Engineering shear: a shear component's strain counts twice.
-            let weight = if r < 3 { 1.0 } else { 2.0 };
-            work += weight * ((1.0 - force_weight) * before[r] + force_weight * after) * (e_new[r] - kept[KEPT_E + r]);
             kept[KEPT_S + r] = s_iso[r];
+            let after = overstress(kept, r);
+            work += VOIGT_WEIGHT[r] * ((1.0 - force_weight) * before[r] + force_weight * after) * (e_new[r] - kept[KEPT_E + r]);
             kept[KEPT_E + r] = e_new[r];
         }
         work
     }
-}
 
-/// The symmetric tensor of a Voigt vector.
-fn symmetric(v: &[Real]) -> Mat3 {
-    Mat3::new(v[0], v[3], v[5], v[3], v[1], v[4], v[5], v[4], v[2])
-}
-
-impl Viscoelastic {
     /// The energy a point's branches hold beyond what the model's instantaneous energy counts
     /// for them, `Σ (|Qᵢ|² - gᵢ² |S̃|²) / (4 gᵢ G)`, from what it kept; `G` is the model's
     /// small-strain shear modulus. Each branch is taken as a Maxwell element of modulus `gᵢ G`
@@ -142,7 +123,7 @@ impl Viscoelastic {
     /// exact at small strain, an estimate at finite strain (the energy balance closes either
     /// way: what this misses is counted in the dissipation).
     pub fn branch_energy(&self, kept: &[Real], shear_modulus: Real) -> Real {
-        let norm2 = |v: &[Real]| (0..HISTORY).map(|r| if r < 3 { v[r] * v[r] } else { 2.0 * v[r] * v[r] }).sum::<Real>();
+        let norm2 = |v: &[Real]| (0..HISTORY).map(|r| VOIGT_WEIGHT[r] * v[r] * v[r]).sum::<Real>();
         let s2 = norm2(&kept[KEPT_S..KEPT_S + HISTORY]);
         self.terms
             .iter()
@@ -152,9 +133,15 @@ impl Viscoelastic {
     }
 }
 
-/// `C = I + 2E`.
-fn right_cauchy_green(e: &Mat3) -> Mat3 {
-    Mat3::identity() + e * 2.0
+/// The symmetric tensor of a Voigt vector.
+fn symmetric(v: &[Real]) -> Mat3 {
+    Mat3::new(v[0], v[3], v[5], v[3], v[1], v[4], v[5], v[4], v[2])
+}
+
+/// `C = I + 2E` and its inverse (NaN where it has none, as the stresses are then).
+fn cauchy_green_and_inverse(e: &Mat3) -> (Mat3, Mat3) {
+    let c = right_cauchy_green(e);
+    (c, c.try_inverse().unwrap_or(Mat3::from_element(Real::NAN)))
 }
 
 /// `S : C`.
@@ -164,8 +151,7 @@ fn double_dot(s: &Mat3, c: &Mat3) -> Real {
 
 /// The isochoric part of a stress, `Dev S = S - (S:C)/3 C⁻¹` (Holzapfel (6.86)).
 pub fn isochoric_part(s: &Mat3, e: &Mat3) -> Mat3 {
-    let c = right_cauchy_green(e);
-    let ci = c.try_inverse().unwrap_or(Mat3::from_element(Real::NAN));
+    let (c, ci) = cauchy_green_and_inverse(e);
     s - ci * (double_dot(s, &c) / 3.0)
 }
 
@@ -176,13 +162,12 @@ pub fn isochoric_part(s: &Mat3, e: &Mat3) -> Mat3 {
 /// (Blatz-Ko, LVF, the compressible Neo-Hookean) its symmetric part is a tangent Newton
 /// converges with, as it does with a kept factorisation.
 pub fn relaxed_stress_tangent(s: &Mat3, d: Option<&Tangent>, e: &Mat3, c: Real, h: &[Real]) -> (Mat3, Option<Tangent>) {
-    let cg = right_cauchy_green(e);
-    let ci = cg.try_inverse().unwrap_or(Mat3::from_element(Real::NAN));
+    let (cg, ci) = cauchy_green_and_inverse(e);
     let t = double_dot(s, &cg);
     let relaxed = s * (1.0 - c) + ci * (c * t / 3.0) + symmetric(h);
     let tangent = d.map(|d| {
         // X = C:D + 2S, a shear entry of C counting twice in the contraction.
-        let xv: [Real; 6] = std::array::from_fn(|col| (0..6).map(|r| (if r < 3 { 1.0 } else { 2.0 }) * cg[VOIGT[r]] * d[(r, col)]).sum::<Real>() + 2.0 * s[VOIGT[col]]);
+        let xv: [Real; 6] = std::array::from_fn(|col| (0..6).map(|r| VOIGT_WEIGHT[r] * cg[VOIGT[r]] * d[(r, col)]).sum::<Real>() + 2.0 * s[VOIGT[col]]);
         let x = symmetric(&xv);
         d * (1.0 - c) + (outer(&ci, &x) + outer(&x, &ci)) * (c / 6.0) - odot(&ci, &ci) * (2.0 * c * t / 3.0)
     });
