@@ -43,6 +43,36 @@ pub fn neighbours(boxes: &[Aabb], can_touch: impl Fn(usize, usize) -> bool + Syn
         .collect()
 }
 
+/// Body pairs kept between steps (a Verlet list of boxes): the pairs whose boxes, each grown by
+/// a skin, meet, found again only when a body's box leaves the grown box its pairs were found
+/// with. Until then they hold every pair whose boxes meet, so that a packing at rest does not
+/// rebuild its grid every step.
+#[derive(Debug, Clone, Default)]
+pub struct KeptPairs {
+    /// Each body's box, grown by the skin, when the pairs were found.
+    boxes: Vec<Aabb>,
+    /// Per body, the bodies whose grown boxes met its own then (as [`neighbours`] gives them).
+    near: Vec<Vec<u32>>,
+    /// Times the pairs were found, for the tests.
+    pub rebuilds: usize,
+}
+
+impl KeptPairs {
+    /// Per body, a superset (in increasing order) of the bodies whose `boxes` meet its own and
+    /// that `can_touch` it: the kept pairs, found again with boxes grown by `skin` when a box
+    /// has left its grown one (or the number of bodies changed).
+    pub fn near(&mut self, boxes: &[Aabb], skin: Real, can_touch: impl Fn(usize, usize) -> bool + Sync) -> &[Vec<u32>] {
+        let inside = |a: &Aabb, b: &Aabb| (0..3).all(|i| b.0[i] <= a.0[i] && a.1[i] <= b.1[i]);
+        let valid = self.boxes.len() == boxes.len() && boxes.par_iter().zip(&self.boxes).all(|(now, kept)| inside(now, kept));
+        if !valid {
+            self.boxes = boxes.iter().map(|&b| grown(b, skin)).collect();
+            self.near = neighbours(&self.boxes, can_touch);
+            self.rebuilds += 1;
+        }
+        &self.near
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -72,5 +102,30 @@ mod tests {
             pairs += expected.len();
         }
         assert!(pairs > 100, "the case has pairs to find: {pairs}");
+    }
+
+    /// Kept pairs hold every meeting pair while boxes move within the skin, and are found again
+    /// once one leaves it.
+    #[test]
+    fn kept_pairs_hold_the_meeting_boxes_until_a_box_leaves_its_skin() {
+        let boxes: Vec<Aabb> = (0..20).map(|i| ([i as Real, 0.0, 0.0], [i as Real + 0.9, 1.0, 0.0])).collect();
+        let mut kept = KeptPairs::default();
+        let check = |boxes: &[Aabb], kept: &mut KeptPairs| {
+            let fresh = neighbours(boxes, |_, _| true);
+            let near = kept.near(boxes, 0.2, |_, _| true).to_vec();
+            for (a, list) in fresh.iter().enumerate() {
+                assert!(list.iter().all(|b| near[a].contains(b)), "body {a}: {list:?} not in {:?}", near[a]);
+            }
+        };
+        check(&boxes, &mut kept);
+        assert_eq!(kept.rebuilds, 1);
+        // Within the skin: every other box grown by 0.12, so that it meets its neighbours, 0.1 away.
+        let moved: Vec<Aabb> = boxes.iter().enumerate().map(|(i, b)| grown(*b, if i % 2 == 0 { 0.12 } else { 0.0 })).collect();
+        assert!(neighbours(&moved, |_, _| true)[0] == [1]);
+        check(&moved, &mut kept);
+        assert_eq!(kept.rebuilds, 1, "no box left its skin");
+        let far: Vec<Aabb> = moved.iter().enumerate().map(|(i, b)| if i == 3 { grown(*b, 1.0) } else { *b }).collect();
+        check(&far, &mut kept);
+        assert_eq!(kept.rebuilds, 2, "box 3 left its skin");
     }
 }

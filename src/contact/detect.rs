@@ -85,9 +85,27 @@ impl Candidate {
 /// All contact points of the configuration `positions` (current node positions per body) at
 /// time `t`, for a step of length `dt`. A point is kept when its gap is at most `margin`.
 pub fn detect(model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, t: Real, dt: Real, margin: Real) -> Vec<ContactPoint> {
+    detect_kept(model, positions, dim, t, dt, margin, &mut broad::KeptPairs::default())
+}
+
+/// [`detect`] with the body pairs of the broad phase kept between calls in `kept`: the same
+/// points, without a new grid while no body has moved far.
+pub fn detect_kept(model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, t: Real, dt: Real, margin: Real, kept: &mut broad::KeptPairs) -> Vec<ContactPoint> {
     let mut points = Vec::new();
-    obstacles(model, positions, dim, t, dt, margin, &mut points);
-    body_pairs(model, positions, dim, margin, &mut points);
+    // Each body's box: most bodies of a packing are far from every wall and every other body,
+    // and a box tells so without visiting their nodes. With it, the body's largest facet, which
+    // sets how far beyond the box a node can still make a point with it.
+    let (boxes, largest): (Vec<broad::Aabb>, Vec<Real>) = model
+        .surfaces
+        .par_iter()
+        .zip(positions)
+        .map(|(surface, x)| {
+            let largest = (0..surface.facet_count()).map(|f| facet_size(&surface.facet_points(x, f).0[..surface.facet_nodes])).fold(0.0, Real::max);
+            (bounds(surface.nodes.iter().map(|&n| x[n as usize])), largest)
+        })
+        .unzip();
+    obstacles(model, positions, &boxes, dim, t, dt, margin, &mut points);
+    body_pairs(model, positions, &boxes, &largest, dim, margin, kept, &mut points);
     points
 }
 
@@ -155,7 +173,8 @@ pub fn thin_second_pass(model: &ContactModel, positions: &[Vec<Vec3>], points: &
     points.retain(|_| keep.next().unwrap_or(true));
 }
 
-fn obstacles(model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, t: Real, dt: Real, margin: Real, out: &mut Vec<ContactPoint>) {
+#[allow(clippy::too_many_arguments)]
+fn obstacles(model: &ContactModel, positions: &[Vec<Vec3>], boxes: &[broad::Aabb], dim: usize, t: Real, dt: Real, margin: Real, out: &mut Vec<ContactPoint>) {
     let bodies = model.surfaces.len();
     // Obstacle by obstacle, the bodies in parallel, the points in that order.
     let found: Vec<Vec<ContactPoint>> = (0..model.obstacles.len() * bodies)
@@ -164,10 +183,10 @@ fn obstacles(model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, t: Real,
             let (o, b) = (k / bodies, k % bodies);
             let obstacle = &model.obstacles[o];
             let mut points = Vec::new();
-            if !obstacle.bodies[b] {
+            let offset = obstacle.motion.displacement(t);
+            if !obstacle.bodies[b] || !obstacle.may_touch(boxes[b], offset, margin) {
                 return points;
             }
-            let offset = obstacle.motion.displacement(t);
             let velocity = [obstacle.motion.velocity(t), obstacle.motion.velocity(t + dt)];
             let displacement = sub(obstacle.motion.displacement(t + dt), offset);
             let mut touches: Vec<Touch> = Vec::new();
@@ -237,7 +256,8 @@ impl MasterFacets {
 /// Slave nodes against master facets, searched only inside the body pairs whose boxes come
 /// within reach of each other ([`broad::neighbours`]), the slaves in parallel. The result is
 /// that of a search of every node against every facet: the same points in the same order.
-fn body_pairs(model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, margin: Real, out: &mut Vec<ContactPoint>) {
+#[allow(clippy::too_many_arguments)]
+fn body_pairs(model: &ContactModel, positions: &[Vec<Vec3>], boxes: &[broad::Aabb], largest: &[Real], dim: usize, margin: Real, kept: &mut broad::KeptPairs, out: &mut Vec<ContactPoint>) {
     if !model.pairs.any() {
         return;
     }
@@ -247,18 +267,19 @@ fn body_pairs(model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, margin:
     // facet, and the margin, holds every node that can make a point with it, so that two bodies
     // whose grown boxes do not meet are not searched.
     let reach = |size: Real| margin.max(0.5 * size);
-    let grown_boxes: Vec<broad::Aabb> = surfaces
+    let grown_boxes: Vec<broad::Aabb> = boxes.iter().zip(largest).map(|(&b, &size)| broad::grown(b, reach(size) + EDGE_TOLERANCE * size + margin)).collect();
+    // Bodies move a fraction of a facet per step: a skin of half the largest facet keeps the
+    // pairs for several steps of the fastest body without many more pairs to test.
+    let skin = 0.5 * largest.iter().copied().fold(0.0, Real::max);
+    let near = kept.near(&grown_boxes, skin, |a, b| model.pairs.mu(a, b).is_some());
+    // The masters each slave's nodes are searched against: those whose grown box takes some of
+    // the slave's nodes, which needs the slave's box to meet it (and then the grown boxes meet,
+    // which is what the kept pairs hold).
+    let masters: Vec<Vec<u32>> = near
         .par_iter()
         .enumerate()
-        .map(|(b, surface)| {
-            let x = &positions[b];
-            let largest = (0..surface.facet_count()).map(|f| facet_size(&surface.facet_points(x, f).0[..surface.facet_nodes])).fold(0.0, Real::max);
-            broad::grown(bounds(surface.nodes.iter().map(|&n| x[n as usize])), reach(largest) + EDGE_TOLERANCE * largest + margin)
-        })
+        .map(|(s, list)| list.iter().copied().filter(|&m| model.pairs.friction(s, m as usize).is_some() && broad::intersect(boxes[s], grown_boxes[m as usize])).collect())
         .collect();
-    let near = broad::neighbours(&grown_boxes, |a, b| model.pairs.mu(a, b).is_some());
-    // The masters each slave's nodes are searched against.
-    let masters: Vec<Vec<u32>> = near.par_iter().enumerate().map(|(s, list)| list.iter().copied().filter(|&m| model.pairs.friction(s, m as usize).is_some()).collect()).collect();
     let mut searched = vec![false; surfaces.len()];
     for &m in masters.iter().flatten() {
         searched[m as usize] = true;

@@ -151,6 +151,21 @@ impl Obstacle {
         (faces, Mode::Walls)
     }
 
+    /// Whether a node inside the box `(lo, hi)` can touch the obstacle (displaced by `offset`)
+    /// within `margin` ([`Obstacle::touches`]): a face whose gap exceeds `margin` over the whole
+    /// box (the gap is linear, so its least is at a corner) takes none of its nodes.
+    pub fn may_touch(&self, (lo, hi): (Vec3, Vec3), offset: Vec3, margin: Real) -> bool {
+        let far = |f: &Face| {
+            let least: Real = (0..3).map(|i| (lo[i] - offset[i] - f.point[i]) * f.normal[i]).zip((0..3).map(|i| (hi[i] - offset[i] - f.point[i]) * f.normal[i])).map(|(a, b)| a.min(b)).sum();
+            least > margin
+        };
+        match self.mode {
+            // A node touches a solid only where every face's gap is within the margin.
+            Mode::Solid => !self.faces.iter().any(far),
+            Mode::Walls => !self.faces.iter().all(far),
+        }
+    }
+
     /// Faces that the node at `x` touches or may touch within `margin`, the obstacle being
     /// displaced by `offset`.
     pub fn touches(&self, x: Vec3, offset: Vec3, margin: Real, out: &mut Vec<Touch>) {

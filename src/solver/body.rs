@@ -637,7 +637,7 @@ impl Body {
     }
 
     /// Adds a free-dof increment to the trial displacement and records its size.
-    fn apply_increment(&mut self, du: &[Real]) {
+    pub fn apply_increment(&mut self, du: &[Real]) {
         self.tangent_current = false;
         let mut du2 = 0.0;
         for (d, f) in self.dofs.free_pairs() {

@@ -47,12 +47,36 @@ pub struct ContactStep {
     /// Whether `delassus` (and each point's rho) was built with the bodies' current
     /// factorisations: while no body refactorises, `W` does not change within a step.
     delassus_current: bool,
+    /// Per body, the contact-free increment `K̄⁻¹(-g)` of the increment being solved.
+    free_increment: Vec<Vec<Real>>,
+    /// Per body, the columns `K̄⁻¹ Hᵀ` that `delassus` was built from, kept where they are small
+    /// ([`KEPT_COLUMNS`]): with them the increment is `K̄⁻¹(-g) + K̄⁻¹ Hᵀ r` without a
+    /// second solve.
+    responses: Vec<Option<Response>>,
 }
+
+/// A body's kept columns `K̄⁻¹ Hᵀ`: column `j` (free dofs, contiguous) belongs to the listed
+/// point and direction `of[j]`.
+struct Response {
+    of: Vec<(usize, usize)>,
+    columns: Vec<Real>,
+}
+
+/// A body keeps its Delassus columns while they hold at most this many reals (8 MB): a grain's
+/// take a few thousand; a large body with many points solves its increment instead.
+const KEPT_COLUMNS: usize = 1 << 20;
 
 impl ContactStep {
     /// Sets up a step's contact points: their gap shift and the block pattern of `W`.
-    pub fn new(mut points: Vec<ContactPoint>, bodies: &[Body], p: &StepParams, warm: &HashMap<(u32, u32, crate::contact::Master), ([Real; 3], Real)>, velocity_scale: Real) -> Self {
+    pub fn new(mut points: Vec<ContactPoint>, bodies: &[&mut Body], p: &StepParams, warm: &HashMap<(u32, u32, crate::contact::Master), ([Real; 3], Real)>, velocity_scale: Real) -> Self {
         let dim = bodies[0].dim;
+        if points.is_empty() {
+            // Most groups of a packing: a grain that touches nothing.
+            let (delassus, colours, nodal) = Default::default();
+            let (per_body, h, r, local) = Default::default();
+            let (free_increment, responses) = Default::default();
+            return Self { points, delassus, colours, per_body, h, r, local, nodal, dim, velocity_scale, floor: 0.0, delassus_current: false, free_increment, responses };
+        }
         let (dt, theta) = (p.dt, p.theta);
         for c in &mut points {
             let vn_start = local_velocity(c, dim, |b, d| bodies[b].state.v[d], 0)[0];
@@ -125,7 +149,8 @@ impl ContactStep {
             nodal.terms.push(terms.collect());
         }
         nodal.nodes = slots.len();
-        Self { points, delassus, colours, per_body, h, r, local, nodal, dim, velocity_scale, floor, delassus_current: false }
+        let responses = bodies.iter().map(|_| None).collect();
+        Self { points, delassus, colours, per_body, h, r, local, nodal, dim, velocity_scale, floor, delassus_current: false, free_increment: Vec::new(), responses }
     }
 
     pub fn is_empty(&self) -> bool {
@@ -139,7 +164,7 @@ impl ContactStep {
     }
 
     /// Writes the nodal forces of the reactions `r` into each body's `contact_force`.
-    pub fn apply_forces(&self, bodies: &mut [Body]) {
+    pub fn apply_forces(&self, bodies: &mut [&mut Body]) {
         let dim = self.dim;
         for b in bodies.iter_mut() {
             b.contact_force.iter_mut().for_each(|f| *f = 0.0);
@@ -158,7 +183,7 @@ impl ContactStep {
     /// The Uzawa residuals `r - proj(r - ρ ṽ)` at the trial displacements as nodal forces, the
     /// largest relative to `max(largest nodal force, ρ v_scale)`: zero when the reactions satisfy
     /// the law with the current velocities.
-    pub fn complementarity(&self, bodies: &[Body], p: &StepParams) -> Real {
+    pub fn complementarity(&self, bodies: &[&mut Body], p: &StepParams) -> Real {
         let residual: Vec<[Real; 3]> = self
             .points
             .iter()
@@ -183,7 +208,7 @@ impl ContactStep {
     /// velocity plus the contact-free increment) and, when `refactorized` (some body has a new
     /// factorisation since the last increment) or not built yet for this step, the Delassus
     /// blocks.
-    pub fn prepare(&mut self, bodies: &mut [Body], p: &StepParams, settings: &Settings, refactorized: bool, times: &mut PhaseTimes) {
+    pub fn prepare(&mut self, bodies: &mut [&mut Body], p: &StepParams, settings: &Settings, refactorized: bool, times: &mut PhaseTimes) {
         let dim = self.dim;
         let theta_dt = p.theta * p.dt;
         let started = std::time::Instant::now();
@@ -207,6 +232,7 @@ impl ContactStep {
             }, 1);
             self.local[i].v_free = v;
         }
+        self.free_increment = x0;
         if refactorized || !self.delassus_current {
             self.build_delassus(bodies, theta_dt, settings, times);
         }
@@ -239,7 +265,7 @@ impl ContactStep {
 
     /// Applies the solved reactions: each body's contact forces and Newton increment
     /// `Δu = K̄⁻¹(-g + Hᵀ r)`. Returns the relative change of the contact forces.
-    pub fn apply(&mut self, bodies: &mut [Body], times: &mut PhaseTimes) -> Real {
+    pub fn apply(&mut self, bodies: &mut [&mut Body], times: &mut PhaseTimes) -> Real {
         let started = std::time::Instant::now();
         let solve_before = times.solve;
         // The change is judged on the nodal forces H^T r: with redundant constraints (two passes
@@ -253,8 +279,22 @@ impl ContactStep {
                 size = size.max(a.abs());
             }
         }
-        for body in bodies.iter_mut() {
-            body.newton_step(times);
+        for (b, body) in bodies.iter_mut().enumerate() {
+            match &self.responses[b] {
+                Some(response) => {
+                    let n = body.dofs.free_count;
+                    let list = &self.per_body[b].0;
+                    let mut du = std::mem::take(&mut self.free_increment[b]);
+                    for (j, &(k, a)) in response.of.iter().enumerate() {
+                        let r = self.r[list[k] as usize][a];
+                        if r != 0.0 {
+                            du.iter_mut().zip(&response.columns[j * n..(j + 1) * n]).for_each(|(x, c)| *x += r * c);
+                        }
+                    }
+                    body.apply_increment(&du);
+                }
+                None => body.newton_step(times),
+            }
         }
         times.contact += started.elapsed().as_secs_f64() - (times.solve - solve_before);
         change / size.max(self.floor).max(Real::MIN_POSITIVE)
@@ -262,7 +302,7 @@ impl ContactStep {
 
     /// The Delassus blocks `W = H K̄⁻¹ Hᵀ / (θ dt)` by back-substitution with each body's
     /// factorisation, a batch of columns at a time, and each point's Uzawa step length.
-    fn build_delassus(&mut self, bodies: &mut [Body], theta_dt: Real, settings: &Settings, times: &mut PhaseTimes) {
+    fn build_delassus(&mut self, bodies: &mut [&mut Body], theta_dt: Real, settings: &Settings, times: &mut PhaseTimes) {
         let dim = self.dim;
         self.delassus.blocks.iter_mut().for_each(|b| *b = [0.0; 9]);
         for (b, body) in bodies.iter_mut().enumerate() {
@@ -275,6 +315,8 @@ impl ContactStep {
             let points = &self.points;
             let directions = |k: usize| if points[list[k] as usize].friction == 0.0 { 1 } else { dim };
             let columns: Vec<(usize, usize)> = (0..list.len()).flat_map(|k| (0..directions(k)).map(move |a| (k, a))).collect();
+            let keep = n * columns.len() <= KEPT_COLUMNS;
+            let mut kept = Vec::with_capacity(if keep { n * columns.len() } else { 0 });
             for batch in columns.chunks(COLUMN_BATCH) {
                 let mut x = vec![0.0; n * batch.len()];
                 for (j, &(k, a)) in batch.iter().enumerate() {
@@ -293,7 +335,11 @@ impl ContactStep {
                         }
                     }
                 }
+                if keep {
+                    kept.extend_from_slice(&x);
+                }
             }
+            self.responses[b] = keep.then_some(Response { of: columns, columns: kept });
         }
         for i in 0..self.points.len() {
             self.local[i].rho = self.delassus.rho(i, dim, settings.sweep);
@@ -304,7 +350,7 @@ impl ContactStep {
     }
 
     /// Records the end-of-step velocity, status and linearised end gap of every point.
-    pub fn finish(&mut self, bodies: &[Body], p: &StepParams) {
+    pub fn finish(&mut self, bodies: &[&mut Body], p: &StepParams) {
         for (i, c) in self.points.iter_mut().enumerate() {
             c.r = self.r[i];
             c.rho = self.local[i].rho;
@@ -361,6 +407,6 @@ fn local_velocity(c: &ContactPoint, dim: usize, vel: impl Fn(usize, usize) -> Re
 }
 
 /// Relative velocity at the end of the step implied by the trial displacements.
-fn end_velocity(c: &ContactPoint, bodies: &[Body], p: &StepParams) -> [Real; 3] {
+fn end_velocity(c: &ContactPoint, bodies: &[&mut Body], p: &StepParams) -> [Real; 3] {
     local_velocity(c, bodies[0].dim, |b, d| bodies[b].trial_velocity(p, d), 1)
 }

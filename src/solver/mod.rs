@@ -14,7 +14,8 @@ pub use body::{Body, NodalLoad, StepFailure};
 pub use restart::{RestoreError, SavedBody, SavedFactor, SavedReaction, SavedState};
 pub use setup::{build_mesh, build_simulation};
 
-use crate::contact::detect::{detect, thin_second_pass};
+use crate::contact::broad::KeptPairs;
+use crate::contact::detect::{detect_kept, thin_second_pass};
 use crate::contact::overlap::{overlaps, Overlap, Worst};
 use crate::contact::{ContactModel, ContactPoint, ContactStats, Master};
 use crate::gpu::GpuWorld;
@@ -253,6 +254,8 @@ pub struct Simulation {
     pub first_step: (Real, usize),
     /// The warm start of a restored state, until its first step is done.
     restored_warm_start: Option<HashMap<(u32, u32, Master), ([Real; 3], Real)>>,
+    /// The broad phase's body pairs, kept between steps (they do not change the points found).
+    pub kept_pairs: KeptPairs,
 }
 
 impl Simulation {
@@ -492,9 +495,9 @@ impl Simulation {
     ///
     /// The velocity scale is what matters in a step: the fastest body or obstacle, or what
     /// gravity adds in one step, but not below round-off of the smallest element per step.
-    fn detect(&self, dt: Real) -> (Vec<ContactPoint>, Real) {
+    fn detect(&mut self, dt: Real) -> (Vec<ContactPoint>, Real) {
         let dim = self.dim;
-        let body_speed = self.bodies.iter().flat_map(|b| b.state.v.chunks(dim).map(|v| v.iter().map(|x| x * x).sum::<Real>().sqrt())).fold(0.0, Real::max);
+        let body_speed = self.bodies.par_iter().map(|b| b.state.v.chunks(dim).map(|v| v.iter().map(|x| x * x).sum::<Real>().sqrt()).fold(0.0, Real::max)).reduce(|| 0.0, Real::max);
         let obstacle_speed = self
             .contact
             .iter()
@@ -509,7 +512,7 @@ impl Simulation {
         let positions = node_positions(&self.bodies, |b| &b.state.u);
         // The search reaches as far as anything can travel in two steps, plus a little.
         let margin = 2.0 * dt * (2.0 * body_speed + obstacle_speed) + 0.01 * h;
-        (detect(model, &positions, dim, self.t, dt, margin), velocity_scale)
+        (detect_kept(model, &positions, dim, self.t, dt, margin, &mut self.kept_pairs), velocity_scale)
     }
 
     /// Energy bookkeeping of a converged step (before commit): external work, friction (as

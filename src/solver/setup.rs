@@ -438,6 +438,7 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
         interrupt: None,
         first_step: (0.0, 0),
         restored_warm_start: None,
+        kept_pairs: Default::default(),
     })
 }
 
