@@ -59,26 +59,32 @@ impl Worst {
 
 /// Every boundary node of every body that is inside an element of a body it can contact, or
 /// behind an obstacle that touches it (obstacles displaced to time `t`), deeper than `1e-9` of
-/// its element size. `meshes[b]` gives the connectivity, `positions[b]` the current nodes.
-pub fn overlaps(model: &ContactModel, meshes: &[&Mesh], positions: &[Vec<Vec3>], t: Real) -> Vec<Overlap> {
+/// its element size. `meshes[b]` gives the connectivity, `positions[b]` the current nodes;
+/// `kept` holds the body pairs whose boxes meet between calls (a default one to start afresh).
+pub fn overlaps(model: &ContactModel, meshes: &[&Mesh], positions: &[Vec<Vec3>], t: Real, kept: &mut broad::KeptPairs) -> Vec<Overlap> {
     let bodies = meshes.len();
     let can_touch = |a: usize, b: usize| model.pairs.mu(a, b).is_some();
     // Only a node inside another body's box can be inside that body, and only elements in the
     // box of a body that can touch theirs can hold such a node: in a packing that leaves the
     // rims of the grains (the search cost a quarter of a step with every element).
     let body_boxes: Vec<Aabb> = positions.par_iter().map(|x| bounds(x.iter().copied())).collect();
-    let neighbours = broad::neighbours(&body_boxes, can_touch);
-    let mut ids: Vec<(u32, u32)> = Vec::new();
-    let mut boxes: Vec<(Vec3, Vec3)> = Vec::new();
-    for (m, mesh) in meshes.iter().enumerate().filter(|(m, _)| !neighbours[*m].is_empty()) {
-        for e in 0..mesh.element_count() {
-            let (lo, hi) = bounds(mesh.element(e).iter().map(|&n| positions[m][n as usize]));
-            if neighbours[m].iter().any(|&s| intersect((lo, hi), body_boxes[s as usize])) {
-                ids.push((m as u32, e as u32));
-                boxes.push((lo, hi));
-            }
-        }
-    }
+    // A skin of a quarter of the smallest body keeps the pairs while the bodies move less.
+    let skin = 0.25 * body_boxes.iter().map(|(lo, hi)| (0..3).map(|i| hi[i] - lo[i]).fold(0.0, Real::max)).fold(Real::INFINITY, Real::min);
+    // A superset of the pairs whose boxes meet: every test below is against the boxes themselves.
+    let neighbours = kept.near(&body_boxes, if skin.is_finite() { skin } else { 0.0 }, can_touch);
+    // The elements in reach of another body, the bodies in parallel, in body order.
+    let (body_boxes, neighbours) = (&body_boxes, &neighbours);
+    let (ids, boxes): (Vec<(u32, u32)>, Vec<(Vec3, Vec3)>) = meshes
+        .par_iter()
+        .enumerate()
+        .filter(|(m, _)| neighbours[*m].iter().any(|&s| intersect(body_boxes[*m], body_boxes[s as usize])))
+        .flat_map_iter(|(m, mesh)| {
+            (0..mesh.element_count()).filter_map(move |e| {
+                let (lo, hi) = bounds(mesh.element(e).iter().map(|&n| positions[m][n as usize]));
+                neighbours[m].iter().any(|&s| intersect((lo, hi), body_boxes[s as usize])).then_some(((m as u32, e as u32), (lo, hi)))
+            })
+        })
+        .unzip();
     let grid = (!ids.is_empty()).then(|| {
         let cell = boxes.iter().map(|(lo, hi)| (0..3).map(|i| hi[i] - lo[i]).fold(0.0, Real::max)).sum::<Real>() / boxes.len() as Real;
         Grid::new(boxes.iter().enumerate().map(|(i, &(lo, hi))| (i as u32, lo, hi)), cell.max(Real::MIN_POSITIVE))
@@ -93,10 +99,16 @@ pub fn overlaps(model: &ContactModel, meshes: &[&Mesh], positions: &[Vec<Vec3>],
             let mut sizes: Option<Vec<Real>> = None;
             let mut found = Vec::new();
             let mut touches: Vec<Touch> = Vec::new();
+            // The obstacles this body's box reaches (few: the walls next to it).
+            let near: Vec<(usize, &super::Obstacle)> = model.obstacles.iter().enumerate().filter(|(o, obstacle)| obstacle.bodies[s] && obstacle.may_touch(body_boxes[s], offsets[*o], 0.0)).collect();
+            let meets = |m: &u32| intersect(body_boxes[s], body_boxes[*m as usize]);
+            if near.is_empty() && !neighbours[s].iter().any(meets) {
+                return found;
+            }
             for &node in &surface.nodes {
                 let x = positions[s][node as usize];
                 let mut own = || sizes.get_or_insert_with(|| node_sizes(surface, &positions[s]))[node as usize];
-                for (o, obstacle) in model.obstacles.iter().enumerate().filter(|(_, o)| o.bodies[s]) {
+                for &(o, obstacle) in &near {
                     obstacle.touches(x, offsets[o], 0.0, &mut touches);
                     if let Some(deepest) = touches.iter().min_by(|a, b| a.gap.total_cmp(&b.gap)) {
                         let (depth, size) = (-deepest.gap, own());

@@ -167,9 +167,10 @@ pub(crate) fn node_positions(bodies: &[Body], u: impl Fn(&Body) -> &[Real] + Syn
 }
 
 /// The boundary nodes of `bodies` at `positions` inside another body or behind an obstacle.
-pub(crate) fn body_overlaps(bodies: &[Body], model: &ContactModel, positions: &[Vec<[Real; 3]>], t: Real) -> Vec<Overlap> {
+/// The body pairs whose boxes meet come from `kept` ([`overlaps`]).
+pub(crate) fn body_overlaps(bodies: &[Body], model: &ContactModel, positions: &[Vec<[Real; 3]>], t: Real, kept: &mut KeptPairs) -> Vec<Overlap> {
     let meshes: Vec<&crate::mesh::Mesh> = bodies.iter().map(|b| &b.mesh).collect();
-    overlaps(model, &meshes, positions, t)
+    overlaps(model, &meshes, positions, t, kept)
 }
 
 /// A step retried with the second contact pass thinned is kept only if no node ends deeper than
@@ -254,8 +255,10 @@ pub struct Simulation {
     pub first_step: (Real, usize),
     /// The warm start of a restored state, until its first step is done.
     restored_warm_start: Option<HashMap<(u32, u32, Master), ([Real; 3], Real)>>,
-    /// The broad phase's body pairs, kept between steps (they do not change the points found).
+    /// The broad phase's body pairs, kept between steps (they do not change the points found),
+    /// and those of the overlap search after each step.
     pub kept_pairs: KeptPairs,
+    pub kept_overlap_pairs: KeptPairs,
 }
 
 impl Simulation {
@@ -426,7 +429,10 @@ impl Simulation {
         // The step took as many Newton iterations as its slowest group.
         report.newton_iterations += iterations;
         // The step's overlaps, measured once on its end state (the state `commit` keeps).
-        let overlap = Worst::of(&self.overlaps_at(&node_positions(&self.bodies, |b| &b.trial.u), self.t + dt));
+        let overlap = match &self.contact {
+            Some(model) => Worst::of(&body_overlaps(&self.bodies, model, &node_positions(&self.bodies, |b| &b.trial.u), self.t + dt, &mut self.kept_overlap_pairs)),
+            None => Worst::default(),
+        };
         if thin && overlap.ratio > THINNED_PENETRATION {
             // Thinning trades convergence for a little penetration; beyond this, a shorter step
             // with both passes is the better trade.
@@ -487,7 +493,7 @@ impl Simulation {
 
     /// Overlaps of the bodies at `positions`, the obstacles where they are at time `t`.
     fn overlaps_at(&self, positions: &[Vec<[Real; 3]>], t: Real) -> Vec<Overlap> {
-        self.contact.as_ref().map_or_else(Vec::new, |model| body_overlaps(&self.bodies, model, positions, t))
+        self.contact.as_ref().map_or_else(Vec::new, |model| body_overlaps(&self.bodies, model, positions, t, &mut KeptPairs::default()))
     }
 
     /// Contact points for a step of length `dt` from the committed state, and the step's

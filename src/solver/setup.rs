@@ -439,6 +439,7 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
         first_step: (0.0, 0),
         restored_warm_start: None,
         kept_pairs: Default::default(),
+        kept_overlap_pairs: Default::default(),
     })
 }
 
@@ -449,7 +450,7 @@ const SEPARATION_ROUNDS: usize = 200;
 
 fn initial_overlaps(bodies: &[Body], model: &ContactModel) -> Vec<Overlap> {
     let positions = node_positions(bodies, |b| &b.state.u);
-    body_overlaps(bodies, model, &positions, 0.0).into_iter().filter(|o| o.ratio() > INITIAL_OVERLAP).collect()
+    body_overlaps(bodies, model, &positions, 0.0, &mut Default::default()).into_iter().filter(|o| o.ratio() > INITIAL_OVERLAP).collect()
 }
 
 /// The scene key and the words of an overlap: the bodies (or obstacle), the node and the depth.
