@@ -111,15 +111,22 @@ pub struct StepReport {
 
 /// A step that could not be completed even after all cut-backs.
 #[derive(Debug, Clone, thiserror::Error)]
-#[error("step {step} at t = {t:.6e} failed after {cutbacks} cut-backs (dt = {dt:.3e}): {failure}")]
+#[error("step {step} at t = {t:.6e} failed after {cutbacks} cut-backs{} (dt = {dt:.3e}): {failure}", started_at(*.level))]
 pub struct RunFailure {
     pub step: usize,
     pub t: Real,
     pub dt: Real,
     pub cutbacks: usize,
+    /// The cut-back level the step started at, carried over from the steps before it.
+    pub level: usize,
     pub failure: StepFailure,
     /// The partial report (cut-back events) of the failing step.
     pub report: StepReport,
+}
+
+/// Where a failed step started, when earlier steps had already shortened it.
+fn started_at(level: usize) -> String {
+    if level == 0 { String::new() } else { format!(" from dt / {}", 1u64 << level) }
 }
 
 /// Energies of the whole system at the current time.
@@ -319,7 +326,7 @@ impl Simulation {
                 report.t = self.t;
                 Ok(report)
             }
-            Err((failure, sub_dt)) => Err(RunFailure { step: self.step + 1, t: self.t, dt: sub_dt, cutbacks: report.cutbacks, failure, report }),
+            Err((failure, sub_dt)) => Err(RunFailure { step: self.step + 1, t: self.t, dt: sub_dt, cutbacks: report.cutbacks, level, failure, report }),
         }
     }
 
