@@ -63,10 +63,10 @@ fn detection(c: &mut Criterion) {
         };
         let positions = vec![lower.nodes.clone(), upper.nodes.clone()];
         let margin = 0.01 / cells as f64;
-        let found = detect(&model, &positions, 3, 0.0, 1e-3, margin).len();
+        let found = detect(&model, &positions, 3, 0.0, 1e-3, margin, &mut Default::default()).len();
         assert_eq!(found, (cells + 1) * (cells + 1), "every node of the upper plate's bottom touches");
         group.throughput(Throughput::Elements(facets as u64));
-        group.bench_function(BenchmarkId::from_parameter(facets), |b| b.iter(|| black_box(detect(&model, &positions, 3, 0.0, 1e-3, margin).len())));
+        group.bench_function(BenchmarkId::from_parameter(facets), |b| b.iter(|| black_box(detect(&model, &positions, 3, 0.0, 1e-3, margin, &mut Default::default()).len())));
     }
     group.finish();
 }

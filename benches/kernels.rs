@@ -9,6 +9,7 @@
 
 use bifirst::bench::{bench_devices, bench_elements, bench_models, element_label, BenchCase, KINDS};
 use bifirst::element::{element_force_tangent, ElementOutput, Formulation, ReferenceGeometry};
+use bifirst::precision::Real;
 use bifirst::gpu::types::{Coefficients, DofOut};
 use bifirst::gpu::{Gpu, WorldKernel};
 use std::sync::Arc;

@@ -105,7 +105,7 @@ fn broad_phase_finds_what_brute_force_finds() {
         };
         let positions: Vec<Vec<[f64; 3]>> = meshes.iter().map(|m| m.nodes.clone()).collect();
         let margin = 0.01;
-        let found = detect(&model, &positions, 3, 0.0, 0.1, margin);
+        let found = detect(&model, &positions, 3, 0.0, 0.1, margin, &mut Default::default());
         // Brute force: every boundary node of the slave against every facet of the master.
         let mut expected = 0;
         for &node in &surfaces[1].nodes {

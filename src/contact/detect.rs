@@ -83,14 +83,10 @@ impl Candidate {
 }
 
 /// All contact points of the configuration `positions` (current node positions per body) at
-/// time `t`, for a step of length `dt`. A point is kept when its gap is at most `margin`.
-pub fn detect(model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, t: Real, dt: Real, margin: Real) -> Vec<ContactPoint> {
-    detect_kept(model, positions, dim, t, dt, margin, &mut broad::KeptPairs::default())
-}
-
-/// [`detect`] with the body pairs of the broad phase kept between calls in `kept`: the same
-/// points, without a new grid while no body has moved far.
-pub fn detect_kept(model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, t: Real, dt: Real, margin: Real, kept: &mut broad::KeptPairs) -> Vec<ContactPoint> {
+/// time `t`, for a step of length `dt`. A point is kept when its gap is at most `margin`. `kept`
+/// holds the broad phase's body pairs between calls (a default one to start afresh): the points
+/// are the same either way.
+pub fn detect(model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, t: Real, dt: Real, margin: Real, kept: &mut broad::KeptPairs) -> Vec<ContactPoint> {
     let mut points = Vec::new();
     // Each body's box: most bodies of a packing are far from every wall and every other body,
     // and a box tells so without visiting their nodes. With it, the body's largest facet, which

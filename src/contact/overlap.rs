@@ -72,12 +72,14 @@ pub fn overlaps(model: &ContactModel, meshes: &[&Mesh], positions: &[Vec<Vec3>],
     let skin = 0.25 * body_boxes.iter().map(|(lo, hi)| (0..3).map(|i| hi[i] - lo[i]).fold(0.0, Real::max)).fold(Real::INFINITY, Real::min);
     // A superset of the pairs whose boxes meet: every test below is against the boxes themselves.
     let neighbours = kept.near(&body_boxes, if skin.is_finite() { skin } else { 0.0 }, can_touch);
+    // Whether a body's box meets another's: only then can it hold or put a node in another body.
+    let meets_another: Vec<bool> = neighbours.par_iter().enumerate().map(|(b, list)| list.iter().any(|&o| intersect(body_boxes[b], body_boxes[o as usize]))).collect();
     // The elements in reach of another body, the bodies in parallel, in body order.
     let (body_boxes, neighbours) = (&body_boxes, &neighbours);
-    let (ids, boxes): (Vec<(u32, u32)>, Vec<(Vec3, Vec3)>) = meshes
+    let (ids, boxes): (Vec<(u32, u32)>, Vec<Aabb>) = meshes
         .par_iter()
         .enumerate()
-        .filter(|(m, _)| neighbours[*m].iter().any(|&s| intersect(body_boxes[*m], body_boxes[s as usize])))
+        .filter(|(m, _)| meets_another[*m])
         .flat_map_iter(|(m, mesh)| {
             (0..mesh.element_count()).filter_map(move |e| {
                 let (lo, hi) = bounds(mesh.element(e).iter().map(|&n| positions[m][n as usize]));
@@ -101,8 +103,7 @@ pub fn overlaps(model: &ContactModel, meshes: &[&Mesh], positions: &[Vec<Vec3>],
             let mut touches: Vec<Touch> = Vec::new();
             // The obstacles this body's box reaches (few: the walls next to it).
             let near: Vec<(usize, &super::Obstacle)> = model.obstacles.iter().enumerate().filter(|(o, obstacle)| obstacle.bodies[s] && obstacle.may_touch(body_boxes[s], offsets[*o], 0.0)).collect();
-            let meets = |m: &u32| intersect(body_boxes[s], body_boxes[*m as usize]);
-            if near.is_empty() && !neighbours[s].iter().any(meets) {
+            if near.is_empty() && !meets_another[s] {
                 return found;
             }
             for &node in &surface.nodes {

@@ -15,7 +15,7 @@ pub use restart::{RestoreError, SavedBody, SavedFactor, SavedReaction, SavedStat
 pub use setup::{build_mesh, build_simulation};
 
 use crate::contact::broad::KeptPairs;
-use crate::contact::detect::{detect_kept, thin_second_pass};
+use crate::contact::detect::{detect, thin_second_pass};
 use crate::contact::overlap::{overlaps, Overlap, Worst};
 use crate::contact::{ContactModel, ContactPoint, ContactStats, Master};
 use crate::gpu::GpuWorld;
@@ -526,7 +526,7 @@ impl Simulation {
         let positions = node_positions(&self.bodies, |b| &b.state.u);
         // The search reaches as far as anything can travel in two steps, plus a little.
         let margin = 2.0 * dt * (2.0 * body_speed + obstacle_speed) + 0.01 * h;
-        (detect_kept(model, &positions, dim, self.t, dt, margin, &mut self.kept_pairs), velocity_scale)
+        (detect(model, &positions, dim, self.t, dt, margin, &mut self.kept_pairs), velocity_scale)
     }
 
     /// Energy bookkeeping of a converged step (before commit): external work, friction (as
