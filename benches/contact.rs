@@ -7,7 +7,7 @@
 
 use bifirst::contact::detect::detect;
 use bifirst::contact::pairs::{BodyPairs, Rank};
-use bifirst::contact::{uzawa_step, ContactModel, Settings, Surface, Sweep};
+use bifirst::contact::{uzawa_step, Configuration, ContactModel, Settings, Surface, Sweep};
 use bifirst::mesh::{generate, ElementKind};
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use rand::rngs::SmallRng;
@@ -61,12 +61,13 @@ fn detection(c: &mut Criterion) {
             obstacles: Vec::new(),
             pairs: upper_on_lower(0.3),
         };
-        let positions = vec![lower.nodes.clone(), upper.nodes.clone()];
+        let mut config = Configuration::new(&model, vec![lower.nodes.clone(), upper.nodes.clone()]);
+        let placed = |_: usize, _: &mut Vec<[f64; 3]>| unreachable!("every body is placed");
         let margin = 0.01 / cells as f64;
-        let found = detect(&model, &positions, 3, 0.0, 1e-3, margin, &mut Default::default()).len();
+        let found = detect(&model, &mut config, &placed, 3, 0.0, 1e-3, margin, &mut Default::default()).len();
         assert_eq!(found, (cells + 1) * (cells + 1), "every node of the upper plate's bottom touches");
         group.throughput(Throughput::Elements(facets as u64));
-        group.bench_function(BenchmarkId::from_parameter(facets), |b| b.iter(|| black_box(detect(&model, &positions, 3, 0.0, 1e-3, margin, &mut Default::default()).len())));
+        group.bench_function(BenchmarkId::from_parameter(facets), |b| b.iter(|| black_box(detect(&model, &mut config, &placed, 3, 0.0, 1e-3, margin, &mut Default::default()).len())));
     }
     group.finish();
 }

@@ -7,7 +7,7 @@ mod common_run;
 use bifirst::contact::detect::detect;
 use bifirst::contact::geometry::{dot, on_quad, on_segment, sub};
 use bifirst::contact::pairs::{BodyPairs, Rank};
-use bifirst::contact::{ContactModel, Master, Settings, Surface, Sweep};
+use bifirst::contact::{Configuration, ContactModel, Master, Settings, Surface, Sweep};
 use bifirst::mesh::generate::{cuboid, disk, rectangle};
 use bifirst::mesh::{ElementKind, Mesh};
 use bifirst::scene::parse_scene;
@@ -105,7 +105,8 @@ fn broad_phase_finds_what_brute_force_finds() {
         };
         let positions: Vec<Vec<[f64; 3]>> = meshes.iter().map(|m| m.nodes.clone()).collect();
         let margin = 0.01;
-        let found = detect(&model, &positions, 3, 0.0, 0.1, margin, &mut Default::default());
+        let mut config = Configuration::new(&model, positions.clone());
+        let found = detect(&model, &mut config, &|_, _| unreachable!("every body is placed"), 3, 0.0, 0.1, margin, &mut Default::default());
         // Brute force: every boundary node of the slave against every facet of the master.
         let mut expected = 0;
         for &node in &surfaces[1].nodes {

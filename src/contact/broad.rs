@@ -63,7 +63,7 @@ impl KeptPairs {
     /// has left its grown one (or the number of bodies changed).
     pub fn near(&mut self, boxes: &[Aabb], skin: Real, can_touch: impl Fn(usize, usize) -> bool + Sync) -> &[Vec<u32>] {
         let inside = |a: &Aabb, b: &Aabb| (0..3).all(|i| b.0[i] <= a.0[i] && a.1[i] <= b.1[i]);
-        let valid = self.boxes.len() == boxes.len() && boxes.par_iter().zip(&self.boxes).all(|(now, kept)| inside(now, kept));
+        let valid = self.boxes.len() == boxes.len() && boxes.iter().zip(&self.boxes).all(|(now, kept)| inside(now, kept));
         if !valid {
             self.boxes = boxes.iter().map(|&b| grown(b, skin)).collect();
             self.near = neighbours(&self.boxes, can_touch);

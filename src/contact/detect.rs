@@ -6,10 +6,12 @@ use super::broad;
 use super::geometry::{self, bounds, frame, norm, sub, Projection, Vec3};
 use super::grid::Grid;
 use super::obstacle::Touch;
+use super::configuration::{Configuration, Fill};
 use super::{ContactModel, ContactPoint, Master, Status, Term};
 use crate::precision::Real;
 use rayon::prelude::*;
 use std::collections::{HashMap, HashSet};
+use std::sync::OnceLock;
 
 /// How far beyond a facet's edge (relative) a projection is still accepted, so that a node
 /// cannot slip between two neighbouring facets.
@@ -82,26 +84,29 @@ impl Candidate {
     }
 }
 
-/// All contact points of the configuration `positions` (current node positions per body) at
-/// time `t`, for a step of length `dt`. A point is kept when its gap is at most `margin`. `kept`
-/// holds the broad phase's body pairs between calls (a default one to start afresh): the points
-/// are the same either way.
-pub fn detect(model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, t: Real, dt: Real, margin: Real, kept: &mut broad::KeptPairs) -> Vec<ContactPoint> {
-    let mut points = Vec::new();
-    // Each body's box: most bodies of a packing are far from every wall and every other body,
-    // and a box tells so without visiting their nodes. With it, the body's largest facet, which
-    // sets how far beyond the box a node can still make a point with it.
-    let (boxes, largest): (Vec<broad::Aabb>, Vec<Real>) = model
-        .surfaces
-        .par_iter()
-        .zip(positions)
-        .map(|(surface, x)| {
-            let largest = (0..surface.facet_count()).map(|f| facet_size(&surface.facet_points(x, f).0[..surface.facet_nodes])).fold(0.0, Real::max);
-            (bounds(surface.nodes.iter().map(|&n| x[n as usize])), largest)
-        })
-        .unzip();
-    obstacles(model, positions, &boxes, dim, t, dt, margin, &mut points);
-    body_pairs(model, positions, &boxes, &largest, dim, margin, kept, &mut points);
+/// All contact points of the configuration (node boxes of every body; positions placed, by
+/// `fill`, for the bodies something may touch) at time `t`, for a step of length `dt`. A point
+/// is kept when its gap is at most `margin`. `kept` holds the broad phase's body pairs between
+/// calls (a default one to start afresh): the points are the same either way.
+#[allow(clippy::too_many_arguments)]
+pub fn detect(model: &ContactModel, config: &mut Configuration, fill: &Fill<'_>, dim: usize, t: Real, dt: Real, margin: Real, kept: &mut broad::KeptPairs) -> Vec<ContactPoint> {
+    // The boxes tell, without visiting any node, that most bodies of a packing are far from
+    // every wall and every other body: only the others' nodes are placed and searched.
+    let walls = ObstacleSearch::new(model, &config.boxes, t, dt, margin);
+    let pairs = PairSearch::new(model, &config.boxes, &config.largest, margin, kept);
+    let mut needed = vec![false; config.boxes.len()];
+    for &(_, b) in &walls.candidates {
+        needed[b as usize] = true;
+    }
+    for (s, masters) in pairs.masters.iter().enumerate() {
+        needed[s] |= !masters.is_empty();
+        for &m in masters {
+            needed[m as usize] = true;
+        }
+    }
+    config.nodes.place(|b| needed[b], fill);
+    let mut points = walls.points(model, &config.nodes.positions, dim, margin);
+    points.extend(pairs.points(model, &config.nodes.positions, dim, margin));
     points
 }
 
@@ -169,37 +174,63 @@ pub fn thin_second_pass(model: &ContactModel, positions: &[Vec<Vec3>], points: &
     points.retain(|_| keep.next().unwrap_or(true));
 }
 
-#[allow(clippy::too_many_arguments)]
-fn obstacles(model: &ContactModel, positions: &[Vec<Vec3>], boxes: &[broad::Aabb], dim: usize, t: Real, dt: Real, margin: Real, out: &mut Vec<ContactPoint>) {
-    let bodies = model.surfaces.len();
-    // Obstacle by obstacle, the bodies in parallel, the points in that order.
-    let found: Vec<Vec<ContactPoint>> = (0..model.obstacles.len() * bodies)
-        .into_par_iter()
-        .map(|k| {
-            let (o, b) = (k / bodies, k % bodies);
-            let obstacle = &model.obstacles[o];
-            let mut points = Vec::new();
-            let offset = obstacle.motion.displacement(t);
-            if !obstacle.bodies[b] || !obstacle.may_touch(boxes[b], offset, margin) {
-                return points;
-            }
-            let velocity = [obstacle.motion.velocity(t), obstacle.motion.velocity(t + dt)];
-            let displacement = sub(obstacle.motion.displacement(t + dt), offset);
-            let mut touches: Vec<Touch> = Vec::new();
-            for &node in &model.surfaces[b].nodes {
-                obstacle.touches(positions[b][node as usize], offset, margin, &mut touches);
-                for touch in &touches {
-                    let master = Master::Obstacle { obstacle: o as u32, face: touch.face };
-                    let mut p = point(b, node, master, frame(touch.normal, touch.tangent, dim), touch.gap, obstacle.friction);
-                    p.obstacle_velocity = velocity;
-                    p.obstacle_displacement = displacement;
-                    points.push(p);
+/// The obstacle side of a detection: each obstacle's motion over the step, and the (obstacle,
+/// body) pairs whose box comes within the margin of it, obstacle by obstacle.
+struct ObstacleSearch {
+    /// Offset at `t`, velocity at `t` and `t + dt`, displacement over the step.
+    motions: Vec<(Vec3, [Vec3; 2], Vec3)>,
+    candidates: Vec<(u32, u32)>,
+}
+
+impl ObstacleSearch {
+    fn new(model: &ContactModel, boxes: &[broad::Aabb], t: Real, dt: Real, margin: Real) -> Self {
+        let bodies = boxes.len();
+        // Once per obstacle, not once per body: a motion is a table.
+        let motions: Vec<(Vec3, [Vec3; 2], Vec3)> = model
+            .obstacles
+            .iter()
+            .map(|o| {
+                let offset = o.motion.displacement(t);
+                (offset, [o.motion.velocity(t), o.motion.velocity(t + dt)], sub(o.motion.displacement(t + dt), offset))
+            })
+            .collect();
+        let candidates = (0..model.obstacles.len() * bodies)
+            .into_par_iter()
+            .filter(|&k| {
+                let (o, b) = (k / bodies, k % bodies);
+                let obstacle = &model.obstacles[o];
+                obstacle.bodies[b] && obstacle.may_touch(boxes[b], motions[o].0, margin)
+            })
+            .map(|k| ((k / bodies) as u32, (k % bodies) as u32))
+            .collect();
+        Self { motions, candidates }
+    }
+
+    /// The points of the candidates' boundary nodes, the candidates in parallel, in their order.
+    fn points(&self, model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, margin: Real) -> Vec<ContactPoint> {
+        let found: Vec<Vec<ContactPoint>> = self
+            .candidates
+            .par_iter()
+            .map(|&(o, b)| {
+                let (o, b) = (o as usize, b as usize);
+                let obstacle = &model.obstacles[o];
+                let (offset, velocity, displacement) = self.motions[o];
+                let (mut points, mut touches): (Vec<ContactPoint>, Vec<Touch>) = Default::default();
+                for &node in &model.surfaces[b].nodes {
+                    obstacle.touches(positions[b][node as usize], offset, margin, &mut touches);
+                    for touch in &touches {
+                        let master = Master::Obstacle { obstacle: o as u32, face: touch.face };
+                        let mut p = point(b, node, master, frame(touch.normal, touch.tangent, dim), touch.gap, obstacle.friction);
+                        p.obstacle_velocity = velocity;
+                        p.obstacle_displacement = displacement;
+                        points.push(p);
+                    }
                 }
-            }
-            points
-        })
-        .collect();
-    out.extend(found.into_iter().flatten());
+                points
+            })
+            .collect();
+        found.into_iter().flatten().collect()
+    }
 }
 
 /// Masters with more facets than this get a hash grid of them; smaller ones are scanned.
@@ -252,95 +283,105 @@ impl MasterFacets {
 /// Slave nodes against master facets, searched only inside the body pairs whose boxes come
 /// within reach of each other ([`broad::neighbours`]), the slaves in parallel. The result is
 /// that of a search of every node against every facet: the same points in the same order.
-#[allow(clippy::too_many_arguments)]
-fn body_pairs(model: &ContactModel, positions: &[Vec<Vec3>], boxes: &[broad::Aabb], largest: &[Real], dim: usize, margin: Real, kept: &mut broad::KeptPairs, out: &mut Vec<ContactPoint>) {
-    if !model.pairs.any() {
-        return;
+struct PairSearch {
+    /// Each body's box grown by how far off it a node can still make a point with it.
+    grown_boxes: Vec<broad::Aabb>,
+    /// Per slave, the masters its nodes are searched against.
+    masters: Vec<Vec<u32>>,
+}
+
+impl PairSearch {
+    fn new(model: &ContactModel, boxes: &[broad::Aabb], largest: &[Real], margin: Real, kept: &mut broad::KeptPairs) -> Self {
+        if !model.pairs.any() {
+            return Self { grown_boxes: Vec::new(), masters: vec![Vec::new(); boxes.len()] };
+        }
+        // A point's node is at most `reach` (half a facet, or the margin) off its facet's plane
+        // and `EDGE_TOLERANCE` of an edge beyond its sides: a body's box grown by that for its
+        // largest facet, and the margin, holds every node that can make a point with it, so
+        // that two bodies whose grown boxes do not meet are not searched.
+        let reach = |size: Real| margin.max(0.5 * size);
+        let grown_boxes: Vec<broad::Aabb> = boxes.iter().zip(largest).map(|(&b, &size)| broad::grown(b, reach(size) + EDGE_TOLERANCE * size + margin)).collect();
+        // Bodies move a fraction of a facet per step: a skin of half the largest facet keeps
+        // the pairs for several steps of the fastest body without many more pairs to test.
+        let skin = 0.5 * largest.iter().copied().fold(0.0, Real::max);
+        let near = kept.near(&grown_boxes, skin, |a, b| model.pairs.mu(a, b).is_some());
+        // The masters each slave's nodes are searched against: those whose grown box takes some
+        // of the slave's nodes, which needs the slave's box to meet it (and then the grown boxes
+        // meet, which is what the kept pairs hold).
+        let masters = near
+            .par_iter()
+            .enumerate()
+            .map(|(s, list)| list.iter().copied().filter(|&m| model.pairs.friction(s, m as usize).is_some() && broad::intersect(boxes[s], grown_boxes[m as usize])).collect())
+            .collect();
+        Self { grown_boxes, masters }
     }
-    let surfaces = &model.surfaces;
-    // A point's node is at most `reach` (half a facet, or the margin) off its facet's plane and
-    // `EDGE_TOLERANCE` of an edge beyond its sides: a body's box grown by that for its largest
-    // facet, and the margin, holds every node that can make a point with it, so that two bodies
-    // whose grown boxes do not meet are not searched.
-    let reach = |size: Real| margin.max(0.5 * size);
-    let grown_boxes: Vec<broad::Aabb> = boxes.iter().zip(largest).map(|(&b, &size)| broad::grown(b, reach(size) + EDGE_TOLERANCE * size + margin)).collect();
-    // Bodies move a fraction of a facet per step: a skin of half the largest facet keeps the
-    // pairs for several steps of the fastest body without many more pairs to test.
-    let skin = 0.5 * largest.iter().copied().fold(0.0, Real::max);
-    let near = kept.near(&grown_boxes, skin, |a, b| model.pairs.mu(a, b).is_some());
-    // The masters each slave's nodes are searched against: those whose grown box takes some of
-    // the slave's nodes, which needs the slave's box to meet it (and then the grown boxes meet,
-    // which is what the kept pairs hold).
-    let masters: Vec<Vec<u32>> = near
-        .par_iter()
-        .enumerate()
-        .map(|(s, list)| list.iter().copied().filter(|&m| model.pairs.friction(s, m as usize).is_some() && broad::intersect(boxes[s], grown_boxes[m as usize])).collect())
-        .collect();
-    let mut searched = vec![false; surfaces.len()];
-    for &m in masters.iter().flatten() {
-        searched[m as usize] = true;
-    }
-    // The facets of every master that some slave searches (none of the others).
-    let facets: Vec<Option<MasterFacets>> =
-        surfaces.par_iter().enumerate().map(|(m, surface)| searched[m].then(|| MasterFacets::new(surface, &positions[m], dim, margin))).collect();
-    let found: Vec<Vec<ContactPoint>> = (0..surfaces.len())
-        .into_par_iter()
-        .map(|s| {
-            let mut points = Vec::new();
-            if masters[s].is_empty() {
-                return points;
-            }
-            let normals = node_normals(&surfaces[s], &positions[s]);
-            // Best facet per master body for the current node, among this slave's masters: one
-            // that faces the node's own surface, else one that does not (`Candidate`).
-            let mut best: Vec<[Option<(Real, usize, Projection)>; 2]> = vec![[None, None]; masters[s].len()];
-            let mut xs: Vec<Vec3> = Vec::with_capacity(4);
-            for &node in &surfaces[s].nodes {
-                let x = positions[s][node as usize];
-                for (k, &m) in masters[s].iter().enumerate() {
-                    let m = m as usize;
-                    if !broad::intersect((x, x), grown_boxes[m]) {
-                        continue;
+
+    fn points(&self, model: &ContactModel, positions: &[Vec<Vec3>], dim: usize, margin: Real) -> Vec<ContactPoint> {
+        let (surfaces, masters, grown_boxes) = (&model.surfaces, &self.masters, &self.grown_boxes);
+        // A master's facets, made when a slave node first comes within its grown box (in a
+        // loose packing most neighbours' boxes meet without a node in reach).
+        let facets: Vec<OnceLock<MasterFacets>> = (0..surfaces.len()).map(|_| OnceLock::new()).collect();
+        let found: Vec<Vec<ContactPoint>> = (0..surfaces.len())
+            .into_par_iter()
+            .map(|s| {
+                let mut points = Vec::new();
+                if masters[s].is_empty() {
+                    return points;
+                }
+                // The slave's node normals, when a node first projects on a master facet.
+                let mut normals: Option<Vec<Vec3>> = None;
+                // Best facet per master body for the current node, among this slave's masters: one
+                // that faces the node's own surface, else one that does not (`Candidate`).
+                let mut best: Vec<[Option<(Real, usize, Projection)>; 2]> = vec![[None, None]; masters[s].len()];
+                let mut xs: Vec<Vec3> = Vec::with_capacity(4);
+                for &node in &surfaces[s].nodes {
+                    let x = positions[s][node as usize];
+                    for (k, &m) in masters[s].iter().enumerate() {
+                        let m = m as usize;
+                        if !broad::intersect((x, x), grown_boxes[m]) {
+                            continue;
+                        }
+                        facets[m].get_or_init(|| MasterFacets::new(&surfaces[m], &positions[m], dim, margin)).candidates(x, |f, size| {
+                            let facet = surfaces[m].facet(f);
+                            xs.clear();
+                            xs.extend(facet.iter().map(|&n| positions[m][n as usize]));
+                            let Some(p) = project(x, &xs, EDGE_TOLERANCE) else { return };
+                            // Penetrations deeper than half a facet are the far side of the master body.
+                            if p.gap > margin || p.gap < -0.5 * size {
+                                return;
+                            }
+                            let normal = normals.get_or_insert_with(|| node_normals(&surfaces[s], &positions[s]))[node as usize];
+                            let tier = match Candidate::of(normal, &p, || project(x, &xs, 0.0).is_some()) {
+                                Candidate::Facing => 0,
+                                Candidate::Askew => 1,
+                                Candidate::Extension => return,
+                            };
+                            let slot = &mut best[k][tier];
+                            if slot.as_ref().is_none_or(|(g, _, _)| p.gap.abs() < g.abs()) {
+                                *slot = Some((p.gap, f, p));
+                            }
+                        });
                     }
-                    facets[m].as_ref().expect("a searched master").candidates(x, |f, size| {
+                    for (k, &m) in masters[s].iter().enumerate() {
+                        let [facing, askew] = std::mem::take(&mut best[k]);
+                        let Some((gap, f, p)) = facing.or(askew) else { continue };
+                        let m = m as usize;
                         let facet = surfaces[m].facet(f);
-                        xs.clear();
-                        xs.extend(facet.iter().map(|&n| positions[m][n as usize]));
-                        let Some(p) = project(x, &xs, EDGE_TOLERANCE) else { return };
-                        // Penetrations deeper than half a facet are the far side of the master body.
-                        if p.gap > margin || p.gap < -0.5 * size {
-                            return;
+                        let mu = model.pairs.friction(s, m).expect("pair checked");
+                        let mut c = point(s, node, Master::Body(m as u32), frame(p.normal, Some(p.tangent), dim), gap, mu);
+                        for (k, &n) in facet.iter().enumerate() {
+                            c.terms[1 + k] = Term { body: m as u32, node: n, coef: -p.weights[k] };
                         }
-                        let tier = match Candidate::of(normals[node as usize], &p, || project(x, &xs, 0.0).is_some()) {
-                            Candidate::Facing => 0,
-                            Candidate::Askew => 1,
-                            Candidate::Extension => return,
-                        };
-                        let slot = &mut best[k][tier];
-                        if slot.as_ref().is_none_or(|(g, _, _)| p.gap.abs() < g.abs()) {
-                            *slot = Some((p.gap, f, p));
-                        }
-                    });
-                }
-                for (k, &m) in masters[s].iter().enumerate() {
-                    let [facing, askew] = std::mem::take(&mut best[k]);
-                    let Some((gap, f, p)) = facing.or(askew) else { continue };
-                    let m = m as usize;
-                    let facet = surfaces[m].facet(f);
-                    let mu = model.pairs.friction(s, m).expect("pair checked");
-                    let mut c = point(s, node, Master::Body(m as u32), frame(p.normal, Some(p.tangent), dim), gap, mu);
-                    for (k, &n) in facet.iter().enumerate() {
-                        c.terms[1 + k] = Term { body: m as u32, node: n, coef: -p.weights[k] };
+                        c.term_count = 1 + facet.len();
+                        c.second = model.pairs.second(s, m);
+                        points.push(c);
                     }
-                    c.term_count = 1 + facet.len();
-                    c.second = model.pairs.second(s, m);
-                    points.push(c);
                 }
-            }
-            points
-        })
-        .collect();
-    out.extend(found.into_iter().flatten());
+                points
+            })
+            .collect();
+        found.into_iter().flatten().collect()
+    }
 }
 
 /// Outward normal of a facet, scaled by its area (length in 2D).

@@ -8,6 +8,7 @@
 
 pub mod anderson;
 pub mod broad;
+pub mod configuration;
 pub mod detect;
 pub mod geometry;
 pub mod grid;
@@ -18,6 +19,7 @@ pub mod pairs;
 pub mod surface;
 pub mod uzawa;
 
+pub use configuration::Configuration;
 pub use law::{project_on_cone, uzawa_step, Status};
 pub use obstacle::{Motion, Obstacle};
 pub use surface::Surface;

@@ -8,6 +8,7 @@ use super::geometry::{add, bounds, cross, dot, edge_range, norm, scale, sub, Vec
 use super::broad::{self, intersect, Aabb};
 use super::grid::Grid;
 use super::obstacle::Touch;
+use super::configuration::{Configuration, Fill};
 use super::ContactModel;
 use crate::mesh::{ElementKind, Mesh};
 use crate::precision::Real;
@@ -59,23 +60,29 @@ impl Worst {
 
 /// Every boundary node of every body that is inside an element of a body it can contact, or
 /// behind an obstacle that touches it (obstacles displaced to time `t`), deeper than `1e-9` of
-/// its element size. `meshes[b]` gives the connectivity, `positions[b]` the current nodes;
-/// `kept` holds the body pairs whose boxes meet between calls (a default one to start afresh).
-pub fn overlaps(model: &ContactModel, meshes: &[&Mesh], positions: &[Vec<Vec3>], t: Real, kept: &mut broad::KeptPairs) -> Vec<Overlap> {
+/// its element size. `meshes[b]` gives the connectivity, `config` the current boxes and, placed
+/// by `fill` where a body's box meets another's or an obstacle, its nodes; `kept` holds the body
+/// pairs whose boxes meet between calls (a default one to start afresh).
+pub fn overlaps(model: &ContactModel, meshes: &[&Mesh], config: &mut Configuration, fill: &Fill<'_>, t: Real, kept: &mut broad::KeptPairs) -> Vec<Overlap> {
     let bodies = meshes.len();
     let can_touch = |a: usize, b: usize| model.pairs.mu(a, b).is_some();
     // Only a node inside another body's box can be inside that body, and only elements in the
     // box of a body that can touch theirs can hold such a node: in a packing that leaves the
     // rims of the grains (the search cost a quarter of a step with every element).
-    let body_boxes: Vec<Aabb> = positions.par_iter().map(|x| bounds(x.iter().copied())).collect();
+    let body_boxes = &config.boxes;
     // A skin of a quarter of the smallest body keeps the pairs while the bodies move less.
     let skin = 0.25 * body_boxes.iter().map(|(lo, hi)| (0..3).map(|i| hi[i] - lo[i]).fold(0.0, Real::max)).fold(Real::INFINITY, Real::min);
     // A superset of the pairs whose boxes meet: every test below is against the boxes themselves.
     let neighbours = kept.near(&body_boxes, if skin.is_finite() { skin } else { 0.0 }, can_touch);
     // Whether a body's box meets another's: only then can it hold or put a node in another body.
     let meets_another: Vec<bool> = neighbours.par_iter().enumerate().map(|(b, list)| list.iter().any(|&o| intersect(body_boxes[b], body_boxes[o as usize]))).collect();
+    let offsets: &[Vec3] = &model.obstacles.iter().map(|o| o.motion.displacement(t)).collect::<Vec<_>>();
+    // The obstacles each body's box reaches (few: the walls next to it).
+    let near_obstacles = |s: usize| model.obstacles.iter().enumerate().filter(move |(o, obstacle)| obstacle.bodies[s] && obstacle.may_touch(body_boxes[s], offsets[*o], 0.0));
+    config.nodes.place(|b| meets_another[b] || near_obstacles(b).next().is_some(), fill);
+    let positions = &config.nodes.positions;
     // The elements in reach of another body, the bodies in parallel, in body order.
-    let (body_boxes, neighbours) = (&body_boxes, &neighbours);
+    let neighbours = &neighbours;
     let (ids, boxes): (Vec<(u32, u32)>, Vec<Aabb>) = meshes
         .par_iter()
         .enumerate()
@@ -92,7 +99,6 @@ pub fn overlaps(model: &ContactModel, meshes: &[&Mesh], positions: &[Vec<Vec3>],
         Grid::new(boxes.iter().enumerate().map(|(i, &(lo, hi))| (i as u32, lo, hi)), cell.max(Real::MIN_POSITIVE))
     });
     let dim = meshes.first().map_or(2, |m| m.dim());
-    let offsets: Vec<Vec3> = model.obstacles.iter().map(|o| o.motion.displacement(t)).collect();
     (0..bodies)
         .into_par_iter()
         .flat_map_iter(|s| {
@@ -102,7 +108,7 @@ pub fn overlaps(model: &ContactModel, meshes: &[&Mesh], positions: &[Vec<Vec3>],
             let mut found = Vec::new();
             let mut touches: Vec<Touch> = Vec::new();
             // The obstacles this body's box reaches (few: the walls next to it).
-            let near: Vec<(usize, &super::Obstacle)> = model.obstacles.iter().enumerate().filter(|(o, obstacle)| obstacle.bodies[s] && obstacle.may_touch(body_boxes[s], offsets[*o], 0.0)).collect();
+            let near: Vec<(usize, &super::Obstacle)> = near_obstacles(s).collect();
             if near.is_empty() && !meets_another[s] {
                 return found;
             }

@@ -29,6 +29,11 @@ pub struct Surface {
     pub nodes: Vec<u32>,
     /// The element each facet belongs to (for colouring the boundary by element stress).
     pub owners: Vec<u32>,
+    /// `facets` as indices into `nodes`: a facet's points among the boundary nodes' alone.
+    pub local_facets: Vec<u32>,
+    /// The boundary nodes' reference positions, side by side (a pass over every body's boundary
+    /// each step reads these instead of the whole mesh).
+    pub reference: Vec<Vec3>,
 }
 
 impl Surface {
@@ -52,7 +57,16 @@ impl Surface {
         let mut nodes = facets.clone();
         nodes.sort_unstable();
         nodes.dedup();
-        Self { facet_nodes, facets, nodes, owners }
+        let local_facets = facets.iter().map(|n| nodes.binary_search(n).expect("a facet's node is a boundary node") as u32).collect();
+        let reference = nodes.iter().map(|&n| mesh.nodes[n as usize]).collect();
+        Self { facet_nodes, facets, nodes, owners, local_facets, reference }
+    }
+
+    /// The same boundary on another mesh of the same connectivity (a packing's grains of one
+    /// shape share the boundary search of one of them).
+    pub fn on(&self, mesh: &Mesh) -> Self {
+        let reference = self.nodes.iter().map(|&n| mesh.nodes[n as usize]).collect();
+        Self { reference, ..self.clone() }
     }
 
     pub fn facet_count(&self) -> usize {

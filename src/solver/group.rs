@@ -27,9 +27,24 @@ pub struct GroupReport {
     pub wall: PhaseTimes,
 }
 
-/// Connected components of the bodies joined by contact points, each as its bodies (ascending)
-/// and its points (in detection order).
-fn components(body_count: usize, points: &[ContactPoint]) -> Vec<(Vec<usize>, Vec<usize>)> {
+/// Connected components of the bodies joined by contact points, flat: group `g`'s bodies
+/// (ascending) are `bodies[body_start[g]..body_start[g + 1]]`, its points (in detection order)
+/// likewise. Flat, because a packing at rest is 10 000 groups of one body and no point, and a
+/// pair of vectors per group cost more than the groups' Newton loops.
+struct Plan {
+    bodies: Vec<usize>,
+    body_start: Vec<usize>,
+    points: Vec<usize>,
+    point_start: Vec<usize>,
+}
+
+impl Plan {
+    fn len(&self) -> usize {
+        self.body_start.len() - 1
+    }
+}
+
+fn components(body_count: usize, points: &[ContactPoint]) -> Plan {
     let mut parent: Vec<usize> = (0..body_count).collect();
     fn root(parent: &mut [usize], mut b: usize) -> usize {
         while parent[b] != b {
@@ -45,31 +60,52 @@ fn components(body_count: usize, points: &[ContactPoint]) -> Vec<(Vec<usize>, Ve
             parent[a.max(b)] = a.min(b);
         }
     }
+    // Groups numbered in the order of their first body.
     let mut index = vec![usize::MAX; body_count];
-    let mut groups: Vec<(Vec<usize>, Vec<usize>)> = Vec::new();
+    let mut group_of = vec![0; body_count];
+    let mut groups = 0;
     for b in 0..body_count {
         let r = root(&mut parent, b);
         if index[r] == usize::MAX {
-            index[r] = groups.len();
-            groups.push((Vec::new(), Vec::new()));
+            index[r] = groups;
+            groups += 1;
         }
-        groups[index[r]].0.push(b);
+        group_of[b] = index[r];
     }
-    for (i, c) in points.iter().enumerate() {
-        let r = root(&mut parent, c.terms()[0].body as usize);
-        groups[index[r]].1.push(i);
+    let point_group: Vec<usize> = points.iter().map(|c| group_of[c.terms()[0].body as usize]).collect();
+    let (bodies, body_start) = counting_sort(&group_of, groups);
+    let (points, point_start) = counting_sort(&point_group, groups);
+    Plan { bodies, body_start, points, point_start }
+}
+
+/// The indices `0..keys.len()` ordered by key (stably), and where each key's run starts (with
+/// the end appended).
+fn counting_sort(keys: &[usize], count: usize) -> (Vec<usize>, Vec<usize>) {
+    let mut start = vec![0; count + 1];
+    for &k in keys {
+        start[k + 1] += 1;
     }
-    groups
+    for g in 0..count {
+        start[g + 1] += start[g];
+    }
+    let mut next = start.clone();
+    let mut order = vec![0; keys.len()];
+    for (i, &k) in keys.iter().enumerate() {
+        order[next[k]] = i;
+        next[k] += 1;
+    }
+    (order, start)
 }
 
 /// One group during a step: its bodies (borrowed from the simulation: a body is 1.3 KB, and
 /// moving 10 000 resting grains in and out of groups cost more than their evaluation), its
-/// contact points with body indices local to the group.
-struct Group<'a> {
-    ids: Vec<usize>,
-    bodies: Vec<&'a mut Body>,
-    point_ids: Vec<usize>,
-    contact: ContactStep,
+/// contact problem (none without points: most groups of a packing) with body indices local to
+/// the group.
+struct Group<'a, 'b> {
+    ids: &'a [usize],
+    bodies: &'a mut [&'b mut Body],
+    point_ids: &'a [usize],
+    contact: Option<Box<ContactStep>>,
     newton: NewtonState,
 }
 
@@ -92,21 +128,28 @@ pub fn solve_groups(
 ) -> (Vec<ContactPoint>, Vec<Result<GroupReport, StepFailure>>) {
     let started = std::time::Instant::now();
     let plan = components(bodies.len(), &points);
-    // Each body's group and index in it, to hand out the bodies in one pass.
-    let (mut owner, mut local) = (vec![0usize; bodies.len()], vec![0u32; bodies.len()]);
-    for (g, (ids, _)) in plan.iter().enumerate() {
-        for (k, &b) in ids.iter().enumerate() {
-            (owner[b], local[b]) = (g, k as u32);
+    // Each body's index in its group, and the bodies in the plan's order, handed out in one pass.
+    let mut local = vec![0u32; bodies.len()];
+    let mut slot = vec![0usize; bodies.len()];
+    for g in 0..plan.len() {
+        for (k, i) in (plan.body_start[g]..plan.body_start[g + 1]).enumerate() {
+            (local[plan.bodies[i]], slot[plan.bodies[i]]) = (k as u32, i);
         }
     }
-    let mut members: Vec<Vec<&mut Body>> = plan.iter().map(|(ids, _)| Vec::with_capacity(ids.len())).collect();
+    let mut members: Vec<Option<&mut Body>> = (0..bodies.len()).map(|_| None).collect();
     for (b, body) in bodies.iter_mut().enumerate() {
-        members[owner[b]].push(body);
+        members[slot[b]] = Some(body);
     }
+    let mut members: Vec<&mut Body> = members.into_iter().map(|b| b.expect("every body is in a group")).collect();
     let mut points: Vec<Option<ContactPoint>> = points.into_iter().map(Some).collect();
-    let group_points: Vec<Vec<ContactPoint>> = plan
-        .iter()
-        .map(|(_, point_ids)| {
+    let mut rest: &mut [&mut Body] = &mut members;
+    let mut groups: Vec<Group> = Vec::with_capacity(plan.len());
+    let mut group_points: Vec<Option<Vec<ContactPoint>>> = Vec::with_capacity(plan.len());
+    for g in 0..plan.len() {
+        let (group_bodies, tail) = std::mem::take(&mut rest).split_at_mut(plan.body_start[g + 1] - plan.body_start[g]);
+        rest = tail;
+        let point_ids = &plan.points[plan.point_start[g]..plan.point_start[g + 1]];
+        group_points.push((!point_ids.is_empty()).then(|| {
             point_ids
                 .iter()
                 .map(|&i| {
@@ -117,17 +160,12 @@ pub fn solve_groups(
                     c
                 })
                 .collect()
-        })
-        .collect();
-    let mut groups: Vec<Group> = plan
-        .into_par_iter()
-        .zip(members)
-        .zip(group_points)
-        .map(|(((ids, point_ids), group_bodies), group_points)| {
-            let contact = ContactStep::new(group_points, &group_bodies, p, warm, velocity_scale);
-            Group { ids, bodies: group_bodies, point_ids, contact, newton: NewtonState::default() }
-        })
-        .collect();
+        }));
+        groups.push(Group { ids: &plan.bodies[plan.body_start[g]..plan.body_start[g + 1]], bodies: group_bodies, point_ids, contact: None, newton: NewtonState::default() });
+    }
+    groups.par_iter_mut().zip(group_points).filter_map(|(g, points)| Some((g, points?))).for_each(|(g, points)| {
+        g.contact = Some(Box::new(ContactStep::new(points, g.bodies, p, warm, velocity_scale)));
+    });
     times.contact += started.elapsed().as_secs_f64();
     let context = Context { p, settings, velocity_scale, interrupt };
     let reports = match world {
@@ -135,8 +173,8 @@ pub fn solve_groups(
         Some(world) => newton_in_lockstep(&mut groups, world, &context, times),
     };
     for g in groups {
-        for (c, i) in g.contact.points.into_iter().zip(g.point_ids) {
-            let mut c = c;
+        let Some(contact) = g.contact else { continue };
+        for (mut c, &i) in contact.points.into_iter().zip(g.point_ids) {
             for t in &mut c.terms[..c.term_count] {
                 t.body = g.ids[t.body as usize] as u32;
             }
@@ -172,7 +210,7 @@ struct NewtonState {
 /// `contact.max_iterations` sweeps, and a stall that lasts this long did not clear in any run.
 const UZAWA_STALLS: usize = 3;
 
-impl Group<'_> {
+impl Group<'_, '_> {
     /// The Newton loop of one group on the CPU (paper eqs. 16-19, with contact as in
     /// `coupling.rs`), until its bodies meet the solver tolerances and its contact points the
     /// contact criteria.
@@ -192,14 +230,16 @@ impl Group<'_> {
     /// After the bodies' evaluation: applies the contact forces and tests convergence; an error
     /// when the iterations are spent.
     fn converged(&mut self, c: &Context) -> Result<bool, StepFailure> {
-        let (p, bodies, contact, state) = (c.p, &mut self.bodies, &mut self.contact, &mut self.newton);
-        contact.apply_forces(bodies);
+        let (p, bodies, state) = (c.p, &mut *self.bodies, &mut self.newton);
+        if let Some(contact) = &mut self.contact {
+            contact.apply_forces(bodies);
+        }
         let mut converged = true;
         for body in bodies.iter_mut() {
             converged &= body.converged(p, c.velocity_scale * p.dt)?;
         }
         let mut contact_unmet = Vec::new();
-        if !contact.is_empty() {
+        if let Some(contact) = &self.contact {
             let tolerance = c.settings.expect("contact points need contact settings").tolerance;
             // A step that starts from last step's solution may already satisfy everything.
             match state.last_change {
@@ -239,7 +279,8 @@ impl Group<'_> {
     /// iterations, [`Group::end_increment`].
     fn increment(&mut self, c: &Context) -> Result<(), StepFailure> {
         if self.begin_increment(c)? {
-            let outcome = self.contact.solve_on_cpu(c.settings.expect("contact settings"), c.interrupt, &mut self.newton.report.wall);
+            let contact = self.contact.as_mut().expect("a group waiting on its contact problem has one");
+            let outcome = contact.solve_on_cpu(c.settings.expect("contact settings"), c.interrupt, &mut self.newton.report.wall);
             self.end_increment(c, outcome)?;
         }
         Ok(())
@@ -251,20 +292,20 @@ impl Group<'_> {
         if c.interrupt.is_some_and(|f| f.load(Ordering::SeqCst)) {
             return Err(StepFailure::Interrupted);
         }
-        let (p, bodies, contact, state) = (c.p, &mut self.bodies, &mut self.contact, &mut self.newton);
+        let (p, bodies, state) = (c.p, &mut *self.bodies, &mut self.newton);
         let mut refactorized = false;
         for body in bodies.iter_mut() {
             let fresh = body.refresh_factor(p, &mut state.report.wall)?;
             refactorized |= fresh;
             state.report.factorizations += fresh as usize;
         }
-        if contact.is_empty() {
+        let Some(contact) = &mut self.contact else {
             for body in bodies.iter_mut() {
                 body.newton_step(&mut state.report.wall);
             }
             state.report.iterations += 1;
             return Ok(false);
-        }
+        };
         contact.prepare(bodies, p, c.settings.expect("contact settings"), refactorized, &mut state.report.wall);
         Ok(true)
     }
@@ -276,7 +317,7 @@ impl Group<'_> {
             return Err(StepFailure::Interrupted);
         }
         let state = &mut self.newton;
-        let change = self.contact.apply(&mut self.bodies, &mut state.report.wall);
+        let change = self.contact.as_mut().expect("a group with an outcome has contact").apply(self.bodies, &mut state.report.wall);
         state.report.uzawa_iterations += outcome.iterations;
         state.uzawa_ran = true;
         state.uzawa_converged = outcome.converged;
@@ -289,7 +330,9 @@ impl Group<'_> {
     /// The report of a converged group, after the contact points take their solution.
     fn finish(&mut self, p: &StepParams) -> GroupReport {
         self.newton.report.residual_norm = self.bodies.iter().map(|b| b.residual_norm()).fold(0.0, Real::max);
-        self.contact.finish(&self.bodies, p);
+        if let Some(contact) = &mut self.contact {
+            contact.finish(self.bodies, p);
+        }
         self.newton.report
     }
 }
@@ -378,11 +421,11 @@ fn newton_in_lockstep(groups: &mut [Group], world: &mut GpuWorld, c: &Context, t
 fn solve_contact(groups: &mut [Group], waiting: &[bool], world: &mut GpuWorld, c: &Context, times: &mut PhaseTimes) -> Vec<Result<Outcome, StepFailure>> {
     let Some(settings) = c.settings else { return groups.iter().map(|_| Ok(Outcome::default())).collect() };
     let chosen = || groups.iter().zip(waiting).filter(|(_, &w)| w).map(|(g, _)| g);
-    let points: usize = chosen().map(|g| g.contact.points.len()).sum();
-    let colours = chosen().map(|g| g.contact.colours.count()).max().unwrap_or(0);
+    let points: usize = chosen().filter_map(|g| g.contact.as_ref()).map(|c| c.points.len()).sum();
+    let colours = chosen().filter_map(|g| g.contact.as_ref()).map(|c| c.colours.count()).max().unwrap_or(0);
     if points > 0 && crate::backend::uzawa_on_device(world, settings, points, colours) {
         let owners: Vec<usize> = (0..groups.len()).filter(|&k| waiting[k]).collect();
-        let mut problems: Vec<_> = groups.iter_mut().zip(waiting).filter(|(_, &w)| w).map(|(g, _)| g.contact.problem(settings)).collect();
+        let mut problems: Vec<_> = groups.iter_mut().zip(waiting).filter(|(_, &w)| w).map(|(g, _)| g.contact.as_mut().expect("a waiting group has contact").problem(settings)).collect();
         let solved = world.solve_contact(&mut problems, c.interrupt, times);
         drop(problems);
         let mut results: Vec<Result<Outcome, StepFailure>> = groups.iter().map(|_| Ok(Outcome::default())).collect();
@@ -407,7 +450,10 @@ fn solve_contact(groups: &mut [Group], waiting: &[bool], world: &mut GpuWorld, c
     groups
         .par_iter_mut()
         .zip(waiting)
-        .map(|(g, &w)| Ok(if w { g.contact.solve_on_cpu(settings, c.interrupt, &mut g.newton.report.wall) } else { Outcome::default() }))
+        .map(|(g, &w)| match (&mut g.contact, w) {
+            (Some(contact), true) => Ok(contact.solve_on_cpu(settings, c.interrupt, &mut g.newton.report.wall)),
+            _ => Ok(Outcome::default()),
+        })
         .collect()
 }
 
@@ -430,7 +476,7 @@ fn device_pass(
     }
     let mut list: Vec<Evaluation> = Vec::new();
     for (g, chosen) in groups.iter_mut().zip(&chosen) {
-        for ((body, &id), &yes) in g.bodies.iter_mut().zip(&g.ids).zip(chosen) {
+        for ((body, &id), &yes) in g.bodies.iter_mut().zip(g.ids).zip(chosen) {
             if yes {
                 list.push(body.device_evaluation(id, tangent, !tangent));
             }

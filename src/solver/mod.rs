@@ -17,7 +17,8 @@ pub use setup::{build_mesh, build_simulation};
 use crate::contact::broad::KeptPairs;
 use crate::contact::detect::{detect, thin_second_pass};
 use crate::contact::overlap::{overlaps, Overlap, Worst};
-use crate::contact::{ContactModel, ContactPoint, ContactStats, Master};
+use crate::contact::configuration::extent;
+use crate::contact::{Configuration, ContactModel, ContactPoint, ContactStats, Master};
 use crate::gpu::GpuWorld;
 use crate::precision::{Precision, Real};
 pub use body::StepParams;
@@ -161,23 +162,62 @@ impl Energies {
     }
 }
 
-/// Node positions per body: the reference nodes plus the displacements `u(body)` (committed or
-/// trial), padded to 3 components.
-pub(crate) fn node_positions(bodies: &[Body], u: impl Fn(&Body) -> &[Real] + Sync) -> Vec<Vec<[Real; 3]>> {
-    bodies
-        .par_iter()
-        .map(|b| {
-            let u = u(b);
-            b.mesh.nodes.iter().enumerate().map(|(n, x)| [0, 1, 2].map(|i| x[i] + if i < b.dim { u[n * b.dim + i] } else { 0.0 })).collect()
-        })
-        .collect()
+/// The boundary nodes of `bodies` displaced by their committed state that are inside another
+/// body or behind an obstacle (at time `t`), searched afresh.
+pub(crate) fn state_overlaps(bodies: &[Body], model: &ContactModel, t: Real) -> Vec<Overlap> {
+    let meshes: Vec<&crate::mesh::Mesh> = bodies.iter().map(|b| &b.mesh).collect();
+    let mut config = configuration(bodies, model, |b| &b.state.u);
+    overlaps(model, &meshes, &mut config, &placer(bodies, |b| &b.state.u), t, &mut KeptPairs::default())
 }
 
-/// The boundary nodes of `bodies` at `positions` inside another body or behind an obstacle.
-/// The body pairs whose boxes meet come from `kept` ([`overlaps`]).
-pub(crate) fn body_overlaps(bodies: &[Body], model: &ContactModel, positions: &[Vec<[Real; 3]>], t: Real, kept: &mut KeptPairs) -> Vec<Overlap> {
-    let meshes: Vec<&crate::mesh::Mesh> = bodies.iter().map(|b| &b.mesh).collect();
-    overlaps(model, &meshes, positions, t, kept)
+/// The configuration of `bodies` at the displacements `u`: boundary boxes and largest facets,
+/// no body placed yet. Written over `config`, whose position buffers are kept (a packing's
+/// positions are megabytes: fresh pages each step cost as much as filling them).
+pub(crate) fn configure(bodies: &[Body], model: &ContactModel, u: impl Fn(&Body) -> &[Real] + Sync, config: &mut Configuration) {
+    (config.boxes, config.largest) = bodies
+        .par_iter()
+        .zip(&model.surfaces)
+        .map_init(Vec::new, |scratch, (b, surface)| {
+            let (u, dim) = (u(b), b.dim);
+            extent(
+                surface,
+                |k| {
+                    let (x, n) = (surface.reference[k], surface.nodes[k] as usize);
+                    [0, 1, 2].map(|i| x[i] + if i < dim { u[n * dim + i] } else { 0.0 })
+                },
+                scratch,
+            )
+        })
+        .unzip();
+    config.nodes.unplace(bodies.len());
+}
+
+/// [`configure`] into a new configuration.
+pub(crate) fn configuration(bodies: &[Body], model: &ContactModel, u: impl Fn(&Body) -> &[Real] + Sync) -> Configuration {
+    let mut config = Configuration::default();
+    configure(bodies, model, u, &mut config);
+    config
+}
+
+/// Node `n` of body `b` at the displacements `u`, padded to 3 components.
+fn position(b: &Body, u: &[Real], n: usize) -> [Real; 3] {
+    let x = b.mesh.nodes[n];
+    [0, 1, 2].map(|i| x[i] + if i < b.dim { u[n * b.dim + i] } else { 0.0 })
+}
+
+/// Places a body's nodes at the displacements `u` ([`Configuration`]'s `Fill`).
+fn placer<'a>(bodies: &'a [Body], u: impl Fn(&Body) -> &[Real] + Sync + 'a) -> impl Fn(usize, &mut Vec<[Real; 3]>) + Sync + 'a {
+    move |b, x| {
+        let body = &bodies[b];
+        let u = u(body);
+        x.clear();
+        x.extend((0..body.mesh.nodes.len()).map(|n| position(body, u, n)));
+    }
+}
+
+/// The largest nodal speed of a body's velocities `v`.
+fn max_speed(v: &[Real], dim: usize) -> Real {
+    v.chunks(dim).map(|v| v.iter().map(|x| x * x).sum::<Real>()).fold(0.0, Real::max).sqrt()
 }
 
 /// A step retried with the second contact pass thinned is kept only if no node ends deeper than
@@ -262,10 +302,17 @@ pub struct Simulation {
     pub first_step: (Real, usize),
     /// The warm start of a restored state, until its first step is done.
     restored_warm_start: Option<HashMap<(u32, u32, Master), ([Real; 3], Real)>>,
-    /// The broad phase's body pairs, kept between steps (they do not change the points found),
-    /// and those of the overlap search after each step.
+    /// The broad phase's body pairs, kept between steps (they do not change the points or
+    /// overlaps found). The overlap search after a step takes the detection's: found for grown
+    /// boxes, they hold the pairs of the boxes themselves until a box leaves them.
     pub kept_pairs: KeptPairs,
-    pub kept_overlap_pairs: KeptPairs,
+    /// The committed state's configuration and largest nodal speed, as the step that committed
+    /// it left them (its overlap search built the configuration): the next detection starts
+    /// from them instead of visiting every node again. `None` until a step is taken, and after
+    /// [`Simulation::load_state`].
+    committed: Option<(Configuration, Real)>,
+    /// The buffers the next step's configuration is written over (the one before the committed).
+    spare_configuration: Configuration,
 }
 
 impl Simulation {
@@ -396,8 +443,9 @@ impl Simulation {
         };
         let started = std::time::Instant::now();
         let (mut points, velocity_scale) = self.detect(dt);
-        if let (true, Some(model)) = (thin, &self.contact) {
-            thin_second_pass(model, &node_positions(&self.bodies, |b| &b.state.u), &mut points);
+        if let (true, Some(model), Some((config, _))) = (thin, &self.contact, &self.committed) {
+            // The slaves of second-pass points, which the detection placed.
+            thin_second_pass(model, &config.nodes.positions, &mut points);
         }
         let warm = self.warm_start();
         report.wall.contact += started.elapsed().as_secs_f64();
@@ -436,10 +484,17 @@ impl Simulation {
         // The step took as many Newton iterations as its slowest group.
         report.newton_iterations += iterations;
         // The step's overlaps, measured once on its end state (the state `commit` keeps).
+        let started = std::time::Instant::now();
+        let mut config = std::mem::take(&mut self.spare_configuration);
         let overlap = match &self.contact {
-            Some(model) => Worst::of(&body_overlaps(&self.bodies, model, &node_positions(&self.bodies, |b| &b.trial.u), self.t + dt, &mut self.kept_overlap_pairs)),
+            Some(model) => {
+                configure(&self.bodies, model, |b| &b.trial.u, &mut config);
+                let meshes: Vec<&crate::mesh::Mesh> = self.bodies.iter().map(|b| &b.mesh).collect();
+                Worst::of(&overlaps(model, &meshes, &mut config, &placer(&self.bodies, |b| &b.trial.u), self.t + dt, &mut self.kept_pairs))
+            }
             None => Worst::default(),
         };
+        report.wall.contact += started.elapsed().as_secs_f64();
         if thin && overlap.ratio > THINNED_PENETRATION && !last {
             // Thinning trades convergence for a little penetration; beyond this, a shorter step
             // with both passes is the better trade. At the smallest step there is none: the step
@@ -454,7 +509,7 @@ impl Simulation {
         }
         let stats = ContactStats::of(&points, dt);
         let accumulators = (self.external_work, self.friction_dissipation, self.numerical_dissipation, self.contact_correction, self.viscous_dissipation);
-        self.book_step(&p, &points, stats.friction_dissipation_step, &mut report.wall)?;
+        let speed = self.book_step(&p, &points, stats.friction_dissipation_step, &mut report.wall)?;
         // Created energy: what the scheme dissipated, when negative. The drift correction's
         // input is booked apart and bounded by design (`coupling::shift`); the run's total
         // counts it ([`Simulation::energy_created`]).
@@ -486,6 +541,9 @@ impl Simulation {
         for body in &mut self.bodies {
             body.commit();
         }
+        if let Some((old, _)) = self.committed.replace((config, speed)) {
+            self.spare_configuration = old;
+        }
         self.t += dt;
         self.last_overlap = overlap.ratio;
         report.contact.max_overlap = report.contact.max_overlap.max(overlap.depth);
@@ -496,12 +554,7 @@ impl Simulation {
     /// The boundary nodes of the committed state that are inside another body or behind an
     /// obstacle (none without contact).
     pub fn overlaps(&self) -> Vec<Overlap> {
-        self.overlaps_at(&node_positions(&self.bodies, |b| &b.state.u), self.t)
-    }
-
-    /// Overlaps of the bodies at `positions`, the obstacles where they are at time `t`.
-    fn overlaps_at(&self, positions: &[Vec<[Real; 3]>], t: Real) -> Vec<Overlap> {
-        self.contact.as_ref().map_or_else(Vec::new, |model| body_overlaps(&self.bodies, model, positions, t, &mut KeptPairs::default()))
+        self.contact.as_ref().map_or_else(Vec::new, |model| state_overlaps(&self.bodies, model, self.t))
     }
 
     /// Contact points for a step of length `dt` from the committed state, and the step's
@@ -511,7 +564,15 @@ impl Simulation {
     /// gravity adds in one step, but not below round-off of the smallest element per step.
     fn detect(&mut self, dt: Real) -> (Vec<ContactPoint>, Real) {
         let dim = self.dim;
-        let body_speed = self.bodies.par_iter().map(|b| b.state.v.chunks(dim).map(|v| v.iter().map(|x| x * x).sum::<Real>().sqrt()).fold(0.0, Real::max)).reduce(|| 0.0, Real::max);
+        if self.committed.is_none() {
+            let config = self.contact.as_ref().map(|model| configuration(&self.bodies, model, |b| &b.state.u)).unwrap_or_default();
+            let speed = self.bodies.par_iter().map(|b| max_speed(&b.state.v, dim)).reduce(|| 0.0, Real::max);
+            if let Some((old, _)) = self.committed.replace((config, speed)) {
+            self.spare_configuration = old;
+        }
+        }
+        let (config, body_speed) = self.committed.as_mut().expect("configured above");
+        let body_speed = *body_speed;
         let obstacle_speed = self
             .contact
             .iter()
@@ -523,15 +584,15 @@ impl Simulation {
         let gravity = self.gravity.iter().map(|g| g * g).sum::<Real>().sqrt();
         let velocity_scale = body_speed.max(obstacle_speed).max(gravity * dt).max(1e-9 * h / dt);
         let Some(model) = &self.contact else { return (Vec::new(), velocity_scale) };
-        let positions = node_positions(&self.bodies, |b| &b.state.u);
         // The search reaches as far as anything can travel in two steps, plus a little.
         let margin = 2.0 * dt * (2.0 * body_speed + obstacle_speed) + 0.01 * h;
-        (detect(model, &positions, dim, self.t, dt, margin, &mut self.kept_pairs), velocity_scale)
+        (detect(model, config, &placer(&self.bodies, |b| &b.state.u), dim, self.t, dt, margin, &mut self.kept_pairs), velocity_scale)
     }
 
     /// Energy bookkeeping of a converged step (before commit): external work, friction (as
     /// [`ContactStats`] counts it) and numerical dissipation, and the obstacles' reactions.
-    fn book_step(&mut self, p: &StepParams, points: &[ContactPoint], friction: Real, times: &mut PhaseTimes) -> Result<(), StepFailure> {
+    /// Returns the largest nodal speed at the step's end.
+    fn book_step(&mut self, p: &StepParams, points: &[ContactPoint], friction: Real, times: &mut PhaseTimes) -> Result<Real, StepFailure> {
         // f32 kernels leave the energies, like the residual, to the f64 CPU twins.
         let strains: Vec<Real> = match self.world.as_mut().filter(|w| w.precision() == Precision::F64) {
             None => self.bodies.par_iter().map(Body::trial_strain_energy).collect(),
@@ -541,13 +602,14 @@ impl Simulation {
                 energies.iter().map(|e| e.iter().sum()).collect()
             }
         };
-        let energies: Vec<_> = self.bodies.par_iter_mut().zip(strains).map(|(body, strain)| body.finish_step(p, strain)).collect();
-        for e in energies {
+        let dim = self.dim;
+        let finished: Vec<_> = self.bodies.par_iter_mut().zip(strains).map(|(body, strain)| (body.finish_step(p, strain), max_speed(&body.trial.v, dim))).collect();
+        let speed = finished.iter().map(|f| f.1).fold(0.0, Real::max);
+        for (e, _) in finished {
             self.external_work += e.support_work + e.load_work;
             self.numerical_dissipation += e.theta_dissipation + e.force_dissipation;
             self.viscous_dissipation += e.viscous_dissipation;
         }
-        let dim = self.dim;
         let mut reactions = vec![[0.0; 3]; self.contact.as_ref().map_or(0, |c| c.obstacles.len())];
         let (mut relative_work, mut correction) = (0.0, 0.0);
         for c in points {
@@ -580,7 +642,7 @@ impl Simulation {
         self.contact_correction += correction;
         self.numerical_dissipation += correction - relative_work - friction;
         self.obstacle_reactions = reactions;
-        Ok(())
+        Ok(speed)
     }
 
     /// Energy the run has created so far, relative to the energy scale: the total energy less
@@ -667,5 +729,43 @@ impl Body {
             l[2] += m * (x[0] * v[1] - x[1] * v[0]);
         }
         BodyMetrics { mass, center_of_mass: mx.map(|c| c / mass), linear_momentum: p, angular_momentum: l, kinetic: self.kinetic_energy() }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::contact::geometry::{bounds, edge_range};
+
+    /// Each grain's box and largest facet from its own nodes, although grains of one shape share
+    /// their boundary search (a copied boundary once took the first grain's reference nodes for
+    /// all of them), and placing fills exactly the bodies asked for.
+    #[test]
+    fn a_configuration_is_each_bodys_own_and_places_what_is_asked() {
+        let path = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/grains_many.toml"));
+        let text = std::fs::read_to_string(path).expect("scene");
+        let loaded = crate::scene::parse_scene(path, text, &["packing.count=12".to_string()]).expect("scene parses");
+        let mut sim = setup::build_simulation(&loaded).expect("simulation");
+        for (b, body) in sim.bodies.iter_mut().enumerate() {
+            body.state.u.iter_mut().enumerate().for_each(|(d, u)| *u = 1e-3 * ((b * 31 + d) as Real).sin());
+        }
+        let model = sim.contact.as_ref().expect("contact");
+        let mut config = configuration(&sim.bodies, model, |b| &b.state.u);
+        for (b, body) in sim.bodies.iter().enumerate() {
+            let x: Vec<[Real; 3]> = (0..body.mesh.nodes.len()).map(|n| position(body, &body.state.u, n)).collect();
+            let surface = &model.surfaces[b];
+            assert_eq!(config.boxes[b], bounds(surface.nodes.iter().map(|&n| x[n as usize])), "body {b}'s box");
+            let largest = (0..surface.facet_count()).map(|f| edge_range(&surface.facet_points(&x, f).0[..surface.facet_nodes]).1).fold(0.0, Real::max);
+            assert_eq!(config.largest[b], largest, "body {b}'s largest facet");
+        }
+        assert!(config.nodes.placed.iter().all(|&p| !p), "nothing placed before it is asked for");
+        config.nodes.place(|b| b % 5 == 0, &placer(&sim.bodies, |b| &b.state.u));
+        for (b, body) in sim.bodies.iter().enumerate() {
+            assert_eq!(config.nodes.placed[b], b % 5 == 0);
+            if b % 5 == 0 {
+                let expected: Vec<[Real; 3]> = (0..body.mesh.nodes.len()).map(|n| position(body, &body.state.u, n)).collect();
+                assert_eq!(config.nodes.positions[b], expected);
+            }
+        }
     }
 }

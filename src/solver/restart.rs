@@ -238,6 +238,7 @@ impl Simulation {
             b.refresh_branch_energy();
             b.reactions.clone_from(&s.reactions);
         }
+        self.committed = None;
         self.t = saved.t;
         self.step = saved.step;
         self.first_step = (saved.t, saved.step);

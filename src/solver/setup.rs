@@ -5,7 +5,7 @@ use super::body::{Body, NodalLoad, Prescribed};
 use super::topology::{Topology, TopologyKey};
 use super::{BoundarySet, Probe, Simulation};
 use crate::contact::obstacle::Shape;
-use super::{body_overlaps, node_positions};
+use super::state_overlaps;
 use crate::contact::overlap::{Host, Overlap};
 use crate::contact::pairs::{BodyPairs, Rank};
 use crate::contact::{ContactModel, Motion, Obstacle, Settings, Surface};
@@ -439,7 +439,8 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
         first_step: (0.0, 0),
         restored_warm_start: None,
         kept_pairs: Default::default(),
-        kept_overlap_pairs: Default::default(),
+        committed: None,
+        spare_configuration: Default::default(),
     })
 }
 
@@ -449,8 +450,7 @@ const INITIAL_OVERLAP: Real = 1e-6;
 const SEPARATION_ROUNDS: usize = 200;
 
 fn initial_overlaps(bodies: &[Body], model: &ContactModel) -> Vec<Overlap> {
-    let positions = node_positions(bodies, |b| &b.state.u);
-    body_overlaps(bodies, model, &positions, 0.0, &mut Default::default()).into_iter().filter(|o| o.ratio() > INITIAL_OVERLAP).collect()
+    state_overlaps(bodies, model, 0.0).into_iter().filter(|o| o.ratio() > INITIAL_OVERLAP).collect()
 }
 
 /// The scene key and the words of an overlap: the bodies (or obstacle), the node and the depth.
@@ -548,7 +548,7 @@ fn build_contact(loaded: &LoadedScene, bodies: &[Body], dim: usize) -> Result<Op
     let mut first_of: HashMap<*const crate::assembly::StiffnessPattern, usize> = HashMap::new();
     let firsts: Vec<usize> = bodies.iter().enumerate().map(|(b, body)| *first_of.entry(Arc::as_ptr(&body.pattern)).or_insert(b)).collect();
     let searched: HashMap<usize, Surface> = first_of.into_values().collect::<Vec<_>>().into_par_iter().map(|b| (b, Surface::of(&bodies[b].mesh))).collect();
-    let surfaces: Vec<Surface> = firsts.iter().map(|b| searched[b].clone()).collect();
+    let surfaces: Vec<Surface> = firsts.iter().zip(bodies).map(|(b, body)| searched[b].on(&body.mesh)).collect();
     let ranks = bodies.iter().zip(&surfaces).map(|(b, s)| Rank { length_scale: b.length_scale(), boundary_nodes: s.nodes.len() }).collect();
     let mut pairs = BodyPairs::new(ranks, spec.all_pairs.then_some(spec.friction), spec.two_pass);
     for pair in spec.pair.values() {
