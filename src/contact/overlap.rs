@@ -73,7 +73,7 @@ pub fn overlaps(model: &ContactModel, meshes: &[&Mesh], config: &mut Configurati
     // A skin of a quarter of the smallest body keeps the pairs while the bodies move less.
     let skin = 0.25 * body_boxes.iter().map(|(lo, hi)| (0..3).map(|i| hi[i] - lo[i]).fold(0.0, Real::max)).fold(Real::INFINITY, Real::min);
     // A superset of the pairs whose boxes meet: every test below is against the boxes themselves.
-    let neighbours = kept.near(&body_boxes, if skin.is_finite() { skin } else { 0.0 }, can_touch);
+    let neighbours = kept.near(body_boxes, if skin.is_finite() { skin } else { 0.0 }, can_touch);
     // Whether a body's box meets another's: only then can it hold or put a node in another body.
     let meets_another: Vec<bool> = neighbours.par_iter().enumerate().map(|(b, list)| list.iter().any(|&o| intersect(body_boxes[b], body_boxes[o as usize]))).collect();
     let offsets: &[Vec3] = &model.obstacles.iter().map(|o| o.motion.displacement(t)).collect::<Vec<_>>();

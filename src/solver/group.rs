@@ -62,16 +62,17 @@ fn components(body_count: usize, points: &[ContactPoint]) -> Plan {
     }
     // Groups numbered in the order of their first body.
     let mut index = vec![usize::MAX; body_count];
-    let mut group_of = vec![0; body_count];
     let mut groups = 0;
-    for b in 0..body_count {
-        let r = root(&mut parent, b);
-        if index[r] == usize::MAX {
-            index[r] = groups;
-            groups += 1;
-        }
-        group_of[b] = index[r];
-    }
+    let group_of: Vec<usize> = (0..body_count)
+        .map(|b| {
+            let r = root(&mut parent, b);
+            if index[r] == usize::MAX {
+                index[r] = groups;
+                groups += 1;
+            }
+            index[r]
+        })
+        .collect();
     let point_group: Vec<usize> = points.iter().map(|c| group_of[c.terms()[0].body as usize]).collect();
     let (bodies, body_start) = counting_sort(&group_of, groups);
     let (points, point_start) = counting_sort(&point_group, groups);
