@@ -4,7 +4,7 @@
 //! by the overlap search at the end of a step and the detection that starts the next one.
 
 use super::broad::Aabb;
-use super::geometry::{bounds, Vec3};
+use super::geometry::{bounds, edge_range, Vec3};
 use super::{ContactModel, Surface};
 use crate::precision::Real;
 use rayon::prelude::*;
@@ -63,15 +63,11 @@ impl Nodes {
 pub fn extent(surface: &Surface, x: impl Fn(usize) -> Vec3, scratch: &mut Vec<Vec3>) -> (Aabb, Real) {
     scratch.clear();
     scratch.extend((0..surface.nodes.len()).map(x));
-    let mut longest2: Real = 0.0;
-    for facet in surface.local_facets.chunks_exact(surface.facet_nodes) {
-        for (i, &a) in facet.iter().enumerate() {
-            for &b in &facet[i + 1..] {
-                let (p, q) = (scratch[a as usize], scratch[b as usize]);
-                let d = [p[0] - q[0], p[1] - q[1], p[2] - q[2]];
-                longest2 = longest2.max(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
-            }
-        }
-    }
-    (bounds(scratch.iter().copied()), longest2.sqrt())
+    let mut p = [[0.0; 3]; 4];
+    let largest = surface.local_facets.chunks_exact(surface.facet_nodes).map(|facet| {
+        facet.iter().zip(&mut p).for_each(|(&k, p)| *p = scratch[k as usize]);
+        edge_range(&p[..facet.len()]).1
+    });
+    let largest = largest.fold(0.0, Real::max);
+    (bounds(scratch.iter().copied()), largest)
 }

@@ -58,15 +58,14 @@ impl Surface {
         nodes.sort_unstable();
         nodes.dedup();
         let local_facets = facets.iter().map(|n| nodes.binary_search(n).expect("a facet's node is a boundary node") as u32).collect();
-        let reference = nodes.iter().map(|&n| mesh.nodes[n as usize]).collect();
+        let reference = reference(&nodes, mesh);
         Self { facet_nodes, facets, nodes, owners, local_facets, reference }
     }
 
     /// The same boundary on another mesh of the same connectivity (a packing's grains of one
     /// shape share the boundary search of one of them).
     pub fn on(&self, mesh: &Mesh) -> Self {
-        let reference = self.nodes.iter().map(|&n| mesh.nodes[n as usize]).collect();
-        Self { reference, ..self.clone() }
+        Self { reference: reference(&self.nodes, mesh), ..self.clone() }
     }
 
     pub fn facet_count(&self) -> usize {
@@ -86,4 +85,9 @@ impl Surface {
         }
         (p, self.facet_nodes)
     }
+}
+
+/// The reference positions of `nodes` of `mesh`.
+fn reference(nodes: &[u32], mesh: &Mesh) -> Vec<Vec3> {
+    nodes.iter().map(|&n| mesh.nodes[n as usize]).collect()
 }

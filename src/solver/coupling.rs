@@ -70,13 +70,6 @@ impl ContactStep {
     /// Sets up a step's contact points: their gap shift and the block pattern of `W`.
     pub fn new(mut points: Vec<ContactPoint>, bodies: &[&mut Body], p: &StepParams, warm: &HashMap<(u32, u32, crate::contact::Master), ([Real; 3], Real)>, velocity_scale: Real) -> Self {
         let dim = bodies[0].dim;
-        if points.is_empty() {
-            // Most groups of a packing: a grain that touches nothing.
-            let (delassus, colours, nodal) = Default::default();
-            let (per_body, h, r, local) = Default::default();
-            let (free_increment, responses) = Default::default();
-            return Self { points, delassus, colours, per_body, h, r, local, nodal, dim, velocity_scale, floor: 0.0, delassus_current: false, free_increment, responses };
-        }
         let (dt, theta) = (p.dt, p.theta);
         for c in &mut points {
             let vn_start = local_velocity(c, dim, |b, d| bodies[b].state.v[d], 0)[0];
@@ -151,10 +144,6 @@ impl ContactStep {
         nodal.nodes = slots.len();
         let responses = bodies.iter().map(|_| None).collect();
         Self { points, delassus, colours, per_body, h, r, local, nodal, dim, velocity_scale, floor, delassus_current: false, free_increment: Vec::new(), responses }
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.points.is_empty()
     }
 
     /// Whether every point has a step length (carried over from the last step), so that the

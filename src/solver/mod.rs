@@ -165,9 +165,15 @@ impl Energies {
 /// The boundary nodes of `bodies` displaced by their committed state that are inside another
 /// body or behind an obstacle (at time `t`), searched afresh.
 pub(crate) fn state_overlaps(bodies: &[Body], model: &ContactModel, t: Real) -> Vec<Overlap> {
+    body_overlaps(bodies, model, |b| &b.state.u, t, &mut Configuration::default(), &mut KeptPairs::default())
+}
+
+/// The overlaps of `bodies` at the displacements `u` (the obstacles where they are at time `t`),
+/// the configuration written over `config`, the body pairs from `kept`.
+fn body_overlaps(bodies: &[Body], model: &ContactModel, u: impl Fn(&Body) -> &[Real] + Sync + Copy, t: Real, config: &mut Configuration, kept: &mut KeptPairs) -> Vec<Overlap> {
+    configure(bodies, model, u, config);
     let meshes: Vec<&crate::mesh::Mesh> = bodies.iter().map(|b| &b.mesh).collect();
-    let mut config = configuration(bodies, model, |b| &b.state.u);
-    overlaps(model, &meshes, &mut config, &placer(bodies, |b| &b.state.u), t, &mut KeptPairs::default())
+    overlaps(model, &meshes, config, &placer(bodies, u), t, kept)
 }
 
 /// The configuration of `bodies` at the displacements `u`: boundary boxes and largest facets,
@@ -178,15 +184,8 @@ pub(crate) fn configure(bodies: &[Body], model: &ContactModel, u: impl Fn(&Body)
         .par_iter()
         .zip(&model.surfaces)
         .map_init(Vec::new, |scratch, (b, surface)| {
-            let (u, dim) = (u(b), b.dim);
-            extent(
-                surface,
-                |k| {
-                    let (x, n) = (surface.reference[k], surface.nodes[k] as usize);
-                    [0, 1, 2].map(|i| x[i] + if i < dim { u[n * dim + i] } else { 0.0 })
-                },
-                scratch,
-            )
+            let u = u(b);
+            extent(surface, |k| displaced(surface.reference[k], u, surface.nodes[k] as usize, b.dim), scratch)
         })
         .unzip();
     config.nodes.unplace(bodies.len());
@@ -199,10 +198,15 @@ pub(crate) fn configuration(bodies: &[Body], model: &ContactModel, u: impl Fn(&B
     config
 }
 
-/// Node `n` of body `b` at the displacements `u`, padded to 3 components.
+/// Node `n`, at `x` in the reference configuration, moved by the displacements `u` (`dim` per
+/// node), padded to 3 components.
+fn displaced(x: [Real; 3], u: &[Real], n: usize, dim: usize) -> [Real; 3] {
+    [0, 1, 2].map(|i| x[i] + if i < dim { u[n * dim + i] } else { 0.0 })
+}
+
+/// Node `n` of body `b` at the displacements `u`.
 fn position(b: &Body, u: &[Real], n: usize) -> [Real; 3] {
-    let x = b.mesh.nodes[n];
-    [0, 1, 2].map(|i| x[i] + if i < b.dim { u[n * b.dim + i] } else { 0.0 })
+    displaced(b.mesh.nodes[n], u, n, b.dim)
 }
 
 /// Places a body's nodes at the displacements `u` ([`Configuration`]'s `Fill`).
@@ -487,11 +491,7 @@ impl Simulation {
         let started = std::time::Instant::now();
         let mut config = std::mem::take(&mut self.spare_configuration);
         let overlap = match &self.contact {
-            Some(model) => {
-                configure(&self.bodies, model, |b| &b.trial.u, &mut config);
-                let meshes: Vec<&crate::mesh::Mesh> = self.bodies.iter().map(|b| &b.mesh).collect();
-                Worst::of(&overlaps(model, &meshes, &mut config, &placer(&self.bodies, |b| &b.trial.u), self.t + dt, &mut self.kept_pairs))
-            }
+            Some(model) => Worst::of(&body_overlaps(&self.bodies, model, |b| &b.trial.u, self.t + dt, &mut config, &mut self.kept_pairs)),
             None => Worst::default(),
         };
         report.wall.contact += started.elapsed().as_secs_f64();
@@ -567,9 +567,7 @@ impl Simulation {
         if self.committed.is_none() {
             let config = self.contact.as_ref().map(|model| configuration(&self.bodies, model, |b| &b.state.u)).unwrap_or_default();
             let speed = self.bodies.par_iter().map(|b| max_speed(&b.state.v, dim)).reduce(|| 0.0, Real::max);
-            if let Some((old, _)) = self.committed.replace((config, speed)) {
-            self.spare_configuration = old;
-        }
+            self.committed = Some((config, speed));
         }
         let (config, body_speed) = self.committed.as_mut().expect("configured above");
         let body_speed = *body_speed;
