@@ -4,7 +4,7 @@
 //! by the overlap search at the end of a step and the detection that starts the next one.
 
 use super::broad::Aabb;
-use super::geometry::{bounds, edge_range, Vec3};
+use super::geometry::{dot, sub, Vec3};
 use super::{ContactModel, Surface};
 use crate::precision::Real;
 use rayon::prelude::*;
@@ -60,14 +60,41 @@ impl Nodes {
 
 /// The box of a body's boundary nodes and its facets' largest edge (or diagonal), `x(k)` giving
 /// the position of boundary node `k` (the `k`-th of `surface.nodes`); `scratch` holds them.
+/// Run on every body each step: one pass for the box, squared lengths compared and one square
+/// root per body (the same number as the largest of the lengths: the root is monotonic and
+/// correctly rounded).
 pub fn extent(surface: &Surface, x: impl Fn(usize) -> Vec3, scratch: &mut Vec<Vec3>) -> (Aabb, Real) {
+    let (mut lo, mut hi) = ([Real::INFINITY; 3], [Real::NEG_INFINITY; 3]);
     scratch.clear();
-    scratch.extend((0..surface.nodes.len()).map(x));
-    let mut p = [[0.0; 3]; 4];
-    let largest = surface.local_facets.chunks_exact(surface.facet_nodes).map(|facet| {
-        facet.iter().zip(&mut p).for_each(|(&k, p)| *p = scratch[k as usize]);
-        edge_range(&p[..facet.len()]).1
-    });
-    let largest = largest.fold(0.0, Real::max);
-    (bounds(scratch.iter().copied()), largest)
+    scratch.extend((0..surface.nodes.len()).map(|k| {
+        let p = x(k);
+        for i in 0..3 {
+            lo[i] = if p[i] < lo[i] { p[i] } else { lo[i] };
+            hi[i] = if p[i] > hi[i] { p[i] } else { hi[i] };
+        }
+        p
+    }));
+    let facets = &surface.local_facets;
+    let longest = match surface.facet_nodes {
+        2 => longest_squared::<2>(facets, scratch),
+        3 => longest_squared::<3>(facets, scratch),
+        _ => longest_squared::<4>(facets, scratch),
+    };
+    ((lo, hi), longest.sqrt())
+}
+
+/// The largest squared distance between two points of one facet (`N` points each).
+fn longest_squared<const N: usize>(facets: &[u32], x: &[Vec3]) -> Real {
+    let mut longest: Real = 0.0;
+    for facet in facets.chunks_exact(N) {
+        let p: [Vec3; N] = std::array::from_fn(|i| x[facet[i] as usize]);
+        for i in 0..N {
+            for j in i + 1..N {
+                let d = sub(p[i], p[j]);
+                let d = dot(d, d);
+                longest = if d > longest { d } else { longest };
+            }
+        }
+    }
+    longest
 }

@@ -3,7 +3,7 @@
 //! of each slave node on the facets of the master body).
 
 use super::broad;
-use super::geometry::{self, bounds, frame, norm, sub, Projection, Vec3};
+use super::geometry::{self, frame, norm, sub, Projection, Vec3};
 use super::grid::Grid;
 use super::obstacle::Touch;
 use super::configuration::{Configuration, Fill};
@@ -246,18 +246,11 @@ struct MasterFacets {
 
 impl MasterFacets {
     fn new(surface: &super::Surface, x: &[Vec3], dim: usize, margin: Real) -> Self {
-        let boxes: Vec<(Vec3, Vec3, Real)> = (0..surface.facet_count())
-            .map(|f| {
-                let (p, len) = surface.facet_points(x, f);
-                let (lo, hi) = bounds(p[..len].iter().copied());
-                let size = facet_size(&p[..len]);
-                // Off its plane by `reach`, beyond its sides by `EDGE_TOLERANCE` (a 2D scene's
-                // boxes stay flat in z, so that each takes one layer of cells).
-                let r = margin.max(0.5 * size) + EDGE_TOLERANCE * size;
-                let grow = |c: Vec3, sign: Real| [0, 1, 2].map(|i| if i < dim { c[i] + sign * r } else { c[i] });
-                (grow(lo, -1.0), grow(hi, 1.0), size)
-            })
-            .collect();
+        let boxes = match surface.facet_nodes {
+            2 => facet_boxes::<2>(&surface.facets, x, dim, margin),
+            3 => facet_boxes::<3>(&surface.facets, x, dim, margin),
+            _ => facet_boxes::<4>(&surface.facets, x, dim, margin),
+        };
         let grid = (boxes.len() > SCANNED_FACETS).then(|| {
             let cell = boxes.iter().map(|b| b.2).sum::<Real>() / boxes.len() as Real + 2.0 * margin;
             Grid::new(boxes.iter().enumerate().map(|(f, &(lo, hi, _))| (f as u32, lo, hi)), cell)
@@ -278,6 +271,39 @@ impl MasterFacets {
             None => (0..self.boxes.len()).for_each(visit),
         }
     }
+}
+
+/// `(min, max, size)` of each facet (`N` nodes each, at `x`): its box grown by how far off a node
+/// can be and still make a point with it, off its plane by `reach`, beyond its sides by
+/// `EDGE_TOLERANCE` (a 2D scene's boxes stay flat in z, so that each takes one layer of grid
+/// cells), and its largest edge (or diagonal). Built for thousands of masters a step in a packing.
+fn facet_boxes<const N: usize>(facets: &[u32], x: &[Vec3], dim: usize, margin: Real) -> Vec<(Vec3, Vec3, Real)> {
+    facets
+        .chunks_exact(N)
+        .map(|facet| {
+            let p: [Vec3; N] = std::array::from_fn(|i| x[facet[i] as usize]);
+            let (mut lo, mut hi) = (p[0], p[0]);
+            let mut longest: Real = 0.0;
+            for i in 0..N {
+                for c in 0..3 {
+                    lo[c] = if p[i][c] < lo[c] { p[i][c] } else { lo[c] };
+                    hi[c] = if p[i][c] > hi[c] { p[i][c] } else { hi[c] };
+                }
+                for j in i + 1..N {
+                    let d = sub(p[i], p[j]);
+                    let d = geometry::dot(d, d);
+                    longest = if d > longest { d } else { longest };
+                }
+            }
+            // The largest of the lengths: the root is monotonic and correctly rounded.
+            let size = longest.sqrt();
+            let r = margin.max(0.5 * size) + EDGE_TOLERANCE * size;
+            for c in 0..dim {
+                (lo[c], hi[c]) = (lo[c] - r, hi[c] + r);
+            }
+            (lo, hi, size)
+        })
+        .collect()
 }
 
 /// Slave nodes against master facets, searched only inside the body pairs whose boxes come

@@ -71,7 +71,7 @@ impl BodyPairs {
 
     /// The first pass's slave of the pair `a < b`.
     fn slave_of(&self, a: usize, b: usize) -> usize {
-        match self.listed.get(&(a, b)).and_then(|l| l.1) {
+        match self.listed(a, b).and_then(|l| l.1) {
             Some(slave) => slave,
             None if self.before(a, b).is_lt() => a,
             None => b,
@@ -83,11 +83,19 @@ impl BodyPairs {
         if a == b {
             return None;
         }
-        let key = (a.min(b), a.max(b));
-        match self.listed.get(&key) {
+        match self.listed(a.min(b), a.max(b)) {
             Some(&(friction, _)) => Some(friction),
             None => self.every,
         }
+    }
+
+    /// The listing of the pair `a < b`. A packing lists no pair, and its searches ask of every
+    /// neighbour: no hashing then.
+    fn listed(&self, a: usize, b: usize) -> Option<&(Real, Option<usize>)> {
+        if self.listed.is_empty() {
+            return None;
+        }
+        self.listed.get(&(a, b))
     }
 
     /// The friction of the pass with `slave`'s nodes on `master`'s facets, `None` when that pass

@@ -201,6 +201,9 @@ pub struct Body {
     pub contact_force: Vec<Real>,
     force_scale: Real,
     last_increment: Option<Real>,
+    /// The trial displacements equal the committed ones: nothing of the body moved this step
+    /// ([`Body::still`]).
+    still: bool,
     /// The criteria the last [`Body::converged`] found unmet, worded for a failure message.
     unmet: Vec<String>,
     /// Keep a factorisation across Newton iterations and steps while it contracts the residual
@@ -324,6 +327,7 @@ impl Body {
             contact_force: vec![0.0; ndof],
             force_scale: 0.0,
             last_increment: None,
+            still: true,
             unmet: Vec::new(),
             reuse_factorization: true,
             factor_c1: None,
@@ -421,14 +425,20 @@ impl Body {
                 }
             }
         }
+        let mut still = true;
         for d in 0..self.mass.len() {
             self.f_ext[d] = self.mass[d] * gravity[d % dim] + self.f_load.get(d).copied().unwrap_or(0.0);
-            self.trial.u[d] = self.state.u[d] + p.dt * self.state.v[d];
+            let du = p.dt * self.state.v[d];
+            still &= du == 0.0;
+            self.trial.u[d] = self.state.u[d] + du;
             self.contact_force[d] = 0.0;
         }
         for pr in &self.prescribed {
-            self.trial.u[pr.dof] = self.state.u[pr.dof] + pr.travel(t, p.dt);
+            let travel = pr.travel(t, p.dt);
+            still &= travel == 0.0;
+            self.trial.u[pr.dof] = self.state.u[pr.dof] + travel;
         }
+        self.still = still;
         for (d, s) in self.step_inputs.iter_mut().enumerate() {
             *s = DofStep { mass: self.mass[d], u_pred: self.state.u[d] + p.dt * self.state.v[d], f_int_t: self.state.f_int[d], f_ext: self.f_ext[d] };
         }
@@ -644,7 +654,17 @@ impl Body {
             self.trial.u[d] += du[f];
             du2 += du[f] * du[f];
         }
+        // Not `du2 == 0`: squares of the smallest increments underflow.
+        self.still &= du.iter().all(|&du| du == 0.0);
         self.last_increment = Some(du2.sqrt());
+    }
+
+    /// Whether the trial displacements equal the committed ones (the predictor and every
+    /// increment of the step left them where they were): what depends only on the body's
+    /// configuration, such as its contact box, is as it was at the last commit. Meaningful
+    /// between [`Body::begin_step`] and [`Body::commit`].
+    pub fn still(&self) -> bool {
+        self.still
     }
 
     /// Velocity of dof `d` implied by the trial displacement (eq. 15).
