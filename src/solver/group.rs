@@ -211,6 +211,26 @@ struct NewtonState {
 /// `contact.max_iterations` sweeps, and a stall that lasts this long did not clear in any run.
 const UZAWA_STALLS: usize = 3;
 
+/// A contact criterion a group's convergence test found unmet, worded only for a failure
+/// message (as the bodies' own, [`Body::unmet`]).
+enum ContactUnmet {
+    Changing { change: Real, tolerance: Real },
+    NotSolved,
+    Uzawa,
+    Complementarity { complementarity: Real, tolerance: Real },
+}
+
+impl std::fmt::Display for ContactUnmet {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Changing { change, tolerance } => write!(f, "contact forces still changing by {change:.3e} > {tolerance:.3e}"),
+            Self::NotSolved => write!(f, "contact forces not solved yet"),
+            Self::Uzawa => write!(f, "Uzawa iterations not converged"),
+            Self::Complementarity { complementarity, tolerance } => write!(f, "complementarity {complementarity:.3e} > {tolerance:.3e}"),
+        }
+    }
+}
+
 impl Group<'_, '_> {
     /// The Newton loop of one group on the CPU (paper eqs. 16-19, with contact as in
     /// `coupling.rs`), until its bodies meet the solver tolerances and its contact points the
@@ -244,12 +264,12 @@ impl Group<'_, '_> {
             let tolerance = c.settings.expect("contact points need contact settings").tolerance;
             // A step that starts from last step's solution may already satisfy everything.
             match state.last_change {
-                Some(change) if change > tolerance => contact_unmet.push(format!("contact forces still changing by {change:.3e} > {tolerance:.3e}")),
-                None if !contact.all_warm() => contact_unmet.push("contact forces not solved yet".to_string()),
+                Some(change) if change > tolerance => contact_unmet.push(ContactUnmet::Changing { change, tolerance }),
+                None if !contact.all_warm() => contact_unmet.push(ContactUnmet::NotSolved),
                 _ => {}
             }
             if state.uzawa_ran && !state.uzawa_converged {
-                contact_unmet.push("Uzawa iterations not converged".to_string());
+                contact_unmet.push(ContactUnmet::Uzawa);
             }
             // Before any Uzawa sweep of this step (reactions carried over from the last step),
             // the law is checked point by point; after one, the sweeps' own convergence and the
@@ -259,7 +279,7 @@ impl Group<'_, '_> {
             if !state.uzawa_ran {
                 let complementarity = contact.complementarity(bodies, p);
                 if complementarity > tolerance {
-                    contact_unmet.push(format!("complementarity {complementarity:.3e} > {tolerance:.3e}"));
+                    contact_unmet.push(ContactUnmet::Complementarity { complementarity, tolerance });
                 }
             }
             converged &= contact_unmet.is_empty();
@@ -270,7 +290,7 @@ impl Group<'_, '_> {
         if state.report.iterations == p.max_iterations || state.uzawa_stalls >= UZAWA_STALLS {
             let names: Vec<String> = bodies.iter().map(|b| format!("`{}`", b.name)).collect();
             let bodies_named = if names.len() == 1 { format!("body {}", names[0]) } else { format!("bodies {} (coupled by contact)", names.join(", ")) };
-            let unmet: Vec<String> = bodies.iter().flat_map(|b| b.unmet().iter().cloned()).chain(contact_unmet).collect();
+            let unmet: Vec<String> = bodies.iter().flat_map(|b| b.unmet()).chain(contact_unmet.iter().map(ContactUnmet::to_string)).collect();
             return Err(StepFailure::NotConverged { bodies: bodies_named, iterations: state.report.iterations, unmet: unmet.join("; ") });
         }
         Ok(false)
@@ -294,10 +314,10 @@ impl Group<'_, '_> {
             return Err(StepFailure::Interrupted);
         }
         let (p, bodies, state) = (c.p, &mut *self.bodies, &mut self.newton);
-        let mut refactorized = false;
+        let mut refactorized = Vec::with_capacity(bodies.len());
         for body in bodies.iter_mut() {
             let fresh = body.refresh_factor(p, &mut state.report.wall)?;
-            refactorized |= fresh;
+            refactorized.push(fresh);
             state.report.factorizations += fresh as usize;
         }
         let Some(contact) = &mut self.contact else {
@@ -307,7 +327,7 @@ impl Group<'_, '_> {
             state.report.iterations += 1;
             return Ok(false);
         };
-        contact.prepare(bodies, p, c.settings.expect("contact settings"), refactorized, &mut state.report.wall);
+        contact.prepare(bodies, p, c.settings.expect("contact settings"), &refactorized, &mut state.report.wall);
         Ok(true)
     }
 
