@@ -632,6 +632,12 @@ impl Body {
         1e-14 * c1 * self.max_mass * self.length_scale + 1e-13 * c1 * self.max_mass * travel + STIFFNESS_ROUND_OFF * free * p.xi * self.stiffness_scale * self.length_scale
     }
 
+    /// Whether the last convergence test found the residual within its tolerance (the
+    /// increment may still be above its bound).
+    pub fn balanced(&self) -> bool {
+        self.unmet.iter().all(|u| matches!(u, Unmet::Increment { .. }))
+    }
+
     /// The criteria the last convergence test found unmet (empty when it passed), worded for a
     /// failure message.
     pub fn unmet(&self) -> Vec<String> {

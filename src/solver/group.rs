@@ -211,6 +211,10 @@ struct NewtonState {
 /// `contact.max_iterations` sweeps, and a stall that lasts this long did not clear in any run.
 const UZAWA_STALLS: usize = 3;
 
+/// Newton iterations after which a group whose only unmet criterion is the increment solves its
+/// contact problems tighter ([`ContactStep::tighten`]).
+const TIGHTEN_AFTER: usize = 4;
+
 /// A contact criterion a group's convergence test found unmet, worded only for a failure
 /// message (as the bodies' own, [`Body::unmet`]).
 enum ContactUnmet {
@@ -286,6 +290,13 @@ impl Group<'_, '_> {
         }
         if converged {
             return Ok(true);
+        }
+        // Forces balanced and reactions settled, increments still above their bound after a few
+        // iterations: what remains is the reactions' inexactness.
+        if state.report.iterations >= TIGHTEN_AFTER && contact_unmet.is_empty() && bodies.iter().all(|b| b.balanced()) {
+            if let Some(contact) = &mut self.contact {
+                contact.tighten();
+            }
         }
         if state.report.iterations == p.max_iterations || state.uzawa_stalls >= UZAWA_STALLS {
             let names: Vec<String> = bodies.iter().map(|b| format!("`{}`", b.name)).collect();
