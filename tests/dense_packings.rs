@@ -107,6 +107,17 @@ fn grains_box_with_two_passes_runs_to_the_end() {
     assert!(deepest_node_inside_another_grain(&sim) < 0.01 * h);
 }
 
+/// Caught by the issue: 60 grains pressed by a wall at 10 times the shipped speed stopped at
+/// t = 0.224, a group's residuals and contact forces converged and its increments stuck just
+/// above their bound at dt / 64 for every Newton iteration: what was left of them was the
+/// inexactness of the Uzawa reactions. Such a group now solves its contact problems tighter.
+#[test]
+fn a_fast_compression_passes_the_step_whose_increments_stalled_on_the_reactions() {
+    let mut sim = simulation("grains_many", &["packing.count=60", "packing.wall_velocity=20.0", "time.end=0.23", "output.scene_every=0"]);
+    run_to_end(&mut sim);
+    assert!(sim.finished());
+}
+
 /// Caught by the issue: the penetration the theta rule leaves at an impact (here 1.25e-5) stayed
 /// for the whole contact, as the law only stops a penetration from growing. Drift correction
 /// removes half of it per step, and its energy is booked apart so that the balance still closes.
