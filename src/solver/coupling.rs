@@ -434,17 +434,13 @@ fn end_velocity(c: &ContactPoint, bodies: &[&mut Body], p: &StepParams) -> [Real
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::solver::setup;
+    use crate::solver::grains_many;
 
     /// When one body of a group refactorises, the Delassus blocks solved again for that body
     /// alone are those of a build from scratch, to the bit.
     #[test]
     fn delassus_solved_again_for_one_body_is_that_of_a_fresh_build() {
-        let path = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/grains_many.toml"));
-        let text = std::fs::read_to_string(path).expect("scene");
-        let settings = ["packing.count=16", "packing.wall_velocity=20.0", "time.end=0.05", "output.scene_every=0"].map(String::from);
-        let loaded = crate::scene::parse_scene(path, text, &settings).expect("scene parses");
-        let mut sim = setup::build_simulation(&loaded).expect("simulation");
+        let mut sim = grains_many(&["packing.count=16", "packing.wall_velocity=20.0", "time.end=0.05", "output.scene_every=0"]);
         sim.start();
         while !sim.finished() {
             sim.advance().expect("step");

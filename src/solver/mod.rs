@@ -754,6 +754,16 @@ impl Body {
     }
 }
 
+/// `scenes/grains_many.toml` with these `--set`s, built, for the unit tests.
+#[cfg(test)]
+pub(crate) fn grains_many(settings: &[&str]) -> Simulation {
+    let path = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/grains_many.toml"));
+    let text = std::fs::read_to_string(path).expect("scene");
+    let settings: Vec<String> = settings.iter().map(|s| s.to_string()).collect();
+    let loaded = crate::scene::parse_scene(path, text, &settings).expect("scene parses");
+    setup::build_simulation(&loaded).expect("simulation")
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -764,10 +774,7 @@ mod tests {
     /// all of them), and placing fills exactly the bodies asked for.
     #[test]
     fn a_configuration_is_each_bodys_own_and_places_what_is_asked() {
-        let path = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/grains_many.toml"));
-        let text = std::fs::read_to_string(path).expect("scene");
-        let loaded = crate::scene::parse_scene(path, text, &["packing.count=12".to_string()]).expect("scene parses");
-        let mut sim = setup::build_simulation(&loaded).expect("simulation");
+        let mut sim = grains_many(&["packing.count=12"]);
         for (b, body) in sim.bodies.iter_mut().enumerate() {
             body.state.u.iter_mut().enumerate().for_each(|(d, u)| *u = 1e-3 * ((b * 31 + d) as Real).sin());
         }
@@ -796,11 +803,7 @@ mod tests {
     /// rest, checked against a fresh configuration after every step.
     #[test]
     fn still_bodies_keep_the_boxes_of_their_committed_state() {
-        let path = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/grains_many.toml"));
-        let text = std::fs::read_to_string(path).expect("scene");
-        let settings = ["packing.count=16", "packing.wall_velocity=20.0", "time.end=0.05", "output.scene_every=0"].map(String::from);
-        let loaded = crate::scene::parse_scene(path, text, &settings).expect("scene parses");
-        let mut sim = setup::build_simulation(&loaded).expect("simulation");
+        let mut sim = grains_many(&["packing.count=16", "packing.wall_velocity=20.0", "time.end=0.05", "output.scene_every=0"]);
         sim.start();
         let (mut still, mut moved) = (0, 0);
         while !sim.finished() {
