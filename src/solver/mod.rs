@@ -693,7 +693,10 @@ impl Simulation {
             ..Default::default()
         };
         // Each body's in parallel, summed in the bodies' order (the same sums on any pool).
-        let bodies: Vec<[Real; 3]> = self.bodies.par_iter().map(|b| [b.kinetic_energy(), b.strain_energy(), b.potential_energy(&self.gravity)]).collect();
+        // Without gravity the potential is zero: no pass over every node's position.
+        let weightless = self.gravity == [0.0; 3];
+        let potential = |b: &Body| if weightless { 0.0 } else { b.potential_energy(&self.gravity) };
+        let bodies: Vec<[Real; 3]> = self.bodies.par_iter().map(|b| [b.kinetic_energy(), b.strain_energy(), potential(b)]).collect();
         for [kinetic, strain, potential] in bodies {
             e.kinetic += kinetic;
             e.strain += strain;
