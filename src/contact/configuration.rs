@@ -4,7 +4,7 @@
 //! by the overlap search at the end of a step and the detection that starts the next one.
 
 use super::broad::Aabb;
-use super::geometry::{dot, sub, Vec3};
+use super::geometry::{self, Vec3};
 use super::{ContactModel, Surface};
 use crate::precision::Real;
 use rayon::prelude::*;
@@ -83,18 +83,7 @@ pub fn extent(surface: &Surface, x: impl Fn(usize) -> Vec3, scratch: &mut Vec<Ve
     ((lo, hi), longest.sqrt())
 }
 
-/// The largest squared distance between two points of one facet (`N` points each).
+/// The largest squared edge (or diagonal) of the facets (`N` points each) at `x`.
 fn longest_squared<const N: usize>(facets: &[u32], x: &[Vec3]) -> Real {
-    let mut longest: Real = 0.0;
-    for facet in facets.chunks_exact(N) {
-        let p: [Vec3; N] = std::array::from_fn(|i| x[facet[i] as usize]);
-        for i in 0..N {
-            for j in i + 1..N {
-                let d = sub(p[i], p[j]);
-                let d = dot(d, d);
-                longest = if d > longest { d } else { longest };
-            }
-        }
-    }
-    longest
+    facets.chunks_exact(N).map(|facet| geometry::longest_squared::<N>(&std::array::from_fn(|i| x[facet[i] as usize]))).fold(0.0, |a, d| if d > a { d } else { a })
 }

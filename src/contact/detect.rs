@@ -283,20 +283,13 @@ fn facet_boxes<const N: usize>(facets: &[u32], x: &[Vec3], dim: usize, margin: R
         .map(|facet| {
             let p: [Vec3; N] = std::array::from_fn(|i| x[facet[i] as usize]);
             let (mut lo, mut hi) = (p[0], p[0]);
-            let mut longest: Real = 0.0;
-            for i in 0..N {
+            for x in &p[1..] {
                 for c in 0..3 {
-                    lo[c] = if p[i][c] < lo[c] { p[i][c] } else { lo[c] };
-                    hi[c] = if p[i][c] > hi[c] { p[i][c] } else { hi[c] };
-                }
-                for j in i + 1..N {
-                    let d = sub(p[i], p[j]);
-                    let d = geometry::dot(d, d);
-                    longest = if d > longest { d } else { longest };
+                    lo[c] = if x[c] < lo[c] { x[c] } else { lo[c] };
+                    hi[c] = if x[c] > hi[c] { x[c] } else { hi[c] };
                 }
             }
-            // The largest of the lengths: the root is monotonic and correctly rounded.
-            let size = longest.sqrt();
+            let size = geometry::longest_squared(&p).sqrt();
             let r = margin.max(0.5 * size) + EDGE_TOLERANCE * size;
             for c in 0..dim {
                 (lo[c], hi[c]) = (lo[c] - r, hi[c] + r);

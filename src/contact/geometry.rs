@@ -45,6 +45,20 @@ pub fn edge_range(p: &[Vec3]) -> (Real, Real) {
     (shortest, longest)
 }
 
+/// The largest squared distance between two of the `N` points of a facet: the square of
+/// [`edge_range`]'s longest, without a root per pair (the searches take it for every facet of
+/// thousands of bodies each step; the root of the largest square is the largest root).
+pub fn longest_squared<const N: usize>(p: &[Vec3; N]) -> Real {
+    let mut longest: Real = 0.0;
+    for i in 0..N {
+        for j in i + 1..N {
+            let d = dot(sub(p[i], p[j]), sub(p[i], p[j]));
+            longest = if d > longest { d } else { longest };
+        }
+    }
+    longest
+}
+
 /// Orthonormal frame `[n, t1, t2]` from a unit normal; `t1` follows `hint` when it is not
 /// parallel to `n`. In 2D (`n[2] = 0`), `t1` is `n` turned by +90 degrees and `t2 = 0`.
 pub fn frame(n: Vec3, hint: Option<Vec3>, dim: usize) -> [Vec3; 3] {

@@ -79,7 +79,8 @@ pub fn overlaps(model: &ContactModel, meshes: &[&Mesh], config: &mut Configurati
     let offsets: &[Vec3] = &model.obstacles.iter().map(|o| o.motion.displacement(t)).collect::<Vec<_>>();
     // The obstacles each body's box reaches (few: the walls next to it).
     let near_obstacles = |s: usize| model.obstacles.iter().enumerate().filter(move |(o, obstacle)| obstacle.bodies[s] && obstacle.may_touch(body_boxes[s], offsets[*o], 0.0));
-    config.nodes.place(|b| meets_another[b] || near_obstacles(b).next().is_some(), fill);
+    let near_an_obstacle: Vec<bool> = (0..bodies).into_par_iter().map(|b| near_obstacles(b).next().is_some()).collect();
+    config.nodes.place(|b| meets_another[b] || near_an_obstacle[b], fill);
     let positions = &config.nodes.positions;
     // The elements in reach of another body, the bodies in parallel, in body order.
     let neighbours = &neighbours;
@@ -107,11 +108,10 @@ pub fn overlaps(model: &ContactModel, meshes: &[&Mesh], config: &mut Configurati
             let mut sizes: Option<Vec<Real>> = None;
             let mut found = Vec::new();
             let mut touches: Vec<Touch> = Vec::new();
-            // The obstacles this body's box reaches (few: the walls next to it).
-            let near: Vec<(usize, &super::Obstacle)> = near_obstacles(s).collect();
-            if near.is_empty() && !meets_another[s] {
+            if !near_an_obstacle[s] && !meets_another[s] {
                 return found;
             }
+            let near: Vec<(usize, &super::Obstacle)> = near_obstacles(s).collect();
             for &node in &surface.nodes {
                 let x = positions[s][node as usize];
                 let mut own = || sizes.get_or_insert_with(|| node_sizes(surface, &positions[s]))[node as usize];

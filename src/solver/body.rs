@@ -886,11 +886,7 @@ impl Body {
 
     /// Current position of a node.
     pub fn position(&self, node: usize) -> [Real; 3] {
-        let mut x = self.mesh.nodes[node];
-        for i in 0..self.dim {
-            x[i] += self.state.u[node * self.dim + i];
-        }
-        x
+        super::displaced(self.mesh.nodes[node], &self.state.u, node, self.dim)
     }
 
     /// Gravity potential `-Σ m g·x`.

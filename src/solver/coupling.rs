@@ -48,12 +48,11 @@ pub struct ContactStep {
     /// vanishing reaction is not mistaken for a change.
     velocity_scale: Real,
     floor: Real,
-    /// Whether `delassus` (and each point's rho) was built with the bodies' current
-    /// factorisations: while no body refactorises, `W` does not change within a step.
-    delassus_current: bool,
     /// The Uzawa tolerance of each Newton iteration, relative to the contact tolerance.
     inner: Real,
-    /// Per body, its terms of the Delassus blocks: `(block, entry, value)`.
+    /// Per body, its terms of the Delassus blocks `(block, entry, value)`, with its current
+    /// factorisation (none before the first build): while no body refactorises, `W` does not
+    /// change within a step.
     shares: Vec<Vec<(u32, u8, Real)>>,
     /// Per body, the contact-free increment `K̄⁻¹(-g)` of the increment being solved.
     free_increment: Vec<Vec<Real>>,
@@ -151,7 +150,7 @@ impl ContactStep {
         }
         nodal.nodes = slots.len();
         let responses = bodies.iter().map(|_| None).collect();
-        Self { points, delassus, colours, per_body, h, r, local, nodal, dim, velocity_scale, floor, delassus_current: false, inner: INNER_TOLERANCE, shares: Vec::new(), free_increment: Vec::new(), responses }
+        Self { points, delassus, colours, per_body, h, r, local, nodal, dim, velocity_scale, floor, inner: INNER_TOLERANCE, shares: Vec::new(), free_increment: Vec::new(), responses }
     }
 
     /// Whether every point has a step length (carried over from the last step), so that the
@@ -230,10 +229,9 @@ impl ContactStep {
             self.local[i].v_free = v;
         }
         self.free_increment = x0;
-        if !self.delassus_current {
-            self.build_delassus(bodies, |_| true, theta_dt, settings, times);
-        } else if refactorized.iter().any(|&r| r) {
-            self.build_delassus(bodies, |b| refactorized[b], theta_dt, settings, times);
+        let first = self.shares.len() != bodies.len();
+        if first || refactorized.iter().any(|&r| r) {
+            self.build_delassus(bodies, |b| first || refactorized[b], theta_dt, settings, times);
         }
         // The back-substitutions are counted as solves, the rest as contact.
         times.contact += started.elapsed().as_secs_f64() - (times.solve - solve_before);
@@ -365,7 +363,6 @@ impl ContactStep {
             self.local[i].rho = self.delassus.rho(i, dim, settings.sweep);
         }
         self.floor = self.velocity_scale * self.local.iter().map(|l| l.rho).fold(0.0, Real::max);
-        self.delassus_current = true;
         self.delassus.stamp();
     }
 
@@ -459,17 +456,17 @@ mod tests {
             body.refresh_factor(&p, &mut times).expect("factorisation");
         }
         let mut kept = ContactStep::new(points.clone(), &bodies, &p, &HashMap::new(), 1.0);
-        let all = vec![false; bodies.len()];
-        kept.prepare(&mut bodies, &p, &contact_settings, &all, &mut times);
+        let none = vec![false; bodies.len()];
+        kept.prepare(&mut bodies, &p, &contact_settings, &none, &mut times);
         // One touched body refactorises at another step length.
         let changed = *touched.iter().nth(1).expect("several grains") as usize;
         let other = StepParams { dt: 0.004, ..p };
         bodies[changed].refresh_factor(&other, &mut times).expect("factorisation");
-        let mut refactorized = all.clone();
+        let mut refactorized = none.clone();
         refactorized[changed] = true;
         kept.prepare(&mut bodies, &p, &contact_settings, &refactorized, &mut times);
         let mut fresh = ContactStep::new(points, &bodies, &p, &HashMap::new(), 1.0);
-        fresh.prepare(&mut bodies, &p, &contact_settings, &all, &mut times);
+        fresh.prepare(&mut bodies, &p, &contact_settings, &none, &mut times);
         assert_eq!(kept.delassus.blocks, fresh.delassus.blocks);
     }
 }
