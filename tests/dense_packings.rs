@@ -107,6 +107,24 @@ fn grains_box_with_two_passes_runs_to_the_end() {
     assert!(deepest_node_inside_another_grain(&sim) < 0.01 * h);
 }
 
+/// Caught by the issue's fast compression (the wall at 10 times its speed): a node of one grain
+/// pressed into the dented side of another, at a concave corner of its boundary, was held by
+/// the nearer of the corner's two segments only and sank through the other, 2.9 % of an element
+/// deep however short the step (30 grains at t = 0.056, kept at dt / 64). It is held by both.
+#[test]
+fn a_grain_pressed_into_a_dented_neighbour_stays_out_of_it() {
+    let mut sim = simulation("grains_many", &["packing.count=30", "packing.wall_velocity=20.0", "time.end=0.06"]);
+    sim.start();
+    let mut ratio: f64 = 0.0;
+    while !sim.finished() {
+        let report = sim.advance().unwrap_or_else(|f| panic!("step {} at t = {:.4} failed: {}", f.step, f.t, f.failure));
+        ratio = ratio.max(report.contact.max_overlap_ratio);
+    }
+    let corners = sim.contact_points.iter().filter(|c| c.corner).count();
+    println!("30 grains at 10x the wall speed to t = 0.06: deepest overlap {ratio:.3e} of an element; {corners} corner points at the end");
+    assert!(ratio < 0.01, "a node went {ratio:.3e} of an element into another grain");
+}
+
 /// Caught by the issue: 60 grains pressed by a wall at 10 times the shipped speed stopped at
 /// t = 0.224, a group's residuals and contact forces converged and its increments stuck just
 /// above their bound at dt / 64 for every Newton iteration: what was left of them was the

@@ -57,6 +57,9 @@ pub struct ContactPoint {
     pub term_count: usize,
     /// The point belongs to the second pass of a two-pass pair.
     pub second: bool,
+    /// The point holds its node on a second facet of its master, in a concave corner
+    /// ([`detect`]'s `concave`): its key differs from the first's.
+    pub corner: bool,
     /// `[n, t1, t2]`, `n` pointing from the master towards the slave.
     pub frame: [Vec3; 3],
     /// Signed gap at the start of the step (negative: penetration).
@@ -101,10 +104,14 @@ impl ContactPoint {
 
     /// Identity across steps, to warm-start the Uzawa iterations (a slave node sliding from one
     /// facet of a master body to the next keeps its key).
-    pub fn key(&self) -> (u32, u32, Master) {
-        (self.slave_body, self.slave_node, self.master)
+    pub fn key(&self) -> PointKey {
+        (self.slave_body, self.slave_node, self.master, self.corner)
     }
 }
+
+/// A contact point's identity across steps: slave body and node, master, and whether it is the
+/// node's second point on that master ([`ContactPoint::corner`]).
+pub type PointKey = (u32, u32, Master, bool);
 
 /// Contact settings of a scene (`[contact]`).
 #[derive(Debug, Clone)]

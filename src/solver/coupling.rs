@@ -75,7 +75,7 @@ const KEPT_COLUMNS: usize = 1 << 20;
 
 impl ContactStep {
     /// Sets up a step's contact points: their gap shift and the block pattern of `W`.
-    pub fn new(mut points: Vec<ContactPoint>, bodies: &[&mut Body], p: &StepParams, warm: &HashMap<(u32, u32, crate::contact::Master), ([Real; 3], Real)>, velocity_scale: Real) -> Self {
+    pub fn new(mut points: Vec<ContactPoint>, bodies: &[&mut Body], p: &StepParams, warm: &HashMap<crate::contact::PointKey, ([Real; 3], Real)>, velocity_scale: Real) -> Self {
         let dim = bodies[0].dim;
         let (dt, theta) = (p.dt, p.theta);
         for c in &mut points {

@@ -8,7 +8,7 @@ use super::body::{coefficients, Body, StepFailure, StepParams};
 use super::coupling::ContactStep;
 use super::PhaseTimes;
 use crate::contact::uzawa::Outcome;
-use crate::contact::{ContactPoint, Master, Settings};
+use crate::contact::{ContactPoint, Settings};
 use crate::gpu::{ElementFailure, Evaluation, GpuWorld};
 use crate::precision::{Precision, Real};
 use rayon::prelude::*;
@@ -121,7 +121,7 @@ pub fn solve_groups(
     points: Vec<ContactPoint>,
     p: &StepParams,
     settings: Option<&Settings>,
-    warm: &HashMap<(u32, u32, Master), ([Real; 3], Real)>,
+    warm: &HashMap<crate::contact::PointKey, ([Real; 3], Real)>,
     velocity_scale: Real,
     world: Option<&mut GpuWorld>,
     interrupt: Option<&AtomicBool>,

@@ -326,7 +326,7 @@ pub struct Simulation {
     /// Time and step the run starts from: (0, 0), or a restored state's.
     pub first_step: (Real, usize),
     /// The warm start of a restored state, until its first step is done.
-    restored_warm_start: Option<HashMap<(u32, u32, Master), ([Real; 3], Real)>>,
+    restored_warm_start: Option<HashMap<crate::contact::PointKey, ([Real; 3], Real)>>,
     /// The broad phase's body pairs, kept between steps (they do not change the points or
     /// overlaps found). The overlap search after a step takes the detection's: found for grown
     /// boxes, they hold the pairs of the boxes themselves until a box leaves them.

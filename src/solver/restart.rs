@@ -2,7 +2,7 @@
 //! steps before it, so that a restarted run repeats the uninterrupted one to round-off.
 
 use super::Simulation;
-use crate::contact::Master;
+use crate::contact::{Master, PointKey};
 use crate::precision::Real;
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
@@ -121,6 +121,9 @@ pub struct SavedReaction {
     pub slave_body: u32,
     pub slave_node: u32,
     pub master: Master,
+    /// The node's second point on that master, in a concave corner (absent: the first).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub corner: bool,
     pub r: [Real; 3],
     pub rho: Real,
 }
@@ -177,8 +180,8 @@ impl Simulation {
                 })
                 .collect(),
             contact: {
-                let mut points: Vec<SavedReaction> = self.warm_start().into_iter().map(|((slave_body, slave_node, master), (r, rho))| SavedReaction { slave_body, slave_node, master, r, rho }).collect();
-                points.sort_by_key(|c| (c.slave_body, c.slave_node, c.master));
+                let mut points: Vec<SavedReaction> = self.warm_start().into_iter().map(|((slave_body, slave_node, master, corner), (r, rho))| SavedReaction { slave_body, slave_node, master, corner, r, rho }).collect();
+                points.sort_by_key(|c| (c.slave_body, c.slave_node, c.master, c.corner));
                 points
             },
             obstacle_reactions: self.obstacle_reactions.clone(),
@@ -250,7 +253,7 @@ impl Simulation {
         self.contact_correction = saved.contact_correction;
         (self.level, self.easy_steps, self.last_overlap) = (saved.step_level, saved.easy_steps, saved.last_overlap);
         self.obstacle_reactions.clone_from(&saved.obstacle_reactions);
-        self.restored_warm_start = Some(saved.contact.iter().map(|c| ((c.slave_body, c.slave_node, c.master), (c.r, c.rho))).collect());
+        self.restored_warm_start = Some(saved.contact.iter().map(|c| ((c.slave_body, c.slave_node, c.master, c.corner), (c.r, c.rho))).collect());
         // Finite values can still overflow the energies (a velocity of 1e308).
         let energies = self.energies();
         for (what, value) in [("kinetic energy", energies.kinetic), ("strain energy", energies.strain), ("total energy", energies.total)] {
@@ -262,7 +265,7 @@ impl Simulation {
     }
 
     /// The reactions and rho the next step starts its Uzawa sweeps from, by point identity.
-    pub(super) fn warm_start(&self) -> HashMap<(u32, u32, Master), ([Real; 3], Real)> {
+    pub(super) fn warm_start(&self) -> HashMap<PointKey, ([Real; 3], Real)> {
         match &self.restored_warm_start {
             Some(warm) => warm.clone(),
             None => self.contact_points.iter().map(|c| (c.key(), (c.r, c.rho))).collect(),
