@@ -353,7 +353,7 @@ impl PairSearch {
                 // Best facet per master body for the current node, among this slave's masters: one
                 // that faces the node's own surface, else one that does not (`Candidate`).
                 let mut best: Vec<[Option<(Real, usize, Projection)>; 2]> = vec![[None, None]; masters[s].len()];
-                // Every facing facet of the current node, by master: in 2D a second one holds it
+                // In 2D, every facing facet of the current node, by master: a second one holds it
                 // in a concave corner of the master ([`concave`]).
                 let mut facing: Vec<(usize, usize, Projection)> = Vec::new();
                 let mut xs: Vec<Vec3> = Vec::with_capacity(4);
@@ -376,7 +376,9 @@ impl PairSearch {
                             let normal = normals.get_or_insert_with(|| node_normals(&surfaces[s], &positions[s]))[node as usize];
                             let tier = match Candidate::of(normal, &p, || project(x, &xs, 0.0).is_some()) {
                                 Candidate::Facing => {
-                                    facing.push((k, f, p));
+                                    if dim == 2 {
+                                        facing.push((k, f, p));
+                                    }
                                     0
                                 }
                                 Candidate::Askew => 1,

@@ -52,7 +52,8 @@ pub fn longest_squared<const N: usize>(p: &[Vec3; N]) -> Real {
     let mut longest: Real = 0.0;
     for i in 0..N {
         for j in i + 1..N {
-            let d = dot(sub(p[i], p[j]), sub(p[i], p[j]));
+            let d = sub(p[i], p[j]);
+            let d = dot(d, d);
             longest = if d > longest { d } else { longest };
         }
     }

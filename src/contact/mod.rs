@@ -113,6 +113,9 @@ impl ContactPoint {
 /// node's second point on that master ([`ContactPoint::corner`]).
 pub type PointKey = (u32, u32, Master, bool);
 
+/// The reactions and rho a step's Uzawa sweeps start from, by point identity.
+pub type WarmStart = std::collections::HashMap<PointKey, ([Real; 3], Real)>;
+
 /// Contact settings of a scene (`[contact]`).
 #[derive(Debug, Clone)]
 pub struct Settings {

@@ -9,7 +9,7 @@
 use super::body::{Body, StepParams};
 use super::PhaseTimes;
 use crate::contact::uzawa::{self, Colours, Delassus, Local, NodalMap, Outcome, Problem};
-use crate::contact::{uzawa_step, ContactPoint, Settings, Status};
+use crate::contact::{uzawa_step, ContactPoint, Settings, Status, WarmStart};
 use crate::precision::Real;
 use std::collections::HashMap;
 use std::sync::atomic::AtomicBool;
@@ -75,7 +75,7 @@ const KEPT_COLUMNS: usize = 1 << 20;
 
 impl ContactStep {
     /// Sets up a step's contact points: their gap shift and the block pattern of `W`.
-    pub fn new(mut points: Vec<ContactPoint>, bodies: &[&mut Body], p: &StepParams, warm: &HashMap<crate::contact::PointKey, ([Real; 3], Real)>, velocity_scale: Real) -> Self {
+    pub fn new(mut points: Vec<ContactPoint>, bodies: &[&mut Body], p: &StepParams, warm: &WarmStart, velocity_scale: Real) -> Self {
         let dim = bodies[0].dim;
         let (dt, theta) = (p.dt, p.theta);
         for c in &mut points {

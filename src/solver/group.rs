@@ -8,11 +8,10 @@ use super::body::{coefficients, Body, StepFailure, StepParams};
 use super::coupling::ContactStep;
 use super::PhaseTimes;
 use crate::contact::uzawa::Outcome;
-use crate::contact::{ContactPoint, Settings};
+use crate::contact::{ContactPoint, Settings, WarmStart};
 use crate::gpu::{ElementFailure, Evaluation, GpuWorld};
 use crate::precision::{Precision, Real};
 use rayon::prelude::*;
-use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, Ordering};
 
 /// What the Newton loop of one group did.
@@ -121,7 +120,7 @@ pub fn solve_groups(
     points: Vec<ContactPoint>,
     p: &StepParams,
     settings: Option<&Settings>,
-    warm: &HashMap<crate::contact::PointKey, ([Real; 3], Real)>,
+    warm: &WarmStart,
     velocity_scale: Real,
     world: Option<&mut GpuWorld>,
     interrupt: Option<&AtomicBool>,

@@ -24,7 +24,6 @@ use crate::precision::{Precision, Real};
 pub use body::StepParams;
 use group::solve_groups;
 use rayon::prelude::*;
-use std::collections::HashMap;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
@@ -326,7 +325,7 @@ pub struct Simulation {
     /// Time and step the run starts from: (0, 0), or a restored state's.
     pub first_step: (Real, usize),
     /// The warm start of a restored state, until its first step is done.
-    restored_warm_start: Option<HashMap<crate::contact::PointKey, ([Real; 3], Real)>>,
+    restored_warm_start: Option<crate::contact::WarmStart>,
     /// The broad phase's body pairs, kept between steps (they do not change the points or
     /// overlaps found). The overlap search after a step takes the detection's: found for grown
     /// boxes, they hold the pairs of the boxes themselves until a box leaves them.

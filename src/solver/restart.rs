@@ -2,10 +2,9 @@
 //! steps before it, so that a restarted run repeats the uninterrupted one to round-off.
 
 use super::Simulation;
-use crate::contact::{Master, PointKey};
+use crate::contact::{Master, WarmStart};
 use crate::precision::Real;
 use serde::{Deserialize, Serialize};
-use std::collections::HashMap;
 
 /// A finished step's state: time, step, every body's state, the energy accumulators, the
 /// contact reactions and rho (the next step's warm start) and the kept factorisations.
@@ -265,7 +264,7 @@ impl Simulation {
     }
 
     /// The reactions and rho the next step starts its Uzawa sweeps from, by point identity.
-    pub(super) fn warm_start(&self) -> HashMap<PointKey, ([Real; 3], Real)> {
+    pub(super) fn warm_start(&self) -> WarmStart {
         match &self.restored_warm_start {
             Some(warm) => warm.clone(),
             None => self.contact_points.iter().map(|c| (c.key(), (c.r, c.rho))).collect(),
