@@ -5,6 +5,7 @@
 use crate::contact::uzawa::{Acceleration, Sweep};
 use crate::contact::Settings;
 use crate::gpu::{self, Gpu, GpuError, GpuWorld};
+use crate::mesh::ElementKind;
 use crate::precision::{Precision, PRECISION_NAME};
 use crate::solver::Simulation;
 use std::sync::Arc;
@@ -67,14 +68,48 @@ impl std::str::FromStr for UzawaPlacement {
     }
 }
 
+/// Which Newton rounds evaluate their bodies on the device when the bodies are on a GPU
+/// (`bifirst run --rounds`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum RoundPlacement {
+    /// The first round of every step, and a later round when its element work is worth a
+    /// device pass ([`round_on_device`]); the other rounds on the CPU twins.
+    #[default]
+    Auto,
+    /// Every round.
+    Gpu,
+}
+
+impl RoundPlacement {
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Auto => "auto",
+            Self::Gpu => "gpu",
+        }
+    }
+}
+
+impl std::str::FromStr for RoundPlacement {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "auto" => Ok(Self::Auto),
+            "gpu" => Ok(Self::Gpu),
+            _ => Err(format!("unknown round placement `{s}` (auto or gpu)")),
+        }
+    }
+}
+
 /// The backend request of a run: choice, adapter name (a case-insensitive substring),
-/// precision (default: f64 when the adapter has it) and where the Uzawa sweeps run.
+/// precision (default: f64 when the adapter has it), where the Uzawa sweeps run and which
+/// Newton rounds go to the device.
 #[derive(Debug, Clone, Default)]
 pub struct BackendRequest {
     pub choice: BackendChoice,
     pub adapter: Option<String>,
     pub precision: Option<Precision>,
     pub uzawa: UzawaPlacement,
+    pub rounds: RoundPlacement,
 }
 
 impl BackendRequest {
@@ -96,6 +131,9 @@ impl BackendRequest {
         if self.uzawa != UzawaPlacement::Auto {
             args.extend(["--uzawa".to_string(), self.uzawa.name().to_string()]);
         }
+        if self.rounds != RoundPlacement::Auto {
+            args.extend(["--rounds".to_string(), self.rounds.name().to_string()]);
+        }
         args
     }
 }
@@ -110,13 +148,15 @@ pub enum BackendError {
     CpuAdapter,
     #[error("--uzawa gpu needs a GPU backend")]
     CpuUzawa,
+    #[error("--rounds gpu needs a GPU backend")]
+    CpuRounds,
 }
 
 /// Where the kernels run.
 #[derive(Clone)]
 pub enum Backend {
     Cpu,
-    Gpu(Arc<Gpu>, UzawaPlacement),
+    Gpu(Arc<Gpu>, UzawaPlacement, RoundPlacement),
 }
 
 /// Why `auto` runs on the CPU on a machine with a hardware GPU. Measured on an NVIDIA H100
@@ -150,13 +190,14 @@ impl Backend {
             let notice = gpu.adapter.software().then(|| {
                 format!("no hardware GPU: the GPU kernels run on the software adapter {} (slow; use --backend cpu for speed)", gpu.adapter.name)
             });
-            Resolved { backend: Backend::Gpu(Arc::new(gpu), request.uzawa), notice, reason: None }
+            Resolved { backend: Backend::Gpu(Arc::new(gpu), request.uzawa, request.rounds), notice, reason: None }
         };
         let cpu = |reason: String| Ok(Resolved { backend: Backend::Cpu, notice: None, reason: Some(format!("backend auto: {reason}; running on the CPU")) });
         match request.choice {
             BackendChoice::Cpu if request.precision == Some(Precision::F32) => Err(BackendError::CpuPrecision),
             BackendChoice::Cpu if request.adapter.is_some() => Err(BackendError::CpuAdapter),
             BackendChoice::Cpu if request.uzawa == UzawaPlacement::Gpu => Err(BackendError::CpuUzawa),
+            BackendChoice::Cpu if request.rounds == RoundPlacement::Gpu => Err(BackendError::CpuRounds),
             BackendChoice::Cpu => Ok(Resolved { backend: Backend::Cpu, notice: None, reason: None }),
             BackendChoice::Gpu => Ok(on_gpu(gpu::open(request.adapter.as_deref(), request.precision)?)),
             // An adapter named by the user is taken whatever it is.
@@ -180,7 +221,7 @@ impl Backend {
     pub fn precision(&self) -> &'static str {
         match self {
             Backend::Cpu => PRECISION_NAME,
-            Backend::Gpu(gpu, _) => gpu.precision.name(),
+            Backend::Gpu(gpu, ..) => gpu.precision.name(),
         }
     }
 
@@ -188,7 +229,7 @@ impl Backend {
     pub fn adapter(&self) -> Option<String> {
         match self {
             Backend::Cpu => None,
-            Backend::Gpu(gpu, _) => Some(gpu.adapter.line()),
+            Backend::Gpu(gpu, ..) => Some(gpu.adapter.line()),
         }
     }
 
@@ -196,13 +237,13 @@ impl Backend {
     pub fn describe(&self) -> String {
         match self {
             Backend::Cpu => format!("cpu ({PRECISION_NAME})"),
-            Backend::Gpu(gpu, uzawa) => format!("gpu on {} in {}, Uzawa sweeps {}", gpu.adapter.line(), gpu.precision.name(), uzawa.name()),
+            Backend::Gpu(gpu, uzawa, rounds) => format!("gpu on {} in {}, Uzawa sweeps {}, Newton rounds {}", gpu.adapter.line(), gpu.precision.name(), uzawa.name(), rounds.name()),
         }
     }
 
     /// Why `--uzawa gpu` cannot put a scene's sweeps on the device (they stay on the CPU).
     pub fn uzawa_notice(&self, sweep: Option<Sweep>) -> Option<String> {
-        let Backend::Gpu(gpu, UzawaPlacement::Gpu) = self else { return None };
+        let Backend::Gpu(gpu, UzawaPlacement::Gpu, _) = self else { return None };
         let why = if gpu.precision != Precision::F64 {
             "in f32 they could not reach the contact tolerance"
         } else if sweep == Some(Sweep::Jacobi) {
@@ -216,10 +257,11 @@ impl Backend {
     /// Places every body's element and assembly kernels (the CPU twins are the default): on a
     /// GPU, all bodies go into one device world.
     pub fn apply(&self, sim: &mut Simulation) -> Result<(), GpuError> {
-        if let Backend::Gpu(gpu, uzawa) = self {
+        if let Backend::Gpu(gpu, uzawa, rounds) = self {
             let bodies: Vec<_> = sim.bodies.iter().map(|b| b.world_body()).collect();
             let mut world = GpuWorld::new(gpu.clone(), &bodies)?;
             world.uzawa = *uzawa;
+            world.rounds = *rounds;
             sim.world = Some(world);
         }
         Ok(())
@@ -243,5 +285,42 @@ pub fn uzawa_on_device(world: &GpuWorld, settings: &Settings, points: usize, col
         UzawaPlacement::Gpu => true,
         UzawaPlacement::Cpu => false,
         UzawaPlacement::Auto => settings.acceleration == Acceleration::None && !world.software() && points >= AUTO_UZAWA_POINTS && points >= AUTO_UZAWA_POINTS_PER_COLOUR * colours,
+    }
+}
+
+/// What a device pass costs in submit and fence wait, in seconds: ~0.3 ms on an NVIDIA H100
+/// (doc/benchmarks.md, "GPU pipeline"), about 13 of them per grain step before rounds were
+/// placed.
+pub const DEVICE_PASS_SECONDS: f64 = 3e-4;
+
+/// CPU seconds per element and core of a force and tangent evaluation, by element kind: the
+/// CPU column of `bifirst bench --elements 1000000` on that machine (16 cores: Tri3 23.9 M/s,
+/// Quad4 6.58 M/s, Tet4 14.1 M/s, Hex8 860 k/s) times 16.
+fn cpu_seconds_per_element(kind: ElementKind) -> f64 {
+    16.0 / match kind {
+        ElementKind::Tri3 => 23.9e6,
+        ElementKind::Quad4 => 6.58e6,
+        ElementKind::Tet4 => 14.1e6,
+        ElementKind::Hex8 => 860e3,
+    }
+}
+
+/// Whether a Newton round evaluates its bodies, `elements` of each kind, on the device of
+/// `world`. With `--rounds auto`, the first round of a step does (every body of the scene, in
+/// the large dispatches a GPU is for), and a later round when the CPU twins would take longer
+/// on the run's threads than a device pass costs ([`DEVICE_PASS_SECONDS`]): after the first
+/// round only the groups still iterating remain, mostly a few grains in contact, which the CPU
+/// evaluates in microseconds while a pass waits for the device. On a software adapter, which
+/// shares the CPU's cores, only the first round: it runs the GPU path, and no later round gains
+/// there. Estimated from the H100's measurements, not yet measured as a rule.
+pub fn round_on_device(world: &GpuWorld, first: bool, elements: &[(ElementKind, usize)]) -> bool {
+    match world.rounds {
+        RoundPlacement::Gpu => true,
+        RoundPlacement::Auto if first => true,
+        RoundPlacement::Auto if world.software() => false,
+        RoundPlacement::Auto => {
+            let threads = rayon::current_num_threads() as f64;
+            elements.iter().map(|&(kind, n)| n as f64 * cpu_seconds_per_element(kind)).sum::<f64>() / threads >= DEVICE_PASS_SECONDS
+        }
     }
 }

@@ -2,7 +2,7 @@
 //! accuracy, stability, state, check, plot, summary, bench and info.
 
 use anyhow::Result;
-use bifirst::backend::{BackendChoice, BackendRequest, UzawaPlacement};
+use bifirst::backend::{BackendChoice, BackendRequest, RoundPlacement, UzawaPlacement};
 use bifirst::bench::{bench_devices, run_bench, BenchOptions};
 use bifirst::output::plot::{self, PlotOptions};
 use bifirst::output::{read_run, summary};
@@ -258,11 +258,16 @@ struct BackendArgs {
     /// (Gauss-Seidel in f64), `cpu` never.
     #[arg(long, default_value = "auto", value_parser = parse_uzawa)]
     uzawa: UzawaPlacement,
+    /// With the kernels on a GPU, which Newton rounds evaluate on the device: `auto` the first
+    /// of each step and those with enough elements to gain, the others on the CPU twins; `gpu`
+    /// every round.
+    #[arg(long, default_value = "auto", value_parser = parse_rounds)]
+    rounds: RoundPlacement,
 }
 
 impl From<BackendArgs> for BackendRequest {
     fn from(a: BackendArgs) -> Self {
-        BackendRequest { choice: a.backend, adapter: a.adapter, precision: a.precision, uzawa: a.uzawa }
+        BackendRequest { choice: a.backend, adapter: a.adapter, precision: a.precision, uzawa: a.uzawa, rounds: a.rounds }
     }
 }
 
@@ -387,6 +392,10 @@ fn parse_backend(s: &str) -> Result<BackendChoice, String> {
 }
 
 fn parse_uzawa(s: &str) -> Result<UzawaPlacement, String> {
+    s.parse()
+}
+
+fn parse_rounds(s: &str) -> Result<RoundPlacement, String> {
     s.parse()
 }
 
@@ -853,7 +862,7 @@ fn main() -> ExitCode {
             println!("build: {} profile, rustc target {}-{}", if cfg!(debug_assertions) { "debug" } else { "release" }, std::env::consts::ARCH, std::env::consts::OS);
             println!("solver precision: {} (factorisation, time stepping, contact)", bifirst::precision::PRECISION_NAME);
             println!("WGSL kernels: {}", bifirst::gpu::shaders::SHADERS.iter().map(|(name, _)| *name).collect::<Vec<_>>().join(", "));
-            println!("  `run --backend gpu` runs the element, assembly and energy kernels on the adapter, and the Uzawa sweeps of large contact sets (`--uzawa`); factorisations, solves and contact detection stay on the CPU");
+            println!("  `run --backend gpu` runs the element, assembly and energy kernels on the adapter (every body's first Newton round of a step, later rounds when large: `--rounds`), and the Uzawa sweeps of large contact sets (`--uzawa`); factorisations, solves and contact detection stay on the CPU");
             println!("  `run --backend auto` runs on the CPU: a hardware GPU {}", bifirst::backend::AUTO_REASON_GPU);
             println!("worker threads: {} (--threads)", rayon::current_num_threads());
             let adapters = bifirst::gpu::describe_adapters();

@@ -13,7 +13,7 @@ use super::uzawa_sweep::UzawaSweeps;
 use super::types::{Active, Coefficients, DofOut, DofStep, MaterialParams, MemberRange, MODE_FORCES, MODE_TANGENT, NO_HISTORY};
 use super::{ElementVariant, Gpu, GpuError};
 use crate::assembly::{element_out_stride, GatherMap, StiffnessPattern};
-use crate::backend::UzawaPlacement;
+use crate::backend::{RoundPlacement, UzawaPlacement};
 use crate::contact::uzawa::{Outcome, Problem};
 use crate::element::{Formulation, ReferenceGeometry};
 use crate::material::viscous::HISTORY;
@@ -238,6 +238,8 @@ pub struct GpuWorld {
     contact: Option<UzawaSweeps>,
     /// Where the Uzawa sweeps run (set by the backend).
     pub uzawa: UzawaPlacement,
+    /// Which Newton rounds evaluate on the device (set by the backend).
+    pub rounds: RoundPlacement,
 }
 
 pub(super) fn buffer(gpu: &Gpu, label: &str, bytes: usize, usage: BufferUsages) -> Buffer {
@@ -300,7 +302,7 @@ impl GpuWorld {
             batches.push(batch);
         }
         let readback = buffer(&gpu, "readback", readback_bytes, BufferUsages::MAP_READ | BufferUsages::COPY_DST);
-        Ok(Self { gpu, batches, place, coefficients, readback, traffic, submits: 0, contact: None, uzawa: UzawaPlacement::default() })
+        Ok(Self { gpu, batches, place, coefficients, readback, traffic, submits: 0, contact: None, uzawa: UzawaPlacement::default(), rounds: RoundPlacement::default() })
     }
 
     pub fn precision(&self) -> Precision {

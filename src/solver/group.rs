@@ -10,6 +10,7 @@ use super::PhaseTimes;
 use crate::contact::uzawa::Outcome;
 use crate::contact::{ContactPoint, Settings, WarmStart};
 use crate::gpu::{ElementFailure, Evaluation, GpuWorld};
+use crate::mesh::ElementKind;
 use crate::precision::{Precision, Real};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -372,18 +373,22 @@ impl Group<'_, '_> {
 /// evaluates the bodies of every group still iterating (forces and residuals); the groups test
 /// convergence in parallel; one device pass computes the tangents of the bodies that
 /// refactorise; the groups take their increments in parallel. The number of device passes per
-/// Newton iteration does not depend on the number of bodies.
+/// Newton iteration does not depend on the number of bodies. A round whose element work is not
+/// worth a device pass ([`crate::backend::round_on_device`]: after the first, mostly a few
+/// grains in contact) evaluates on the CPU twins instead, so that the passes of a step do not
+/// grow with its Newton iterations.
 fn newton_in_lockstep(groups: &mut [Group], world: &mut GpuWorld, c: &Context, times: &mut PhaseTimes) -> Vec<Result<GroupReport, StepFailure>> {
     let mut outcome: Vec<Option<Result<GroupReport, StepFailure>>> = (0..groups.len()).map(|_| None).collect();
     // In f32 the residual is computed in f64 on the CPU; the device gives the tangents.
     let device_residual = world.precision() == Precision::F64;
+    let mut first = true;
     loop {
         let live: Vec<bool> = outcome.iter().map(Option::is_none).collect();
         if !live.iter().any(|&l| l) {
             break;
         }
         let wanted = |_: &Body| true;
-        let evaluated = if device_residual {
+        let evaluated = if device_residual && on_device(groups, &live, &wanted, world, first) {
             device_pass(groups, &live, world, c.p, false, &wanted, times)
         } else {
             groups
@@ -422,7 +427,13 @@ fn newton_in_lockstep(groups: &mut [Group], world: &mut GpuWorld, c: &Context, t
             }
         }
         let p = c.p;
-        let tangents = device_pass(groups, &continuing, world, p, true, &|b: &Body| b.needs_tangent(p), times);
+        let needs_tangent = |b: &Body| b.needs_tangent(p);
+        // Else each body's `refresh_factor` assembles its tangent on the CPU.
+        let tangents = if on_device(groups, &continuing, &needs_tangent, world, first) {
+            device_pass(groups, &continuing, world, p, true, &needs_tangent, times)
+        } else {
+            groups.iter().map(|_| Ok(())).collect()
+        };
         let begun: Vec<Option<Result<bool, StepFailure>>> =
             groups.par_iter_mut().zip(tangents).zip(&continuing).map(|((g, tangents), &go)| go.then(|| tangents.and_then(|()| g.begin_increment(c)))).collect();
         let mut waiting = vec![false; groups.len()];
@@ -441,8 +452,29 @@ fn newton_in_lockstep(groups: &mut [Group], world: &mut GpuWorld, c: &Context, t
                 outcome[k] = Some(Err(e));
             }
         }
+        first = false;
     }
     outcome.into_iter().map(|o| o.expect("every group has an outcome")).collect()
+}
+
+/// Whether the round's pass over the bodies of the `live` groups that `wanted` selects goes to
+/// the device ([`crate::backend::round_on_device`]).
+fn on_device(groups: &[Group], live: &[bool], wanted: &dyn Fn(&Body) -> bool, world: &GpuWorld, first: bool) -> bool {
+    let work = if first { Vec::new() } else { element_work(groups, live, wanted) };
+    crate::backend::round_on_device(world, first, &work)
+}
+
+/// The elements of each kind of the bodies of the `live` groups that `wanted` selects.
+fn element_work(groups: &[Group], live: &[bool], wanted: &dyn Fn(&Body) -> bool) -> Vec<(ElementKind, usize)> {
+    let mut work: Vec<(ElementKind, usize)> = Vec::new();
+    for body in groups.iter().zip(live).filter(|(_, &l)| l).flat_map(|(g, _)| g.bodies.iter()).filter(|b| wanted(b)) {
+        let mesh = body.elements();
+        match work.iter_mut().find(|(kind, _)| *kind == mesh.kind) {
+            Some((_, n)) => *n += mesh.element_count(),
+            None => work.push((mesh.kind, mesh.element_count())),
+        }
+    }
+    work
 }
 
 /// The Uzawa iterations of the `waiting` groups' contact problems: on the device, all in one
