@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The GPU measurement of issue 14 (doc/benchmarks.md, "GPU pipeline") in one command, for a
 # machine with a GPU: the four scenes of its table on the CPU and GPU backends, back to back,
-# repeated, medians; the grains again with the contact sweeps on the device; the kernels'
+# repeated, medians; the grains again with the contact sweeps on the device, and the grains
+# and stack_3d with every Newton round on the device (`--rounds gpu`); the kernels'
 # throughput and roofline (`bench`); the contact sweeps' device/CPU ratio by size, from which
 # `--uzawa auto`'s thresholds (backend::AUTO_UZAWA_*) are read.
 #
@@ -61,6 +62,10 @@ for r in $(seq "$reps"); do
   done
   UZAWA_LABEL=" --uzawa gpu"
   run "grains_many" gpu grains_many "${grains[@]}" --set output.scene_every=10 --uzawa gpu
+  # Every Newton round on the device: what backend::round_on_device saves (its threshold).
+  UZAWA_LABEL=" --rounds gpu"
+  run "grains_many" gpu grains_many "${grains[@]}" --set output.scene_every=10 --rounds gpu
+  run "stack_3d" gpu stack_3d "${stack[@]}" --rounds gpu
 done
 
 : >"$out/bench.jsonl"
@@ -93,13 +98,13 @@ print("| --- | --- | --- | --- | --- | --- | --- | --- |")
 labels = list(dict.fromkeys(r["label"] for r in runs))
 for label in labels:
     cpu = by.get((label, "cpu"))
-    for mode in ("gpu", "gpu --uzawa gpu"):
+    for mode in ("gpu", "gpu --uzawa gpu", "gpu --rounds gpu"):
         gpu = by.get((label, mode))
         if not cpu or not gpu:
             continue
         wc, wg = med(cpu, lambda r: r["wall_s"]), med(gpu, lambda r: r["wall_s"])
         ratio = f"{wc / wg:.2f}x faster" if wg < wc else f"{wg / wc:.2f}x slower"
-        name = label + (" (contact on the device)" if "uzawa" in mode else "")
+        name = label + (" (contact on the device)" if "uzawa" in mode else " (every round on the device)" if "rounds" in mode else "")
         print(f"| {name} | {wc:.2f} s | {wg:.2f} s | {ratio} | {med(cpu, lambda r: r['wall_by_phase']['total']):.2f} s "
               f"| {med(gpu, lambda r: r['wall_by_phase']['total']):.2f} s | {med(gpu, lambda r: r['device_submits']):.0f} "
               f"| {cpu[0]['energy']['total']:.10g} / {gpu[0]['energy']['total']:.10g} |")

@@ -202,8 +202,9 @@ fn grains_on_the_gpu_take_at_most_three_submits_a_step_however_many_iterations_o
     // Issue 31: the device passes of a step grow neither with the grains (one pass evaluates
     // every body of a round) nor with the Newton iterations (`--rounds auto`: after the first
     // round, the few grains still iterating evaluate on the CPU twins). A step takes the first
-    // round's forces, at most one tangent pass, and the strain energies. With `--rounds gpu`
-    // every round goes to the device, with the same energies.
+    // round's forces, at most one tangent pass, and the strain energies; none when no grain
+    // moves (their inputs are those of their last evaluation). With `--rounds gpu` every round
+    // goes to the device, with the same energies.
     let test = "grains_on_the_gpu_take_at_most_three_submits_a_step_however_many_iterations_or_grains";
     if !gpu_available(test) {
         return;
@@ -222,7 +223,7 @@ fn grains_on_the_gpu_take_at_most_three_submits_a_step_however_many_iterations_o
         assert_eq!(field(&gpu, "cutbacks"), 0);
         let per_step = gpu.series("/solver", "device_submits");
         eprintln!("{count} grains, tolerance {tolerance}: {submits} submits, {newton} Newton iterations, {steps} steps, {} body evaluations; per step {per_step:?}", field(&gpu, "bodies_iterated"));
-        assert!(per_step.iter().all(|&s| (1.0..=3.0).contains(&s)), "{count} grains: {per_step:?}");
+        assert!(submits > 0 && per_step.iter().all(|&s| s <= 3.0), "{count} grains: {per_step:?}");
         assert!(energy_difference(&cpu, &gpu) <= 1e-9, "{count} grains: energies differ by {:.3e}", energy_difference(&cpu, &gpu));
         evaluations.push((field(&gpu, "bodies_iterated"), newton));
         if tolerance == "1e-12" {

@@ -348,7 +348,8 @@ impl GpuWorld {
     }
 
     /// The step's start values of the listed bodies, for `assemble_residual` (once per step;
-    /// they go up with the next submit, one write per run of consecutive members).
+    /// they go up with the next submit, one write per run of consecutive members whose values
+    /// changed: a grain at rest starts every step from the same ones).
     pub fn begin_step(&mut self, steps: &[(usize, &[DofStep<Real>])]) {
         for batch in 0..self.batches.len() {
             let mut members = Vec::new();
@@ -356,8 +357,12 @@ impl GpuWorld {
                 let m = self.place[body].1;
                 let range = self.batches[batch].members[m];
                 let start = range.dof_start as usize * 4;
-                self.batches[batch].step_host[start..start + 4 * range.dofs as usize].copy_from_slice(bytemuck::cast_slice(step));
-                members.push(m);
+                let host = &mut self.batches[batch].step_host[start..start + 4 * range.dofs as usize];
+                let step: &[Real] = bytemuck::cast_slice(step);
+                if bytemuck::cast_slice::<Real, u8>(host) != bytemuck::cast_slice::<Real, u8>(step) {
+                    host.copy_from_slice(step);
+                    members.push(m);
+                }
             }
             members.sort_unstable();
             self.upload_runs(batch, &members, Mirror::Step);
@@ -405,18 +410,26 @@ impl GpuWorld {
         let mut order: Vec<usize> = (0..list.len()).collect();
         order.sort_by_key(|&i| self.place[list[i].0]);
         let mut by_batch: Vec<(usize, Vec<usize>)> = Vec::new();
+        // Only the members whose displacement changed since it last went up.
+        let mut changed: Vec<(usize, Vec<usize>)> = Vec::new();
         for i in order {
             let (batch, member) = self.place[list[i].0];
             let range = self.batches[batch].members[member];
-            self.batches[batch].u_host[range.dof_start as usize..(range.dof_start + range.dofs) as usize].copy_from_slice(list[i].1);
+            let host = &mut self.batches[batch].u_host[range.dof_start as usize..(range.dof_start + range.dofs) as usize];
+            if bytemuck::cast_slice::<Real, u8>(host) != bytemuck::cast_slice::<Real, u8>(list[i].1) {
+                host.copy_from_slice(list[i].1);
+                match changed.last_mut() {
+                    Some((b, members)) if *b == batch => members.push(member),
+                    _ => changed.push((batch, vec![member])),
+                }
+            }
             match by_batch.last_mut() {
                 Some((b, mine)) if *b == batch => mine.push(i),
                 _ => by_batch.push((batch, vec![i])),
             }
         }
-        for (batch, mine) in &by_batch {
-            let members: Vec<usize> = mine.iter().map(|&i| self.place[list[i].0].1).collect();
-            self.upload_runs(*batch, &members, Mirror::Displacement);
+        for (batch, members) in &changed {
+            self.upload_runs(*batch, members, Mirror::Displacement);
         }
         by_batch
     }

@@ -476,9 +476,8 @@ impl Body {
         // The same inputs, bit for bit, give the same results: a body at rest (a grain no
         // other touches yet) is not evaluated again every step. A viscoelastic body's stresses
         // relax even at rest.
-        if !with_tangent && self.viscoelastic.is_none() && self.evaluated.holds(&self.trial.u, &self.step_inputs, c) {
-            self.tangent_current = false;
-            self.absorb_residual(p);
+        if !with_tangent && self.evaluation_holds(p) {
+            self.reuse_evaluation(p);
             return Ok(());
         }
         let u = std::mem::take(&mut self.trial.u);
@@ -507,6 +506,19 @@ impl Body {
         self.force_scale = scale2.sqrt();
     }
 
+    /// Whether a forces-only evaluation would repeat the last one's inputs bit for bit, so that
+    /// its results are still there ([`Body::evaluate`] skips such an evaluation on the CPU; a
+    /// GPU world's pass leaves the body out with [`Body::reuse_evaluation`]).
+    pub fn evaluation_holds(&self, p: &StepParams) -> bool {
+        self.viscoelastic.is_none() && self.evaluated.holds(&self.trial.u, &self.step_inputs, coefficients(p))
+    }
+
+    /// Takes the last evaluation's results again (see [`Body::evaluation_holds`]).
+    pub fn reuse_evaluation(&mut self, p: &StepParams) {
+        self.tangent_current = false;
+        self.absorb_residual(p);
+    }
+
     /// The body's share of a GPU world evaluation at the trial displacement: the tangent if
     /// `tangent`, the residual if `residual`. Finish with [`Body::finish_device_evaluation`].
     pub fn device_evaluation(&mut self, body: usize, tangent: bool, residual: bool) -> Evaluation<'_> {
@@ -524,6 +536,9 @@ impl Body {
         }
         self.tangent_current = tangent;
         if residual {
+            if !tangent {
+                self.evaluated.record(&self.trial.u, &self.step_inputs, coefficients(p));
+            }
             self.absorb_residual(p);
         }
         Ok(())
@@ -877,11 +892,17 @@ impl Body {
     /// Strain energy at the trial displacement, `element_energy` on the CPU (the state's when
     /// the body has not moved: the same displacement, bit for bit, has the same energy).
     pub fn trial_strain_energy(&self) -> Real {
-        if self.state.strain_at_u && bytemuck::cast_slice::<Real, u8>(&self.trial.u) == bytemuck::cast_slice::<Real, u8>(&self.state.u) {
-            return self.state.strain;
+        if let Some(strain) = self.unmoved_strain_energy() {
+            return strain;
         }
         let elements = self.elements();
         (0..elements.element_count()).map(|e| element_energy(&self.model, self.geometry.element_points(e), &elements.element_displacements(&self.trial.u, e), self.dim, self.formulation)).sum()
+    }
+
+    /// The state's strain energy when the trial displacement is the state's, bit for bit (a
+    /// GPU world then need not compute it again).
+    pub fn unmoved_strain_energy(&self) -> Option<Real> {
+        (self.state.strain_at_u && bytemuck::cast_slice::<Real, u8>(&self.trial.u) == bytemuck::cast_slice::<Real, u8>(&self.state.u)).then_some(self.state.strain)
     }
 
     /// Current position of a node.

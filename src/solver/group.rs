@@ -533,7 +533,25 @@ fn device_pass(
     times: &mut PhaseTimes,
 ) -> Vec<Result<(), StepFailure>> {
     let mut results: Vec<Result<(), StepFailure>> = groups.iter().map(|_| Ok(())).collect();
-    let chosen: Vec<Vec<bool>> = groups.iter().zip(live).map(|(g, &l)| g.bodies.iter().map(|b| l && wanted(b)).collect()).collect();
+    // A forces pass leaves out the bodies whose inputs are those of their last evaluation (a
+    // grain at rest): their results are still there, as on the CPU.
+    let chosen: Vec<Vec<bool>> = groups
+        .iter_mut()
+        .zip(live)
+        .map(|(g, &l)| {
+            g.bodies
+                .iter_mut()
+                .map(|b| {
+                    let chosen = l && wanted(b);
+                    let unchanged = chosen && !tangent && b.evaluation_holds(p);
+                    if unchanged {
+                        b.reuse_evaluation(p);
+                    }
+                    chosen && !unchanged
+                })
+                .collect()
+        })
+        .collect();
     if !chosen.iter().flatten().any(|&x| x) {
         return results;
     }

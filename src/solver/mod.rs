@@ -618,9 +618,16 @@ impl Simulation {
         let strains: Vec<Real> = match self.world.as_mut().filter(|w| w.precision() == Precision::F64) {
             None => self.bodies.par_iter().map(Body::trial_strain_energy).collect(),
             Some(world) => {
-                let list: Vec<(usize, &[Real])> = self.bodies.iter().enumerate().map(|(b, body)| (b, &body.trial.u[..])).collect();
-                let energies = world.element_energies(&list, times).map_err(|e| self.bodies[0].device_failure(&e))?;
-                energies.iter().map(|e| e.iter().sum()).collect()
+                // A body that has not moved keeps its state's energy, as on the CPU.
+                let mut strains: Vec<Option<Real>> = self.bodies.iter().map(Body::unmoved_strain_energy).collect();
+                let list: Vec<(usize, &[Real])> = self.bodies.iter().enumerate().filter(|(b, _)| strains[*b].is_none()).map(|(b, body)| (b, &body.trial.u[..])).collect();
+                if !list.is_empty() {
+                    let energies = world.element_energies(&list, times).map_err(|e| self.bodies[0].device_failure(&e))?;
+                    for ((b, _), e) in list.iter().zip(energies) {
+                        strains[*b] = Some(e.iter().sum());
+                    }
+                }
+                strains.into_iter().map(|s| s.expect("every body's energy")).collect()
             }
         };
         let dim = self.dim;
