@@ -10,6 +10,12 @@ pub type Real = f64;
 /// Name of [`Real`] as written to logs (`/run.precision`).
 pub const PRECISION_NAME: &str = "f64";
 
+/// Whether two slices hold the same values bit for bit (`==` would take -0 for 0 and never NaN
+/// for NaN): what decides that an evaluation's inputs, or a device copy, are unchanged.
+pub fn same_bits<T: bytemuck::Pod>(a: &[T], b: &[T]) -> bool {
+    bytemuck::cast_slice::<T, u8>(a) == bytemuck::cast_slice::<T, u8>(b)
+}
+
 /// Precision of a GPU pipeline.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "lowercase")]

@@ -19,7 +19,7 @@ use crate::element::{Formulation, ReferenceGeometry};
 use crate::material::viscous::HISTORY;
 use crate::material::{Model, Relaxation};
 use crate::mesh::Mesh;
-use crate::precision::{Precision, Real};
+use crate::precision::{same_bits, Precision, Real};
 use crate::solver::PhaseTimes;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
@@ -357,10 +357,7 @@ impl GpuWorld {
                 let m = self.place[body].1;
                 let range = self.batches[batch].members[m];
                 let start = range.dof_start as usize * 4;
-                let host = &mut self.batches[batch].step_host[start..start + 4 * range.dofs as usize];
-                let step: &[Real] = bytemuck::cast_slice(step);
-                if bytemuck::cast_slice::<Real, u8>(host) != bytemuck::cast_slice::<Real, u8>(step) {
-                    host.copy_from_slice(step);
+                if update_mirror(&mut self.batches[batch].step_host[start..start + 4 * range.dofs as usize], bytemuck::cast_slice(step)) {
                     members.push(m);
                 }
             }
@@ -415,9 +412,7 @@ impl GpuWorld {
         for i in order {
             let (batch, member) = self.place[list[i].0];
             let range = self.batches[batch].members[member];
-            let host = &mut self.batches[batch].u_host[range.dof_start as usize..(range.dof_start + range.dofs) as usize];
-            if bytemuck::cast_slice::<Real, u8>(host) != bytemuck::cast_slice::<Real, u8>(list[i].1) {
-                host.copy_from_slice(list[i].1);
+            if update_mirror(&mut self.batches[batch].u_host[range.dof_start as usize..(range.dof_start + range.dofs) as usize], list[i].1) {
                 match changed.last_mut() {
                     Some((b, members)) if *b == batch => members.push(member),
                     _ => changed.push((batch, vec![member])),
@@ -628,6 +623,16 @@ impl GpuWorld {
         times.elements += (mapped - submitted).as_secs_f64();
         Ok(())
     }
+}
+
+/// Copies `values` into a host mirror if they differ from it, bit for bit; whether they did (and
+/// must go up).
+fn update_mirror(mirror: &mut [Real], values: &[Real]) -> bool {
+    let changed = !same_bits(mirror, values);
+    if changed {
+        mirror.copy_from_slice(values);
+    }
+    changed
 }
 
 /// Sorted member indices cut into runs of consecutive members.

@@ -14,7 +14,7 @@ use crate::material::viscous::HISTORY;
 use crate::material::{Hyperelastic, Model, Relaxation, Viscoelastic};
 use rayon::prelude::*;
 use crate::mesh::Mesh;
-use crate::precision::Real;
+use crate::precision::{same_bits, Real};
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -238,7 +238,7 @@ struct EvaluatedAt {
 impl EvaluatedAt {
     /// Whether these inputs are the recorded ones, bit for bit (`==` would take -0 for 0).
     fn holds(&self, u: &[Real], inputs: &[DofStep<Real>], coefficients: Coefficients<Real>) -> bool {
-        self.valid && bytemuck::bytes_of(&coefficients) == bytemuck::bytes_of(&self.coefficients) && bytemuck::cast_slice::<Real, u8>(u) == bytemuck::cast_slice::<Real, u8>(&self.u) && bytemuck::cast_slice::<DofStep<Real>, u8>(inputs) == bytemuck::cast_slice::<DofStep<Real>, u8>(&self.inputs)
+        self.valid && same_bits(&[coefficients], &[self.coefficients]) && same_bits(u, &self.u) && same_bits(inputs, &self.inputs)
     }
 
     fn record(&mut self, u: &[Real], inputs: &[DofStep<Real>], coefficients: Coefficients<Real>) {
@@ -902,7 +902,7 @@ impl Body {
     /// The state's strain energy when the trial displacement is the state's, bit for bit (a
     /// GPU world then need not compute it again).
     pub fn unmoved_strain_energy(&self) -> Option<Real> {
-        (self.state.strain_at_u && bytemuck::cast_slice::<Real, u8>(&self.trial.u) == bytemuck::cast_slice::<Real, u8>(&self.state.u)).then_some(self.state.strain)
+        (self.state.strain_at_u && same_bits(&self.trial.u, &self.state.u)).then_some(self.state.strain)
     }
 
     /// Current position of a node.
