@@ -100,7 +100,9 @@ fn forces(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) wor
         let point = (e * NQP + q) * POINT_STRIDE;
         let f = fq[q];
         if FBAR {
-            // f_a = Σ_q dV α² (F S̄ g_a + (S̄ : C) β_a), β_a = (θ̂_a - h_a) / DIM.
+            // f_a = Σ_q dV α² (F S̄ g_a + (S̄ : C) β_a), β_a = (θ̂_a - h_a) / DIM (as a product: an
+            // f64 division is a dozen instructions on a GPU; the compiler folds the constant).
+            let inverse_dim = real(1.0) / real(DIM);
             let alpha = fbar_alpha(theta, determinant(f));
             let s = point_stress(range, local * NQP + q, green_lagrange(fbar_scale(f, alpha))) * point_volume(point);
             let t = scaled_trace(s, transpose(f) * f);
@@ -108,7 +110,7 @@ fn forces(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) wor
             let inv_t = transpose(inverse3(f));
             for (var a = 0u; a < NEN; a++) {
                 let g = gradient(point, a);
-                let beta = (theta_hat[a] - inv_t * g) / real(DIM);
+                let beta = (theta_hat[a] - inv_t * g) * inverse_dim;
                 let fa = (fs * g + t * beta) * (alpha * alpha);
                 for (var i = 0u; i < DIM; i++) {
                     force[a * DIM + i] += fa[i];
@@ -325,10 +327,12 @@ fn fbar_pair(e: u32, base: u32, a: u32, b: u32, k: ptr<function, array<array<rea
             }
         }
     }
+    // Divisions as products (an f64 division is a dozen instructions on a GPU).
     let theta = big_theta / volume;
-    theta_a = theta_a / big_theta;
-    theta_b = theta_b / big_theta;
-    let n = real(DIM);
+    let inverse_theta = real(1.0) / big_theta;
+    let inverse_dim = real(1.0) / real(DIM);
+    theta_a = theta_a * inverse_theta;
+    theta_b = theta_b * inverse_theta;
     for (var q = 0u; q < NQP; q++) {
         let point = (e * NQP + q) * POINT_STRIDE;
         let f = point_f[base + q];
@@ -342,8 +346,8 @@ fn fbar_pair(e: u32, base: u32, a: u32, b: u32, k: ptr<function, array<array<rea
         let hb = inv_t * gb;
         let c = transpose(f) * f;
         let t = scaled_trace(s, c);
-        let beta_a = (theta_a - ha) / n;
-        let beta_b = (theta_b - hb) / n;
+        let beta_a = (theta_a - ha) * inverse_dim;
+        let beta_b = (theta_b - hb) * inverse_dim;
         let ra = f * (s * ga);
         let rb = f * (s * gb);
         // (dV D̄) B̄_b, one column per component j of node b.
@@ -365,7 +369,7 @@ fn fbar_pair(e: u32, base: u32, a: u32, b: u32, k: ptr<function, array<array<rea
         let geometric = dot(ga, s * gb);
         for (var i = 0u; i < DIM; i++) {
             for (var j = 0u; j < DIM; j++) {
-                let beta_ab = (theta_ab[i][j] / big_theta - theta_a[i] * theta_b[j] + ha[j] * hb[i]) / n;
+                let beta_ab = (theta_ab[i][j] * inverse_theta - theta_a[i] * theta_b[j] + ha[j] * hb[i]) * inverse_dim;
                 var kij = t * (real(2.0) * beta_a[i] * beta_b[j] + beta_ab) + real(2.0) * (beta_a[i] * rb[j] + ra[i] * beta_b[j]);
                 if i == j {
                     kij += geometric;

@@ -68,8 +68,9 @@ fn dilatation_gradient(e: u32, fq: array<Mat3, NQP>) -> array<vec3<real>, NEN> {
             out[a] += w * (inv_t * gradient(point, a));
         }
     }
+    let inverse = real(1.0) / big_theta;
     for (var a = 0u; a < NEN; a++) {
-        out[a] = out[a] / big_theta;
+        out[a] = out[a] * inverse;
     }
     return out;
 }

@@ -48,7 +48,7 @@ fn trace3(a: Mat3) -> real {
 }
 
 fn dev(a: Mat3) -> Mat3 {
-    return a - identity3() * (trace3(a) / real(3.0));
+    return a - identity3() * (trace3(a) * real(0.3333333333333333));
 }
 
 // `E = (FᵀF - I)/2`.
