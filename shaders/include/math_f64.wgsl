@@ -1,11 +1,10 @@
 // Logarithm, exponential and cube root in f64: Vulkan has them in 32 bits only. Each is a
-// multiply-add polynomial with its constants precomputed, at most one f64 division and no loop
-// for the arguments the element kernels meet: an f64 division is a dozen instructions on a GPU
-// (and a slow one on a CPU), and the series with a division per term cost the f64 kernels more
-// than their tensor algebra. Powers of two go through `ldexp`, exact over the whole f64 range.
+// multiply-add polynomial with precomputed constants and at most one f64 division (a dozen
+// instructions on a GPU, where the old series divided once per term). Powers of two go through
+// `ldexp`, exact over the whole f64 range.
 
 // Natural logarithm: x = m 2^e with m in [√½, √2] (e from the f32 logarithm, then exact
-// halvings or doublings for what f32 cannot represent), ln m = 2 atanh(s), s = (m - 1)/(m + 1),
+// halvings or doublings: at most one, unless x is beyond f32's range), ln m = 2 atanh(s), s = (m - 1)/(m + 1),
 // |s| < 0.172, whose series reaches 1e-17 in 12 terms, summed by Horner's rule in s².
 fn ln_real(x: real) -> real {
     var e = i32(clamp(round(log2(f32(x))), -126.0, 126.0));
