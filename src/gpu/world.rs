@@ -408,23 +408,19 @@ impl GpuWorld {
         order.sort_by_key(|&i| self.place[list[i].0]);
         let mut by_batch: Vec<(usize, Vec<usize>)> = Vec::new();
         // Only the members whose displacement changed since it last went up.
-        let mut changed: Vec<(usize, Vec<usize>)> = Vec::new();
+        let mut changed = vec![false; list.len()];
         for i in order {
             let (batch, member) = self.place[list[i].0];
             let range = self.batches[batch].members[member];
-            if update_mirror(&mut self.batches[batch].u_host[range.dof_start as usize..(range.dof_start + range.dofs) as usize], list[i].1) {
-                match changed.last_mut() {
-                    Some((b, members)) if *b == batch => members.push(member),
-                    _ => changed.push((batch, vec![member])),
-                }
-            }
+            changed[i] = update_mirror(&mut self.batches[batch].u_host[range.dof_start as usize..(range.dof_start + range.dofs) as usize], list[i].1);
             match by_batch.last_mut() {
                 Some((b, mine)) if *b == batch => mine.push(i),
                 _ => by_batch.push((batch, vec![i])),
             }
         }
-        for (batch, members) in &changed {
-            self.upload_runs(*batch, members, Mirror::Displacement);
+        for (batch, mine) in &by_batch {
+            let members: Vec<usize> = mine.iter().filter(|&&i| changed[i]).map(|&i| self.place[list[i].0].1).collect();
+            self.upload_runs(*batch, &members, Mirror::Displacement);
         }
         by_batch
     }
