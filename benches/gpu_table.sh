@@ -1,19 +1,27 @@
 #!/usr/bin/env bash
-# The GPU measurement of issue 14 (doc/benchmarks.md, "GPU pipeline") in one command, for a
-# machine with a GPU: the four scenes of its table on the CPU and GPU backends, back to back,
-# repeated, medians; the grains again with the contact sweeps on the device, and the grains
-# and stack_3d with every Newton round on the device (`--rounds gpu`); the kernels'
-# throughput and roofline (`bench`); the contact sweeps' device/CPU ratio by size, from which
-# `--uzawa auto`'s thresholds (backend::AUTO_UZAWA_*) are read.
+# The GPU measurements in one command, for a machine with a GPU, CPU and GPU backends of one
+# build back to back, repeated, medians:
+#   runs    issue 14's table (doc/benchmarks.md, "GPU pipeline"): four scenes; the grains again
+#           with the contact sweeps on the device, and the grains and stack_3d with every
+#           Newton round on the device (`--rounds gpu`);
+#   scale   issue 31's table (doc/benchmarks.md, "The GPU at scale"): grains_many N = 1 000,
+#           10 000 and 100 000 (2D) and grains_3d N = 1 000 and 10 000, the grains falling
+#           under gravity in their box (every grain moves, so every one is evaluated: the
+#           packings-at-scale convention of benches/packings.sh), stack_3d, and the 54 243-dof
+#           Hex8 block of free_flight_3d;
+#   bench   the kernels' throughput and roofline (`bench --elements 1000000`);
+#   sweeps  the contact sweeps' device/CPU ratio by size, from which `--uzawa auto`'s
+#           thresholds (backend::AUTO_UZAWA_*) are read.
 #
 #   benches/gpu_table.sh [BINARY] [REPETITIONS] [OUTDIR]
 #
-# Prints Markdown tables; OUTDIR (default: a temporary folder) keeps every run's `--json`
-# summary and bench's JSON rows. QUICK=1 runs small sizes, to try the script on lavapipe (90 s
-# on 2 cores); BENCH_ELEMENTS (default 1000000) sizes the kernel benchmark, whose every kernel
-# is stopped after BENCH_LIMIT seconds (default 80). SECTIONS (default "runs bench sweeps")
-# picks the parts, so that a device call's 10 minutes can hold them (all three take about 8
-# minutes next to an H100, most of it the kernel benchmark).
+# Prints the date, the machine and Markdown tables; OUTDIR (default: a temporary folder) keeps
+# every run's `--json` summary and bench's JSON rows. QUICK=1 runs small sizes, to try the
+# script on lavapipe; BENCH_ELEMENTS (default 1000000) sizes the kernel benchmark, whose every
+# kernel is stopped after BENCH_LIMIT seconds (default 80). SECTIONS (default "runs bench
+# sweeps") picks the parts, so that a device call's 10 minutes can hold them: "runs bench
+# sweeps" took about 8 minutes next to an H100, most of it the kernel benchmark; "scale" takes
+# about 4 minutes of CPU runs on 2 cores per repetition, less on 16 (call it on its own).
 set -uo pipefail
 bin=$(realpath "${1:-target/release/bifirst}")
 reps=${2:-3}
@@ -27,12 +35,15 @@ if [ "${QUICK:-0}" = 1 ]; then
   love=(--set contact.friction=0.5 --set time.end=0.05)
   flight=(--set 'body.block.mesh.divisions=[8,4,4]' --set time.end=0.004)
   elements=${BENCH_ELEMENTS:-4096} bench_time=0.2 sweep_sizes="64 256 1024"
+  scale_2d=("100 0.05" "300 0.02") scale_3d=("27 0.02") stack_end=0.1 block=(8 4 4) block_end=0.004
 else
   grains=(--set packing.count=1000 --set time.end=0.2)
   stack=()
   love=(--set contact.friction=0.5)
   flight=(--set 'body.block.mesh.divisions=[40,20,20]' --set time.end=0.02)
   elements=${BENCH_ELEMENTS:-1000000} bench_time=0 sweep_sizes="64 256 1024 4096 16384 65536"
+  # "N end" pairs: 40, 20 and 10 steps of dt = 0.005 (2D); 20 and 10 (3D).
+  scale_2d=("1000 0.2" "10000 0.1" "100000 0.05") scale_3d=("1000 0.1" "10000 0.05") stack_end=5.0 block=(40 20 20) block_end=0.02
 fi
 limit=${BENCH_LIMIT:-80}
 sections=" ${SECTIONS:-runs bench sweeps} "
@@ -48,10 +59,13 @@ run() { # label backend scene [arguments...]: one run, its summary appended to r
   fi
 }
 
+echo "Date: $(date -u '+%Y-%m-%d %H:%M UTC'); machine: $(nproc) cores, $(uname -m); binary: $("$bin" info 2>/dev/null | head -n 1)"
+echo
 "$bin" info >&2 || true
 : >"$out/runs.jsonl"
-[[ $sections == *" runs "* ]] || reps=0
-for r in $(seq "$reps"); do
+runs_reps=$reps
+[[ $sections == *" runs "* ]] || runs_reps=0
+for r in $(seq "$runs_reps"); do
   echo "repetition $r of $reps" >&2
   for backend in cpu gpu; do
     UZAWA_LABEL=""
@@ -66,6 +80,28 @@ for r in $(seq "$reps"); do
   UZAWA_LABEL=" --rounds gpu"
   run "grains_many" gpu grains_many "${grains[@]}" --set output.scene_every=10 --rounds gpu
   run "stack_3d" gpu stack_3d "${stack[@]}" --rounds gpu
+done
+
+scale_reps=$reps
+[[ $sections == *" scale "* ]] || scale_reps=0
+for r in $(seq "$scale_reps"); do
+  echo "scale: repetition $r of $scale_reps" >&2
+  for backend in cpu gpu; do
+    UZAWA_LABEL=""
+    for case in "${scale_2d[@]}"; do
+      read -r n end <<<"$case"
+      run "grains_many, N = $n, falling, t <= $end" "$backend" grains_many --set packing.count="$n" --set time.end="$end" \
+        --set 'gravity=[0.0,-9.81]' --set output.scene_every=0
+    done
+    for case in "${scale_3d[@]}"; do
+      read -r n end <<<"$case"
+      run "grains_3d, N = $n, falling, t <= $end" "$backend" grains_3d --set packing.count="$n" --set time.end="$end" \
+        --set 'gravity=[0.0,-9.81,0.0]' --set output.scene_every=0
+    done
+    run "stack_3d, t <= $stack_end" "$backend" stack_3d --set time.end="$stack_end"
+    run "free_flight_3d, ${block[0]}x${block[1]}x${block[2]} Hex8, t <= $block_end" "$backend" free_flight_3d \
+      --set "body.block.mesh.divisions=[${block[0]},${block[1]},${block[2]}]" --set time.end="$block_end"
+  done
 done
 
 : >"$out/bench.jsonl"
