@@ -59,6 +59,7 @@ pub struct BenchCase {
     pub model: Model,
     pub formulation: Formulation,
     pub geometry: ReferenceGeometry,
+    pub dofs: DofMap,
     pub pattern: StiffnessPattern,
     pub gather: GatherMap,
     pub u: Vec<Real>,
@@ -89,7 +90,7 @@ impl BenchCase {
         let gather = GatherMap::new(&mesh, dim, &pattern);
         let geometry = ReferenceGeometry::new(&mesh).expect("generated meshes are valid");
         let step = u.iter().enumerate().map(|(d, &x)| DofStep { mass: 1.0 + (d % 7) as Real * 0.1, u_pred: 0.9 * x, f_int_t: 0.0, f_ext: 0.1 }).collect();
-        Self { mesh, model, formulation, geometry, pattern, gather, u, step, coefficients: Coefficients { factor: 0.5, c1: 1e4 } }
+        Self { mesh, model, formulation, geometry, dofs, pattern, gather, u, step, coefficients: Coefficients { factor: 0.5, c1: 1e4 } }
     }
 
     pub fn elements(&self) -> usize {
@@ -107,7 +108,7 @@ impl BenchCase {
 
     /// A GPU world of this one body, with its step inputs uploaded.
     pub fn on(&self, gpu: &Arc<Gpu>) -> Result<GpuWorld, GpuError> {
-        let body = crate::gpu::WorldBody { mesh: &self.mesh, geometry: &self.geometry, model: &self.model, formulation: self.formulation, pattern: &self.pattern, gather: &self.gather, viscous: false };
+        let body = crate::gpu::WorldBody { mesh: &self.mesh, geometry: &self.geometry, model: &self.model, formulation: self.formulation, pattern: &self.pattern, gather: &self.gather, dofs: &self.dofs, viscous: false };
         let mut world = GpuWorld::new(gpu.clone(), &[body])?;
         world.begin_step(&[(0, &self.step[..])]);
         world.take_traffic();

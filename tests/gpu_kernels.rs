@@ -9,9 +9,9 @@ use bifirst::contact::Status;
 use bifirst::cpu;
 use bifirst::element::{ElementOutput, Formulation, Patches, ReferenceGeometry};
 use bifirst::gpu::shaders::{is_element_kernel, validate, ElementVariant, DECOUPLED, SHADERS};
-use bifirst::gpu::types::{Coefficients, DofOut, DofStep, MaterialParams};
+use bifirst::gpu::types::{Active, Coefficients, DofOut, DofStep, MaterialParams, MemberRange, NewtonMember, NewtonState, NEWTON_CONVERGED, NEWTON_HOST, NEWTON_ITERATING};
 use bifirst::gpu::uzawa_step::{UzawaPoint, UzawaStepKernel};
-use bifirst::gpu::{ElementFailure, Evaluation, GpuWorld, WorldBody};
+use bifirst::gpu::{ElementFailure, Evaluation, GpuWorld, NewtonCall, WorldBody};
 use bifirst::material::{ArrudaBoyce, BlatzKo, Decoupled, Gent, Lvf, Model, MooneyRivlin, NeoHookean, Ogden, Relaxation, Yeoh};
 use bifirst::mesh::{generate, ElementKind, Mesh};
 use bifirst::precision::Precision;
@@ -123,6 +123,33 @@ fn kernel_structs_match_the_shader_layouts() {
     check_all_real_struct("assemble_residual", None, "DofOut", &["f_int", "g"], [size_of::<DofOut<f32>>(), size_of::<DofOut<f64>>()]);
     let o = DofOut::<f64> { f_int: 1.0, g: 2.0 };
     assert_eq!(bytemuck::cast::<_, [f64; 2]>(o), [1.0, 2.0], "field order");
+}
+
+#[test]
+fn newton_structs_match_the_shader_layout() {
+    let u32_fields = ["inverse_start", "free_start", "free_count", "budget"];
+    let real_fields = ["residual_tolerance", "floor", "floor_per_travel", "increment_tolerance", "increment_floor", "round_off"];
+    let state_u32 = ["status", "iterations", "moved", "pad"];
+    let state_real = ["residual", "previous_residual", "increment"];
+    for precision in PRECISIONS {
+        let real = precision.size() as u32;
+        let layout = |u: &[&str], r: &[&str]| -> Vec<(String, u32)> { u.iter().enumerate().map(|(i, f)| (f.to_string(), 4 * i as u32)).chain(r.iter().enumerate().map(|(i, f)| (f.to_string(), 16 + real * i as u32))).collect() };
+        let sizes = match precision {
+            Precision::F64 => [std::mem::size_of::<NewtonMember<f64>>(), std::mem::size_of::<NewtonState<f64>>()],
+            Precision::F32 => [std::mem::size_of::<NewtonMember<f32>>(), std::mem::size_of::<NewtonState<f32>>()],
+        };
+        for kernel in ["newton_update", "newton_judge", "newton_compact"] {
+            let module = validate(kernel, precision, None).unwrap();
+            let (members, span) = naga_layout(&module, "NewtonMember");
+            assert_eq!((members, span as usize), (layout(&u32_fields, &real_fields), sizes[0]), "{kernel} {}", precision.name());
+            let (members, span) = naga_layout(&module, "NewtonState");
+            assert_eq!((members, span as usize), (layout(&state_u32, &state_real), sizes[1]), "{kernel} {}", precision.name());
+        }
+    }
+    let m = NewtonMember::<f64> { inverse_start: 1, free_start: 2, free_count: 3, budget: 4, residual_tolerance: 5.0, floor: 6.0, floor_per_travel: 7.0, increment_tolerance: 8.0, increment_floor: 9.0, round_off: 10.0 };
+    let words: [u32; 16] = bytemuck::cast(m);
+    assert_eq!(words[..4], [1, 2, 3, 4], "field order");
+    assert_eq!(bytemuck::cast::<_, [f64; 8]>(m)[2..], [5.0, 6.0, 7.0, 8.0, 9.0, 10.0], "field order");
 }
 
 #[test]
@@ -307,6 +334,7 @@ struct Case {
     model: Model,
     formulation: Formulation,
     geometry: ReferenceGeometry,
+    dofs: DofMap,
     pattern: StiffnessPattern,
     gather: GatherMap,
     u: Vec<f64>,
@@ -327,12 +355,12 @@ fn case(variant: ElementVariant, seed: u64) -> Case {
     let pattern = StiffnessPattern::new(&mesh, &dofs);
     let gather = GatherMap::new(&mesh, dim, &pattern);
     let geometry = ReferenceGeometry::new(&mesh).unwrap();
-    Case { model: model_of(variant.material), formulation: variant.formulation, mesh, geometry, pattern, gather, u, relaxation: None }
+    Case { model: model_of(variant.material), formulation: variant.formulation, mesh, geometry, dofs, pattern, gather, u, relaxation: None }
 }
 
 impl Case {
     fn world_body(&self) -> WorldBody<'_> {
-        WorldBody { mesh: &self.mesh, geometry: &self.geometry, model: &self.model, formulation: self.formulation, pattern: &self.pattern, gather: &self.gather, viscous: self.relaxation.is_some() }
+        WorldBody { mesh: &self.mesh, geometry: &self.geometry, model: &self.model, formulation: self.formulation, pattern: &self.pattern, gather: &self.gather, dofs: &self.dofs, viscous: self.relaxation.is_some() }
     }
 
     fn element_u(&self, e: usize) -> Vec<[f64; 3]> {
@@ -500,7 +528,7 @@ fn grouped_patches_in_the_element_kernel_match_its_cpu_twin() {
             let gather = GatherMap::new(&cells, dim, &pattern);
             let mut rng = random::rng(300 + k as u64);
             let u = (0..cells.nodes.len() * dim).map(|_| rng.random_range(-0.02..0.02)).collect();
-            let cases = [Case { mesh: cells, model: model_of("neo_hookean"), formulation: Formulation::Fbar, geometry, pattern, gather, u, relaxation: None }];
+            let cases = [Case { mesh: cells, model: model_of("neo_hookean"), formulation: Formulation::Fbar, geometry, dofs, pattern, gather, u, relaxation: None }];
             let mut world = world_of(&gpu, &cases);
             let (mut values, mut dof_out) = buffers_for(&cases);
             let failures = evaluate_all(&mut world, &cases, true, &mut values, &mut dof_out, Coefficients { factor: 0.5, c1: 1.0 });
@@ -723,5 +751,132 @@ fn peak_kernels_match_their_cpu_twins() {
         assert!(error <= tolerance, "peak_fma {}: {error:.2e}", precision.name());
         let peaks = bifirst::gpu::peak::measure(&gpu, 0.0).unwrap();
         assert!(peaks.bytes_per_second > 0.0 && peaks.flops_per_second > 0.0, "{peaks:?}");
+    }
+}
+
+/// `K̄ = ξ K + c1 M` of a case's free dofs at its displacement (the CPU twins' tangent, a unit
+/// mass per dof), inverted densely: what `Body::effective_inverse` gives from faer's factors.
+fn effective_inverse(c: &Case, coefficients: Coefficients<f64>) -> Vec<f64> {
+    let stride = element_out_stride(c.pattern.element_dofs);
+    let mut results = vec![0.0; c.mesh.element_count() * stride];
+    cpu::dispatch_element_force_tangent(&c.model, &c.mesh, &c.geometry, c.formulation, None, &c.u, true, &mut results).unwrap();
+    let mut values = vec![0.0; c.pattern.nnz()];
+    cpu::assemble_csr(&results, &c.gather.csr_start, &c.gather.csr, coefficients, &mut values);
+    let n = c.pattern.n;
+    let mut k = nalgebra::DMatrix::<f64>::zeros(n, n);
+    for col in 0..n {
+        let entries = c.pattern.col_ptr[col] as usize..c.pattern.col_ptr[col + 1] as usize;
+        for (&row, &value) in c.pattern.row_idx[entries.clone()].iter().zip(&values[entries]) {
+            k[(row as usize, col)] = value;
+            k[(col, row as usize)] = value;
+        }
+        k[(col, col)] += coefficients.c1;
+    }
+    let inverse = k.try_inverse().expect("K̄ is invertible");
+    (0..n).flat_map(|f| (0..n).map(move |j| (f, j))).map(|(f, j)| inverse[(f, j)]).collect()
+}
+
+/// The forces and residuals of a case at `u` on the CPU twins.
+fn cpu_residual(c: &Case, u: &[f64], step: &[DofStep<f64>], coefficients: Coefficients<f64>) -> Vec<DofOut<f64>> {
+    let mut results = vec![0.0; c.mesh.element_count() * element_out_stride(c.pattern.element_dofs)];
+    cpu::dispatch_element_force_tangent(&c.model, &c.mesh, &c.geometry, c.formulation, None, u, false, &mut results).unwrap();
+    let mut out = vec![DofOut::default(); u.len()];
+    cpu::assemble_residual(&results, &c.gather.dof_start, &c.gather.dof, coefficients, u, step, &mut out);
+    out
+}
+
+/// Device Newton iterations (`newton_update`, the forces, `newton_judge`, `newton_compact`,
+/// several per submission) take the iterations their CPU twins take, to 1e-12: two bodies of
+/// each element kind in one world, one with a budget of one increment (it must drop out of the
+/// list and keep its state while the other goes on), and, with real tolerances, the same
+/// iteration at which each converges.
+#[test]
+fn newton_kernels_match_their_cpu_twins() {
+    let Some(gpu) = gpu_or_skip("newton_kernels_match_their_cpu_twins", Precision::F64) else { return };
+    let gpu = Arc::new(gpu);
+    let coefficients = Coefficients { factor: 1.0, c1: 1e6 };
+    for (k, kind) in [ElementKind::Tri3, ElementKind::Quad4, ElementKind::Tet4, ElementKind::Hex8].into_iter().enumerate() {
+        let cases = two_bodies(ElementVariant { kind, formulation: Formulation::Displacement, material: "neo_hookean" }, 400 + k as u64);
+        // The step started from 0.9 u at rest: Newton goes from u towards the balance of inertia
+        // and elasticity, with K̄ from u kept throughout (a modified Newton, as a kept factor).
+        let steps: Vec<Vec<DofStep<f64>>> = cases.iter().map(|c| c.u.iter().map(|&x| DofStep { mass: 1.0, u_pred: 0.9 * x, f_int_t: 0.0, f_ext: 0.0 }).collect()).collect();
+        let starts: Vec<Vec<f64>> = cases.iter().map(|c| c.u.iter().map(|&x| 0.9 * x).collect()).collect();
+        let inverses: Vec<Vec<f64>> = cases.iter().map(|c| effective_inverse(c, coefficients)).collect();
+        let free: Vec<Vec<u32>> = cases.iter().map(|c| c.dofs.free_pairs().map(|(d, _)| d as u32).collect()).collect();
+        for (budgets, tolerance) in [([1u32, 3], 0.0), ([25, 25], 1e-9)] {
+            let member = |b: usize| NewtonMember {
+                inverse_start: 0,
+                free_start: 0,
+                free_count: free[b].len() as u32,
+                budget: budgets[b],
+                residual_tolerance: tolerance,
+                floor: 0.0,
+                floor_per_travel: 0.0,
+                increment_tolerance: tolerance,
+                increment_floor: 1e-3,
+                round_off: 0.0,
+            };
+            let first: Vec<Vec<DofOut<f64>>> = cases.iter().zip(&steps).map(|(c, s)| cpu_residual(c, &c.u, s, coefficients)).collect();
+            let residual0 = |b: usize| free[b].iter().map(|&d| first[b][d as usize].g.powi(2)).sum::<f64>().sqrt();
+            // The twins, one member at a time.
+            let mut expected = Vec::new();
+            for (b, c) in cases.iter().enumerate() {
+                let range = [MemberRange { dof_start: 0, dofs: c.u.len() as u32, ..Default::default() }];
+                let mut state = [NewtonState { status: NEWTON_ITERATING, residual: residual0(b), previous_residual: residual0(b), ..Default::default() }];
+                let (mut u, mut out) = (c.u.clone(), first[b].clone());
+                let call = [Active { member: 0, mode: 1 }];
+                let mut jobs = call;
+                while cpu::newton_compact(&call, &state, &mut jobs) > 0 {
+                    cpu::newton_update(&inverses[b], &free[b], &[member(b)], &mut state, &out, &mut u, &range, 0);
+                    out = cpu_residual(c, &u, &steps[b], coefficients);
+                    cpu::newton_judge(&free[b], &[member(b)], &mut state, &out, &u, &starts[b], &steps[b], coefficients, &[u32::MAX; 2], &range, 0);
+                }
+                expected.push((state[0], u, out));
+            }
+            // The device, both members in one call.
+            let mut world = world_of(&gpu, &cases);
+            world.begin_step(&steps.iter().enumerate().map(|(b, s)| (b, &s[..])).collect::<Vec<_>>());
+            let mut us: Vec<Vec<f64>> = cases.iter().map(|c| c.u.clone()).collect();
+            let mut outs = first.clone();
+            let mut calls: Vec<NewtonCall> = us
+                .iter_mut()
+                .zip(outs.iter_mut())
+                .enumerate()
+                .map(|(b, (u, dof_out))| NewtonCall {
+                    body: b,
+                    factor: 1,
+                    inverse: Some(inverses[b].clone()),
+                    member: member(b),
+                    residual: residual0(b),
+                    u,
+                    dof_out,
+                    u_start: &starts[b],
+                    outcome: NewtonState::default(),
+                    failure: None,
+                })
+                .collect();
+            assert!(calls.iter().all(|c| world.newton_capable(c.body)));
+            world.newton(&mut calls, coefficients, None, &mut Default::default()).expect("device Newton");
+            let got: Vec<(NewtonState<f64>, Option<ElementFailure>)> = calls.iter().map(|c| (c.outcome, c.failure)).collect();
+            drop(calls);
+            for (b, ((state, failure), (want, u, out))) in got.into_iter().zip(&expected).enumerate() {
+                let g = |o: &[DofOut<f64>]| o.iter().map(|o| o.g).collect::<Vec<_>>();
+                let f = |o: &[DofOut<f64>]| o.iter().map(|o| o.f_int).collect::<Vec<_>>();
+                let (u_error, f_error) = (relative_error(&us[b], u), relative_error(&f(&outs[b]), &f(out)));
+                let g_error = relative_error(&g(&outs[b]), &g(out)) * g(out).iter().fold(0.0f64, |m, x| m.max(x.abs())) / f(out).iter().fold(1e-300f64, |m, x| m.max(x.abs()));
+                let r_error = (state.residual - want.residual).abs() / f(out).iter().fold(1e-300f64, |m, x| m.max(x.abs()));
+                // Near convergence the increment is round-off of u: measured against u.
+                let du_error = (state.increment - want.increment).abs() / u.iter().fold(1e-300f64, |m, x| m.max(x.abs()));
+                eprintln!("{} body {b} budgets {budgets:?}: status {} after {} increments; u {u_error:.1e}, f_int {f_error:.1e}, g {g_error:.1e}, |g| {r_error:.1e}, |du| {du_error:.1e}", kind.name(), state.status, state.iterations);
+                assert_eq!(failure, None);
+                assert_eq!((state.status, state.iterations, state.moved), (want.status, want.iterations, want.moved), "{} body {b}", kind.name());
+                assert!(u_error <= 1e-12 && f_error <= 1e-12 && g_error <= 1e-12 && r_error <= 1e-12 && du_error <= 1e-12, "{} body {b}", kind.name());
+            }
+            if tolerance == 0.0 {
+                assert_eq!((expected[0].0.status, expected[0].0.iterations, expected[1].0.iterations), (NEWTON_HOST, 1, 3), "the budgets end the iterations");
+            } else {
+                assert!(expected.iter().all(|(s, _, _)| s.status == NEWTON_CONVERGED && s.iterations > 1), "{}: both converge, after more than one increment", kind.name());
+            }
+        }
     }
 }

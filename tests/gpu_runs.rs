@@ -305,3 +305,40 @@ fn the_sliding_block_keeps_its_known_answer_with_contact_on_the_device() {
     assert!(host < 1e-2, "within 1 % of the closed form: {host:.3e}");
     assert!((device - host).abs() <= 1e-9 * host, "{device:.9e} vs {host:.9e}");
 }
+
+#[test]
+fn a_free_body_takes_its_newton_iterations_on_the_device_in_at_most_two_submits() {
+    // Issue 31, item 1: with `--rounds gpu`, a body without contact points that keeps its
+    // factorisation iterates on the device (`K̄⁻¹` up once per factorisation; increments,
+    // forces and convergence tests there, several iterations per submission), where before each
+    // Newton round was a device pass. A step then takes the first round's forces, at most two
+    // submissions of device iterations and the strain energies, however many iterations a
+    // tighter tolerance asks for; the iterations and energies are the CPU backend's.
+    let test = "a_free_body_takes_its_newton_iterations_on_the_device_in_at_most_two_submits";
+    if !gpu_available(test) {
+        return;
+    }
+    let path = scene_path("free_flight_3d");
+    let field = |log: &Log, name: &str| log.topics["/summary"][0][name].as_u64().unwrap_or_else(|| panic!("{name}"));
+    let mut per_step_iterations = Vec::new();
+    for tolerance in ["1e-9", "1e-12"] {
+        let sets = ["time.end=0.1".to_string(), "output.every=1".into(), format!("solver.residual_tolerance={tolerance}"), format!("solver.increment_tolerance={tolerance}")];
+        let sets: Vec<&str> = sets.iter().map(String::as_str).collect();
+        let tag = format!("{test}_{tolerance}");
+        let cpu = run_with(&path, &sets, &format!("{tag}_cpu"), &options(BackendChoice::Cpu, None));
+        let mut every = options(BackendChoice::Gpu, Some(Precision::F64));
+        every.backend.rounds = RoundPlacement::Gpu;
+        let gpu = run_with(&path, &sets, &format!("{tag}_gpu"), &every);
+        let (submits, newton, steps) = (field(&gpu, "device_submits"), field(&gpu, "newton_iterations"), field(&gpu, "steps"));
+        let per_step = gpu.series("/solver", "device_submits");
+        let worst = energy_difference(&cpu, &gpu);
+        eprintln!("tolerance {tolerance}: {submits} submits for {newton} Newton iterations in {steps} steps (CPU {}); energies differ by {worst:.2e}; per step {per_step:?}", field(&cpu, "newton_iterations"));
+        assert_eq!(newton, field(&cpu, "newton_iterations"), "the device takes the CPU's iterations");
+        assert!(worst <= 1e-9, "energies differ by {worst:.3e}");
+        assert!(submits < newton, "fewer submits than Newton iterations: {submits} for {newton}");
+        // The first step also factorises (its tangent pass and a host increment).
+        assert!(per_step[1..].iter().all(|&s| s <= 4.0), "per step: {per_step:?}");
+        per_step_iterations.push(newton as f64 / steps as f64);
+    }
+    assert!(per_step_iterations[1] > per_step_iterations[0] + 0.5, "the tighter tolerance iterates more: {per_step_iterations:?}");
+}

@@ -10,10 +10,14 @@
 //! | `assemble_residual` | [`assemble_residual`] |
 //! | `uzawa_step` | [`uzawa_step`] |
 //! | `uzawa_sweep` | [`uzawa_sweep`] |
+//! | `newton_update`, `newton_judge`, `newton_compact` | [`newton_update`], [`newton_judge`], [`newton_compact`] |
 //! | `peak_copy` | [`peak_copy`] |
 //! | `peak_fma` | [`peak_fma`] |
 
+mod newton;
+
 pub use crate::contact::law::uzawa_step;
+pub use newton::{newton_compact, newton_judge, newton_update};
 pub use crate::contact::uzawa::uzawa_sweep;
 pub use crate::element::{element_energy, element_force_tangent};
 

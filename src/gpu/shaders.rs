@@ -14,6 +14,9 @@ pub const SHADERS: &[(&str, &str)] = &[
     ("assemble_residual", include_str!("../../shaders/assemble_residual.wgsl")),
     ("element_energy", include_str!("../../shaders/element_energy.wgsl")),
     ("element_force_tangent", include_str!("../../shaders/element_force_tangent.wgsl")),
+    ("newton_compact", include_str!("../../shaders/newton_compact.wgsl")),
+    ("newton_judge", include_str!("../../shaders/newton_judge.wgsl")),
+    ("newton_update", include_str!("../../shaders/newton_update.wgsl")),
     ("peak_copy", include_str!("../../shaders/peak_copy.wgsl")),
     ("peak_fma", include_str!("../../shaders/peak_fma.wgsl")),
     ("uzawa_step", include_str!("../../shaders/uzawa_step.wgsl")),
@@ -29,6 +32,7 @@ pub const INCLUDES: &[(&str, &str)] = &[
     ("fbar", include_str!("../../shaders/include/fbar.wgsl")),
     ("math_f32", include_str!("../../shaders/include/math_f32.wgsl")),
     ("math_f64", include_str!("../../shaders/include/math_f64.wgsl")),
+    ("newton", include_str!("../../shaders/include/newton.wgsl")),
     ("material_arruda_boyce", include_str!("../../shaders/include/material_arruda_boyce.wgsl")),
     ("material_blatz_ko", include_str!("../../shaders/include/material_blatz_ko.wgsl")),
     ("material_gent", include_str!("../../shaders/include/material_gent.wgsl")),
@@ -80,7 +84,12 @@ pub fn is_contact_kernel(kernel: &str) -> bool {
 
 /// Whether a kernel runs over the members of a batch (`shaders/include/batch.wgsl`).
 pub fn is_batch_kernel(kernel: &str) -> bool {
-    is_element_kernel(kernel) || kernel.starts_with("assemble_")
+    is_element_kernel(kernel) || kernel.starts_with("assemble_") || is_newton_kernel(kernel)
+}
+
+/// Whether a kernel is one of a device Newton iteration's own (`shaders/include/newton.wgsl`).
+pub fn is_newton_kernel(kernel: &str) -> bool {
+    kernel.starts_with("newton_")
 }
 
 fn include(name: &str) -> Result<&'static str, String> {
@@ -93,6 +102,14 @@ pub fn source(kernel: &str, precision: Precision, variant: Option<ElementVariant
     let mut module = precision.wgsl_prelude();
     if is_batch_kernel(kernel) {
         module += include("batch")?;
+    }
+    if is_newton_kernel(kernel) {
+        use super::types::{NEWTON_MAX_FREE, NEWTON_WORKGROUP};
+        module += &format!(
+            "const MAX_FREE = {NEWTON_MAX_FREE}u;\nconst NEWTON_WORKGROUP = {NEWTON_WORKGROUP}u;\nconst REFACTOR_CONTRACTION = {:?};\n",
+            crate::solver::REFACTOR_CONTRACTION
+        );
+        module += include("newton")?;
     }
     if is_contact_kernel(kernel) {
         // The CPU twin's bound, so that both sweeps stop a point's local steps alike.

@@ -96,3 +96,52 @@ pub struct Active {
 pub const MODE_FORCES: u32 = 1;
 /// `TANGENT` of `batch.wgsl`: also the tangent and the stiffness values.
 pub const MODE_TANGENT: u32 = 2;
+
+/// `struct NewtonMember` of `shaders/include/newton.wgsl`: what a member's device Newton
+/// iterations need ([`crate::cpu::newton_judge`] reads the fields as the shader does).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct NewtonMember<R> {
+    pub inverse_start: u32,
+    pub free_start: u32,
+    pub free_count: u32,
+    /// Increments the member may take before the host must judge it.
+    pub budget: u32,
+    pub residual_tolerance: R,
+    pub floor: R,
+    pub floor_per_travel: R,
+    pub increment_tolerance: R,
+    pub increment_floor: R,
+    pub round_off: R,
+}
+
+/// `struct NewtonState` of `shaders/include/newton.wgsl`: where a member's device Newton
+/// iterations stand.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct NewtonState<R> {
+    pub status: u32,
+    pub iterations: u32,
+    pub moved: u32,
+    pub pad: u32,
+    pub residual: R,
+    pub previous_residual: R,
+    pub increment: R,
+}
+
+/// `NewtonState.status`: still iterating, converged, handed to the host, element failure.
+pub const NEWTON_ITERATING: u32 = 0;
+pub const NEWTON_CONVERGED: u32 = 1;
+pub const NEWTON_HOST: u32 = 2;
+pub const NEWTON_FAILED: u32 = 3;
+/// `MAX_FREE` of `newton.wgsl`: the most free dofs a body iterating on the device may have.
+pub const NEWTON_MAX_FREE: usize = 1024;
+/// `NEWTON_WORKGROUP` of `newton.wgsl`: the invocations of a member's reductions.
+pub const NEWTON_WORKGROUP: usize = 64;
+
+// SAFETY: four u32 (16 bytes, a multiple of either real's alignment) then fields of one type
+// `R`: no padding, and every bit pattern is valid.
+unsafe impl<R: Pod> Zeroable for NewtonMember<R> {}
+unsafe impl<R: Pod> Pod for NewtonMember<R> {}
+unsafe impl<R: Pod> Zeroable for NewtonState<R> {}
+unsafe impl<R: Pod> Pod for NewtonState<R> {}

@@ -9,10 +9,14 @@
 //! residuals of the evaluated bodies, and the stiffness values only of the bodies whose tangent
 //! was asked for (those that refactorise).
 
+mod newton;
+
+pub use newton::{NewtonCall, ITERATIONS_PER_SUBMIT};
+
 use super::uzawa_sweep::UzawaSweeps;
 use super::types::{Active, Coefficients, DofOut, DofStep, MaterialParams, MemberRange, MODE_FORCES, MODE_TANGENT, NO_HISTORY};
 use super::{ElementVariant, Gpu, GpuError};
-use crate::assembly::{element_out_stride, GatherMap, StiffnessPattern};
+use crate::assembly::{element_out_stride, DofMap, GatherMap, StiffnessPattern};
 use crate::backend::{RoundPlacement, UzawaPlacement};
 use crate::contact::uzawa::{Outcome, Problem};
 use crate::element::{Formulation, ReferenceGeometry};
@@ -63,6 +67,8 @@ pub struct WorldBody<'a> {
     pub formulation: Formulation,
     pub pattern: &'a StiffnessPattern,
     pub gather: &'a GatherMap,
+    /// Which of its dofs are free (the rows of `K̄⁻¹` for device Newton iterations).
+    pub dofs: &'a DofMap,
     /// Whether its material has a Prony series (a history per quadrature point each step).
     pub viscous: bool,
 }
@@ -107,6 +113,20 @@ impl Pass {
         let (x, y) = super::dispatch_rows(chunks);
         pass.dispatch_workgroups(x, y, active as u32);
     }
+
+    /// A dispatch whose workgroup counts the device wrote (`offset` into `arguments`).
+    fn dispatch_indirect(&self, pass: &mut wgpu::ComputePass, arguments: &Buffer, offset: u64) {
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &self.bind_group, &[]);
+        pass.dispatch_workgroups_indirect(arguments, offset);
+    }
+
+    /// `groups` workgroups in a pass being recorded.
+    fn dispatch(&self, pass: &mut wgpu::ComputePass, groups: u32) {
+        pass.set_pipeline(&self.pipeline);
+        pass.set_bind_group(0, &self.bind_group, &[]);
+        pass.dispatch_workgroups(groups, 1, 1);
+    }
 }
 
 /// The bodies of one element kind and material model.
@@ -130,6 +150,16 @@ struct Batch {
     energy: Buffer,
     /// The viscoelastic members' step relaxation and point histories (`MemberRange.history`).
     history: Buffer,
+    member_buffer: Buffer,
+    /// Each member's free dofs (indices into its dofs, ascending), `(start, count)` in `free_dofs`.
+    free_dofs: Vec<u32>,
+    free_range: Vec<(u32, u32)>,
+    /// Where each member's `K̄⁻¹` lies in the Newton buffers' `inverse` (`None`: too large), and
+    /// their total entries.
+    inverse_slot: Vec<Option<u32>>,
+    inverse_entries: usize,
+    /// Made by the first device Newton call that needs them.
+    newton: Option<newton::NewtonBuffers>,
     forces: Pass,
     tangent: Deferred,
     csr: Pass,
@@ -194,6 +224,8 @@ enum Source {
     DofOut,
     Values,
     Energy,
+    Displacement,
+    NewtonState,
 }
 
 /// The copies of one pass into the read-back buffer, each landing 8-byte aligned after the last.
@@ -240,6 +272,8 @@ pub struct GpuWorld {
     pub uzawa: UzawaPlacement,
     /// Which Newton rounds evaluate on the device (set by the backend).
     pub rounds: RoundPlacement,
+    /// The read-back of device Newton calls and its size, grown on demand.
+    newton_readback: Option<(Buffer, u64)>,
 }
 
 pub(super) fn buffer(gpu: &Gpu, label: &str, bytes: usize, usage: BufferUsages) -> Buffer {
@@ -296,13 +330,13 @@ impl GpuWorld {
             for (m, &b) in members.iter().enumerate() {
                 place[b] = (batches.len(), m);
             }
-            let batch = Batch::new(&gpu, variant, members, bodies, &coefficients, &mut traffic)?;
+            let batch = Batch::new(&gpu, variant, members, bodies, &coefficients, max_bytes, &mut traffic)?;
             let (elements, dofs, nnz) = batch.totals();
             readback_bytes += (batch.members.len() * 8 + dofs * 2 * real + nnz * real + elements * real).div_ceil(8) * 8;
             batches.push(batch);
         }
         let readback = buffer(&gpu, "readback", readback_bytes, BufferUsages::MAP_READ | BufferUsages::COPY_DST);
-        Ok(Self { gpu, batches, place, coefficients, readback, traffic, submits: 0, contact: None, uzawa: UzawaPlacement::default(), rounds: RoundPlacement::default() })
+        Ok(Self { gpu, batches, place, coefficients, readback, traffic, submits: 0, contact: None, uzawa: UzawaPlacement::default(), rounds: RoundPlacement::default(), newton_readback: None })
     }
 
     pub fn precision(&self) -> Precision {
@@ -478,14 +512,7 @@ impl GpuWorld {
         }
         self.read_back(encoder, &readback, "element_force_tangent", times, t0, |bytes| {
             for (e, [flags_at, dof_at, values_at]) in list.iter_mut().zip(landing) {
-                let flags: [u32; 2] = bytemuck::pod_read_unaligned(&bytes[flags_at..flags_at + 8]);
-                e.failure = if flags[0] != NO_FAILURE {
-                    Some(ElementFailure::Inverted(flags[0] as usize))
-                } else if flags[1] != NO_FAILURE {
-                    Some(ElementFailure::NonFinite(flags[1] as usize))
-                } else {
-                    None
-                };
+                e.failure = failure_of(bytemuck::pod_read_unaligned(&bytes[flags_at..flags_at + 8]));
                 if e.failure.is_some() {
                     continue;
                 }
@@ -583,8 +610,16 @@ impl GpuWorld {
     /// Records the read-back's copies, submits once, maps once and hands the
     /// mapped bytes to `unpack`. The device's work counts as `elements`, the host's packing and
     /// unpacking as `transfer`.
-    fn read_back(
+    fn read_back(&mut self, encoder: wgpu::CommandEncoder, readback: &ReadBack, kernel: &str, times: &mut PhaseTimes, started: Instant, unpack: impl FnOnce(&[u8])) -> Result<(), GpuError> {
+        let target = self.readback.clone();
+        self.read_back_into(&target, encoder, readback, kernel, times, started, unpack)
+    }
+
+    /// [`GpuWorld::read_back`] into another mappable buffer.
+    #[allow(clippy::too_many_arguments)]
+    fn read_back_into(
         &mut self,
+        target: &Buffer,
         mut encoder: wgpu::CommandEncoder,
         readback: &ReadBack,
         kernel: &str,
@@ -599,8 +634,10 @@ impl GpuWorld {
                 Source::DofOut => &b.dof_out,
                 Source::Values => &b.values,
                 Source::Energy => &b.energy,
+                Source::Displacement => &b.u,
+                Source::NewtonState => &b.newton.as_ref().expect("a batch whose Newton states are read has them").state,
             };
-            encoder.copy_buffer_to_buffer(source, c.source.start, &self.readback, c.target, c.source.end - c.source.start);
+            encoder.copy_buffer_to_buffer(source, c.source.start, target, c.target, c.source.end - c.source.start);
         }
         let submitted = Instant::now();
         self.gpu.queue.submit([encoder.finish()]);
@@ -610,7 +647,7 @@ impl GpuWorld {
             self.gpu.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Kernel { kernel: kernel.into(), message: e.to_string() })?;
             Vec::new()
         } else {
-            self.gpu.read_range(kernel, &self.readback, end)?
+            self.gpu.read_range(kernel, target, end)?
         };
         self.traffic.down += end;
         let mapped = Instant::now();
@@ -618,6 +655,18 @@ impl GpuWorld {
         times.transfer += (submitted - started).as_secs_f64() + mapped.elapsed().as_secs_f64();
         times.elements += (mapped - submitted).as_secs_f64();
         Ok(())
+    }
+}
+
+/// A member's failure flags (its lowest inverted element, its lowest non-finite one) as the
+/// failure they report.
+fn failure_of(flags: [u32; 2]) -> Option<ElementFailure> {
+    if flags[0] != NO_FAILURE {
+        Some(ElementFailure::Inverted(flags[0] as usize))
+    } else if flags[1] != NO_FAILURE {
+        Some(ElementFailure::NonFinite(flags[1] as usize))
+    } else {
+        None
     }
 }
 
@@ -644,7 +693,7 @@ fn runs(members: &[usize]) -> Vec<Vec<usize>> {
 }
 
 impl Batch {
-    fn new(gpu: &Arc<Gpu>, variant: ElementVariant, members: Vec<usize>, bodies: &[WorldBody], coefficients: &Buffer, traffic: &mut Traffic) -> Result<Self, GpuError> {
+    fn new(gpu: &Arc<Gpu>, variant: ElementVariant, members: Vec<usize>, bodies: &[WorldBody], coefficients: &Buffer, max_bytes: u64, traffic: &mut Traffic) -> Result<Self, GpuError> {
         let kind = variant.kind;
         let dim = kind.dim();
         let stride = element_out_stride(kind.nodes() * dim);
@@ -655,8 +704,12 @@ impl Batch {
         let (mut geometry, mut connectivity) = (Vec::new(), Vec::new());
         let (mut csr_start, mut csr, mut dof_start, mut dof) = (vec![0u32], Vec::new(), vec![0u32], Vec::new());
         let (mut elements, mut dofs, mut nnz, mut history) = (0usize, 0usize, 0usize, 0usize);
+        let (mut free_dofs, mut free_range) = (Vec::new(), Vec::with_capacity(members.len()));
         for &b in &members {
             let body = &bodies[b];
+            let free_start = free_dofs.len() as u32;
+            free_dofs.extend(body.dofs.free_pairs().map(|(d, _)| d as u32));
+            free_range.push((free_start, free_dofs.len() as u32 - free_start));
             let params = MaterialParams::of(body.model);
             let material = materials.iter().position(|m| *m == params).unwrap_or_else(|| {
                 materials.push(params);
@@ -710,13 +763,13 @@ impl Batch {
         let csr = uploaded("csr gather", bytemuck::cast_slice(&csr));
         let dof_start = uploaded("dof gather start", bytemuck::cast_slice(&dof_start));
         let dof = uploaded("dof gather", bytemuck::cast_slice(&dof));
-        let u = buffer(gpu, "u", dofs * real, write);
+        let u = buffer(gpu, "u", dofs * real, write | BufferUsages::COPY_SRC);
         let step = buffer(gpu, "step", dofs * 4 * real, write);
         let failure = buffer(gpu, "failure", members.len() * 8, write | BufferUsages::COPY_SRC);
         let active = buffer(gpu, "active", members.len() * 8, write);
         let element_out = buffer(gpu, "element_out", elements * stride * real, copy_out);
         let values = buffer(gpu, "values", nnz * real, copy_out);
-        let dof_out = buffer(gpu, "dof_out", dofs * 2 * real, copy_out);
+        let dof_out = buffer(gpu, "dof_out", dofs * 2 * real, copy_out | BufferUsages::COPY_DST);
         let energy = buffer(gpu, "energy", elements * real, copy_out);
         let history = buffer(gpu, "history", history * real, write);
         let v = Some(variant);
@@ -734,6 +787,7 @@ impl Batch {
             let join = |h: std::thread::ScopedJoinHandle<'_, Result<Pass, GpuError>>| h.join().expect("a pipeline compiles without panicking");
             Ok::<_, GpuError>((join(forces)?, join(csr)?, join(residual)?, energy?))
         })?;
+        let (inverse_slot, inverse_entries) = newton::inverse_slots(&free_range.iter().map(|&(_, n)| n as usize).collect::<Vec<_>>(), real, max_bytes);
         Ok(Self {
             members: ranges,
             stride,
@@ -749,6 +803,12 @@ impl Batch {
             dof_out,
             energy,
             history,
+            member_buffer,
+            free_dofs,
+            free_range,
+            inverse_slot,
+            inverse_entries,
+            newton: None,
             forces,
             tangent,
             csr: csr_pass,

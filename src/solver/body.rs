@@ -8,7 +8,8 @@ use crate::assembly::{element_out_stride, DofMap, GatherMap, StiffnessPattern};
 use crate::cpu::{assemble_csr, assemble_residual, dispatch_element_force_tangent, element_energy, element_force_tangent};
 use crate::element::{element_cell_fields, element_point_fields, element_von_mises, point_gradients, CellFields, ElementError, ElementOutput, Formulation, Patches, ReferenceGeometry};
 use crate::gpu::types::{Coefficients, DofOut, DofStep};
-use crate::gpu::{ElementFailure, Evaluation, GpuError, WorldBody};
+use crate::gpu::types::{NewtonMember, NewtonState};
+use crate::gpu::{ElementFailure, Evaluation, GpuError, NewtonCall, WorldBody};
 use crate::material::tensor::green_lagrange;
 use crate::material::viscous::HISTORY;
 use crate::material::{Hyperelastic, Model, Relaxation, Viscoelastic};
@@ -219,6 +220,8 @@ pub struct Body {
     pub reuse_factorization: bool,
     /// `c1 = 1/(θ dt²)` of the current factorisation; `None` when there is none.
     factor_c1: Option<Real>,
+    /// Counts the factorisations: what a device copy of `K̄⁻¹` was computed from.
+    factor_version: u64,
     /// Whether `values` hold `ξ K` at the current trial displacement.
     tangent_current: bool,
     /// Residual norm of the previous evaluation in this step, and the ratio of the last one to it.
@@ -339,6 +342,7 @@ impl Body {
             unmet: Vec::new(),
             reuse_factorization: true,
             factor_c1: None,
+            factor_version: 0,
             tangent_current: false,
             previous_residual: None,
             contraction: None,
@@ -366,7 +370,16 @@ impl Body {
 
     /// What the GPU world uploads of the body.
     pub fn world_body(&self) -> WorldBody<'_> {
-        WorldBody { mesh: self.elements(), geometry: &self.geometry, model: &self.model, formulation: self.formulation, pattern: &self.pattern, gather: &self.gather, viscous: self.viscoelastic.is_some() }
+        WorldBody {
+            mesh: self.elements(),
+            geometry: &self.geometry,
+            model: &self.model,
+            formulation: self.formulation,
+            pattern: &self.pattern,
+            gather: &self.gather,
+            dofs: &self.dofs,
+            viscous: self.viscoelastic.is_some(),
+        }
     }
 
     /// The step's start values of every dof (after [`Body::begin_step`]).
@@ -840,6 +853,7 @@ impl Body {
         let t0 = Instant::now();
         let result = self.solver.factorize(&self.values).map_err(|e| StepFailure::Linear { body: self.name.clone(), error: e.to_string() });
         times.factorization += t0.elapsed().as_secs_f64();
+        self.factor_version += 1;
         self.factor_c1 = result.is_ok().then_some(c1);
         result
     }
@@ -858,6 +872,7 @@ impl Body {
         }
         self.values.copy_from_slice(values);
         self.tangent_current = false;
+        self.factor_version += 1;
         self.solver.factorize(&self.values).map_err(|e| e.to_string())?;
         self.factor_c1 = Some(c1);
         Ok(())
@@ -866,6 +881,78 @@ impl Body {
     /// The fill-reducing ordering of the factorisation and the entries of its factor.
     pub fn factor_report(&self) -> (super::ordering::Ordering, usize) {
         (self.solver.ordering(), self.solver.factor_entries())
+    }
+
+    /// Whether the next increments can be taken on the device ([`crate::gpu::GpuWorld::newton`]):
+    /// the body has free dofs and keeps a factorisation fit for them.
+    pub fn iterates_on_device(&self, p: &StepParams) -> bool {
+        self.dofs.free_count > 0 && !self.needs_factorization(p)
+    }
+
+    /// Which factorisation the body holds (a new number for each).
+    pub fn factor_version(&self) -> u64 {
+        self.factor_version
+    }
+
+    /// `K̄⁻¹` of the free dofs from the kept factorisation, row by row (the columns of the
+    /// solves with the identity: `K̄` is symmetric), for a device that applies it.
+    pub fn effective_inverse(&mut self, times: &mut PhaseTimes) -> Vec<Real> {
+        let n = self.dofs.free_count;
+        let mut x = vec![0.0; n * n];
+        for f in 0..n {
+            x[f * n + f] = 1.0;
+        }
+        self.solve_effective(&mut x, times);
+        x
+    }
+
+    /// The body's share of device Newton iterations from its evaluated iterate: the tolerances
+    /// of [`Body::converged`] (the parts that do not change while it iterates), at most
+    /// `budget` increments, `inverse` when the device does not hold this factorisation's.
+    pub fn newton_call(&mut self, body: usize, p: &StepParams, motion_scale: Real, budget: usize, inverse: Option<Vec<Real>>) -> NewtonCall<'_> {
+        let c1 = coefficients(p).c1;
+        let (bulk, shear) = self.model.bulk_shear();
+        let free = (self.dofs.free_count as Real).sqrt();
+        let member = NewtonMember {
+            budget: budget as u32,
+            residual_tolerance: p.residual_tolerance,
+            floor: 1e-14 * c1 * self.max_mass * self.length_scale + STIFFNESS_ROUND_OFF * free * p.xi * self.stiffness_scale * self.length_scale,
+            floor_per_travel: 1e-13 * c1 * self.max_mass,
+            increment_tolerance: p.increment_tolerance,
+            increment_floor: motion_scale.max(1e-12 * self.length_scale),
+            round_off: 1e3 * Real::EPSILON * (bulk / shear).max(1.0),
+            ..NewtonMember::default()
+        };
+        let residual = self.residual_norm();
+        NewtonCall {
+            body,
+            factor: self.factor_version,
+            inverse,
+            member,
+            residual,
+            u: &mut self.trial.u,
+            dof_out: &mut self.dof_out,
+            u_start: &self.state.u,
+            outcome: NewtonState::default(),
+            failure: None,
+        }
+    }
+
+    /// Takes the end of device Newton iterations ([`Body::newton_call`]): the last iterate and
+    /// its evaluation, as if the host had taken the increments, so that the next convergence
+    /// test ([`Body::converged`], the host's word) sees the last increment and the residual
+    /// before the last.
+    pub fn finish_device_newton(&mut self, p: &StepParams, outcome: &NewtonState<Real>, failure: Option<ElementFailure>) -> Result<(), StepFailure> {
+        if let Some(failure) = failure {
+            return Err(self.element_failure(&self.trial.u, failure));
+        }
+        self.tangent_current = false;
+        self.still &= outcome.moved == 0;
+        self.last_increment = Some(outcome.increment);
+        self.previous_residual = Some(outcome.previous_residual);
+        self.evaluated.record(&self.trial.u, &self.step_inputs, coefficients(p));
+        self.absorb_residual(p);
+        Ok(())
     }
 
     /// Solves `K̄ x = rhs` in place (free dofs) with the last factorisation, for one or more

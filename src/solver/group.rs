@@ -426,6 +426,13 @@ fn newton_in_lockstep(groups: &mut [Group], world: &mut GpuWorld, c: &Context, t
                 Some(Err(e)) => outcome[k] = Some(Err(e)),
             }
         }
+        if device_residual {
+            for (k, result) in newton_on_device(groups, &mut continuing, world, c, times) {
+                if let Err(e) = result {
+                    outcome[k] = Some(Err(e));
+                }
+            }
+        }
         let p = c.p;
         let needs_tangent = |b: &Body| b.needs_tangent(p);
         // Else each body's `refresh_factor` assembles its tangent on the CPU.
@@ -455,6 +462,56 @@ fn newton_in_lockstep(groups: &mut [Group], world: &mut GpuWorld, c: &Context, t
         first = false;
     }
     outcome.into_iter().map(|o| o.expect("every group has an outcome")).collect()
+}
+
+/// The Newton iterations of the `continuing` groups that can take them on the device
+/// ([`GpuWorld::newton`]): no contact problem, one body that keeps its factorisation and has a
+/// slot for `K̄⁻¹` there, and element work worth device passes
+/// ([`crate::backend::round_on_device`]). They leave `continuing` for this round; the next
+/// round judges them on the host, their last evaluation taken again. Returns each such group's
+/// result (an element failure, or a device error for all of them).
+fn newton_on_device(groups: &mut [Group], continuing: &mut [bool], world: &mut GpuWorld, c: &Context, times: &mut PhaseTimes) -> Vec<(usize, Result<(), StepFailure>)> {
+    let p = c.p;
+    let takes = |g: &Group, world: &GpuWorld| {
+        g.contact.is_none() && g.bodies.len() == 1 && g.newton.report.iterations < p.max_iterations && world.newton_capable(g.ids[0]) && g.bodies[0].iterates_on_device(p)
+    };
+    let chosen: Vec<bool> = groups.iter().zip(continuing.iter()).map(|(g, &go)| go && takes(g, world)).collect();
+    if !chosen.contains(&true) || !crate::backend::round_on_device(world, false, &element_work(groups, &chosen, &|_| true)) {
+        return Vec::new();
+    }
+    let motion_scale = c.velocity_scale * p.dt;
+    // `K̄⁻¹` of each factorisation the device lacks (after a step that refactorised many
+    // grains: all of them), in parallel.
+    let stale: Vec<bool> = groups.iter().zip(&chosen).map(|(g, &yes)| yes && !world.newton_inverse_current(g.ids[0], g.bodies[0].factor_version())).collect();
+    let mut inverses: Vec<Option<Vec<Real>>> =
+        groups.par_iter_mut().zip(&stale).map(|(g, &stale)| stale.then(|| g.bodies[0].effective_inverse(&mut g.newton.report.wall))).collect();
+    let mut owners = Vec::new();
+    let mut calls = Vec::new();
+    for (k, g) in groups.iter_mut().enumerate().filter(|(k, _)| chosen[*k]) {
+        let (id, budget) = (g.ids[0], p.max_iterations - g.newton.report.iterations);
+        owners.push(k);
+        calls.push(g.bodies[0].newton_call(id, p, motion_scale, budget, inverses[k].take()));
+    }
+    let ran = world.newton(&mut calls, coefficients(p), c.interrupt, times);
+    let ends: Vec<_> = calls.iter().map(|call| (call.outcome, call.failure)).collect();
+    drop(calls);
+    owners
+        .into_iter()
+        .zip(ends)
+        .map(|(k, (state, failure))| {
+            continuing[k] = false;
+            let g = &mut groups[k];
+            let body = &mut *g.bodies[0];
+            if let Err(e) = &ran {
+                return (k, Err(body.device_failure(e)));
+            }
+            // Each increment is followed by an evaluation; the last one counts in the next
+            // round, which takes it again.
+            g.newton.report.iterations += state.iterations as usize;
+            g.newton.report.bodies_iterated += (state.iterations as usize).saturating_sub(1);
+            (k, body.finish_device_newton(p, &state, failure))
+        })
+        .collect()
 }
 
 /// Whether the round's pass over the bodies of the `live` groups that `wanted` selects goes to

@@ -10,7 +10,7 @@ mod restart;
 mod setup;
 pub mod topology;
 
-pub use body::{Body, NodalLoad, StepFailure};
+pub use body::{Body, NodalLoad, StepFailure, REFACTOR_CONTRACTION};
 pub use restart::{RestoreError, SavedBody, SavedFactor, SavedReaction, SavedState};
 pub use setup::{build_mesh, build_simulation};
 

@@ -1,0 +1,88 @@
+// A step's Newton iterations on the device for bodies that keep their factorisation and have no
+// contact point (`newton_update`, `forces`, `assemble_residual`, `newton_judge`,
+// `newton_compact`, recorded several times in one submission). CPU side: `gpu::newton`; the
+// test it repeats: `Body::converged`.
+
+// What a member's iterations need, set by the host for the call.
+struct NewtonMember {
+    // Where its K̄⁻¹ (free x free, row by row) starts in `inverse`.
+    inverse_start: u32,
+    // Where its free dofs (indices into the member's dofs, ascending) start in `free`.
+    free_start: u32,
+    free_count: u32,
+    // Increments it may take before the host must judge it (what is left of
+    // `solver.max_iterations`).
+    budget: u32,
+    // The residual's tolerance: residual_tolerance x force scale + floor + floor_per_travel x
+    // the largest |u|.
+    residual_tolerance: real,
+    floor: real,
+    floor_per_travel: real,
+    // The increment's bound: increment_tolerance x max(|u - u_t|, increment_floor) + round_off x |u|.
+    increment_tolerance: real,
+    increment_floor: real,
+    round_off: real,
+}
+
+// Where a member's iterations stand, written by the device.
+struct NewtonState {
+    status: u32,
+    // Increments taken in this call.
+    iterations: u32,
+    // Whether an increment changed a displacement.
+    moved: u32,
+    pad: u32,
+    // Residual norms of the last evaluation and of the one before, and the last increment's norm.
+    residual: real,
+    previous_residual: real,
+    increment: real,
+}
+
+// `NewtonState.status`.
+const ITERATING = 0u;
+const CONVERGED = 1u;
+// Not converged, and the device cannot go on: the factorisation contracts too slowly, the
+// budget is spent, or the residual is not finite. The host takes over.
+const HOST = 2u;
+// The element kernel rejected the state (`failure`).
+const FAILED = 3u;
+
+// The module's prelude sets MAX_FREE (the most free dofs a member may have: `newton_update`
+// keeps the right-hand side in workgroup memory), NEWTON_WORKGROUP and REFACTOR_CONTRACTION
+// (`Body::refresh_factor`'s rule) from the engine's constants.
+
+// `dispatch`: the indirect arguments (x, y, z) of update, forces, residual and judge, then the
+// length of the call's list; `newton_compact` sets every z to the members still iterating.
+const DISPATCHES = 4u;
+const CALL_COUNT = 12u;
+
+// The sum of `partial` by halves (the CPU twins add in the same order).
+var<workgroup> partial: array<real, NEWTON_WORKGROUP>;
+
+fn reduce_sum(lane: u32, value: real) -> real {
+    partial[lane] = value;
+    workgroupBarrier();
+    for (var half = NEWTON_WORKGROUP / 2u; half > 0u; half /= 2u) {
+        if lane < half {
+            partial[lane] += partial[lane + half];
+        }
+        workgroupBarrier();
+    }
+    let sum = partial[0];
+    workgroupBarrier();
+    return sum;
+}
+
+fn reduce_max(lane: u32, value: real) -> real {
+    partial[lane] = value;
+    workgroupBarrier();
+    for (var half = NEWTON_WORKGROUP / 2u; half > 0u; half /= 2u) {
+        if lane < half {
+            partial[lane] = max(partial[lane], partial[lane + half]);
+        }
+        workgroupBarrier();
+    }
+    let most = partial[0];
+    workgroupBarrier();
+    return most;
+}

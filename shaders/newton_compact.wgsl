@@ -1,0 +1,45 @@
+// The members of a device Newton call still ITERATING, in the call's order, into the list the
+// next iteration's kernels run over (`jobs`), and their count into every indirect dispatch's z,
+// so that converged members cost nothing more. One workgroup: each invocation takes a
+// contiguous share of the call's list; the shares' counts are summed in order by invocation 0.
+// CPU twin: `cpu::newton_compact`.
+
+@group(0) @binding(0) var<storage, read> call: array<Active>;
+@group(0) @binding(1) var<storage, read> state: array<NewtonState>;
+@group(0) @binding(2) var<storage, read_write> jobs: array<Active>;
+@group(0) @binding(3) var<storage, read_write> dispatch: array<u32>;
+
+var<workgroup> counts: array<u32, NEWTON_WORKGROUP>;
+
+@compute @workgroup_size(NEWTON_WORKGROUP)
+fn main(@builtin(local_invocation_index) lane: u32) {
+    let total = dispatch[CALL_COUNT];
+    let share = (total + NEWTON_WORKGROUP - 1u) / NEWTON_WORKGROUP;
+    let first = min(lane * share, total);
+    let end = min(first + share, total);
+    var mine = 0u;
+    for (var i = first; i < end; i++) {
+        mine += u32(state[call[i].member].status == ITERATING);
+    }
+    counts[lane] = mine;
+    workgroupBarrier();
+    if lane == 0u {
+        var sum = 0u;
+        for (var k = 0u; k < NEWTON_WORKGROUP; k++) {
+            let c = counts[k];
+            counts[k] = sum;
+            sum += c;
+        }
+        for (var k = 0u; k < DISPATCHES; k++) {
+            dispatch[3u * k + 2u] = sum;
+        }
+    }
+    workgroupBarrier();
+    var at = counts[lane];
+    for (var i = first; i < end; i++) {
+        if state[call[i].member].status == ITERATING {
+            jobs[at] = call[i];
+            at++;
+        }
+    }
+}

@@ -1,0 +1,295 @@
+//! A step's Newton iterations on the device, for the bodies that keep their factorisation and
+//! have no contact point (most of a packing's groups after the first round: a grain in free
+//! flight, or one that rests alone). The host computes `K̄⁻¹` of a small body's free dofs from
+//! faer's factors when they are refreshed, and it goes up once per factorisation; the device
+//! then takes the increments (`newton_update`), the forces (`element_force_tangent`'s
+//! `forces`, `assemble_residual`), the convergence test (`newton_judge`) and drops the members
+//! that are done from the next iteration's list and dispatch counts (`newton_compact`), several
+//! iterations per submission. The host reads back the members' states, displacements and
+//! residuals once per submission.
+
+use super::{buffer, to_device, Batch, GpuWorld, Pass, ReadBack, Source, WORKGROUP};
+use crate::gpu::types::{Active, Coefficients, DofOut, NewtonMember, NewtonState, MODE_FORCES, NEWTON_FAILED, NEWTON_ITERATING, NEWTON_MAX_FREE};
+use crate::gpu::{ElementFailure, Gpu, GpuError};
+use crate::precision::{Precision, Real};
+use crate::solver::PhaseTimes;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Instant;
+use wgpu::{Buffer, BufferUsages};
+
+/// Device iterations recorded in the first submission of a call: a body that converges on the
+/// device mostly does so in one to three. The second records what is left of the largest
+/// budget, so that a call takes at most two submissions however many iterations it needs.
+pub const ITERATIONS_PER_SUBMIT: u32 = 4;
+
+/// The indirect dispatches (x, y, z) of update, forces, residual and judge, then the length of
+/// the call's list (`DISPATCHES` and `CALL_COUNT` of `newton.wgsl`).
+const DISPATCH_WORDS: usize = 13;
+const DISPATCHES: usize = 4;
+
+/// One body's share of [`GpuWorld::newton`].
+pub struct NewtonCall<'a> {
+    pub body: usize,
+    /// The version of the body's factorisation, and `K̄⁻¹` of its free dofs (row by row) when
+    /// the device does not hold that version's yet ([`GpuWorld::newton_inverse_current`]).
+    pub factor: u64,
+    pub inverse: Option<Vec<Real>>,
+    /// The body's tolerances and budget (`inverse_start`, `free_start` and `free_count` are the
+    /// world's to set).
+    pub member: NewtonMember<Real>,
+    /// The residual norm of the evaluation at `u`.
+    pub residual: Real,
+    /// In: the evaluated iterate and its results; out: the device's last ones.
+    pub u: &'a mut [Real],
+    pub dof_out: &'a mut [DofOut<Real>],
+    /// The displacements at the start of the step.
+    pub u_start: &'a [Real],
+    /// Out: where the iterations ended.
+    pub outcome: NewtonState<Real>,
+    pub failure: Option<ElementFailure>,
+}
+
+/// A batch's buffers and pipelines for device Newton iterations, made when a call first needs
+/// them (a scene that never iterates on the device pays nothing).
+pub(super) struct NewtonBuffers {
+    inverse: Buffer,
+    newton: Buffer,
+    pub(super) state: Buffer,
+    u_start: Buffer,
+    call: Buffer,
+    dispatch: Buffer,
+    update: Pass,
+    judge: Pass,
+    compact: Pass,
+    /// Host copies: each member's parameters and start displacements as last uploaded, and the
+    /// factorisation whose inverse its slot holds.
+    newton_host: Vec<NewtonMember<Real>>,
+    start_host: Vec<Real>,
+    inverse_version: Vec<Option<u64>>,
+}
+
+/// Where each member's `K̄⁻¹` lies in a batch's `inverse` buffer: members of at most
+/// `NEWTON_MAX_FREE` free dofs, in member order, while the buffer stays within the device's
+/// binding limit; `None` for the others (they iterate on the host).
+pub(super) fn inverse_slots(free_counts: &[usize], real: usize, max_bytes: u64) -> (Vec<Option<u32>>, usize) {
+    let mut total = 0usize;
+    let slots = free_counts
+        .iter()
+        .map(|&n| {
+            let fits = n > 0 && n <= NEWTON_MAX_FREE && ((total + n * n) * real) as u64 <= max_bytes && total + n * n <= u32::MAX as usize;
+            fits.then(|| {
+                total += n * n;
+                (total - n * n) as u32
+            })
+        })
+        .collect();
+    (slots, total)
+}
+
+impl NewtonBuffers {
+    fn new(gpu: &Arc<Gpu>, b: &Batch, coefficients: &Buffer) -> Result<Self, GpuError> {
+        let real = gpu.precision.size();
+        let dofs = b.u_host.len();
+        let members = b.members.len();
+        let storage = BufferUsages::STORAGE;
+        let write = storage | BufferUsages::COPY_DST;
+        let inverse = buffer(gpu, "inverse", b.inverse_entries * real, write);
+        let free = super::buffer_init(gpu, "free dofs", bytemuck::cast_slice(&b.free_dofs), storage);
+        let newton = buffer(gpu, "newton members", members * std::mem::size_of::<NewtonMember<Real>>(), write);
+        let state = buffer(gpu, "newton state", members * std::mem::size_of::<NewtonState<f64>>(), write | BufferUsages::COPY_SRC);
+        let u_start = buffer(gpu, "u start", dofs * real, write);
+        let call = buffer(gpu, "newton call", members * 8, write);
+        let dispatch = buffer(gpu, "newton dispatch", DISPATCH_WORDS * 4, write | BufferUsages::INDIRECT);
+        let update = Pass::new(gpu, "newton_update", "main", None, &[&inverse, &free, &newton, &state, &b.dof_out, &b.u, &b.member_buffer, &b.active])?;
+        let judge = Pass::new(gpu, "newton_judge", "main", None, &[&free, &newton, &state, &b.dof_out, &b.u, &u_start, &b.step, coefficients, &b.failure, &b.member_buffer, &b.active])?;
+        let compact = Pass::new(gpu, "newton_compact", "main", None, &[&call, &state, &b.active, &dispatch])?;
+        Ok(Self {
+            inverse,
+            newton,
+            state,
+            u_start,
+            call,
+            dispatch,
+            update,
+            judge,
+            compact,
+            newton_host: vec![NewtonMember::default(); members],
+            start_host: vec![Real::NAN; dofs],
+            inverse_version: vec![None; members],
+        })
+    }
+}
+
+impl GpuWorld {
+    /// Whether a body can take Newton iterations on the device: f64 kernels (f32 residuals
+    /// could not meet the tolerances) and a slot for its `K̄⁻¹`.
+    pub fn newton_capable(&self, body: usize) -> bool {
+        let (b, m) = self.place[body];
+        self.gpu.precision == Precision::F64 && self.batches[b].inverse_slot[m].is_some()
+    }
+
+    /// Whether the device holds `K̄⁻¹` of this version of a body's factorisation.
+    pub fn newton_inverse_current(&self, body: usize, factor: u64) -> bool {
+        let (b, m) = self.place[body];
+        self.batches[b].newton.as_ref().is_some_and(|n| n.inverse_version[m] == Some(factor))
+    }
+
+    /// Newton iterations of the listed bodies on the device, each from its evaluated iterate
+    /// until it converges, needs the host (its factorisation contracts too slowly, its budget is
+    /// spent, a residual is not finite) or an element fails: [`ITERATIONS_PER_SUBMIT`]
+    /// iterations in the first submission, the rest of the budgets in a second if any body needs
+    /// it. The bodies must be
+    /// [`GpuWorld::newton_capable`]; `interrupt` is checked between submissions.
+    pub fn newton(&mut self, calls: &mut [NewtonCall], coefficients: Coefficients<Real>, interrupt: Option<&AtomicBool>, times: &mut PhaseTimes) -> Result<(), GpuError> {
+        let started = Instant::now();
+        let precision = self.gpu.precision;
+        assert_eq!(precision, Precision::F64, "device Newton iterations need f64 kernels");
+        let real = precision.size();
+        let coefficient_buffer = self.coefficients.clone();
+        self.upload(&coefficient_buffer, 0, &to_device(precision, &[coefficients.factor, coefficients.c1]));
+        let by_batch = self.stage_displacements(&calls.iter().map(|c| (c.body, &*c.u)).collect::<Vec<_>>());
+        // (batch, [(call, member)] in member order).
+        let mut work: Vec<(usize, Vec<(usize, usize)>)> = Vec::with_capacity(by_batch.len());
+        for (batch, mine) in by_batch {
+            if self.batches[batch].newton.is_none() {
+                let made = NewtonBuffers::new(&self.gpu, &self.batches[batch], &self.coefficients)?;
+                self.batches[batch].newton = Some(made);
+            }
+            let mine: Vec<(usize, usize)> = mine.into_iter().map(|i| (i, self.place[calls[i].body].1)).collect();
+            self.stage_newton(batch, &mine, calls);
+            work.push((batch, mine));
+        }
+        let total_dofs: usize = work.iter().map(|(b, mine)| mine.iter().map(|&(_, m)| self.batches[*b].members[m].dofs as usize).sum::<usize>()).sum();
+        let total_members: usize = work.iter().map(|(_, mine)| mine.len()).sum();
+        let bytes = (total_members * (8 + std::mem::size_of::<NewtonState<f64>>()) + total_dofs * 3 * real + 8 * work.len()) as u64;
+        if self.newton_readback.as_ref().is_none_or(|(_, size)| *size < bytes) {
+            self.newton_readback = Some((buffer(&self.gpu, "newton readback", bytes as usize, BufferUsages::MAP_READ | BufferUsages::COPY_DST), bytes));
+        }
+        let target = self.newton_readback.as_ref().expect("made above").0.clone();
+        let mut t0 = started;
+        let mut iterations = calls.iter().map(|c| c.member.budget).max().unwrap_or(0).min(ITERATIONS_PER_SUBMIT);
+        loop {
+            let mut encoder = self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("newton") });
+            {
+                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("newton"), timestamp_writes: None });
+                for _ in 0..iterations {
+                    for (batch, _) in &work {
+                        let b = &self.batches[*batch];
+                        let n = b.newton.as_ref().expect("staged");
+                        n.update.dispatch_indirect(&mut pass, &n.dispatch, 0);
+                        b.forces.dispatch_indirect(&mut pass, &n.dispatch, 12);
+                        b.residual.dispatch_indirect(&mut pass, &n.dispatch, 24);
+                        n.judge.dispatch_indirect(&mut pass, &n.dispatch, 36);
+                        n.compact.dispatch(&mut pass, 1);
+                    }
+                }
+            }
+            let mut readback = ReadBack::default();
+            // Per call: where its state, failure flags, displacements and residuals land.
+            let mut landing = vec![[0usize; 4]; calls.len()];
+            for (batch, mine) in &work {
+                let b = &self.batches[*batch];
+                let members: Vec<usize> = mine.iter().map(|&(_, m)| m).collect();
+                let state_size = std::mem::size_of::<NewtonState<Real>>() as u64;
+                let flags = readback.queue(*batch, Source::Failure, 0..(8 * b.members.len()) as u64);
+                let state_span = |m: usize| m as u64 * state_size..(m as u64 + 1) * state_size;
+                let u_span = |m: usize| b.members[m].dof_start as u64 * real as u64..(b.members[m].dof_start + b.members[m].dofs) as u64 * real as u64;
+                let dof_span = |m: usize| b.members[m].dof_start as u64 * 2 * real as u64..(b.members[m].dof_start + b.members[m].dofs) as u64 * 2 * real as u64;
+                let states = readback.queue_runs(*batch, Source::NewtonState, &members, &state_span);
+                let us = readback.queue_runs(*batch, Source::Displacement, &members, &u_span);
+                let outs = readback.queue_runs(*batch, Source::DofOut, &members, &dof_span);
+                for (k, &(i, m)) in mine.iter().enumerate() {
+                    landing[i] = [states[k], flags as usize + 8 * m, us[k], outs[k]];
+                }
+            }
+            let mut iterating = false;
+            self.read_back_into(&target, encoder, &readback, "newton_update", times, t0, |bytes| {
+                for (call, [state_at, flags_at, u_at, out_at]) in calls.iter_mut().zip(&landing) {
+                    call.outcome = bytemuck::pod_read_unaligned(&bytes[*state_at..state_at + std::mem::size_of::<NewtonState<Real>>()]);
+                    iterating |= call.outcome.status == NEWTON_ITERATING;
+                    let flags: [u32; 2] = bytemuck::pod_read_unaligned(&bytes[*flags_at..flags_at + 8]);
+                    call.failure = (call.outcome.status == NEWTON_FAILED).then(|| super::failure_of(flags)).flatten();
+                    let n = call.u.len();
+                    call.u.copy_from_slice(&super::from_device(precision, &bytes[*u_at..u_at + n * real]));
+                    let reals = super::from_device(precision, &bytes[*out_at..out_at + n * 2 * real]);
+                    call.dof_out.copy_from_slice(bytemuck::cast_slice(&reals));
+                }
+            })?;
+            if !iterating || interrupt.is_some_and(|f| f.load(Ordering::SeqCst)) {
+                break;
+            }
+            iterations = calls.iter().filter(|c| c.outcome.status == NEWTON_ITERATING).map(|c| c.member.budget - c.outcome.iterations).max().unwrap_or(1);
+            t0 = Instant::now();
+        }
+        // The device's displacements are the host's now: the mirror follows, so that the next
+        // pass does not send them back.
+        for call in calls.iter() {
+            let (batch, m) = self.place[call.body];
+            let range = self.batches[batch].members[m];
+            self.batches[batch].u_host[range.dof_start as usize..(range.dof_start + range.dofs) as usize].copy_from_slice(call.u);
+        }
+        Ok(())
+    }
+
+    /// Uploads what the listed calls (`(call, member)`, member order) of one batch need: stale
+    /// inverses, parameters, initial states, start displacements, evaluated residuals, the
+    /// call's list and the first iteration's dispatch arguments; clears the failure flags.
+    fn stage_newton(&mut self, batch: usize, mine: &[(usize, usize)], calls: &mut [NewtonCall]) {
+        let precision = self.gpu.precision;
+        let real = precision.size() as u64;
+        let mut uploads: Vec<(Buffer, u64, Vec<u8>)> = Vec::new();
+        let b = &mut self.batches[batch];
+        let n = b.newton.as_mut().expect("made before staging");
+        let mut start_changed = Vec::new();
+        let mut states = Vec::with_capacity(mine.len());
+        for &(i, m) in mine {
+            let call = &mut calls[i];
+            let slot = b.inverse_slot[m].expect("a capable body has an inverse slot");
+            let (free_start, free_count) = b.free_range[m];
+            if let Some(inverse) = call.inverse.take() {
+                assert_eq!(inverse.len(), (free_count * free_count) as usize, "K̄⁻¹ of the member's free dofs");
+                uploads.push((n.inverse.clone(), slot as u64 * real, to_device(precision, &inverse)));
+                n.inverse_version[m] = Some(call.factor);
+            }
+            n.newton_host[m] = NewtonMember { inverse_start: slot, free_start, free_count, ..call.member };
+            states.push(NewtonState { status: NEWTON_ITERATING, iterations: 0, moved: 0, pad: 0, residual: call.residual, previous_residual: call.residual, increment: 0.0 });
+            let range = b.members[m];
+            if super::update_mirror(&mut n.start_host[range.dof_start as usize..(range.dof_start + range.dofs) as usize], call.u_start) {
+                start_changed.push(m);
+            }
+        }
+        let members: Vec<usize> = mine.iter().map(|&(_, m)| m).collect();
+        let member_size = std::mem::size_of::<NewtonMember<Real>>() as u64;
+        let state_size = std::mem::size_of::<NewtonState<Real>>() as u64;
+        let mut k = 0;
+        for run in super::runs(&members) {
+            let first = run[0] as u64;
+            uploads.push((n.newton.clone(), first * member_size, bytemuck::cast_slice(&n.newton_host[run[0]..=*run.last().expect("a run has members")]).to_vec()));
+            uploads.push((n.state.clone(), first * state_size, bytemuck::cast_slice(&states[k..k + run.len()]).to_vec()));
+            let (start, end) = (b.members[run[0]].dof_start as usize, { let last = b.members[*run.last().expect("a run has members")]; (last.dof_start + last.dofs) as usize });
+            let outs: Vec<Real> = mine[k..k + run.len()].iter().flat_map(|&(i, _)| bytemuck::cast_slice::<DofOut<Real>, Real>(calls[i].dof_out).iter().copied()).collect();
+            debug_assert_eq!(outs.len(), 2 * (end - start));
+            uploads.push((b.dof_out.clone(), start as u64 * 2 * real, to_device(precision, &outs)));
+            k += run.len();
+        }
+        for run in super::runs(&start_changed) {
+            let (start, end) = (b.members[run[0]].dof_start as usize, { let last = b.members[*run.last().expect("a run has members")]; (last.dof_start + last.dofs) as usize });
+            uploads.push((n.u_start.clone(), start as u64 * real, to_device(precision, &n.start_host[start..end])));
+        }
+        let list: Vec<Active> = members.iter().map(|&m| Active { member: m as u32, mode: MODE_FORCES }).collect();
+        uploads.push((n.call.clone(), 0, bytemuck::cast_slice(&list).to_vec()));
+        uploads.push((b.active.clone(), 0, bytemuck::cast_slice(&list).to_vec()));
+        uploads.push((b.failure.clone(), 0, bytemuck::cast_slice(&vec![super::NO_FAILURE; 2 * b.members.len()]).to_vec()));
+        let count = list.len() as u32;
+        let most = |f: fn(&crate::gpu::types::MemberRange) -> u32| members.iter().map(|&m| f(&b.members[m]) as usize).max().unwrap_or(0);
+        let (fx, fy) = crate::gpu::dispatch_rows(most(|r| r.elements).div_ceil(WORKGROUP));
+        let (rx, ry) = crate::gpu::dispatch_rows(most(|r| r.dofs).div_ceil(WORKGROUP));
+        let dispatch: [u32; DISPATCH_WORDS] = [1, 1, count, fx, fy, count, rx, ry, count, 1, 1, count, count];
+        debug_assert_eq!(DISPATCHES * 3 + 1, DISPATCH_WORDS);
+        uploads.push((n.dispatch.clone(), 0, bytemuck::cast_slice(&dispatch).to_vec()));
+        for (buffer, offset, bytes) in uploads {
+            self.upload(&buffer, offset, &bytes);
+        }
+    }
+}
