@@ -99,6 +99,18 @@ for r in $(seq "$scale_reps"); do
         --set 'gravity=[0.0,-9.81,0.0]' --set output.scene_every=0
     done
     run "stack_3d, t <= $stack_end" "$backend" stack_3d --set time.end="$stack_end"
+    if [[ $backend == gpu ]]; then
+      # Every round on the device: the falling grains take their Newton iterations there
+      # (doc/ARCHITECTURE.md, "Newton iterations on the device"), whatever `auto`'s threshold.
+      UZAWA_LABEL=" --rounds gpu"
+      read -r n end <<<"${scale_2d[-1]}"
+      run "grains_many, N = $n, falling, t <= $end" gpu grains_many --set packing.count="$n" --set time.end="$end" \
+        --set 'gravity=[0.0,-9.81]' --set output.scene_every=0 --rounds gpu
+      read -r n end <<<"${scale_3d[-1]}"
+      run "grains_3d, N = $n, falling, t <= $end" gpu grains_3d --set packing.count="$n" --set time.end="$end" \
+        --set 'gravity=[0.0,-9.81,0.0]' --set output.scene_every=0 --rounds gpu
+      UZAWA_LABEL=""
+    fi
     run "free_flight_3d, ${block[0]}x${block[1]}x${block[2]} Hex8, t <= $block_end" "$backend" free_flight_3d \
       --set "body.block.mesh.divisions=[${block[0]},${block[1]},${block[2]}]" --set time.end="$block_end"
   done
@@ -129,8 +141,8 @@ for r in runs:
 med = lambda rs, f: statistics.median(f(r) for r in rs)
 adapter = next((r["adapter"] for r in runs if r.get("adapter")), "none")
 print(f"Adapter: {adapter}\n")
-print("| scene | CPU run | GPU run | GPU / CPU | CPU steps | GPU steps | GPU submits | energies (CPU / GPU) |")
-print("| --- | --- | --- | --- | --- | --- | --- | --- |")
+print("| scene | CPU run | GPU run | GPU / CPU | CPU steps | GPU steps | GPU submits | GPU Newton increments on the device | energies (CPU / GPU) |")
+print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
 labels = list(dict.fromkeys(r["label"] for r in runs))
 for label in labels:
     cpu = by.get((label, "cpu"))
@@ -143,6 +155,7 @@ for label in labels:
         name = label + (" (contact on the device)" if "uzawa" in mode else " (every round on the device)" if "rounds" in mode else "")
         print(f"| {name} | {wc:.2f} s | {wg:.2f} s | {ratio} | {med(cpu, lambda r: r['wall_by_phase']['total']):.2f} s "
               f"| {med(gpu, lambda r: r['wall_by_phase']['total']):.2f} s | {med(gpu, lambda r: r['device_submits']):.0f} "
+              f"| {med(gpu, lambda r: r.get('device_iterations', 0)):.0f} "
               f"| {cpu[0]['energy']['total']:.10g} / {gpu[0]['energy']['total']:.10g} |")
 print()
 

@@ -98,6 +98,8 @@ pub struct RunSummary {
     pub uzawa_iterations: usize,
     /// Body evaluations over the run (see [`StepReport::bodies_iterated`]).
     pub bodies_iterated: usize,
+    /// Newton increments taken on the device over the run, summed over bodies.
+    pub device_iterations: usize,
     /// Numeric factorisations over the run.
     pub factorizations: usize,
     /// Largest penetration over the run (0 without contact).
@@ -359,6 +361,7 @@ impl Logger {
             newton_iterations: r.newton_iterations,
             uzawa_iterations: r.uzawa_iterations,
             bodies_iterated: r.bodies_iterated,
+            device_iterations: r.device_iterations,
             factorizations: r.factorizations,
             residual_norm: r.residual_norm,
             cutbacks: r.cutbacks,
@@ -410,6 +413,7 @@ struct Totals {
     newton: usize,
     uzawa: usize,
     bodies_iterated: usize,
+    device_iterations: usize,
     factorizations: usize,
     max_penetration: Real,
     max_overlap: Real,
@@ -525,6 +529,7 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
         newton_iterations: totals.newton,
         uzawa_iterations: totals.uzawa,
         bodies_iterated: totals.bodies_iterated,
+        device_iterations: totals.device_iterations,
         factorizations: totals.factorizations,
         max_penetration: totals.max_penetration,
         max_overlap: totals.max_overlap,
@@ -577,6 +582,7 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
         totals.newton += report.newton_iterations;
         totals.uzawa += report.uzawa_iterations;
         totals.bodies_iterated += report.bodies_iterated;
+        totals.device_iterations += report.device_iterations;
         totals.factorizations += report.factorizations;
         totals.max_penetration = totals.max_penetration.max(report.contact.max_penetration);
         totals.max_overlap = totals.max_overlap.max(report.contact.max_overlap);

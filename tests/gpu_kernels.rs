@@ -856,7 +856,7 @@ fn newton_kernels_match_their_cpu_twins() {
                 })
                 .collect();
             assert!(calls.iter().all(|c| world.newton_capable(c.body)));
-            world.newton(&mut calls, coefficients, None, &mut Default::default()).expect("device Newton");
+            world.newton(&mut calls, &mut [], coefficients, None, &mut Default::default()).expect("device Newton");
             let got: Vec<(NewtonState<f64>, Option<ElementFailure>)> = calls.iter().map(|c| (c.outcome, c.failure)).collect();
             drop(calls);
             for (b, ((state, failure), (want, u, out))) in got.into_iter().zip(&expected).enumerate() {

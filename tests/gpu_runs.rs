@@ -336,9 +336,44 @@ fn a_free_body_takes_its_newton_iterations_on_the_device_in_at_most_two_submits(
         assert_eq!(newton, field(&cpu, "newton_iterations"), "the device takes the CPU's iterations");
         assert!(worst <= 1e-9, "energies differ by {worst:.3e}");
         assert!(submits < newton, "fewer submits than Newton iterations: {submits} for {newton}");
+        // All but the first step's (a host increment after the factorisation) on the device.
+        assert!(field(&gpu, "device_iterations") + 2 >= newton && field(&cpu, "device_iterations") == 0, "{} device iterations", field(&gpu, "device_iterations"));
         // The first step also factorises (its tangent pass and a host increment).
         assert!(per_step[1..].iter().all(|&s| s <= 4.0), "per step: {per_step:?}");
         per_step_iterations.push(newton as f64 / steps as f64);
     }
     assert!(per_step_iterations[1] > per_step_iterations[0] + 0.5, "the tighter tolerance iterates more: {per_step_iterations:?}");
+}
+
+#[test]
+fn falling_grains_iterate_on_the_device_in_the_passes_of_the_grains_in_contact() {
+    // Grains falling onto the floor under gravity: those still in flight iterate on the device
+    // (`--rounds gpu`), their iterations recorded in the submission of the round's pass over
+    // the grains in contact, which iterate on the host. The iterations and energies are the CPU
+    // backend's, and the device iterations cost no submit of their own: a step takes at most a
+    // pass per Newton round, a tangent pass per round that refactorises, and the energies.
+    let test = "falling_grains_iterate_on_the_device_in_the_passes_of_the_grains_in_contact";
+    if !gpu_available(test) {
+        return;
+    }
+    let path = scene_path("grains_many");
+    let sets = ["packing.count=30", "time.end=0.08", "gravity=[0.0,-9.81]", "output.every=1", "output.scene_every=0"];
+    let field = |log: &Log, name: &str| log.topics["/summary"][0][name].as_u64().unwrap_or_else(|| panic!("{name}"));
+    let cpu = run_with(&path, &sets, &format!("{test}_cpu"), &options(BackendChoice::Cpu, None));
+    let mut every = options(BackendChoice::Gpu, Some(Precision::F64));
+    every.backend.rounds = RoundPlacement::Gpu;
+    let gpu = run_with(&path, &sets, &format!("{test}_gpu"), &every);
+    let worst = energy_difference(&cpu, &gpu);
+    let (submits, newton, device) = (gpu.series("/solver", "device_submits"), gpu.series("/solver", "newton_iterations"), gpu.series("/solver", "device_iterations"));
+    let (factorizations, touching) = (gpu.series("/solver", "factorizations"), gpu.series("/contact", "active"));
+    eprintln!("energies differ by {worst:.2e}; per step: submits {submits:?}, Newton {newton:?}, device iterations {device:?}, contact points {touching:?}");
+    assert_eq!(field(&gpu, "newton_iterations"), field(&cpu, "newton_iterations"));
+    assert_eq!(field(&gpu, "bodies_iterated"), field(&cpu, "bodies_iterated"));
+    assert!(worst <= 1e-9, "energies differ by {worst:.3e}");
+    let mixed = (0..newton.len()).filter(|&s| device[s] > 0.0 && touching[s] > 0.0).count();
+    assert!(mixed > 0, "steps with grains in flight and grains in contact: {device:?} {touching:?}");
+    for s in 0..submits.len() {
+        let bound = newton[s] + 1.0 + if factorizations[s] > 0.0 { newton[s] } else { 0.0 } + 1.0;
+        assert!(submits[s] <= bound, "step {s}: {} submits for {} Newton iterations", submits[s], newton[s]);
+    }
 }

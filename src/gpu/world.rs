@@ -36,6 +36,9 @@ const WORKGROUP: usize = 64;
 /// Invocations per workgroup of the tangent entry point (`TANGENT_WORKGROUP`): one per
 /// quadrature point of its elements.
 const TANGENT_WORKGROUP: usize = 32;
+/// The binding of the job list (`jobs`) in `element_force_tangent` and `assemble_residual`.
+const FORCES_JOBS: usize = 7;
+const RESIDUAL_JOBS: usize = 8;
 /// `failure` entries per member: the lowest inverted element, the lowest non-finite one.
 const NO_FAILURE: u32 = u32::MAX;
 
@@ -94,11 +97,19 @@ struct Pass {
 
 impl Pass {
     fn new(gpu: &Gpu, kernel: &str, entry: &str, variant: Option<ElementVariant>, buffers: &[&Buffer]) -> Result<Self, GpuError> {
-        let pipeline = gpu.pipeline_at(kernel, entry, variant)?;
+        Ok(Self::bound(gpu, gpu.pipeline_at(kernel, entry, variant)?, buffers))
+    }
+
+    fn bound(gpu: &Gpu, pipeline: ComputePipeline, buffers: &[&Buffer]) -> Self {
         let entries: Vec<wgpu::BindGroupEntry> =
             buffers.iter().enumerate().map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() }).collect();
-        let bind_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(kernel), layout: &pipeline.get_bind_group_layout(0), entries: &entries });
-        Ok(Self { pipeline, bind_group })
+        let bind_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor { label: None, layout: &pipeline.get_bind_group_layout(0), entries: &entries });
+        Self { pipeline, bind_group }
+    }
+
+    /// The same pipeline bound to other buffers.
+    fn rebound(&self, gpu: &Gpu, buffers: &[&Buffer]) -> Self {
+        Self::bound(gpu, self.pipeline.clone(), buffers)
     }
 
     /// One z-slice per active member, enough workgroups of `per_group` items for `max_items`.
@@ -151,6 +162,11 @@ struct Batch {
     /// The viscoelastic members' step relaxation and point histories (`MemberRange.history`).
     history: Buffer,
     member_buffer: Buffer,
+    /// What the `forces` and `assemble_residual` passes are bound to (their job lists at
+    /// [`FORCES_JOBS`] and [`RESIDUAL_JOBS`]), so that device Newton iterations can bind them to
+    /// a list of their own.
+    forces_buffers: Vec<Buffer>,
+    residual_buffers: Vec<Buffer>,
     /// Each member's free dofs (indices into its dofs, ascending), `(start, count)` in `free_dofs`.
     free_dofs: Vec<u32>,
     free_range: Vec<(u32, u32)>,
@@ -465,15 +481,22 @@ impl GpuWorld {
     /// element kernel rejected the state (its outputs are then not written).
     pub fn evaluate(&mut self, list: &mut [Evaluation], coefficients: Coefficients<Real>, times: &mut PhaseTimes) -> Result<(), GpuError> {
         let t0 = Instant::now();
-        let precision = self.gpu.precision;
-        let real = precision.size() as u64;
         let coefficient_buffer = self.coefficients.clone();
-        self.upload(&coefficient_buffer, 0, &to_device(precision, &[coefficients.factor, coefficients.c1]));
-        let by_batch = self.stage_displacements(&list.iter().map(|e| (e.body, e.u)).collect::<Vec<_>>());
-        let mut readback = ReadBack::default();
-        // Where each evaluation's failure flags, residuals and values land in the read-back.
-        let mut landing = vec![[0usize; 3]; list.len()];
+        self.upload(&coefficient_buffer, 0, &to_device(self.gpu.precision, &[coefficients.factor, coefficients.c1]));
         let mut encoder = self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("evaluate") });
+        let mut readback = ReadBack::default();
+        let landing = self.record_evaluation(list, &mut encoder, &mut readback)?;
+        let precision = self.gpu.precision;
+        self.read_back(encoder, &readback, "element_force_tangent", times, t0, |bytes| unpack_evaluation(precision, list, &landing, bytes))
+    }
+
+    /// Uploads the displacements and active lists of an evaluation pass and records its
+    /// dispatches and read-back copies; returns where each evaluation's failure flags,
+    /// residuals and values land.
+    fn record_evaluation(&mut self, list: &[Evaluation], encoder: &mut wgpu::CommandEncoder, readback: &mut ReadBack) -> Result<Vec<[usize; 3]>, GpuError> {
+        let real = self.gpu.precision.size() as u64;
+        let by_batch = self.stage_displacements(&list.iter().map(|e| (e.body, e.u)).collect::<Vec<_>>());
+        let mut landing = vec![[0usize; 3]; list.len()];
         for (batch, mine) in by_batch {
             // (list index, member) in member order.
             let mine: Vec<(usize, usize)> = mine.into_iter().map(|i| (i, self.place[list[i].body].1)).collect();
@@ -488,12 +511,12 @@ impl GpuWorld {
             }
             let b = &self.batches[batch];
             let extent = |mode: u32, f: fn(&MemberRange) -> u32| active.iter().filter(|a| a.mode == mode || mode == 0).map(|a| f(&b.members[a.member as usize]) as usize).max().unwrap_or(0);
-            b.forces.record(&mut encoder, WORKGROUP, extent(MODE_FORCES, |m| m.elements), active.len());
+            b.forces.record(encoder, WORKGROUP, extent(MODE_FORCES, |m| m.elements), active.len());
             if let Deferred::Ready(tangent) = &b.tangent {
-                tangent.record(&mut encoder, b.tangent_elements_per_group, extent(MODE_TANGENT, |m| m.elements), active.len());
+                tangent.record(encoder, b.tangent_elements_per_group, extent(MODE_TANGENT, |m| m.elements), active.len());
             }
-            b.residual.record(&mut encoder, WORKGROUP, extent(0, |m| m.dofs), active.len());
-            b.csr.record(&mut encoder, WORKGROUP, extent(MODE_TANGENT, |m| m.nonzeros), active.len());
+            b.residual.record(encoder, WORKGROUP, extent(0, |m| m.dofs), active.len());
+            b.csr.record(encoder, WORKGROUP, extent(MODE_TANGENT, |m| m.nonzeros), active.len());
             let flags = readback.queue(batch, Source::Failure, 0..(8 * b.members.len()) as u64);
             for &(i, m) in &mine {
                 landing[i][0] = flags as usize + 8 * m;
@@ -510,21 +533,7 @@ impl GpuWorld {
                 }
             }
         }
-        self.read_back(encoder, &readback, "element_force_tangent", times, t0, |bytes| {
-            for (e, [flags_at, dof_at, values_at]) in list.iter_mut().zip(landing) {
-                e.failure = failure_of(bytemuck::pod_read_unaligned(&bytes[flags_at..flags_at + 8]));
-                if e.failure.is_some() {
-                    continue;
-                }
-                if let Some(out) = e.dof_out.as_deref_mut() {
-                    let reals = from_device(precision, &bytes[dof_at..dof_at + out.len() * 2 * real as usize]);
-                    out.copy_from_slice(bytemuck::cast_slice(&reals));
-                }
-                if e.tangent && !e.values.is_empty() {
-                    e.values.copy_from_slice(&from_device(precision, &bytes[values_at..values_at + e.values.len() * real as usize]));
-                }
-            }
-        })
+        Ok(landing)
     }
 
     /// The strain energy of every element of each listed body at its displacement
@@ -658,6 +667,25 @@ impl GpuWorld {
     }
 }
 
+/// Takes an evaluation pass's results from the read-back (`landing` from
+/// `GpuWorld::record_evaluation`).
+fn unpack_evaluation(precision: Precision, list: &mut [Evaluation], landing: &[[usize; 3]], bytes: &[u8]) {
+    let real = precision.size();
+    for (e, &[flags_at, dof_at, values_at]) in list.iter_mut().zip(landing) {
+        e.failure = failure_of(bytemuck::pod_read_unaligned(&bytes[flags_at..flags_at + 8]));
+        if e.failure.is_some() {
+            continue;
+        }
+        if let Some(out) = e.dof_out.as_deref_mut() {
+            let reals = from_device(precision, &bytes[dof_at..dof_at + out.len() * 2 * real]);
+            out.copy_from_slice(bytemuck::cast_slice(&reals));
+        }
+        if e.tangent && !e.values.is_empty() {
+            e.values.copy_from_slice(&from_device(precision, &bytes[values_at..values_at + e.values.len() * real]));
+        }
+    }
+}
+
 /// A member's failure flags (its lowest inverted element, its lowest non-finite one) as the
 /// failure they report.
 fn failure_of(flags: [u32; 2]) -> Option<ElementFailure> {
@@ -787,6 +815,8 @@ impl Batch {
             let join = |h: std::thread::ScopedJoinHandle<'_, Result<Pass, GpuError>>| h.join().expect("a pipeline compiles without panicking");
             Ok::<_, GpuError>((join(forces)?, join(csr)?, join(residual)?, energy?))
         })?;
+        let forces_buffers = element_buffers.iter().map(|&b| b.clone()).collect();
+        let residual_buffers = [&element_out, &dof_start, &dof, coefficients, &u, &step, &dof_out, &member_buffer, &active].iter().map(|&b| b.clone()).collect();
         let (inverse_slot, inverse_entries) = newton::inverse_slots(&free_range.iter().map(|&(_, n)| n as usize).collect::<Vec<_>>(), real, max_bytes);
         Ok(Self {
             members: ranges,
@@ -804,6 +834,8 @@ impl Batch {
             energy,
             history,
             member_buffer,
+            forces_buffers,
+            residual_buffers,
             free_dofs,
             free_range,
             inverse_slot,

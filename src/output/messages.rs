@@ -65,6 +65,8 @@ pub struct SolverMessage {
     /// Body evaluations in the step, summed over Newton iterations (bodies that converged
     /// leave the loop).
     pub bodies_iterated: usize,
+    /// Newton increments taken on the device, summed over bodies (0 on the CPU).
+    pub device_iterations: usize,
     pub factorizations: usize,
     pub residual_norm: Real,
     pub cutbacks: usize,

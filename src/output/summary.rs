@@ -28,6 +28,8 @@ pub struct LogSummary {
     pub newton_iterations: u64,
     pub uzawa_iterations: u64,
     pub bodies_iterated: u64,
+    /// Newton increments taken on the device (0 on the CPU, and in logs written before them).
+    pub device_iterations: u64,
     pub factorizations: u64,
     /// Total energy at the end minus at the start.
     pub energy_drift: f64,
@@ -111,6 +113,7 @@ fn from_steps(record: &RunRecord) -> (Value, &'static str) {
         "newton_iterations": sum("newton_iterations"),
         "uzawa_iterations": sum("uzawa_iterations"),
         "bodies_iterated": sum("bodies_iterated"),
+        "device_iterations": sum("device_iterations"),
         "factorizations": sum("factorizations"),
         "max_penetration": record.series("/contact", "max_penetration").into_iter().fold(0.0, f64::max),
         "max_overlap": record.series("/contact", "max_overlap").into_iter().fold(0.0, f64::max),
@@ -149,6 +152,7 @@ pub fn summarize(record: &RunRecord) -> Result<LogSummary, ReadError> {
         newton_iterations: count(&s["newton_iterations"]),
         uzawa_iterations: count(&s["uzawa_iterations"]),
         bodies_iterated: count(&s["bodies_iterated"]),
+        device_iterations: count(&s["device_iterations"]),
         factorizations: count(&s["factorizations"]),
         energy_drift: drift,
         relative_energy_drift: drift / e0.abs().max(e1.abs()).max(f64::MIN_POSITIVE),
@@ -178,6 +182,7 @@ pub fn table(runs: &[LogSummary]) -> String {
         ("Newton iterations".into(), runs.iter().map(|r| per_step(r, r.newton_iterations)).collect()),
         ("Uzawa sweeps".into(), runs.iter().map(|r| per_step(r, r.uzawa_iterations)).collect()),
         ("bodies iterated".into(), runs.iter().map(|r| per_step(r, r.bodies_iterated)).collect()),
+        ("device Newton increments".into(), runs.iter().map(|r| per_step(r, r.device_iterations)).collect()),
         ("factorisations".into(), runs.iter().map(|r| per_step(r, r.factorizations)).collect()),
         // Not a drift in every run: friction, a moving wall or a support change the energy on purpose.
         ("total energy, end - start".into(), runs.iter().map(|r| format!("{:.4e} ({:+.2e} rel.)", r.energy_drift, r.relative_energy_drift)).collect()),

@@ -9,7 +9,7 @@ use super::coupling::ContactStep;
 use super::PhaseTimes;
 use crate::contact::uzawa::Outcome;
 use crate::contact::{ContactPoint, Settings, WarmStart};
-use crate::gpu::{ElementFailure, Evaluation, GpuWorld};
+use crate::gpu::{ElementFailure, Evaluation, GpuWorld, NewtonCall};
 use crate::mesh::ElementKind;
 use crate::precision::{Precision, Real};
 use rayon::prelude::*;
@@ -22,6 +22,8 @@ pub struct GroupReport {
     pub uzawa_iterations: usize,
     /// Body evaluations: the group's size times its evaluations.
     pub bodies_iterated: usize,
+    /// Newton increments its bodies took on the device ([`GpuWorld::newton`]).
+    pub device_iterations: usize,
     pub factorizations: usize,
     pub residual_norm: Real,
     pub wall: PhaseTimes,
@@ -382,20 +384,28 @@ fn newton_in_lockstep(groups: &mut [Group], world: &mut GpuWorld, c: &Context, t
     // In f32 the residual is computed in f64 on the CPU; the device gives the tangents.
     let device_residual = world.precision() == Precision::F64;
     let mut first = true;
+    let none = vec![false; groups.len()];
+    // The groups whose Newton iterations go to the device with this round's pass.
+    let mut iterating = none.clone();
     loop {
         let live: Vec<bool> = outcome.iter().map(Option::is_none).collect();
         if !live.iter().any(|&l| l) {
             break;
         }
         let wanted = |_: &Body| true;
-        let evaluated = if device_residual && on_device(groups, &live, &wanted, world, first) {
-            device_pass(groups, &live, world, c.p, false, &wanted, times)
+        let evaluating: Vec<bool> = live.iter().zip(&iterating).map(|(&l, &i)| l && !i).collect();
+        let others_on_device = device_residual && on_device(groups, &evaluating, &wanted, world, first);
+        let mut evaluated = if others_on_device || iterating.contains(&true) {
+            device_pass(groups, if others_on_device { &evaluating } else { &none }, &iterating, world, c, false, &wanted, times)
         } else {
-            groups
+            groups.iter().map(|_| Ok(())).collect()
+        };
+        if !others_on_device {
+            let on_cpu: Vec<Result<(), StepFailure>> = groups
                 .par_iter_mut()
-                .zip(&live)
-                .map(|(g, &l)| {
-                    if !l {
+                .zip(&evaluating)
+                .map(|(g, &e)| {
+                    if !e {
                         return Ok(());
                     }
                     for body in g.bodies.iter_mut() {
@@ -403,8 +413,13 @@ fn newton_in_lockstep(groups: &mut [Group], world: &mut GpuWorld, c: &Context, t
                     }
                     Ok(())
                 })
-                .collect()
-        };
+                .collect();
+            for (result, cpu) in evaluated.iter_mut().zip(on_cpu) {
+                if result.is_ok() {
+                    *result = cpu;
+                }
+            }
+        }
         let checked: Vec<Option<Result<bool, StepFailure>>> = groups
             .par_iter_mut()
             .zip(evaluated)
@@ -426,18 +441,12 @@ fn newton_in_lockstep(groups: &mut [Group], world: &mut GpuWorld, c: &Context, t
                 Some(Err(e)) => outcome[k] = Some(Err(e)),
             }
         }
-        if device_residual {
-            for (k, result) in newton_on_device(groups, &mut continuing, world, c, times) {
-                if let Err(e) = result {
-                    outcome[k] = Some(Err(e));
-                }
-            }
-        }
+        iterating = if device_residual { iterate_on_device(groups, &mut continuing, world, c) } else { none.clone() };
         let p = c.p;
         let needs_tangent = |b: &Body| b.needs_tangent(p);
         // Else each body's `refresh_factor` assembles its tangent on the CPU.
         let tangents = if on_device(groups, &continuing, &needs_tangent, world, first) {
-            device_pass(groups, &continuing, world, p, true, &needs_tangent, times)
+            device_pass(groups, &continuing, &none, world, c, true, &needs_tangent, times)
         } else {
             groups.iter().map(|_| Ok(())).collect()
         };
@@ -464,54 +473,21 @@ fn newton_in_lockstep(groups: &mut [Group], world: &mut GpuWorld, c: &Context, t
     outcome.into_iter().map(|o| o.expect("every group has an outcome")).collect()
 }
 
-/// The Newton iterations of the `continuing` groups that can take them on the device
-/// ([`GpuWorld::newton`]): no contact problem, one body that keeps its factorisation and has a
-/// slot for `K̄⁻¹` there, and element work worth device passes
-/// ([`crate::backend::round_on_device`]). They leave `continuing` for this round; the next
-/// round judges them on the host, their last evaluation taken again. Returns each such group's
-/// result (an element failure, or a device error for all of them).
-fn newton_on_device(groups: &mut [Group], continuing: &mut [bool], world: &mut GpuWorld, c: &Context, times: &mut PhaseTimes) -> Vec<(usize, Result<(), StepFailure>)> {
+/// The `continuing` groups whose next Newton iterations go to the device
+/// ([`GpuWorld::newton`], with the next round's pass): no contact problem, one body that keeps
+/// its factorisation and has a slot for `K̄⁻¹` there, and element work worth device passes
+/// ([`crate::backend::round_on_device`]). They leave `continuing` for this round.
+fn iterate_on_device(groups: &[Group], continuing: &mut [bool], world: &GpuWorld, c: &Context) -> Vec<bool> {
     let p = c.p;
-    let takes = |g: &Group, world: &GpuWorld| {
-        g.contact.is_none() && g.bodies.len() == 1 && g.newton.report.iterations < p.max_iterations && world.newton_capable(g.ids[0]) && g.bodies[0].iterates_on_device(p)
-    };
-    let chosen: Vec<bool> = groups.iter().zip(continuing.iter()).map(|(g, &go)| go && takes(g, world)).collect();
+    let takes = |g: &Group| g.contact.is_none() && g.bodies.len() == 1 && g.newton.report.iterations < p.max_iterations && world.newton_capable(g.ids[0]) && g.bodies[0].iterates_on_device(p);
+    let chosen: Vec<bool> = groups.iter().zip(continuing.iter()).map(|(g, &go)| go && takes(g)).collect();
     if !chosen.contains(&true) || !crate::backend::round_on_device(world, false, &element_work(groups, &chosen, &|_| true)) {
-        return Vec::new();
+        return vec![false; groups.len()];
     }
-    let motion_scale = c.velocity_scale * p.dt;
-    // `K̄⁻¹` of each factorisation the device lacks (after a step that refactorised many
-    // grains: all of them), in parallel.
-    let stale: Vec<bool> = groups.iter().zip(&chosen).map(|(g, &yes)| yes && !world.newton_inverse_current(g.ids[0], g.bodies[0].factor_version())).collect();
-    let mut inverses: Vec<Option<Vec<Real>>> =
-        groups.par_iter_mut().zip(&stale).map(|(g, &stale)| stale.then(|| g.bodies[0].effective_inverse(&mut g.newton.report.wall))).collect();
-    let mut owners = Vec::new();
-    let mut calls = Vec::new();
-    for (k, g) in groups.iter_mut().enumerate().filter(|(k, _)| chosen[*k]) {
-        let (id, budget) = (g.ids[0], p.max_iterations - g.newton.report.iterations);
-        owners.push(k);
-        calls.push(g.bodies[0].newton_call(id, p, motion_scale, budget, inverses[k].take()));
+    for (go, &chosen) in continuing.iter_mut().zip(&chosen) {
+        *go &= !chosen;
     }
-    let ran = world.newton(&mut calls, coefficients(p), c.interrupt, times);
-    let ends: Vec<_> = calls.iter().map(|call| (call.outcome, call.failure)).collect();
-    drop(calls);
-    owners
-        .into_iter()
-        .zip(ends)
-        .map(|(k, (state, failure))| {
-            continuing[k] = false;
-            let g = &mut groups[k];
-            let body = &mut *g.bodies[0];
-            if let Err(e) = &ran {
-                return (k, Err(body.device_failure(e)));
-            }
-            // Each increment is followed by an evaluation; the last one counts in the next
-            // round, which takes it again.
-            g.newton.report.iterations += state.iterations as usize;
-            g.newton.report.bodies_iterated += (state.iterations as usize).saturating_sub(1);
-            (k, body.finish_device_newton(p, &state, failure))
-        })
-        .collect()
+    chosen
 }
 
 /// Whether the round's pass over the bodies of the `live` groups that `wanted` selects goes to
@@ -578,17 +554,22 @@ fn solve_contact(groups: &mut [Group], waiting: &[bool], world: &mut GpuWorld, c
 }
 
 /// One device pass over the bodies of the `live` groups that `wanted` selects: the tangent and
-/// stiffness values if `tangent`, else forces and residuals. Returns each group's result (a
-/// body's element failure or a device error fails its group); no pass when nothing is wanted.
+/// stiffness values if `tangent`, else forces and residuals; and in the same submission the
+/// Newton iterations of the `iterating` groups ([`GpuWorld::newton`]). Returns each group's
+/// result (a body's element failure or a device error fails its group); no pass when nothing
+/// is wanted.
+#[allow(clippy::too_many_arguments)]
 fn device_pass(
     groups: &mut [Group],
     live: &[bool],
+    iterating: &[bool],
     world: &mut GpuWorld,
-    p: &StepParams,
+    c: &Context,
     tangent: bool,
     wanted: &(dyn Fn(&Body) -> bool + Sync),
     times: &mut PhaseTimes,
 ) -> Vec<Result<(), StepFailure>> {
+    let p = c.p;
     let mut results: Vec<Result<(), StepFailure>> = groups.iter().map(|_| Ok(())).collect();
     // A forces pass leaves out the bodies whose inputs are those of their last evaluation (a
     // grain at rest): their results are still there, as on the CPU.
@@ -609,22 +590,52 @@ fn device_pass(
                 .collect()
         })
         .collect();
-    if !chosen.iter().flatten().any(|&x| x) {
+    if !chosen.iter().flatten().any(|&x| x) && !iterating.contains(&true) {
         return results;
     }
+    // `K̄⁻¹` of each factorisation the device lacks (after a step that refactorised many
+    // grains: all of them), in parallel.
+    let stale: Vec<bool> = groups.iter().zip(iterating).map(|(g, &yes)| yes && !world.newton_inverse_current(g.ids[0], g.bodies[0].factor_version())).collect();
+    let mut inverses: Vec<Option<Vec<Real>>> =
+        groups.par_iter_mut().zip(&stale).map(|(g, &stale)| stale.then(|| g.bodies[0].effective_inverse(&mut g.newton.report.wall))).collect();
+    let motion_scale = c.velocity_scale * p.dt;
     let mut list: Vec<Evaluation> = Vec::new();
-    for (g, chosen) in groups.iter_mut().zip(&chosen) {
+    let mut calls: Vec<NewtonCall> = Vec::new();
+    for (k, (g, chosen)) in groups.iter_mut().zip(&chosen).enumerate() {
+        if iterating[k] {
+            let budget = p.max_iterations - g.newton.report.iterations;
+            calls.push(g.bodies[0].newton_call(g.ids[0], p, motion_scale, budget, inverses[k].take()));
+            continue;
+        }
         for ((body, &id), &yes) in g.bodies.iter_mut().zip(g.ids).zip(chosen) {
             if yes {
                 list.push(body.device_evaluation(id, tangent, !tangent));
             }
         }
     }
-    let passed = world.evaluate(&mut list, coefficients(p), times);
+    let passed = if calls.is_empty() { world.evaluate(&mut list, coefficients(p), times) } else { world.newton(&mut calls, &mut list, coefficients(p), c.interrupt, times) };
     let failures: Vec<Option<ElementFailure>> = list.iter().map(|e| e.failure).collect();
+    let ends: Vec<_> = calls.iter().map(|call| (call.outcome, call.failure)).collect();
     drop(list);
-    let mut failures = failures.into_iter();
-    for ((g, chosen), result) in groups.iter_mut().zip(&chosen).zip(&mut results) {
+    drop(calls);
+    let (mut failures, mut ends) = (failures.into_iter(), ends.into_iter());
+    for (k, ((g, chosen), result)) in groups.iter_mut().zip(&chosen).zip(&mut results).enumerate() {
+        if iterating[k] {
+            let (state, failure) = ends.next().expect("one end per device Newton call");
+            let body = &mut *g.bodies[0];
+            *result = match &passed {
+                Err(e) => Err(body.device_failure(e)),
+                Ok(()) => {
+                    // Each increment is followed by an evaluation; the last one counts in the
+                    // convergence test that follows, which takes it again.
+                    g.newton.report.iterations += state.iterations as usize;
+                    g.newton.report.device_iterations += state.iterations as usize;
+                    g.newton.report.bodies_iterated += (state.iterations as usize).saturating_sub(1);
+                    body.finish_device_newton(p, &state, failure)
+                }
+            };
+            continue;
+        }
         for (body, &yes) in g.bodies.iter_mut().zip(chosen) {
             if !yes {
                 continue;

@@ -85,6 +85,8 @@ pub struct StepReport {
     /// Body evaluations, summed over the Newton iterations (a group of bodies coupled by
     /// contact counts each of its bodies per iteration) and sub-steps.
     pub bodies_iterated: usize,
+    /// Newton increments taken on the device, summed over bodies and sub-steps.
+    pub device_iterations: usize,
     /// Numeric factorisations, summed over bodies, iterations and sub-steps.
     pub factorizations: usize,
     /// Contact totals over the step (sub-steps added up; penetration the largest).
@@ -493,6 +495,7 @@ impl Simulation {
                     iterations = iterations.max(g.iterations);
                     report.uzawa_iterations += g.uzawa_iterations;
                     report.bodies_iterated += g.bodies_iterated;
+                    report.device_iterations += g.device_iterations;
                     report.factorizations += g.factorizations;
                     report.residual_norm = report.residual_norm.max(g.residual_norm);
                     report.wall += g.wall;

@@ -8,7 +8,7 @@
 //! iterations per submission. The host reads back the members' states, displacements and
 //! residuals once per submission.
 
-use super::{buffer, to_device, Batch, GpuWorld, Pass, ReadBack, Source, WORKGROUP};
+use super::{buffer, to_device, Batch, Evaluation, GpuWorld, Pass, ReadBack, Source, FORCES_JOBS, RESIDUAL_JOBS, WORKGROUP};
 use crate::gpu::types::{Active, Coefficients, DofOut, NewtonMember, NewtonState, MODE_FORCES, NEWTON_FAILED, NEWTON_ITERATING, NEWTON_MAX_FREE};
 use crate::gpu::{ElementFailure, Gpu, GpuError};
 use crate::precision::{Precision, Real};
@@ -58,7 +58,13 @@ pub(super) struct NewtonBuffers {
     pub(super) state: Buffer,
     u_start: Buffer,
     call: Buffer,
+    /// The members still iterating, which every kernel of an iteration runs over: a list of
+    /// its own, so that an evaluation pass of other bodies (over the batch's `active`) can share
+    /// the submission.
+    jobs: Buffer,
     dispatch: Buffer,
+    forces: Pass,
+    residual: Pass,
     update: Pass,
     judge: Pass,
     compact: Pass,
@@ -100,17 +106,29 @@ impl NewtonBuffers {
         let state = buffer(gpu, "newton state", members * std::mem::size_of::<NewtonState<f64>>(), write | BufferUsages::COPY_SRC);
         let u_start = buffer(gpu, "u start", dofs * real, write);
         let call = buffer(gpu, "newton call", members * 8, write);
+        let jobs = buffer(gpu, "newton jobs", members * 8, write);
         let dispatch = buffer(gpu, "newton dispatch", DISPATCH_WORDS * 4, write | BufferUsages::INDIRECT);
-        let update = Pass::new(gpu, "newton_update", "main", None, &[&inverse, &free, &newton, &state, &b.dof_out, &b.u, &b.member_buffer, &b.active])?;
-        let judge = Pass::new(gpu, "newton_judge", "main", None, &[&free, &newton, &state, &b.dof_out, &b.u, &u_start, &b.step, coefficients, &b.failure, &b.member_buffer, &b.active])?;
-        let compact = Pass::new(gpu, "newton_compact", "main", None, &[&call, &state, &b.active, &dispatch])?;
+        let with_jobs = |buffers: &[Buffer], at: usize| -> Vec<Buffer> {
+            let mut buffers = buffers.to_vec();
+            buffers[at] = jobs.clone();
+            buffers
+        };
+        let (forces_buffers, residual_buffers) = (with_jobs(&b.forces_buffers, FORCES_JOBS), with_jobs(&b.residual_buffers, RESIDUAL_JOBS));
+        let forces = b.forces.rebound(gpu, &forces_buffers.iter().collect::<Vec<_>>());
+        let residual = b.residual.rebound(gpu, &residual_buffers.iter().collect::<Vec<_>>());
+        let update = Pass::new(gpu, "newton_update", "main", None, &[&inverse, &free, &newton, &state, &b.dof_out, &b.u, &b.member_buffer, &jobs])?;
+        let judge = Pass::new(gpu, "newton_judge", "main", None, &[&free, &newton, &state, &b.dof_out, &b.u, &u_start, &b.step, coefficients, &b.failure, &b.member_buffer, &jobs])?;
+        let compact = Pass::new(gpu, "newton_compact", "main", None, &[&call, &state, &jobs, &dispatch])?;
         Ok(Self {
             inverse,
             newton,
             state,
             u_start,
             call,
+            jobs,
             dispatch,
+            forces,
+            residual,
             update,
             judge,
             compact,
@@ -141,7 +159,11 @@ impl GpuWorld {
     /// iterations in the first submission, the rest of the budgets in a second if any body needs
     /// it. The bodies must be
     /// [`GpuWorld::newton_capable`]; `interrupt` is checked between submissions.
-    pub fn newton(&mut self, calls: &mut [NewtonCall], coefficients: Coefficients<Real>, interrupt: Option<&AtomicBool>, times: &mut PhaseTimes) -> Result<(), GpuError> {
+    ///
+    /// The evaluation pass of other bodies (`list`, as [`GpuWorld::evaluate`] takes it) shares
+    /// the first submission: a Newton round that evaluates the groups in contact and iterates
+    /// the free bodies costs one submit.
+    pub fn newton(&mut self, calls: &mut [NewtonCall], list: &mut [Evaluation], coefficients: Coefficients<Real>, interrupt: Option<&AtomicBool>, times: &mut PhaseTimes) -> Result<(), GpuError> {
         let started = Instant::now();
         let precision = self.gpu.precision;
         assert_eq!(precision, Precision::F64, "device Newton iterations need f64 kernels");
@@ -162,15 +184,18 @@ impl GpuWorld {
         }
         let total_dofs: usize = work.iter().map(|(b, mine)| mine.iter().map(|&(_, m)| self.batches[*b].members[m].dofs as usize).sum::<usize>()).sum();
         let total_members: usize = work.iter().map(|(_, mine)| mine.len()).sum();
-        let bytes = (total_members * (8 + std::mem::size_of::<NewtonState<f64>>()) + total_dofs * 3 * real + 8 * work.len()) as u64;
+        let bytes = (total_members * (8 + std::mem::size_of::<NewtonState<f64>>()) + total_dofs * 3 * real + 8 * work.len()) as u64 + if list.is_empty() { 0 } else { self.readback.size() };
         if self.newton_readback.as_ref().is_none_or(|(_, size)| *size < bytes) {
             self.newton_readback = Some((buffer(&self.gpu, "newton readback", bytes as usize, BufferUsages::MAP_READ | BufferUsages::COPY_DST), bytes));
         }
         let target = self.newton_readback.as_ref().expect("made above").0.clone();
         let mut t0 = started;
         let mut iterations = calls.iter().map(|c| c.member.budget).max().unwrap_or(0).min(ITERATIONS_PER_SUBMIT);
+        let mut first = true;
         loop {
             let mut encoder = self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("newton") });
+            let mut readback = ReadBack::default();
+            let evaluated = if first { Some(self.record_evaluation(list, &mut encoder, &mut readback)?) } else { None };
             {
                 let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("newton"), timestamp_writes: None });
                 for _ in 0..iterations {
@@ -178,14 +203,13 @@ impl GpuWorld {
                         let b = &self.batches[*batch];
                         let n = b.newton.as_ref().expect("staged");
                         n.update.dispatch_indirect(&mut pass, &n.dispatch, 0);
-                        b.forces.dispatch_indirect(&mut pass, &n.dispatch, 12);
-                        b.residual.dispatch_indirect(&mut pass, &n.dispatch, 24);
+                        n.forces.dispatch_indirect(&mut pass, &n.dispatch, 12);
+                        n.residual.dispatch_indirect(&mut pass, &n.dispatch, 24);
                         n.judge.dispatch_indirect(&mut pass, &n.dispatch, 36);
                         n.compact.dispatch(&mut pass, 1);
                     }
                 }
             }
-            let mut readback = ReadBack::default();
             // Per call: where its state, failure flags, displacements and residuals land.
             let mut landing = vec![[0usize; 4]; calls.len()];
             for (batch, mine) in &work {
@@ -205,6 +229,9 @@ impl GpuWorld {
             }
             let mut iterating = false;
             self.read_back_into(&target, encoder, &readback, "newton_update", times, t0, |bytes| {
+                if let Some(landing) = &evaluated {
+                    super::unpack_evaluation(precision, list, landing, bytes);
+                }
                 for (call, [state_at, flags_at, u_at, out_at]) in calls.iter_mut().zip(&landing) {
                     call.outcome = bytemuck::pod_read_unaligned(&bytes[*state_at..state_at + std::mem::size_of::<NewtonState<Real>>()]);
                     iterating |= call.outcome.status == NEWTON_ITERATING;
@@ -216,6 +243,7 @@ impl GpuWorld {
                     call.dof_out.copy_from_slice(bytemuck::cast_slice(&reals));
                 }
             })?;
+            first = false;
             if !iterating || interrupt.is_some_and(|f| f.load(Ordering::SeqCst)) {
                 break;
             }
@@ -279,7 +307,7 @@ impl GpuWorld {
         }
         let list: Vec<Active> = members.iter().map(|&m| Active { member: m as u32, mode: MODE_FORCES }).collect();
         uploads.push((n.call.clone(), 0, bytemuck::cast_slice(&list).to_vec()));
-        uploads.push((b.active.clone(), 0, bytemuck::cast_slice(&list).to_vec()));
+        uploads.push((n.jobs.clone(), 0, bytemuck::cast_slice(&list).to_vec()));
         uploads.push((b.failure.clone(), 0, bytemuck::cast_slice(&vec![super::NO_FAILURE; 2 * b.members.len()]).to_vec()));
         let count = list.len() as u32;
         let most = |f: fn(&crate::gpu::types::MemberRange) -> u32| members.iter().map(|&m| f(&b.members[m]) as usize).max().unwrap_or(0);
