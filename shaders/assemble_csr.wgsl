@@ -3,12 +3,6 @@
 // by the gather map in element order, so the result does not depend on scheduling (no float
 // atomics). CPU twin: `cpu::assemble_csr`.
 
-struct Coefficients {
-    // Multiplies every tangent entry (ξ of the theta method).
-    factor: real,
-    c1: real,
-}
-
 const WORKGROUP = 64u;
 
 @group(0) @binding(0) var<storage, read> element_out: array<real>;

@@ -4,24 +4,6 @@
 //   g     = c1 m (u - u_pred) - (1-ξ)(f_ext - f_int,t) - ξ (f_ext - f_int),  c1 = 1/(θ dt²)
 // where u_pred = u_t + dt v_t. CPU twin: `cpu::assemble_residual`.
 
-struct Coefficients {
-    factor: real,
-    c1: real,
-}
-
-// What a dof needs from the start of the step.
-struct DofStep {
-    mass: real,
-    u_pred: real,
-    f_int_t: real,
-    f_ext: real,
-}
-
-struct DofOut {
-    f_int: real,
-    g: real,
-}
-
 const WORKGROUP = 64u;
 
 @group(0) @binding(0) var<storage, read> element_out: array<real>;

@@ -6,23 +6,6 @@
 // (REFACTOR_CONTRACTION) and its budget lasts, else the HOST takes over; an element failure
 // of the evaluation makes it FAILED. One workgroup per member. CPU twin: `cpu::newton_judge`.
 
-struct Coefficients {
-    factor: real,
-    c1: real,
-}
-
-struct DofStep {
-    mass: real,
-    u_pred: real,
-    f_int_t: real,
-    f_ext: real,
-}
-
-struct DofOut {
-    f_int: real,
-    g: real,
-}
-
 const NO_FAILURE = 0xffffffffu;
 
 @group(0) @binding(0) var<storage, read> free_dofs: array<u32>;

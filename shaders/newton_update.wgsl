@@ -5,11 +5,6 @@
 // the increment's norm and the count of increments into the member's state. One workgroup per
 // member; a member no longer ITERATING does nothing. CPU twin: `cpu::newton_update`.
 
-struct DofOut {
-    f_int: real,
-    g: real,
-}
-
 @group(0) @binding(0) var<storage, read> inverse: array<real>;
 @group(0) @binding(1) var<storage, read> free_dofs: array<u32>;
 @group(0) @binding(2) var<storage, read> newton: array<NewtonMember>;

@@ -32,3 +32,24 @@ const MAX_ROW = 65535u;
 fn chunk_of(workgroup: vec3<u32>) -> u32 {
     return workgroup.x + workgroup.y * MAX_ROW;
 }
+
+// What the assembly and Newton kernels take and give per dof.
+struct Coefficients {
+    // Multiplies every tangent entry and the new internal force (ξ of the theta method).
+    factor: real,
+    // 1/(θ dt²): multiplies the inertia.
+    c1: real,
+}
+
+// What a dof needs from the start of the step.
+struct DofStep {
+    mass: real,
+    u_pred: real,
+    f_int_t: real,
+    f_ext: real,
+}
+
+struct DofOut {
+    f_int: real,
+    g: real,
+}

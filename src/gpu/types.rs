@@ -18,8 +18,8 @@ pub struct MaterialParams<R> {
     pub a6: R,
 }
 
-/// `struct Coefficients` of the assembly kernels: `factor` (ξ) multiplies the tangent and the
-/// new internal force, `c1 = 1/(θ dt²)` the inertia.
+/// `struct Coefficients` of `shaders/include/batch.wgsl` (the assembly and Newton kernels):
+/// `factor` (ξ) multiplies the tangent and the new internal force, `c1 = 1/(θ dt²)` the inertia.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Coefficients<R> {
@@ -27,7 +27,7 @@ pub struct Coefficients<R> {
     pub c1: R,
 }
 
-/// `struct DofStep` of `assemble_residual`: what a dof needs from the start of the step.
+/// `struct DofStep` of `shaders/include/batch.wgsl`: what a dof needs from the start of the step.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct DofStep<R> {
@@ -38,7 +38,7 @@ pub struct DofStep<R> {
     pub f_ext: R,
 }
 
-/// `struct DofOut` of `assemble_residual`.
+/// `struct DofOut` of `shaders/include/batch.wgsl`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct DofOut<R> {

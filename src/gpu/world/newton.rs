@@ -103,7 +103,7 @@ impl NewtonBuffers {
         let inverse = buffer(gpu, "inverse", b.inverse_entries * real, write);
         let free = super::buffer_init(gpu, "free dofs", bytemuck::cast_slice(&b.free_dofs), storage);
         let newton = buffer(gpu, "newton members", members * std::mem::size_of::<NewtonMember<Real>>(), write);
-        let state = buffer(gpu, "newton state", members * std::mem::size_of::<NewtonState<f64>>(), write | BufferUsages::COPY_SRC);
+        let state = buffer(gpu, "newton state", members * std::mem::size_of::<NewtonState<Real>>(), write | BufferUsages::COPY_SRC);
         let u_start = buffer(gpu, "u start", dofs * real, write);
         let call = buffer(gpu, "newton call", members * 8, write);
         let jobs = buffer(gpu, "newton jobs", members * 8, write);
@@ -184,7 +184,7 @@ impl GpuWorld {
         }
         let total_dofs: usize = work.iter().map(|(b, mine)| mine.iter().map(|&(_, m)| self.batches[*b].members[m].dofs as usize).sum::<usize>()).sum();
         let total_members: usize = work.iter().map(|(_, mine)| mine.len()).sum();
-        let bytes = (total_members * (8 + std::mem::size_of::<NewtonState<f64>>()) + total_dofs * 3 * real + 8 * work.len()) as u64 + if list.is_empty() { 0 } else { self.readback.size() };
+        let bytes = (total_members * (8 + std::mem::size_of::<NewtonState<Real>>()) + total_dofs * 3 * real + 8 * work.len()) as u64 + if list.is_empty() { 0 } else { self.readback.size() };
         if self.newton_readback.as_ref().is_none_or(|(_, size)| *size < bytes) {
             self.newton_readback = Some((buffer(&self.gpu, "newton readback", bytes as usize, BufferUsages::MAP_READ | BufferUsages::COPY_DST), bytes));
         }
