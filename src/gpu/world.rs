@@ -290,6 +290,8 @@ pub struct GpuWorld {
     pub rounds: RoundPlacement,
     /// The read-back of device Newton calls and its size, grown on demand.
     newton_readback: Option<(Buffer, u64)>,
+    /// Compiled by the first device Newton call.
+    newton_pipelines: Option<newton::NewtonPipelines>,
 }
 
 pub(super) fn buffer(gpu: &Gpu, label: &str, bytes: usize, usage: BufferUsages) -> Buffer {
@@ -352,7 +354,7 @@ impl GpuWorld {
             batches.push(batch);
         }
         let readback = buffer(&gpu, "readback", readback_bytes, BufferUsages::MAP_READ | BufferUsages::COPY_DST);
-        Ok(Self { gpu, batches, place, coefficients, readback, traffic, submits: 0, contact: None, uzawa: UzawaPlacement::default(), rounds: RoundPlacement::default(), newton_readback: None })
+        Ok(Self { gpu, batches, place, coefficients, readback, traffic, submits: 0, contact: None, uzawa: UzawaPlacement::default(), rounds: RoundPlacement::default(), newton_readback: None, newton_pipelines: None })
     }
 
     pub fn precision(&self) -> Precision {

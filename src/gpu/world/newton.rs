@@ -16,7 +16,7 @@ use crate::solver::PhaseTimes;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
-use wgpu::{Buffer, BufferUsages};
+use wgpu::{Buffer, BufferUsages, ComputePipeline};
 
 /// Device iterations recorded in the first submission of a call: a body that converges on the
 /// device mostly does so in one to three. The second records what is left of the largest
@@ -93,8 +93,22 @@ pub(super) fn inverse_slots(free_counts: &[usize], real: usize, max_bytes: u64) 
     (slots, total)
 }
 
+/// The pipelines of `newton_update`, `newton_judge` and `newton_compact`, compiled once per
+/// world (they do not depend on the batch's element or material).
+pub(super) struct NewtonPipelines {
+    update: ComputePipeline,
+    judge: ComputePipeline,
+    compact: ComputePipeline,
+}
+
+impl NewtonPipelines {
+    fn new(gpu: &Gpu) -> Result<Self, GpuError> {
+        Ok(Self { update: gpu.pipeline_at("newton_update", "main", None)?, judge: gpu.pipeline_at("newton_judge", "main", None)?, compact: gpu.pipeline_at("newton_compact", "main", None)? })
+    }
+}
+
 impl NewtonBuffers {
-    fn new(gpu: &Arc<Gpu>, b: &Batch, coefficients: &Buffer) -> Result<Self, GpuError> {
+    fn new(gpu: &Arc<Gpu>, pipelines: &NewtonPipelines, b: &Batch, coefficients: &Buffer) -> Result<Self, GpuError> {
         let real = gpu.precision.size();
         let dofs = b.u_host.len();
         let members = b.members.len();
@@ -116,9 +130,9 @@ impl NewtonBuffers {
         let (forces_buffers, residual_buffers) = (with_jobs(&b.forces_buffers, FORCES_JOBS), with_jobs(&b.residual_buffers, RESIDUAL_JOBS));
         let forces = b.forces.rebound(gpu, &forces_buffers.iter().collect::<Vec<_>>());
         let residual = b.residual.rebound(gpu, &residual_buffers.iter().collect::<Vec<_>>());
-        let update = Pass::new(gpu, "newton_update", "main", None, &[&inverse, &free, &newton, &state, &b.dof_out, &b.u, &b.member_buffer, &jobs])?;
-        let judge = Pass::new(gpu, "newton_judge", "main", None, &[&free, &newton, &state, &b.dof_out, &b.u, &u_start, &b.step, coefficients, &b.failure, &b.member_buffer, &jobs])?;
-        let compact = Pass::new(gpu, "newton_compact", "main", None, &[&call, &state, &jobs, &dispatch])?;
+        let update = Pass::bound(gpu, pipelines.update.clone(), &[&inverse, &free, &newton, &state, &b.dof_out, &b.u, &b.member_buffer, &jobs]);
+        let judge = Pass::bound(gpu, pipelines.judge.clone(), &[&free, &newton, &state, &b.dof_out, &b.u, &u_start, &b.step, coefficients, &b.failure, &b.member_buffer, &jobs]);
+        let compact = Pass::bound(gpu, pipelines.compact.clone(), &[&call, &state, &jobs, &dispatch]);
         Ok(Self {
             inverse,
             newton,
@@ -175,7 +189,11 @@ impl GpuWorld {
         let mut work: Vec<(usize, Vec<(usize, usize)>)> = Vec::with_capacity(by_batch.len());
         for (batch, mine) in by_batch {
             if self.batches[batch].newton.is_none() {
-                let made = NewtonBuffers::new(&self.gpu, &self.batches[batch], &self.coefficients)?;
+                if self.newton_pipelines.is_none() {
+                    self.newton_pipelines = Some(NewtonPipelines::new(&self.gpu)?);
+                }
+                let pipelines = self.newton_pipelines.as_ref().expect("made above");
+                let made = NewtonBuffers::new(&self.gpu, pipelines, &self.batches[batch], &self.coefficients)?;
                 self.batches[batch].newton = Some(made);
             }
             let mine: Vec<(usize, usize)> = mine.into_iter().map(|i| (i, self.place[calls[i].body].1)).collect();
