@@ -63,11 +63,12 @@ fn main(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workg
         step2 += du * du;
         size2 += u[d] * u[d];
     }
-    let scale = sqrt(reduce_sum(lane, scale2));
+    let sums = sqrt(reduce_sum4(lane, vec4<real>(scale2, residual2, step2, size2)));
     let most = reduce_max(lane, travel);
-    let residual = sqrt(reduce_sum(lane, residual2));
-    let moved = sqrt(reduce_sum(lane, step2));
-    let size = sqrt(reduce_sum(lane, size2));
+    let scale = sums.x;
+    let residual = sums.y;
+    let moved = sums.z;
+    let size = sums.w;
     if lane != 0u {
         return;
     }

@@ -37,10 +37,11 @@ fn main(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workg
     workgroupBarrier();
     var sum2 = real(0.0);
     for (var f = lane; f < n; f += NEWTON_WORKGROUP) {
-        let first = row.inverse_start + f * n;
+        // K̄⁻¹ is symmetric: column f read as row f, so that neighbouring invocations read
+        // neighbouring entries.
         var du = real(0.0);
         for (var j = 0u; j < n; j++) {
-            du += inverse[first + j] * rhs[j];
+            du += inverse[row.inverse_start + j * n + f] * rhs[j];
         }
         let d = dof_start + free_dofs[row.free_start + f];
         u[d] += du;

@@ -42,10 +42,10 @@ pub fn newton_update(inverse: &[Real], free_dofs: &[u32], newton: &[NewtonMember
     let mut sum2 = [0.0; NEWTON_WORKGROUP];
     let mut moved = false;
     for (f, &k) in free.iter().enumerate() {
-        let first = row.inverse_start as usize + f * n;
+        // Column f as row f (K̄⁻¹ is symmetric), as the shader reads it.
         let mut du = 0.0;
         for (j, r) in rhs.iter().enumerate() {
-            du += inverse[first + j] * r;
+            du += inverse[row.inverse_start as usize + j * n + f] * r;
         }
         u[dof_start + k as usize] += du;
         sum2[f % NEWTON_WORKGROUP] += du * du;
