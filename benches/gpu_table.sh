@@ -117,7 +117,7 @@ for r in $(seq "$scale_reps"); do
 done
 
 : >"$out/bench.jsonl"
-kernels="peak element_force_tangent assemble evaluate element_energy"
+kernels="peak element_force_tangent assemble evaluate element_energy newton_iteration"
 [[ $sections == *" bench "* ]] || kernels=""
 for kernel in $kernels; do
   timeout "$limit" "$bin" bench --elements "$elements" --time "$bench_time" --kernel "$kernel" --backend gpu --json >>"$out/bench.jsonl" \

@@ -18,6 +18,8 @@ use crate::solver::PhaseTimes;
 use std::sync::Arc;
 use std::time::Instant;
 
+mod newton;
+
 /// The element kinds and materials the kernels are built for, with the parameters benchmarks use.
 pub fn bench_models() -> [Model; 8] {
     [
@@ -106,10 +108,14 @@ impl BenchCase {
         self.elements() * element_out_stride(self.pattern.element_dofs)
     }
 
+    /// What a GPU world takes of the case's body.
+    pub fn world_body(&self) -> crate::gpu::WorldBody<'_> {
+        crate::gpu::WorldBody { mesh: &self.mesh, geometry: &self.geometry, model: &self.model, formulation: self.formulation, pattern: &self.pattern, gather: &self.gather, dofs: &self.dofs, viscous: false }
+    }
+
     /// A GPU world of this one body, with its step inputs uploaded.
     pub fn on(&self, gpu: &Arc<Gpu>) -> Result<GpuWorld, GpuError> {
-        let body = crate::gpu::WorldBody { mesh: &self.mesh, geometry: &self.geometry, model: &self.model, formulation: self.formulation, pattern: &self.pattern, gather: &self.gather, dofs: &self.dofs, viscous: false };
-        let mut world = GpuWorld::new(gpu.clone(), &[body])?;
+        let mut world = GpuWorld::new(gpu.clone(), &[self.world_body()])?;
         world.begin_step(&[(0, &self.step[..])]);
         world.take_traffic();
         Ok(world)
@@ -343,6 +349,9 @@ pub fn run_bench(options: &BenchOptions, gpus: &[Arc<Gpu>], mut row: impl FnMut(
                 }
             }
         }
+    }
+    if wanted(options, newton::NEWTON_ITERATION) {
+        newton::newton_rows(options, gpus, &peaks, &mut row)?;
     }
     if wanted(options, "uzawa_step") {
         uzawa_rows(options, gpus, &mut row)?;

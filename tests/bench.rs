@@ -13,8 +13,8 @@ fn rows(args: &[&str]) -> Vec<Value> {
 fn bench_reports_every_kernel_on_the_cpu() {
     let rows = rows(&["--backend", "cpu"]);
     // 6 elements (4 kinds, and F-bar on quad4 and hex8) x 8 materials x 3 kernel groups,
-    // uzawa_step, uzawa_sweep, and the two peak kernels.
-    assert_eq!(rows.len(), 6 * 8 * 3 + 2 + 2);
+    // newton_iteration, uzawa_step, uzawa_sweep, and the two peak kernels.
+    assert_eq!(rows.len(), 6 * 8 * 3 + 1 + 2 + 2);
     let materials: std::collections::BTreeSet<&str> = rows.iter().filter_map(|r| r["material"].as_str()).filter(|m| *m != "-").collect();
     assert_eq!(materials.len(), 8, "{materials:?}");
     let elements: std::collections::BTreeSet<&str> = rows.iter().filter_map(|r| r["element"].as_str()).collect();
@@ -61,6 +61,11 @@ fn bench_on_a_gpu_reports_errors_within_the_parity_tolerances() {
     let backends: Vec<&str> = sweeps.iter().map(|r| r["backend"].as_str().unwrap()).collect();
     assert_eq!(backends, ["cpu f64", "gpu f64"]);
     assert!(sweeps[1]["max_relative_error"].as_f64().unwrap() <= 1e-12 && sweeps[1]["bytes_per_call"].as_u64().unwrap() > 0, "{:?}", sweeps[1]);
+    // A device Newton iteration repeats its CPU twins' (f64 only), and moves states up and down.
+    let newton = self::rows(&["--backend", "gpu", "--kernel", "newton_iteration"]);
+    let backends: Vec<&str> = newton.iter().map(|r| r["backend"].as_str().unwrap()).collect();
+    assert_eq!(backends, ["cpu f64", "gpu f64"]);
+    assert!(newton[1]["max_relative_error"].as_f64().unwrap() <= 1e-12 && newton[1]["bytes_per_call"].as_u64().unwrap() > 0, "{:?}", newton[1]);
     // A whole device pass moves the displacements up and the results down.
     let rows = self::rows(&["--backend", "gpu", "--kernel", "evaluate"]);
     assert!(!rows.is_empty() && rows.iter().all(|r| r["bytes_per_call"].as_u64().unwrap() > 0), "{rows:?}");
