@@ -50,7 +50,7 @@ fn main(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workg
             atomicOr(&any_moved, 1u);
         }
     }
-    let total = reduce_sum(lane, sum2);
+    let total = reduce_sum4(lane, vec4<real>(sum2, real(0.0), real(0.0), real(0.0))).x;
     if lane == 0u {
         state[m].increment = sqrt(total);
         state[m].iterations += 1u;

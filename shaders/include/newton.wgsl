@@ -56,11 +56,11 @@ const FAILED = 3u;
 const DISPATCHES = 4u;
 const CALL_COUNT = 12u;
 
-// The sum of `partial` by halves (the CPU twins add in the same order).
-var<workgroup> partial: array<real, NEWTON_WORKGROUP>;
+// Sums over a workgroup by halves, four at a time (the CPU twins add in the same order), and
+// a largest value.
 var<workgroup> partial4: array<vec4<real>, NEWTON_WORKGROUP>;
+var<workgroup> partial: array<real, NEWTON_WORKGROUP>;
 
-// Four sums at once, each by halves as `reduce_sum`.
 fn reduce_sum4(lane: u32, value: vec4<real>) -> vec4<real> {
     partial4[lane] = value;
     workgroupBarrier();
@@ -71,20 +71,6 @@ fn reduce_sum4(lane: u32, value: vec4<real>) -> vec4<real> {
         workgroupBarrier();
     }
     let sum = partial4[0];
-    workgroupBarrier();
-    return sum;
-}
-
-fn reduce_sum(lane: u32, value: real) -> real {
-    partial[lane] = value;
-    workgroupBarrier();
-    for (var half = NEWTON_WORKGROUP / 2u; half > 0u; half /= 2u) {
-        if lane < half {
-            partial[lane] += partial[lane + half];
-        }
-        workgroupBarrier();
-    }
-    let sum = partial[0];
     workgroupBarrier();
     return sum;
 }
