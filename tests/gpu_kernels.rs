@@ -880,3 +880,39 @@ fn newton_kernels_match_their_cpu_twins() {
         }
     }
 }
+
+/// A device Newton call for one body of a batch of 400 read back the failure flags of the whole
+/// batch into a read-back sized for the call's bodies (3 200 bytes of flags against 2 744): the
+/// copy overran it. The call reads back its own bodies' flags only, and takes the twins' step.
+#[test]
+fn a_device_newton_call_for_one_body_of_a_large_batch_reads_back_only_its_own() {
+    let Some(gpu) = gpu_or_skip("a_device_newton_call_for_one_body_of_a_large_batch_reads_back_only_its_own", Precision::F64) else { return };
+    let gpu = Arc::new(gpu);
+    let coefficients = Coefficients { factor: 1.0, c1: 1e6 };
+    let c = case(ElementVariant { kind: ElementKind::Tri3, formulation: Formulation::Displacement, material: "neo_hookean" }, 500);
+    let bodies: Vec<WorldBody> = (0..400).map(|_| c.world_body()).collect();
+    let mut world = GpuWorld::new(gpu, &bodies).expect("device world");
+    let step: Vec<DofStep<f64>> = c.u.iter().map(|&x| DofStep { mass: 1.0, u_pred: 0.9 * x, f_int_t: 0.0, f_ext: 0.0 }).collect();
+    world.begin_step(&(0..400).map(|b| (b, &step[..])).collect::<Vec<_>>());
+    let (inverse, free) = (effective_inverse(&c, coefficients), c.dofs.free_pairs().map(|(d, _)| d as u32).collect::<Vec<_>>());
+    let member = NewtonMember { free_count: free.len() as u32, budget: 2, ..NewtonMember::default() };
+    let first = cpu_residual(&c, &c.u, &step, coefficients);
+    let residual0 = free.iter().map(|&d| first[d as usize].g.powi(2)).sum::<f64>().sqrt();
+    let start = vec![0.0; c.u.len()];
+    let (mut u, mut out) = (c.u.clone(), first.clone());
+    let call = NewtonCall { body: 399, factor: 1, inverse: Some(inverse.clone()), member, residual: residual0, u: &mut u, dof_out: &mut out, u_start: &start, outcome: NewtonState::default(), failure: None };
+    let mut calls = [call];
+    world.newton(&mut calls, &mut [], coefficients, None, &mut Default::default()).expect("device Newton");
+    let (state, failure) = (calls[0].outcome, calls[0].failure);
+    let range = [MemberRange { dof_start: 0, dofs: c.u.len() as u32, ..Default::default() }];
+    let mut expected = [NewtonState { status: NEWTON_ITERATING, residual: residual0, previous_residual: residual0, ..Default::default() }];
+    let (mut u_cpu, mut out_cpu) = (c.u.clone(), first.clone());
+    for _ in 0..2 {
+        cpu::newton_update(&inverse, &free, &[member], &mut expected, &out_cpu, &mut u_cpu, &range, 0);
+        out_cpu = cpu_residual(&c, &u_cpu, &step, coefficients);
+        cpu::newton_judge(&free, &[member], &mut expected, &out_cpu, &u_cpu, &start, &step, coefficients, &[u32::MAX; 2], &range, 0);
+    }
+    assert_eq!((failure, state.status, state.iterations), (None, NEWTON_HOST, 2));
+    assert_eq!((expected[0].status, expected[0].iterations), (NEWTON_HOST, 2));
+    assert!(relative_error(&u, &u_cpu) <= 1e-12, "{:.2e}", relative_error(&u, &u_cpu));
+}

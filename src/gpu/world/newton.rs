@@ -202,7 +202,9 @@ impl GpuWorld {
         }
         let total_dofs: usize = work.iter().map(|(b, mine)| mine.iter().map(|&(_, m)| self.batches[*b].members[m].dofs as usize).sum::<usize>()).sum();
         let total_members: usize = work.iter().map(|(_, mine)| mine.len()).sum();
-        let bytes = (total_members * (8 + std::mem::size_of::<NewtonState<Real>>()) + total_dofs * 3 * real + 8 * work.len()) as u64 + if list.is_empty() { 0 } else { self.readback.size() };
+        // Per member its failure flags and state, per dof its displacement and residual (every
+        // span a multiple of 8 bytes), after an evaluation pass's read-back when one shares it.
+        let bytes = (total_members * (8 + std::mem::size_of::<NewtonState<Real>>()) + total_dofs * 3 * real) as u64 + if list.is_empty() { 0 } else { self.readback.size() };
         if self.newton_readback.as_ref().is_none_or(|(_, size)| *size < bytes) {
             self.newton_readback = Some((buffer(&self.gpu, "newton readback", bytes as usize, BufferUsages::MAP_READ | BufferUsages::COPY_DST), bytes));
         }
@@ -234,15 +236,16 @@ impl GpuWorld {
                 let b = &self.batches[*batch];
                 let members: Vec<usize> = mine.iter().map(|&(_, m)| m).collect();
                 let state_size = std::mem::size_of::<NewtonState<Real>>() as u64;
-                let flags = readback.queue(*batch, Source::Failure, 0..(8 * b.members.len()) as u64);
+                let flag_span = |m: usize| 8 * m as u64..8 * (m as u64 + 1);
+                let flags = readback.queue_runs(*batch, Source::Failure, &members, &flag_span);
                 let state_span = |m: usize| m as u64 * state_size..(m as u64 + 1) * state_size;
                 let u_span = |m: usize| b.members[m].dof_start as u64 * real as u64..(b.members[m].dof_start + b.members[m].dofs) as u64 * real as u64;
                 let dof_span = |m: usize| b.members[m].dof_start as u64 * 2 * real as u64..(b.members[m].dof_start + b.members[m].dofs) as u64 * 2 * real as u64;
                 let states = readback.queue_runs(*batch, Source::NewtonState, &members, &state_span);
                 let us = readback.queue_runs(*batch, Source::Displacement, &members, &u_span);
                 let outs = readback.queue_runs(*batch, Source::DofOut, &members, &dof_span);
-                for (k, &(i, m)) in mine.iter().enumerate() {
-                    landing[i] = [states[k], flags as usize + 8 * m, us[k], outs[k]];
+                for (k, &(i, _)) in mine.iter().enumerate() {
+                    landing[i] = [states[k], flags[k], us[k], outs[k]];
                 }
             }
             let mut iterating = false;
