@@ -916,3 +916,29 @@ fn a_device_newton_call_for_one_body_of_a_large_batch_reads_back_only_its_own() 
     assert_eq!((expected[0].status, expected[0].iterations), (NEWTON_HOST, 2));
     assert!(relative_error(&u, &u_cpu) <= 1e-12, "{:.2e}", relative_error(&u, &u_cpu));
 }
+
+/// An increment that inverts elements ends a body's device iterations as FAILED with the
+/// lowest inverted element, as a device pass reports it (the host then words the failure and
+/// cuts the step back).
+#[test]
+fn a_device_newton_increment_that_inverts_an_element_fails_the_body() {
+    let Some(gpu) = gpu_or_skip("a_device_newton_increment_that_inverts_an_element_fails_the_body", Precision::F64) else { return };
+    let coefficients = Coefficients { factor: 1.0, c1: 1e6 };
+    let c = case(ElementVariant { kind: ElementKind::Quad4, formulation: Formulation::Displacement, material: "blatz_ko" }, 600);
+    let mut world = GpuWorld::new(Arc::new(gpu), &[c.world_body()]).expect("device world");
+    let step: Vec<DofStep<f64>> = c.u.iter().map(|&x| DofStep { mass: 1.0, u_pred: 0.9 * x, f_int_t: 0.0, f_ext: 0.0 }).collect();
+    world.begin_step(&[(0, &step[..])]);
+    // A thousand times the increment, backwards: the body turns inside out.
+    let inverse: Vec<f64> = effective_inverse(&c, coefficients).into_iter().map(|x| -1e3 * x).collect();
+    let free = c.dofs.free_count;
+    let first = cpu_residual(&c, &c.u, &step, coefficients);
+    let start = vec![0.0; c.u.len()];
+    let (mut u, mut out) = (c.u.clone(), first.clone());
+    let member = NewtonMember { free_count: free as u32, budget: 5, ..NewtonMember::default() };
+    let mut calls = [NewtonCall { body: 0, factor: 1, inverse: Some(inverse), member, residual: 1.0, u: &mut u, dof_out: &mut out, u_start: &start, outcome: NewtonState::default(), failure: None }];
+    world.newton(&mut calls, &mut [], coefficients, None, &mut Default::default()).expect("device Newton");
+    let (state, failure) = (calls[0].outcome, calls[0].failure);
+    assert_eq!((state.status, state.iterations), (bifirst::gpu::types::NEWTON_FAILED, 1), "{state:?}");
+    assert!(matches!(failure, Some(ElementFailure::Inverted(_))), "{failure:?}");
+    assert!(relative_error(&u, &c.u) > 1.0, "the failing iterate comes back for the host to word the failure");
+}

@@ -283,7 +283,7 @@ impl GpuWorld {
 
     /// Uploads what the listed calls (`(call, member)`, member order) of one batch need: stale
     /// inverses, parameters, initial states, start displacements, evaluated residuals, the
-    /// call's list and the first iteration's dispatch arguments; clears the failure flags.
+    /// call's list and the first iteration's dispatch arguments; clears their failure flags.
     fn stage_newton(&mut self, batch: usize, mine: &[(usize, usize)], calls: &mut [NewtonCall]) {
         let precision = self.gpu.precision;
         let real = precision.size() as u64;
@@ -329,7 +329,9 @@ impl GpuWorld {
         let list: Vec<Active> = members.iter().map(|&m| Active { member: m as u32, mode: MODE_FORCES }).collect();
         uploads.push((n.call.clone(), 0, bytemuck::cast_slice(&list).to_vec()));
         uploads.push((n.jobs.clone(), 0, bytemuck::cast_slice(&list).to_vec()));
-        uploads.push((b.failure.clone(), 0, bytemuck::cast_slice(&vec![super::NO_FAILURE; 2 * b.members.len()]).to_vec()));
+        for run in super::runs(&members) {
+            uploads.push((b.failure.clone(), 8 * run[0] as u64, bytemuck::cast_slice(&vec![super::NO_FAILURE; 2 * run.len()]).to_vec()));
+        }
         let count = list.len() as u32;
         let most = |f: fn(&crate::gpu::types::MemberRange) -> u32| members.iter().map(|&m| f(&b.members[m]) as usize).max().unwrap_or(0);
         let (fx, fy) = crate::gpu::dispatch_rows(most(|r| r.elements).div_ceil(WORKGROUP));
