@@ -4,7 +4,7 @@
 //! increment, its uploads and read-back included) and as the CPU twins of those kernels take it,
 //! body after body on the thread pool.
 
-use super::{time_calls, BenchCase, BenchOptions, BenchRow};
+use super::{blockwise_error, time_calls, BenchCase, BenchOptions, BenchRow};
 use crate::assembly::element_out_stride;
 use crate::cpu;
 use crate::element::Formulation;
@@ -88,16 +88,10 @@ pub(super) fn newton_rows(options: &BenchOptions, gpus: &[Arc<Gpu>], peaks: &[Pe
         let t = time_calls(options.min_time, || iterate(&mut world));
         result?;
         let traffic = world.take_traffic().total();
-        let error = states.iter().zip(&reference).map(|((u, _), (expected, _))| relative_error(u, expected)).fold(0.0, f64::max);
+        let error = states.iter().zip(&reference).map(|((u, _), (expected, _))| blockwise_error(u, expected, u.len())).fold(0.0, f64::max);
         row(make(format!("gpu {}", gpu.precision.name()), t, traffic, error).with_roofline(cost, peaks));
     }
     Ok(())
-}
-
-/// `max |a - b| / max |b|`.
-fn relative_error(a: &[Real], b: &[Real]) -> f64 {
-    let scale = b.iter().fold(Real::MIN_POSITIVE, |m, x| m.max(x.abs()));
-    a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, Real::max) / scale
 }
 
 /// Forces and residuals of the case's body at `u` on the CPU twins.

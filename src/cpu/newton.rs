@@ -3,12 +3,9 @@
 //! shader spreads it over its invocations so that the sums are taken in the same order. The
 //! engine's CPU path solves with faer instead; these are the oracle of the parity tests.
 
-use crate::gpu::types::{Active, Coefficients, DofOut, DofStep, MemberRange, NewtonMember, NewtonState, NEWTON_CONVERGED, NEWTON_FAILED, NEWTON_HOST, NEWTON_ITERATING, NEWTON_WORKGROUP};
+use crate::gpu::types::{Active, Coefficients, DofOut, DofStep, MemberRange, NewtonMember, NewtonState, NEWTON_CONVERGED, NEWTON_FAILED, NEWTON_HOST, NEWTON_ITERATING, NEWTON_WORKGROUP, NO_FAILURE};
 use crate::precision::Real;
 use crate::solver::REFACTOR_CONTRACTION;
-
-/// `failure` entry of a member whose evaluation found nothing wrong.
-const NO_FAILURE: u32 = u32::MAX;
 
 /// The sum of one value per invocation by halves, as `reduce_sum` of `newton.wgsl`.
 fn reduce_sum(mut partial: [Real; NEWTON_WORKGROUP]) -> Real {

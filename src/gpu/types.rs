@@ -129,6 +129,10 @@ pub struct NewtonState<R> {
     pub increment: R,
 }
 
+/// A member's `failure` entry (its lowest inverted element, its lowest non-finite one) when
+/// the element kernel found nothing wrong.
+pub const NO_FAILURE: u32 = u32::MAX;
+
 /// `NewtonState.status`: still iterating, converged, handed to the host, element failure.
 pub const NEWTON_ITERATING: u32 = 0;
 pub const NEWTON_CONVERGED: u32 = 1;

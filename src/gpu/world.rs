@@ -11,10 +11,10 @@
 
 mod newton;
 
-pub use newton::{NewtonCall, ITERATIONS_PER_SUBMIT};
+pub use newton::NewtonCall;
 
 use super::uzawa_sweep::UzawaSweeps;
-use super::types::{Active, Coefficients, DofOut, DofStep, MaterialParams, MemberRange, MODE_FORCES, MODE_TANGENT, NO_HISTORY};
+use super::types::{Active, Coefficients, DofOut, DofStep, MaterialParams, MemberRange, MODE_FORCES, MODE_TANGENT, NO_FAILURE, NO_HISTORY};
 use super::{ElementVariant, Gpu, GpuError};
 use crate::assembly::{element_out_stride, DofMap, GatherMap, StiffnessPattern};
 use crate::backend::{RoundPlacement, UzawaPlacement};
@@ -39,8 +39,6 @@ const TANGENT_WORKGROUP: usize = 32;
 /// The binding of the job list (`jobs`) in `element_force_tangent` and `assemble_residual`.
 const FORCES_JOBS: usize = 7;
 const RESIDUAL_JOBS: usize = 8;
-/// `failure` entries per member: the lowest inverted element, the lowest non-finite one.
-const NO_FAILURE: u32 = u32::MAX;
 
 /// Why the element kernel rejected a body's state: its lowest failing element of each kind.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -407,9 +405,8 @@ impl GpuWorld {
             let mut members = Vec::new();
             for &(body, step) in steps.iter().filter(|(body, _)| self.place[*body].0 == batch) {
                 let m = self.place[body].1;
-                let range = self.batches[batch].members[m];
-                let start = range.dof_start as usize * 4;
-                if update_mirror(&mut self.batches[batch].step_host[start..start + 4 * range.dofs as usize], bytemuck::cast_slice(step)) {
+                let dofs = dof_span(&self.batches[batch].members, &[m]);
+                if update_mirror(&mut self.batches[batch].step_host[4 * dofs.start..4 * dofs.end], bytemuck::cast_slice(step)) {
                     members.push(m);
                 }
             }
@@ -442,8 +439,8 @@ impl GpuWorld {
         };
         for run in runs(members) {
             let b = &self.batches[batch];
-            let (first, last) = (&b.members[run[0]], &b.members[*run.last().expect("a run has members")]);
-            let (start, end) = (first.dof_start as usize * per_dof, (last.dof_start + last.dofs) as usize * per_dof);
+            let dofs = dof_span(&b.members, &run);
+            let (start, end) = (dofs.start * per_dof, dofs.end * per_dof);
             let (host, buffer) = match mirror {
                 Mirror::Displacement => (&b.u_host, b.u.clone()),
                 Mirror::Step => (&b.step_host, b.step.clone()),
@@ -463,8 +460,8 @@ impl GpuWorld {
         let mut changed = vec![false; list.len()];
         for i in order {
             let (batch, member) = self.place[list[i].0];
-            let range = self.batches[batch].members[member];
-            changed[i] = update_mirror(&mut self.batches[batch].u_host[range.dof_start as usize..(range.dof_start + range.dofs) as usize], list[i].1);
+            let dofs = dof_span(&self.batches[batch].members, &[member]);
+            changed[i] = update_mirror(&mut self.batches[batch].u_host[dofs], list[i].1);
             match by_batch.last_mut() {
                 Some((b, mine)) if *b == batch => mine.push(i),
                 _ => by_batch.push((batch, vec![i])),
@@ -708,6 +705,12 @@ fn update_mirror(mirror: &mut [Real], values: &[Real]) -> bool {
         mirror.copy_from_slice(values);
     }
     changed
+}
+
+/// The dofs of consecutive members of a batch (a run, or one member) in its dof arrays.
+fn dof_span(members: &[MemberRange], run: &[usize]) -> std::ops::Range<usize> {
+    let (first, last) = (&members[run[0]], &members[*run.last().expect("a run has members")]);
+    first.dof_start as usize..(last.dof_start + last.dofs) as usize
 }
 
 /// Sorted member indices cut into runs of consecutive members.

@@ -625,9 +625,8 @@ impl Body {
         // the increment amplified by the stiffness's spread, about K/G for a nearly
         // incompressible body (regression test `a_pressurised_tube_holds_its_load`: a Tri3 tube
         // at K/G = 5000, its load held, stalled at increments of 3 times the unscaled bound).
-        let (bulk, shear) = self.model.bulk_shear();
-        let round_off = 1e3 * Real::EPSILON * size2.sqrt() * (bulk / shear).max(1.0);
-        let allowed = p.increment_tolerance * step2.sqrt().max(motion_scale).max(1e-12 * self.length_scale) + round_off;
+        let round_off = 1e3 * Real::EPSILON * size2.sqrt() * self.stiffness_spread();
+        let allowed = p.increment_tolerance * step2.sqrt().max(self.increment_floor(motion_scale)) + round_off;
         let increment_ok = self.last_increment.is_none_or(|du| du <= allowed);
         self.unmet.clear();
         if residual > tolerance {
@@ -654,10 +653,30 @@ impl Body {
     /// (regression test `newton_converges_at_k_over_g_one_hundred_thousand`: at K/G = 1e5 the
     /// residual stalled at 1.6e-8 against a tolerance of 1.3e-8).
     fn residual_floor(&self, p: &StepParams) -> Real {
-        let c1 = 1.0 / (p.theta * p.dt * p.dt);
+        let [constant, per_travel, stiffness] = self.residual_floor_terms(p);
         let travel = self.trial.u.iter().fold(0.0, |m: Real, u| m.max(u.abs()));
+        constant + per_travel * travel + stiffness
+    }
+
+    /// The terms of [`Body::residual_floor`]: the inertia's round-off at the body's size, the
+    /// same per unit of travel (the largest |u|), and the stiff volumetric term's.
+    fn residual_floor_terms(&self, p: &StepParams) -> [Real; 3] {
+        let c1 = 1.0 / (p.theta * p.dt * p.dt);
         let free = (self.dofs.free_count as Real).sqrt();
-        1e-14 * c1 * self.max_mass * self.length_scale + 1e-13 * c1 * self.max_mass * travel + STIFFNESS_ROUND_OFF * free * p.xi * self.stiffness_scale * self.length_scale
+        [1e-14 * c1 * self.max_mass * self.length_scale, 1e-13 * c1 * self.max_mass, STIFFNESS_ROUND_OFF * free * p.xi * self.stiffness_scale * self.length_scale]
+    }
+
+    /// The displacement over the step below which the increment's bound stops shrinking: how
+    /// far the scene's fastest motion goes in a step, or a trillionth of the smallest edge.
+    fn increment_floor(&self, motion_scale: Real) -> Real {
+        motion_scale.max(1e-12 * self.length_scale)
+    }
+
+    /// How much the residual's round-off is amplified in the increment: about K/G for a nearly
+    /// incompressible body, 1 for a compressible one.
+    fn stiffness_spread(&self) -> Real {
+        let (bulk, shear) = self.model.bulk_shear();
+        (bulk / shear).max(1.0)
     }
 
     /// Whether the last convergence test found the residual within its tolerance (the
@@ -910,17 +929,15 @@ impl Body {
     /// of [`Body::converged`] (the parts that do not change while it iterates), at most
     /// `budget` increments, `inverse` when the device does not hold this factorisation's.
     pub fn newton_call(&mut self, body: usize, p: &StepParams, motion_scale: Real, budget: usize, inverse: Option<Vec<Real>>) -> NewtonCall<'_> {
-        let c1 = coefficients(p).c1;
-        let (bulk, shear) = self.model.bulk_shear();
-        let free = (self.dofs.free_count as Real).sqrt();
+        let [constant, per_travel, stiffness] = self.residual_floor_terms(p);
         let member = NewtonMember {
             budget: budget as u32,
             residual_tolerance: p.residual_tolerance,
-            floor: 1e-14 * c1 * self.max_mass * self.length_scale + STIFFNESS_ROUND_OFF * free * p.xi * self.stiffness_scale * self.length_scale,
-            floor_per_travel: 1e-13 * c1 * self.max_mass,
+            floor: constant + stiffness,
+            floor_per_travel: per_travel,
             increment_tolerance: p.increment_tolerance,
-            increment_floor: motion_scale.max(1e-12 * self.length_scale),
-            round_off: 1e3 * Real::EPSILON * (bulk / shear).max(1.0),
+            increment_floor: self.increment_floor(motion_scale),
+            round_off: 1e3 * Real::EPSILON * self.stiffness_spread(),
             ..NewtonMember::default()
         };
         let residual = self.residual_norm();

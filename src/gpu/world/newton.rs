@@ -9,7 +9,7 @@
 //! residuals once per submission.
 
 use super::{buffer, to_device, Batch, Evaluation, GpuWorld, Pass, ReadBack, Source, FORCES_JOBS, RESIDUAL_JOBS, WORKGROUP};
-use crate::gpu::types::{Active, Coefficients, DofOut, NewtonMember, NewtonState, MODE_FORCES, NEWTON_FAILED, NEWTON_ITERATING, NEWTON_MAX_FREE};
+use crate::gpu::types::{Active, Coefficients, DofOut, NewtonMember, NewtonState, MODE_FORCES, NEWTON_FAILED, NEWTON_ITERATING, NEWTON_MAX_FREE, NO_FAILURE};
 use crate::gpu::{ElementFailure, Gpu, GpuError};
 use crate::precision::{Precision, Real};
 use crate::solver::PhaseTimes;
@@ -21,7 +21,7 @@ use wgpu::{Buffer, BufferUsages, ComputePipeline};
 /// Device iterations recorded in the first submission of a call: a body that converges on the
 /// device mostly does so in one to three. The second records what is left of the largest
 /// budget, so that a call takes at most two submissions however many iterations it needs.
-pub const ITERATIONS_PER_SUBMIT: u32 = 4;
+const ITERATIONS_PER_SUBMIT: u32 = 4;
 
 /// The indirect dispatches (x, y, z) of update, forces, residual and judge, then the length of
 /// the call's list (`DISPATCHES` and `CALL_COUNT` of `newton.wgsl`).
@@ -169,9 +169,8 @@ impl GpuWorld {
 
     /// Newton iterations of the listed bodies on the device, each from its evaluated iterate
     /// until it converges, needs the host (its factorisation contracts too slowly, its budget is
-    /// spent, a residual is not finite) or an element fails: [`ITERATIONS_PER_SUBMIT`]
-    /// iterations in the first submission, the rest of the budgets in a second if any body needs
-    /// it. The bodies must be
+    /// spent, a residual is not finite) or an element fails: four iterations in the first
+    /// submission, the rest of the budgets in a second if any body needs it. The bodies must be
     /// [`GpuWorld::newton_capable`]; `interrupt` is checked between submissions.
     ///
     /// The evaluation pass of other bodies (`list`, as [`GpuWorld::evaluate`] takes it) shares
@@ -239,8 +238,12 @@ impl GpuWorld {
                 let flag_span = |m: usize| 8 * m as u64..8 * (m as u64 + 1);
                 let flags = readback.queue_runs(*batch, Source::Failure, &members, &flag_span);
                 let state_span = |m: usize| m as u64 * state_size..(m as u64 + 1) * state_size;
-                let u_span = |m: usize| b.members[m].dof_start as u64 * real as u64..(b.members[m].dof_start + b.members[m].dofs) as u64 * real as u64;
-                let dof_span = |m: usize| b.members[m].dof_start as u64 * 2 * real as u64..(b.members[m].dof_start + b.members[m].dofs) as u64 * 2 * real as u64;
+                let bytes_of = |m: usize, per_dof: usize| {
+                    let dofs = super::dof_span(&b.members, &[m]);
+                    (dofs.start * per_dof) as u64..(dofs.end * per_dof) as u64
+                };
+                let u_span = |m: usize| bytes_of(m, real);
+                let dof_span = |m: usize| bytes_of(m, 2 * real);
                 let states = readback.queue_runs(*batch, Source::NewtonState, &members, &state_span);
                 let us = readback.queue_runs(*batch, Source::Displacement, &members, &u_span);
                 let outs = readback.queue_runs(*batch, Source::DofOut, &members, &dof_span);
@@ -275,8 +278,8 @@ impl GpuWorld {
         // pass does not send them back.
         for call in calls.iter() {
             let (batch, m) = self.place[call.body];
-            let range = self.batches[batch].members[m];
-            self.batches[batch].u_host[range.dof_start as usize..(range.dof_start + range.dofs) as usize].copy_from_slice(call.u);
+            let dofs = super::dof_span(&self.batches[batch].members, &[m]);
+            self.batches[batch].u_host[dofs].copy_from_slice(call.u);
         }
         Ok(())
     }
@@ -302,9 +305,8 @@ impl GpuWorld {
                 n.inverse_version[m] = Some(call.factor);
             }
             n.newton_host[m] = NewtonMember { inverse_start: slot, free_start, free_count, ..call.member };
-            states.push(NewtonState { status: NEWTON_ITERATING, iterations: 0, moved: 0, pad: 0, residual: call.residual, previous_residual: call.residual, increment: 0.0 });
-            let range = b.members[m];
-            if super::update_mirror(&mut n.start_host[range.dof_start as usize..(range.dof_start + range.dofs) as usize], call.u_start) {
+            states.push(NewtonState { status: NEWTON_ITERATING, residual: call.residual, previous_residual: call.residual, ..NewtonState::default() });
+            if super::update_mirror(&mut n.start_host[super::dof_span(&b.members, &[m])], call.u_start) {
                 start_changed.push(m);
             }
         }
@@ -316,21 +318,21 @@ impl GpuWorld {
             let first = run[0] as u64;
             uploads.push((n.newton.clone(), first * member_size, bytemuck::cast_slice(&n.newton_host[run[0]..=*run.last().expect("a run has members")]).to_vec()));
             uploads.push((n.state.clone(), first * state_size, bytemuck::cast_slice(&states[k..k + run.len()]).to_vec()));
-            let (start, end) = (b.members[run[0]].dof_start as usize, { let last = b.members[*run.last().expect("a run has members")]; (last.dof_start + last.dofs) as usize });
+            let dofs = super::dof_span(&b.members, &run);
             let outs: Vec<Real> = mine[k..k + run.len()].iter().flat_map(|&(i, _)| bytemuck::cast_slice::<DofOut<Real>, Real>(calls[i].dof_out).iter().copied()).collect();
-            debug_assert_eq!(outs.len(), 2 * (end - start));
-            uploads.push((b.dof_out.clone(), start as u64 * 2 * real, to_device(precision, &outs)));
+            debug_assert_eq!(outs.len(), 2 * dofs.len());
+            uploads.push((b.dof_out.clone(), dofs.start as u64 * 2 * real, to_device(precision, &outs)));
             k += run.len();
         }
         for run in super::runs(&start_changed) {
-            let (start, end) = (b.members[run[0]].dof_start as usize, { let last = b.members[*run.last().expect("a run has members")]; (last.dof_start + last.dofs) as usize });
-            uploads.push((n.u_start.clone(), start as u64 * real, to_device(precision, &n.start_host[start..end])));
+            let dofs = super::dof_span(&b.members, &run);
+            uploads.push((n.u_start.clone(), dofs.start as u64 * real, to_device(precision, &n.start_host[dofs])));
         }
         let list: Vec<Active> = members.iter().map(|&m| Active { member: m as u32, mode: MODE_FORCES }).collect();
         uploads.push((n.call.clone(), 0, bytemuck::cast_slice(&list).to_vec()));
         uploads.push((n.jobs.clone(), 0, bytemuck::cast_slice(&list).to_vec()));
         for run in super::runs(&members) {
-            uploads.push((b.failure.clone(), 8 * run[0] as u64, bytemuck::cast_slice(&vec![super::NO_FAILURE; 2 * run.len()]).to_vec()));
+            uploads.push((b.failure.clone(), 8 * run[0] as u64, bytemuck::cast_slice(&vec![NO_FAILURE; 2 * run.len()]).to_vec()));
         }
         let count = list.len() as u32;
         let most = |f: fn(&crate::gpu::types::MemberRange) -> u32| members.iter().map(|&m| f(&b.members[m]) as usize).max().unwrap_or(0);
