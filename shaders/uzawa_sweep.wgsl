@@ -3,7 +3,8 @@
 // a reaction another one writes, and a sweep of dispatches colour after colour gives the
 // iterates of a sequential sweep in that order. A point takes up to LOCAL_STEPS
 // predictor/corrector steps against the others' reactions, `v = v_free + shift n + W r`, until a
-// step moves its reaction by at most `settle max(|r|, floor)`.
+// step moves its reaction by at most `settle max(|r|, floor)`; its change goes into `dr`, which
+// `uzawa_judge` reads after the sweep.
 // CPU twin: `contact::uzawa::uzawa_sweep` (`gauss_seidel_point` per invocation), which this file
 // follows line by line. The law is `include/contact_law.wgsl`; `real` (f32 or f64) is defined by
 // the prelude added when the pipeline is made.
@@ -44,6 +45,8 @@ const WORKGROUP = 64u;
 // The reactions, 3 reals per point: in, the iterate; out, the colour's points stepped.
 @group(0) @binding(6) var<storage, read_write> r: array<real>;
 @group(0) @binding(7) var<uniform> colour: ColourRange;
+// The change of each point's reaction over its visit, 3 reals per point.
+@group(0) @binding(8) var<storage, read_write> dr: array<real>;
 
 fn reaction(i: u32) -> vec3<real> {
     return vec3<real>(r[3u * i], r[3u * i + 1u], r[3u * i + 2u]);
@@ -101,6 +104,10 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) g
             break;
         }
     }
+    let before = reaction(i);
+    dr[3u * i] = ri.x - before.x;
+    dr[3u * i + 1u] = ri.y - before.y;
+    dr[3u * i + 2u] = ri.z - before.z;
     r[3u * i] = ri.x;
     r[3u * i + 1u] = ri.y;
     r[3u * i + 2u] = ri.z;

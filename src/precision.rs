@@ -40,13 +40,14 @@ impl Precision {
         }
     }
 
-    /// Prepended to every shader source: the `real` alias and its largest finite value.
+    /// Prepended to every shader source: the `real` alias, its largest finite value and its
+    /// smallest positive normal one.
     pub fn wgsl_prelude(self) -> String {
-        let max = match self {
-            Precision::F32 => "3.4028234663852886e38",
-            Precision::F64 => "1.7976931348623157e308",
+        let (max, min_positive) = match self {
+            Precision::F32 => ("3.4028234663852886e38", "1.1754943508222875e-38"),
+            Precision::F64 => ("1.7976931348623157e308", "2.2250738585072014e-308"),
         };
-        format!("alias real = {};\nconst REAL_MAX = real({max});\n", self.name())
+        format!("alias real = {};\nconst REAL_MAX = real({max});\nconst REAL_MIN_POSITIVE = real({min_positive});\n", self.name())
     }
 }
 

@@ -175,3 +175,68 @@ fn coloured_gauss_seidel_is_the_sequential_sweep_in_colour_order() {
     }
     assert!(worst < 1e-8, "law residual {worst:.3e} after {} sweeps", outcome.iterations);
 }
+
+#[test]
+fn uzawa_judge_stops_where_the_cpu_iterations_stop() {
+    // The twin of the device's judge, fed the sweeps of the CPU's Gauss-Seidel iterations, stops
+    // each problem at the CPU's sweep with the CPU's outcome, and clears the live flags of that
+    // problem's points only. Three problems in one gather: one that never converges
+    // (tolerance 0, spent after 5 sweeps), two that converge; frames turned so that the nodal
+    // forces are not the reactions.
+    use bifirst::contact::uzawa::{solve, uzawa_sweep, Sweep, SETTLE};
+    use bifirst::gpu::uzawa_sweep::{NodeGather, UzawaJudgeState, UzawaProblem, JUDGE_LIVE};
+    let mut problems = [bifirst::bench::bench_contact_problem(5, 40, 70), bifirst::bench::bench_contact_problem(6, 200, 300), bifirst::bench::bench_contact_problem(7, 9, 12)];
+    for (k, p) in problems.iter_mut().enumerate() {
+        for (i, frame) in p.nodal.frames.iter_mut().enumerate() {
+            let (c, s) = ((0.3 * (i + k) as f64).cos(), (0.3 * (i + k) as f64).sin());
+            *frame = [[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]];
+        }
+    }
+    let settings = [(0.0, 5), (1e-10, 500), (1e-12, 500)];
+    let floor = 1e-3;
+    let mut on_cpu = Vec::new();
+    for (p, &(tolerance, max)) in problems.iter().zip(&settings) {
+        let mut r = p.r.clone();
+        on_cpu.push(solve(&mut p.with(&mut r, tolerance, floor, max), Sweep::GaussSeidel, None));
+    }
+    let mut reactions: Vec<Vec<[f64; 3]>> = problems.iter().map(|p| p.r.clone()).collect();
+    let list: Vec<_> = problems.iter().zip(&settings).zip(&mut reactions).map(|((p, &(tolerance, max)), r)| p.with(r, tolerance, floor, max)).collect();
+    let nodes = NodeGather::of(&list);
+    drop(list);
+    let mut offsets = vec![0u32];
+    for p in &problems {
+        offsets.push(offsets.last().unwrap() + p.local.len() as u32);
+    }
+    let judged: Vec<UzawaProblem<f64>> = (0..3)
+        .map(|k| UzawaProblem { point_start: offsets[k], point_end: offsets[k + 1], node_start: nodes.node_offsets[k], node_end: nodes.node_offsets[k + 1], max_iterations: settings[k].1 as u32, pad: [0; 3], tolerance: settings[k].0, floor })
+        .collect();
+    let mut states: Vec<UzawaJudgeState<f64>> = judged.iter().map(UzawaJudgeState::start).collect();
+    let mut live = vec![1u32; *offsets.last().unwrap() as usize];
+    let mut drs: Vec<Vec<[f64; 3]>> = problems.iter().map(|p| vec![[0.0; 3]; p.local.len()]).collect();
+    while states.iter().any(|s| s.status == JUDGE_LIVE) {
+        for k in 0..3 {
+            if states[k].status != JUDGE_LIVE {
+                continue;
+            }
+            let p = &problems[k];
+            for c in 0..p.colours.count() {
+                uzawa_sweep(&p.w, &p.local, p.colours.colour(c), &mut reactions[k], &mut drs[k], SETTLE * settings[k].0, floor);
+            }
+        }
+        let r: Vec<f64> = reactions.iter().flatten().flatten().copied().collect();
+        let dr: Vec<f64> = drs.iter().flatten().flatten().copied().collect();
+        for k in 0..3 {
+            bifirst::cpu::uzawa_judge(&judged, &mut states, &nodes, &r, &dr, &mut live, k);
+        }
+        for k in 0..3 {
+            let flags = &live[offsets[k] as usize..offsets[k + 1] as usize];
+            assert!(flags.iter().all(|&f| f == (states[k].status == JUDGE_LIVE) as u32), "problem {k}: its points' flags follow its state");
+        }
+    }
+    for k in 0..3 {
+        let (device, cpu) = (states[k].outcome(), on_cpu[k]);
+        assert_eq!((device.iterations, device.converged), (cpu.iterations, cpu.converged), "problem {k}");
+        assert_eq!(device.change, cpu.change, "problem {k}: the change, to the bit");
+    }
+    assert!(!on_cpu[0].converged && on_cpu[1].converged && on_cpu[2].converged && on_cpu[1].iterations > 3, "{on_cpu:?}");
+}

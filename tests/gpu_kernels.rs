@@ -107,6 +107,31 @@ fn uzawa_sweep_structs_match_the_shader_layout() {
 }
 
 #[test]
+fn uzawa_judge_structs_match_the_shader_layout() {
+    use bifirst::gpu::uzawa_sweep::{UzawaJudgeState, UzawaProblem};
+    use std::mem::size_of;
+    let problem_u32 = ["point_start", "point_end", "node_start", "node_end", "max_iterations", "pad0", "pad1", "pad2"];
+    let state_u32 = ["status", "iterations", "pad0", "pad1"];
+    for precision in PRECISIONS {
+        let real = precision.size() as u32;
+        let layout = |u: &[&str], r: &[&str]| -> Vec<(String, u32)> { u.iter().enumerate().map(|(i, f)| (f.to_string(), 4 * i as u32)).chain(r.iter().enumerate().map(|(i, f)| (f.to_string(), 4 * u.len() as u32 + real * i as u32))).collect() };
+        let sizes = match precision {
+            Precision::F64 => [size_of::<UzawaProblem<f64>>(), size_of::<UzawaJudgeState<f64>>()],
+            Precision::F32 => [size_of::<UzawaProblem<f32>>(), size_of::<UzawaJudgeState<f32>>()],
+        };
+        let module = validate("uzawa_judge", precision, None).unwrap();
+        let (members, span) = naga_layout(&module, "UzawaProblem");
+        assert_eq!((members, span as usize), (layout(&problem_u32, &["tolerance", "floor"]), sizes[0]), "{}", precision.name());
+        let (members, span) = naga_layout(&module, "UzawaJudgeState");
+        assert_eq!((members, span as usize), (layout(&state_u32, &["previous", "change"]), sizes[1]), "{}", precision.name());
+    }
+    let p = UzawaProblem::<f64> { point_start: 1, point_end: 2, node_start: 3, node_end: 4, max_iterations: 5, pad: [6, 7, 8], tolerance: 9.0, floor: 10.0 };
+    let words: [u32; 12] = bytemuck::cast(p);
+    assert_eq!(words[..8], [1, 2, 3, 4, 5, 6, 7, 8], "field order");
+    assert_eq!(bytemuck::cast::<_, [f64; 6]>(p)[4..], [9.0, 10.0]);
+}
+
+#[test]
 fn kernel_structs_match_the_shader_layouts() {
     use std::mem::size_of;
     let variant = Some(ElementVariant { kind: ElementKind::Hex8, formulation: Formulation::Displacement, material: "lvf" });

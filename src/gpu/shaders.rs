@@ -19,6 +19,7 @@ pub const SHADERS: &[(&str, &str)] = &[
     ("newton_update", include_str!("../../shaders/newton_update.wgsl")),
     ("peak_copy", include_str!("../../shaders/peak_copy.wgsl")),
     ("peak_fma", include_str!("../../shaders/peak_fma.wgsl")),
+    ("uzawa_judge", include_str!("../../shaders/uzawa_judge.wgsl")),
     ("uzawa_step", include_str!("../../shaders/uzawa_step.wgsl")),
     ("uzawa_sweep", include_str!("../../shaders/uzawa_sweep.wgsl")),
 ];

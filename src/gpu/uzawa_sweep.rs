@@ -1,25 +1,28 @@
-//! The `uzawa_sweep` kernel (`shaders/uzawa_sweep.wgsl`): the Gauss-Seidel Uzawa iterations of
-//! a Newton round on the device, for every group's contact problem ([`Problem`]) at once. CPU
-//! twin: [`crate::contact::uzawa::uzawa_sweep`]; [`crate::contact::uzawa::solve`] is the whole
-//! iteration this one repeats.
+//! The `uzawa_sweep` and `uzawa_judge` kernels (`shaders/uzawa_sweep.wgsl`,
+//! `shaders/uzawa_judge.wgsl`): the Gauss-Seidel Uzawa iterations of a Newton round on the
+//! device, for every group's contact problem ([`Problem`]) at once, judged there. CPU twins:
+//! [`crate::contact::uzawa::uzawa_sweep`] and [`crate::cpu::uzawa_judge`];
+//! [`crate::contact::uzawa::solve`] is the whole iteration this one repeats.
 //!
 //! The problems are independent (their points share no body), so colour `c` of the round is
-//! colour `c` of every problem, and a sweep is one dispatch per colour. Sweeps go to the device
-//! in chunks, one submit each; after every sweep the reactions are copied to the read-back
-//! buffer, so that the host judges each problem after each sweep with the CPU's rule
-//! ([`Judge`]) and takes the reactions of the sweep where it converged: the same iterates and
-//! iteration counts as on the CPU, with one submit per chunk instead of one per sweep.
+//! colour `c` of every problem, and a sweep is one dispatch per colour. After every sweep one
+//! dispatch of `uzawa_judge` applies the CPU's stopping rule ([`crate::contact::uzawa::Judge`])
+//! to each problem; a problem that stops leaves its reactions at that sweep, as the CPU's.
+//! Sweeps go to the device in chunks, one submit each, and the host reads back only where each
+//! problem stands and the reactions: the same iterates and iteration counts as on the CPU, with
+//! one submit per chunk instead of one per sweep, and no copy of the reactions per sweep.
 
-use super::world::{buffer, from_device, to_device, Traffic};
+use super::world::{buffer, Traffic};
 use super::{Gpu, GpuError};
-use crate::contact::uzawa::{Judge, Outcome, Problem, SETTLE};
-use crate::precision::Real;
+use crate::contact::uzawa::{Outcome, Problem, SETTLE};
+use crate::precision::{Precision, Real};
 use bytemuck::{Pod, Zeroable};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use wgpu::{BindGroup, Buffer, BufferUsages};
 
 const KERNEL: &str = "uzawa_sweep";
+const JUDGE: &str = "uzawa_judge";
 const WORKGROUP: u32 = 64;
 /// Sweeps in the first chunk of a solve; each further chunk doubles, up to [`LAST_CHUNK`]: a
 /// warm-started problem often converges in a few sweeps, a hard one needs hundreds.
@@ -51,8 +54,127 @@ pub struct ColourRange {
     pub count: u32,
 }
 
-/// The round's problems in one set of arrays: W (its blocks and rows) and the colour order,
-/// which change only when a problem's Delassus operator does.
+/// A contact problem of a device solve, for `uzawa_judge` (`struct UzawaProblem` in the
+/// shader): its points, its nodes (where its reactions land, [`crate::contact::uzawa::NodalMap`])
+/// and its stopping rule.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct UzawaProblem<R> {
+    pub point_start: u32,
+    pub point_end: u32,
+    pub node_start: u32,
+    pub node_end: u32,
+    pub max_iterations: u32,
+    pub pad: [u32; 3],
+    pub tolerance: R,
+    pub floor: R,
+}
+
+/// Where a problem's device iterations stand (`struct UzawaJudgeState` in the shader).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct UzawaJudgeState<R> {
+    /// [`JUDGE_LIVE`], [`JUDGE_CONVERGED`] or [`JUDGE_SPENT`].
+    pub status: u32,
+    /// Sweeps judged.
+    pub iterations: u32,
+    pub pad: [u32; 2],
+    /// The last sweep's largest change of a nodal force; negative before the first sweep.
+    pub previous: R,
+    /// That change over its scale ([`Outcome::change`]).
+    pub change: R,
+}
+
+// SAFETY: `repr(C)`, the `u32` fields fill whole 16 and 32 bytes before the reals, so that
+// neither f32 nor f64 leaves padding, and any bit pattern is valid.
+unsafe impl<R: Pod> Zeroable for UzawaProblem<R> {}
+unsafe impl<R: Pod> Pod for UzawaProblem<R> {}
+unsafe impl<R: Pod> Zeroable for UzawaJudgeState<R> {}
+unsafe impl<R: Pod> Pod for UzawaJudgeState<R> {}
+
+impl UzawaJudgeState<Real> {
+    /// Before the first sweep: live, unless the problem may take no sweep or has no point.
+    pub fn start(problem: &UzawaProblem<Real>) -> Self {
+        let live = problem.max_iterations > 0 && problem.point_end > problem.point_start;
+        Self { status: if live { JUDGE_LIVE } else { JUDGE_SPENT }, previous: -1.0, ..Default::default() }
+    }
+
+    /// The outcome the CPU's iterations would report.
+    pub fn outcome(&self) -> Outcome {
+        Outcome { iterations: self.iterations as usize, converged: self.status == JUDGE_CONVERGED, change: self.change }
+    }
+}
+
+/// `UzawaJudgeState.status`: still sweeping, converged, `max_iterations` spent.
+pub const JUDGE_LIVE: u32 = 0;
+pub const JUDGE_CONVERGED: u32 = 1;
+pub const JUDGE_SPENT: u32 = 2;
+
+/// Invocations of a `uzawa_judge` workgroup (one problem).
+pub const JUDGE_WORKGROUP: usize = 64;
+
+/// The number of problems (`struct JudgeCount` in the shader).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
+struct JudgeCount {
+    problems: u32,
+    pad: [u32; 3],
+}
+
+/// Where the reactions of a solve's problems land, for `uzawa_judge`: per node (numbered over
+/// all problems, each problem's in a run), the points that act on it in ascending order, each
+/// with its coefficient, and every point's frame.
+#[derive(Debug, Clone, Default)]
+pub struct NodeGather {
+    /// Node `n`'s points are `points[start[n]..start[n + 1]]`.
+    pub start: Vec<u32>,
+    pub points: Vec<u32>,
+    pub coefs: Vec<Real>,
+    /// Per point, its frame `[n, t1, t2]` row by row.
+    pub frames: Vec<Real>,
+    /// Problem `k`'s nodes are `node_offsets[k]..node_offsets[k + 1]`.
+    pub node_offsets: Vec<u32>,
+}
+
+impl NodeGather {
+    /// The gather of `problems`, their points numbered one after the other.
+    pub fn of(problems: &[Problem]) -> Self {
+        let mut g = NodeGather { start: vec![0], node_offsets: vec![0], ..Default::default() };
+        let mut point0 = 0u32;
+        for p in problems {
+            let nodal = p.nodal;
+            let mut count = vec![0u32; nodal.nodes + 1];
+            for terms in &nodal.terms {
+                for &(node, _) in terms {
+                    count[node as usize + 1] += 1;
+                }
+            }
+            for n in 0..nodal.nodes {
+                count[n + 1] += count[n];
+            }
+            let base = g.points.len() as u32;
+            g.start.extend(count[1..].iter().map(|&c| base + c));
+            g.points.resize(base as usize + count[nodal.nodes] as usize, 0);
+            g.coefs.resize(g.points.len(), 0.0);
+            // Point by point, so that each node lists its points in ascending order.
+            for (i, terms) in nodal.terms.iter().enumerate() {
+                for &(node, coef) in terms {
+                    let slot = (base + count[node as usize]) as usize;
+                    count[node as usize] += 1;
+                    g.points[slot] = point0 + i as u32;
+                    g.coefs[slot] = coef;
+                }
+            }
+            g.frames.extend(nodal.frames.iter().flatten().flatten());
+            g.node_offsets.push(g.node_offsets.last().expect("starts at 0") + nodal.nodes as u32);
+            point0 += p.local.len() as u32;
+        }
+        g
+    }
+}
+
+/// The round's problems in one set of arrays: W (its blocks and rows), the colour order and
+/// where the reactions land, which change only when a problem's Delassus operator does.
 #[derive(Default)]
 struct Layout {
     /// Each problem's W version and points: the layout serves a round with the same key.
@@ -64,6 +186,7 @@ struct Layout {
     ranges: Vec<ColourRange>,
     /// Each problem's first point, and the end.
     offsets: Vec<usize>,
+    nodes: NodeGather,
 }
 
 fn key_of(problems: &[Problem]) -> Vec<(u64, usize)> {
@@ -72,7 +195,7 @@ fn key_of(problems: &[Problem]) -> Vec<(u64, usize)> {
 
 impl Layout {
     fn of(problems: &[Problem]) -> Self {
-        let mut m = Layout { key: key_of(problems), row_start: vec![0], offsets: vec![0], ..Default::default() };
+        let mut m = Layout { key: key_of(problems), row_start: vec![0], offsets: vec![0], nodes: NodeGather::of(problems), ..Default::default() };
         for p in problems {
             let (point0, block0) = (*m.offsets.last().expect("starts at 0") as u32, (m.blocks.len() / 9) as u32);
             m.blocks.extend(p.w.blocks.iter().flatten());
@@ -102,16 +225,37 @@ impl Layout {
     fn range(&self, k: usize) -> std::ops::Range<usize> {
         self.offsets[k]..self.offsets[k + 1]
     }
+
+    /// What `uzawa_judge` needs of each problem.
+    fn judged(&self, problems: &[Problem]) -> Vec<UzawaProblem<Real>> {
+        let offsets = &self.nodes.node_offsets;
+        problems
+            .iter()
+            .enumerate()
+            .map(|(k, p)| UzawaProblem {
+                point_start: self.offsets[k] as u32,
+                point_end: self.offsets[k + 1] as u32,
+                node_start: offsets[k],
+                node_end: offsets[k + 1],
+                max_iterations: p.max_iterations.min(u32::MAX as usize) as u32,
+                pad: [0; 3],
+                tolerance: p.tolerance,
+                floor: p.floor,
+            })
+            .collect()
+    }
 }
 
 /// Device buffers, grown as rounds need more.
 struct Buffers {
-    /// Capacities: points, blocks, row entries, colours, sweeps the read-back holds.
+    /// Capacities: points, blocks, row entries, colours, problems, nodes, node entries.
     points: usize,
     blocks: usize,
     entries: usize,
     colours: usize,
-    snapshots: usize,
+    problems: usize,
+    nodes: usize,
+    node_entries: usize,
     block: Buffer,
     row_start: Buffer,
     row_entries: Buffer,
@@ -120,15 +264,25 @@ struct Buffers {
     live: Buffer,
     r: Buffer,
     ranges: Buffer,
+    judged: Buffer,
+    states: Buffer,
+    node_start: Buffer,
+    node_points: Buffer,
+    node_coefs: Buffer,
+    frames: Buffer,
+    count: Buffer,
+    /// The reactions, then the problems' states.
     staging: Buffer,
     /// One per colour: the same buffers with that colour's range.
     bind_groups: Vec<BindGroup>,
+    judge_group: BindGroup,
 }
 
-/// The pipeline and buffers of the device's Uzawa sweeps.
+/// The pipelines and buffers of the device's Uzawa sweeps.
 pub struct UzawaSweeps {
     gpu: Arc<Gpu>,
     pipeline: wgpu::ComputePipeline,
+    judge: wgpu::ComputePipeline,
     buffers: Option<Buffers>,
     /// What the device holds of the last round.
     layout: Layout,
@@ -146,8 +300,9 @@ fn storage(gpu: &Gpu, label: &str, bytes: usize, extra: BufferUsages) -> Buffer 
 impl UzawaSweeps {
     pub fn new(gpu: Arc<Gpu>) -> Result<Self, GpuError> {
         let pipeline = gpu.pipeline(KERNEL, None)?;
+        let judge = gpu.pipeline(JUDGE, None)?;
         let range_stride = (gpu.device.limits().min_uniform_buffer_offset_alignment as u64).max(std::mem::size_of::<ColourRange>() as u64);
-        Ok(Self { gpu, pipeline, buffers: None, layout: Layout::default(), range_stride, submits: 0, traffic: Traffic::default() })
+        Ok(Self { gpu, pipeline, judge, buffers: None, layout: Layout::default(), range_stride, submits: 0, traffic: Traffic::default() })
     }
 
     /// The most items of `bytes` each that one buffer of the device can bind.
@@ -159,16 +314,19 @@ impl UzawaSweeps {
     /// Makes sure the buffers hold the round (growing them by half again what it needs, within
     /// the device's limits) and that there is a bind group per colour; whether they are new
     /// (and hold nothing yet), or `None` when the round is too large for the device's buffers.
-    fn reserve(&mut self, m: &Layout) -> Option<bool> {
+    fn reserve(&mut self, m: &Layout, problems: usize) -> Option<bool> {
         let real = self.gpu.precision.size();
         let local_bytes = std::mem::size_of::<UzawaLocal<f64>>() / 8 * real;
+        let problem_bytes = std::mem::size_of::<UzawaProblem<f64>>();
         let (points, blocks, entries, colours) = (m.points(), m.blocks.len() / 9, m.row_entries.len(), m.ranges.len());
-        let limits = [self.most(local_bytes).min(self.most(3 * real)), self.most(9 * real), self.most(8)];
+        let (nodes, node_entries) = (m.nodes.start.len() - 1, m.nodes.points.len());
+        let limits = [self.most(local_bytes).min(self.most(9 * real)), self.most(9 * real), self.most(8), self.most(problem_bytes), self.most(4), self.most(real)];
         let uniform_limit = (self.gpu.device.limits().max_buffer_size / self.range_stride) as usize;
-        if points > limits[0] || blocks > limits[1] || entries > limits[2] || colours > uniform_limit {
+        if points > limits[0] || blocks > limits[1] || entries > limits[2] || colours > uniform_limit || problems > limits[3] || nodes >= limits[4] || node_entries > limits[5] {
             return None;
         }
-        if self.buffers.as_ref().is_some_and(|b| b.points >= points && b.blocks >= blocks && b.entries >= entries && b.colours >= colours) {
+        let fits = |b: &Buffers| b.points >= points && b.blocks >= blocks && b.entries >= entries && b.colours >= colours && b.problems >= problems && b.nodes >= nodes && b.node_entries >= node_entries;
+        if self.buffers.as_ref().is_some_and(fits) {
             return Some(false);
         }
         let grow = |n: usize, old: Option<usize>, limit: usize| old.unwrap_or(0).max(n + n / 2).clamp(1, limit.max(1));
@@ -177,10 +335,12 @@ impl UzawaSweeps {
         let blocks = grow(blocks, old.map(|b| b.blocks), limits[1]);
         let entries = grow(entries, old.map(|b| b.entries), limits[2]);
         let colours = grow(colours, old.map(|b| b.colours), uniform_limit);
-        let point_bytes = (points * 3 * real) as u64;
-        let snapshots = ((self.gpu.device.limits().max_buffer_size / point_bytes) as usize).clamp(1, LAST_CHUNK);
+        let problems = grow(problems, old.map(|b| b.problems), limits[3]);
+        let nodes = grow(nodes, old.map(|b| b.nodes), limits[4] - 1);
+        let node_entries = grow(node_entries, old.map(|b| b.node_entries), limits[5]);
         let gpu = &self.gpu;
         let none = BufferUsages::empty();
+        let state_bytes = problems * std::mem::size_of::<UzawaJudgeState<Real>>();
         let block = storage(gpu, "uzawa blocks", blocks * 9 * real, none);
         let row_start = storage(gpu, "uzawa row starts", (points + 1) * 4, none);
         let row_entries = storage(gpu, "uzawa row entries", entries * 8, none);
@@ -188,8 +348,16 @@ impl UzawaSweeps {
         let order = storage(gpu, "uzawa colour order", points * 4, none);
         let live = storage(gpu, "uzawa live", points * 4, none);
         let r = storage(gpu, "uzawa reactions", points * 3 * real, BufferUsages::COPY_SRC);
+        let dr = storage(gpu, "uzawa reaction changes", points * 3 * real, none);
         let ranges = buffer(gpu, "uzawa colours", colours * self.range_stride as usize, BufferUsages::UNIFORM | BufferUsages::COPY_DST);
-        let staging = buffer(gpu, "uzawa read-back", snapshots * point_bytes as usize, BufferUsages::MAP_READ | BufferUsages::COPY_DST);
+        let judged = storage(gpu, "uzawa problems", problems * problem_bytes, none);
+        let states = storage(gpu, "uzawa judge states", state_bytes, BufferUsages::COPY_SRC);
+        let node_start = storage(gpu, "uzawa node starts", (nodes + 1) * 4, none);
+        let node_points = storage(gpu, "uzawa node points", node_entries * 4, none);
+        let node_coefs = storage(gpu, "uzawa node coefficients", node_entries * real, none);
+        let frames = storage(gpu, "uzawa frames", points * 9 * real, none);
+        let count = buffer(gpu, "uzawa problem count", std::mem::size_of::<JudgeCount>(), BufferUsages::UNIFORM | BufferUsages::COPY_DST);
+        let staging = buffer(gpu, "uzawa read-back", points * 3 * real + state_bytes, BufferUsages::MAP_READ | BufferUsages::COPY_DST);
         let layout = self.pipeline.get_bind_group_layout(0);
         let bind_groups = (0..colours)
             .map(|c| {
@@ -197,10 +365,42 @@ impl UzawaSweeps {
                 let mut entries: Vec<wgpu::BindGroupEntry> = whole.iter().enumerate().map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() }).collect();
                 let range = wgpu::BufferBinding { buffer: &ranges, offset: c as u64 * self.range_stride, size: wgpu::BufferSize::new(std::mem::size_of::<ColourRange>() as u64) };
                 entries.push(wgpu::BindGroupEntry { binding: 7, resource: wgpu::BindingResource::Buffer(range) });
+                entries.push(wgpu::BindGroupEntry { binding: 8, resource: dr.as_entire_binding() });
                 gpu.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(KERNEL), layout: &layout, entries: &entries })
             })
             .collect();
-        self.buffers = Some(Buffers { points, blocks, entries, colours, snapshots, block, row_start, row_entries, locals, order, live, r, ranges, staging, bind_groups });
+        let judge_group = {
+            let whole = [&judged, &states, &node_start, &node_points, &node_coefs, &frames, &r, &dr, &live, &count];
+            let entries: Vec<wgpu::BindGroupEntry> = whole.iter().enumerate().map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() }).collect();
+            gpu.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(JUDGE), layout: &self.judge.get_bind_group_layout(0), entries: &entries })
+        };
+        self.buffers = Some(Buffers {
+            points,
+            blocks,
+            entries,
+            colours,
+            problems,
+            nodes,
+            node_entries,
+            block,
+            row_start,
+            row_entries,
+            locals,
+            order,
+            live,
+            r,
+            ranges,
+            judged,
+            states,
+            node_start,
+            node_points,
+            node_coefs,
+            frames,
+            count,
+            staging,
+            bind_groups,
+            judge_group,
+        });
         Some(true)
     }
 
@@ -214,27 +414,34 @@ impl UzawaSweeps {
     /// Solves every problem with Gauss-Seidel sweeps on the device until each converges by the
     /// CPU's rule, reaches its `max_iterations`, or `stop` is set; each problem's `r` gets the
     /// reactions of its last sweep. The outcomes are in the problems' order; `None` (nothing
-    /// done) when the round is too large for the device's buffers.
+    /// done) when the round is too large for the device's buffers. f64 kernels only (the
+    /// engine's sweeps run in f64).
     pub fn solve(&mut self, problems: &mut [Problem], stop: Option<&AtomicBool>) -> Result<Option<Vec<Outcome>>, GpuError> {
         let precision = self.gpu.precision;
+        assert_eq!(precision, Precision::F64, "the device's Uzawa sweeps need f64 kernels");
         let mut outcomes = vec![Outcome::default(); problems.len()];
         if problems.iter().all(|p| p.local.is_empty()) {
             return Ok(Some(outcomes));
         }
         let resident = self.layout.key == key_of(problems);
         let layout = if resident { std::mem::take(&mut self.layout) } else { Layout::of(problems) };
-        let Some(reallocated) = self.reserve(&layout) else {
+        let Some(reallocated) = self.reserve(&layout, problems.len()) else {
             return Ok(None);
         };
         let b = self.buffers.take().expect("reserved");
         if !resident || reallocated {
-            self.upload(&b.block, 0, &to_device(precision, &layout.blocks));
+            self.upload(&b.block, 0, bytemuck::cast_slice(&layout.blocks));
             self.upload(&b.row_start, 0, bytemuck::cast_slice(&layout.row_start));
             self.upload(&b.row_entries, 0, bytemuck::cast_slice(&layout.row_entries));
             self.upload(&b.order, 0, bytemuck::cast_slice(&layout.order));
             for (c, range) in layout.ranges.iter().enumerate() {
                 self.upload(&b.ranges, c as u64 * self.range_stride, bytemuck::bytes_of(range));
             }
+            let nodes = &layout.nodes;
+            self.upload(&b.node_start, 0, bytemuck::cast_slice(&nodes.start));
+            self.upload(&b.node_points, 0, bytemuck::cast_slice(&nodes.points));
+            self.upload(&b.node_coefs, 0, bytemuck::cast_slice(&nodes.coefs));
+            self.upload(&b.frames, 0, bytemuck::cast_slice(&nodes.frames));
         }
         let locals: Vec<UzawaLocal<Real>> = problems
             .iter()
@@ -243,81 +450,68 @@ impl UzawaSweeps {
                 p.local.iter().map(move |l| UzawaLocal { v_free: l.v_free, shift: l.shift, mu: l.mu, rho: l.rho, floor: p.floor, settle })
             })
             .collect();
+        let judged = layout.judged(problems);
+        let states: Vec<UzawaJudgeState<Real>> = judged.iter().map(UzawaJudgeState::start).collect();
+        let live: Vec<u32> = judged.iter().zip(&states).flat_map(|(p, s)| std::iter::repeat_n((s.status == JUDGE_LIVE) as u32, (p.point_end - p.point_start) as usize)).collect();
         let start: Vec<Real> = problems.iter().flat_map(|p| p.r.iter().flatten().copied()).collect();
-        self.upload(&b.locals, 0, &to_device(precision, bytemuck::cast_slice(&locals)));
-        self.upload(&b.live, 0, bytemuck::cast_slice(&vec![1u32; layout.points()]));
-        self.upload(&b.r, 0, &to_device(precision, &start));
-        let result = self.iterate(&b, &layout, start, problems, &mut outcomes, stop);
+        self.upload(&b.locals, 0, bytemuck::cast_slice(&locals));
+        self.upload(&b.judged, 0, bytemuck::cast_slice(&judged));
+        self.upload(&b.states, 0, bytemuck::cast_slice(&states));
+        self.upload(&b.count, 0, bytemuck::bytes_of(&JudgeCount { problems: problems.len() as u32, pad: [0; 3] }));
+        self.upload(&b.live, 0, bytemuck::cast_slice(&live));
+        self.upload(&b.r, 0, bytemuck::cast_slice(&start));
+        let sweeping = states.iter().any(|s| s.status == JUDGE_LIVE);
+        let result = if sweeping { self.iterate(&b, &layout, problems, &mut outcomes, stop) } else { Ok(()) };
         self.buffers = Some(b);
         self.layout = layout;
         result.map(|()| Some(outcomes))
     }
 
-    /// The chunks of sweeps and the host's judgement after each sweep, from the reactions
-    /// `previous`.
-    fn iterate(&mut self, b: &Buffers, m: &Layout, mut previous: Vec<Real>, problems: &mut [Problem], outcomes: &mut [Outcome], stop: Option<&AtomicBool>) -> Result<(), GpuError> {
-        let precision = self.gpu.precision;
+    /// The chunks of sweeps, each sweep followed by the device's judgement, until no problem
+    /// is live; after each chunk the host reads back where each problem stands and the
+    /// reactions.
+    fn iterate(&mut self, b: &Buffers, m: &Layout, problems: &mut [Problem], outcomes: &mut [Outcome], stop: Option<&AtomicBool>) -> Result<(), GpuError> {
         let n = m.points();
-        let point_bytes = (n * 3 * precision.size()) as u64;
-        let mut judges: Vec<Judge> = problems.iter().map(|p| Judge::new(p.tolerance, p.floor)).collect();
-        let mut live: Vec<bool> = problems.iter().map(|p| p.max_iterations > 0 && !p.r.is_empty()).collect();
+        let r_bytes = (n * 3 * std::mem::size_of::<Real>()) as u64;
+        let state_bytes = (problems.len() * std::mem::size_of::<UzawaJudgeState<Real>>()) as u64;
         let (mut swept, mut chunk) = (0usize, FIRST_CHUNK);
-        let (mut scratch, mut dr) = (Vec::new(), Vec::new());
         let most = problems.iter().map(|p| p.max_iterations).max().unwrap_or(0);
-        while live.iter().any(|&l| l) && !stop.is_some_and(|s| s.load(Ordering::Relaxed)) {
-            let sweeps = chunk.min(most - swept).min(b.snapshots);
+        let (judge_x, judge_y) = super::dispatch_rows(problems.len());
+        let mut live = true;
+        while live && swept < most && !stop.is_some_and(|s| s.load(Ordering::Relaxed)) {
+            let sweeps = chunk.min(most - swept);
             let mut encoder = self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(KERNEL) });
-            for s in 0..sweeps {
-                {
-                    let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(KERNEL), timestamp_writes: None });
-                    pass.set_pipeline(&self.pipeline);
-                    for (range, group) in m.ranges.iter().zip(&b.bind_groups) {
-                        let (x, y) = super::dispatch_rows(range.count.div_ceil(WORKGROUP) as usize);
-                        pass.set_bind_group(0, group, &[]);
-                        pass.dispatch_workgroups(x, y, 1);
-                    }
+            for _ in 0..sweeps {
+                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(KERNEL), timestamp_writes: None });
+                pass.set_pipeline(&self.pipeline);
+                for (range, group) in m.ranges.iter().zip(&b.bind_groups) {
+                    let (x, y) = super::dispatch_rows(range.count.div_ceil(WORKGROUP) as usize);
+                    pass.set_bind_group(0, group, &[]);
+                    pass.dispatch_workgroups(x, y, 1);
                 }
-                encoder.copy_buffer_to_buffer(&b.r, 0, &b.staging, s as u64 * point_bytes, point_bytes);
+                pass.set_pipeline(&self.judge);
+                pass.set_bind_group(0, &b.judge_group, &[]);
+                pass.dispatch_workgroups(judge_x, judge_y, 1);
             }
+            encoder.copy_buffer_to_buffer(&b.r, 0, &b.staging, 0, r_bytes);
+            encoder.copy_buffer_to_buffer(&b.states, 0, &b.staging, r_bytes, state_bytes);
             self.gpu.queue.submit([encoder.finish()]);
             self.submits += 1;
-            let bytes = self.gpu.read_range(KERNEL, &b.staging, sweeps as u64 * point_bytes)?;
+            let bytes = self.gpu.read_range(KERNEL, &b.staging, r_bytes + state_bytes)?;
             self.traffic.down += bytes.len() as u64;
-            let snapshots = from_device(precision, &bytes);
-            let mut finished = false;
-            for (s, now) in snapshots.chunks(3 * n).enumerate() {
-                let iteration = swept + s + 1;
-                for (k, p) in problems.iter_mut().enumerate() {
-                    if !live[k] {
-                        continue;
-                    }
-                    let range = m.range(k);
-                    dr.clear();
-                    dr.extend(range.clone().map(|i| [0, 1, 2].map(|a| now[3 * i + a] - previous[3 * i + a])));
-                    let r: &[[Real; 3]] = bytemuck::cast_slice(&now[3 * range.start..3 * range.end]);
-                    let (change, size) = p.nodal.change(&dr, r, &mut scratch);
-                    outcomes[k] = judges[k].after(iteration, change, size);
-                    if outcomes[k].converged || iteration == p.max_iterations {
-                        p.r.copy_from_slice(r);
-                        live[k] = false;
-                        finished = true;
-                    }
-                }
-                previous.copy_from_slice(now);
+            let reactions: Vec<Real> = bytemuck::pod_collect_to_vec(&bytes[..r_bytes as usize]);
+            let states: Vec<UzawaJudgeState<Real>> = bytemuck::pod_collect_to_vec(&bytes[r_bytes as usize..]);
+            live = false;
+            for (k, (p, state)) in problems.iter_mut().zip(&states).enumerate() {
+                // A problem that stopped keeps the reactions of its last sweep; a live one
+                // where the device stands, should the next chunk not come.
+                let range = m.range(k);
+                p.r.copy_from_slice(bytemuck::cast_slice(&reactions[3 * range.start..3 * range.end]));
+                outcomes[k] = state.outcome();
+                live |= state.status == JUDGE_LIVE;
             }
             swept += sweeps;
             chunk = (2 * chunk).min(LAST_CHUNK);
-            for (k, p) in problems.iter_mut().enumerate() {
-                if live[k] {
-                    // Where the device stands, should the next chunk not come.
-                    let range = m.range(k);
-                    p.r.copy_from_slice(bytemuck::cast_slice(&previous[3 * range.start..3 * range.end]));
-                }
-            }
-            if finished && live.iter().any(|&l| l) {
-                let flags: Vec<u32> = (0..problems.len()).flat_map(|k| std::iter::repeat_n(live[k] as u32, m.range(k).len())).collect();
-                self.upload(&b.live, 0, bytemuck::cast_slice(&flags));
-            }
         }
         Ok(())
     }
