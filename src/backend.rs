@@ -268,23 +268,29 @@ impl Backend {
     }
 }
 
-/// Whether a Newton round's contact problems, `points` points in at most `colours` colours,
-/// take their Uzawa sweeps on the device of `world`. Only Gauss-Seidel sweeps in f64 can: the
-/// device has no Jacobi kernel, and in f32 the iterations cannot reach the contact tolerance.
-/// `auto` never takes a software adapter (lavapipe was measured 1.8x to 11x slower than the
-/// CPU's sweeps at every size), and takes a hardware one when a colour holds on average at least
-/// [`AUTO_UZAWA_POINTS_PER_COLOUR`] points and the round at least [`AUTO_UZAWA_POINTS`], and
+/// Whether a Newton round's contact problems, `points` points in at most `colours` colours, the
+/// widest of `widest` points, take their Uzawa sweeps on the device of `world`. Only
+/// Gauss-Seidel sweeps in f64 can: the device has no Jacobi kernel, and in f32 the iterations
+/// cannot reach the contact tolerance. `auto` never takes a software adapter (lavapipe was
+/// measured slower than the CPU's sweeps), and takes a hardware one when the round has at least
+/// [`AUTO_UZAWA_POINTS`] points and either is solved whole, one workgroup per problem
+/// (`widest` within [`crate::gpu::uzawa_sweep::SOLVE_WIDEST`]: one dispatch for all its sweeps),
+/// or a colour holds on average at least [`AUTO_UZAWA_POINTS_PER_COLOUR`] points (a dispatch per
+/// colour and sweep), and
 /// only for plain sweeps: the device's sweeps are not accelerated, and the CPU's Anderson-mixed
 /// sweeps need 5 to 10 times fewer (doc/benchmarks.md, "Contact solver"). `gpu` runs plain
 /// sweeps on the device whatever `contact.acceleration` says.
-pub fn uzawa_on_device(world: &GpuWorld, settings: &Settings, points: usize, colours: usize) -> bool {
+pub fn uzawa_on_device(world: &GpuWorld, settings: &Settings, points: usize, colours: usize, widest: usize) -> bool {
     if settings.sweep != Sweep::GaussSeidel || world.precision() != Precision::F64 {
         return false;
     }
     match world.uzawa {
         UzawaPlacement::Gpu => true,
         UzawaPlacement::Cpu => false,
-        UzawaPlacement::Auto => settings.acceleration == Acceleration::None && !world.software() && points >= AUTO_UZAWA_POINTS && points >= AUTO_UZAWA_POINTS_PER_COLOUR * colours,
+        UzawaPlacement::Auto => {
+            let dispatches_pay = widest <= crate::gpu::uzawa_sweep::SOLVE_WIDEST || points >= AUTO_UZAWA_POINTS_PER_COLOUR * colours;
+            settings.acceleration == Acceleration::None && !world.software() && points >= AUTO_UZAWA_POINTS && dispatches_pay
+        }
     }
 }
 

@@ -107,10 +107,10 @@ fn uzawa_sweep_structs_match_the_shader_layout() {
 }
 
 #[test]
-fn uzawa_judge_structs_match_the_shader_layout() {
-    use bifirst::gpu::uzawa_sweep::{UzawaJudgeState, UzawaProblem};
+fn uzawa_problem_structs_match_the_shader_layout() {
+    use bifirst::gpu::uzawa_sweep::{SolveCount, UzawaJudgeState, UzawaProblem};
     use std::mem::size_of;
-    let problem_u32 = ["point_start", "point_end", "node_start", "node_end", "max_iterations", "pad0", "pad1", "pad2"];
+    let problem_u32 = ["point_start", "point_end", "node_start", "node_end", "max_iterations", "colour_first", "colours", "pad"];
     let state_u32 = ["status", "iterations", "pad0", "pad1"];
     for precision in PRECISIONS {
         let real = precision.size() as u32;
@@ -119,13 +119,17 @@ fn uzawa_judge_structs_match_the_shader_layout() {
             Precision::F64 => [size_of::<UzawaProblem<f64>>(), size_of::<UzawaJudgeState<f64>>()],
             Precision::F32 => [size_of::<UzawaProblem<f32>>(), size_of::<UzawaJudgeState<f32>>()],
         };
-        let module = validate("uzawa_judge", precision, None).unwrap();
-        let (members, span) = naga_layout(&module, "UzawaProblem");
-        assert_eq!((members, span as usize), (layout(&problem_u32, &["tolerance", "floor"]), sizes[0]), "{}", precision.name());
-        let (members, span) = naga_layout(&module, "UzawaJudgeState");
-        assert_eq!((members, span as usize), (layout(&state_u32, &["previous", "change"]), sizes[1]), "{}", precision.name());
+        for kernel in ["uzawa_judge", "uzawa_solve"] {
+            let module = validate(kernel, precision, None).unwrap();
+            let (members, span) = naga_layout(&module, "UzawaProblem");
+            assert_eq!((members, span as usize), (layout(&problem_u32, &["tolerance", "floor"]), sizes[0]), "{kernel} {}", precision.name());
+            let (members, span) = naga_layout(&module, "UzawaJudgeState");
+            assert_eq!((members, span as usize), (layout(&state_u32, &["previous", "change"]), sizes[1]), "{kernel} {}", precision.name());
+            let (members, span) = naga_layout(&module, "SolveCount");
+            assert_eq!((members, span as usize), (layout(&["problems", "sweeps", "pad0", "pad1"], &[]), size_of::<SolveCount>()), "{kernel}");
+        }
     }
-    let p = UzawaProblem::<f64> { point_start: 1, point_end: 2, node_start: 3, node_end: 4, max_iterations: 5, pad: [6, 7, 8], tolerance: 9.0, floor: 10.0 };
+    let p = UzawaProblem::<f64> { point_start: 1, point_end: 2, node_start: 3, node_end: 4, max_iterations: 5, colour_first: 6, colours: 7, pad: 8, tolerance: 9.0, floor: 10.0 };
     let words: [u32; 12] = bytemuck::cast(p);
     assert_eq!(words[..8], [1, 2, 3, 4, 5, 6, 7, 8], "field order");
     assert_eq!(bytemuck::cast::<_, [f64; 6]>(p)[4..], [9.0, 10.0]);
@@ -309,6 +313,68 @@ fn uzawa_sweep_kernel_matches_its_cpu_twin() {
     assert!(on_cpu[1].0.converged && on_cpu[2].0.converged && on_cpu[1].0.iterations > 1);
     assert!(uploads[1] < uploads[0] / 2, "W stays on the device while its version does: {uploads:?} bytes up");
     assert!(sweeps.submits < on_cpu.iter().map(|(o, _)| o.iterations as u64).sum::<u64>(), "chunks of sweeps, not a submit per sweep");
+}
+
+#[test]
+fn uzawa_solve_kernel_matches_its_cpu_twin() {
+    // Grain-sized problems (every colour within a workgroup's share) are solved whole on the
+    // device, one workgroup per problem: one dispatch and one submit for every sweep of the
+    // solve. One problem never converges (tolerance 0) and is spent after 7 sweeps, two
+    // converge. Each ends with its twin's iteration count, outcome and change, and that of the
+    // CPU's iterations, and reactions within 1e-12 of both, relative to its largest reaction.
+    use bifirst::contact::uzawa::{solve, Sweep};
+    use bifirst::gpu::uzawa_sweep::{NodeGather, UzawaJudgeState, UzawaProblem, UzawaSweeps, SOLVE_WIDEST};
+    let Some(gpu) = gpu_or_skip("uzawa_solve_kernel_matches_its_cpu_twin", Precision::F64) else { return };
+    let mut sweeps = UzawaSweeps::new(Arc::new(gpu)).expect("pipelines");
+    let problems = [bifirst::bench::bench_contact_problem(21, 60, 90), bifirst::bench::bench_contact_problem(22, 30, 40), bifirst::bench::bench_contact_problem(23, 150, 200)];
+    let widest = problems.iter().flat_map(|p| (0..p.colours.count()).map(|c| p.colours.colour(c).len())).max().unwrap();
+    assert!(widest <= SOLVE_WIDEST && widest > 64, "colours wider than a workgroup, within its share: {widest}");
+    let settings = [(0.0, 7), (1e-10, 500), (1e-12, 500)];
+    let floor = 1e-3;
+    let mut on_cpu = Vec::new();
+    for (p, &(tolerance, max)) in problems.iter().zip(&settings) {
+        let mut r = p.r.clone();
+        let outcome = solve(&mut p.with(&mut r, tolerance, floor, max), Sweep::GaussSeidel, None);
+        on_cpu.push((outcome, r));
+    }
+    // The twin, over the arrays the device holds.
+    let mut unused: Vec<Vec<[f64; 3]>> = problems.iter().map(|p| p.r.clone()).collect();
+    let list: Vec<_> = problems.iter().zip(&settings).zip(&mut unused).map(|((p, &(tolerance, max)), r)| p.with(r, tolerance, floor, max)).collect();
+    let nodes = NodeGather::of(&list);
+    let mut offsets = vec![0u32];
+    for p in &problems {
+        offsets.push(offsets.last().unwrap() + p.local.len() as u32);
+    }
+    let judged: Vec<UzawaProblem<f64>> = (0..3)
+        .map(|k| UzawaProblem { point_start: offsets[k], point_end: offsets[k + 1], node_start: nodes.node_offsets[k], node_end: nodes.node_offsets[k + 1], max_iterations: settings[k].1 as u32, tolerance: settings[k].0, floor, ..Default::default() })
+        .collect();
+    let mut states: Vec<UzawaJudgeState<f64>> = judged.iter().map(UzawaJudgeState::start).collect();
+    let mut r: Vec<f64> = problems.iter().flat_map(|p| p.r.iter().flatten().copied()).collect();
+    let mut dr = vec![0.0; r.len()];
+    for k in 0..3 {
+        cpu::uzawa_solve(&list[k], &judged, &mut states, &nodes, &mut r, &mut dr, 500, k);
+    }
+    drop(list);
+    let mut reactions: Vec<Vec<[f64; 3]>> = problems.iter().map(|p| p.r.clone()).collect();
+    let mut list: Vec<_> = problems.iter().zip(&settings).zip(&mut reactions).map(|((p, &(tolerance, max)), r)| p.with(r, tolerance, floor, max)).collect();
+    let submits = sweeps.submits;
+    let outcomes = sweeps.solve(&mut list, None).expect("device sweeps").expect("the problems fit the device");
+    drop(list);
+    assert_eq!(sweeps.submits - submits, 1, "one submit for the whole solve");
+    for k in 0..3 {
+        let twin = states[k].outcome();
+        let (device, (cpu, cpu_r)) = (outcomes[k], &on_cpu[k]);
+        assert_eq!((device.iterations, device.converged), (twin.iterations, twin.converged), "problem {k}: device and twin");
+        assert_eq!((twin.iterations, twin.converged, twin.change), (cpu.iterations, cpu.converged, cpu.change), "problem {k}: twin and the CPU's iterations");
+        let twin_r = &r[3 * offsets[k] as usize..3 * offsets[k + 1] as usize];
+        let scale = twin_r.iter().fold(1e-300, |m: f64, x| m.max(x.abs()));
+        let device_r: Vec<f64> = reactions[k].iter().flatten().copied().collect();
+        let worst = device_r.iter().zip(twin_r).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max) / scale;
+        assert_eq!(twin_r, cpu_r.iter().flatten().copied().collect::<Vec<_>>().as_slice(), "problem {k}: the twin's reactions are the CPU's, to the bit");
+        eprintln!("problem {k}: {} points, {} colours, {} sweeps, converged {}, max relative difference {worst:.2e}", reactions[k].len(), problems[k].colours.count(), device.iterations, device.converged);
+        assert!(worst <= 1e-12, "problem {k}: {worst:.3e}");
+    }
+    assert!(on_cpu[1].0.converged && on_cpu[2].0.converged && on_cpu[1].0.iterations > 3 && on_cpu[0].0.iterations == 7);
 }
 
 fn model_of(material: &str) -> Model {

@@ -10,18 +10,18 @@
 //! | `assemble_residual` | [`assemble_residual`] |
 //! | `uzawa_step` | [`uzawa_step`] |
 //! | `uzawa_sweep` | [`uzawa_sweep`] |
-//! | `uzawa_judge` | [`uzawa_judge`] |
+//! | `uzawa_judge`, `uzawa_solve` | [`uzawa_judge`], [`uzawa_solve`] |
 //! | `newton_update`, `newton_judge`, `newton_compact` | [`newton_update`], [`newton_judge`], [`newton_compact`] |
 //! | `peak_copy` | [`peak_copy`] |
 //! | `peak_fma` | [`peak_fma`] |
 
 mod newton;
-mod uzawa_judge;
+mod uzawa;
 
 pub use crate::contact::law::uzawa_step;
 pub use newton::{newton_compact, newton_judge, newton_update};
 pub use crate::contact::uzawa::uzawa_sweep;
-pub use uzawa_judge::uzawa_judge;
+pub use uzawa::{uzawa_judge, uzawa_solve};
 pub use crate::element::{element_energy, element_force_tangent};
 
 use crate::assembly::element_out_stride;

@@ -20,6 +20,7 @@ pub const SHADERS: &[(&str, &str)] = &[
     ("peak_copy", include_str!("../../shaders/peak_copy.wgsl")),
     ("peak_fma", include_str!("../../shaders/peak_fma.wgsl")),
     ("uzawa_judge", include_str!("../../shaders/uzawa_judge.wgsl")),
+    ("uzawa_solve", include_str!("../../shaders/uzawa_solve.wgsl")),
     ("uzawa_step", include_str!("../../shaders/uzawa_step.wgsl")),
     ("uzawa_sweep", include_str!("../../shaders/uzawa_sweep.wgsl")),
 ];
@@ -43,6 +44,9 @@ pub const INCLUDES: &[(&str, &str)] = &[
     ("material_ogden", include_str!("../../shaders/include/material_ogden.wgsl")),
     ("material_yeoh", include_str!("../../shaders/include/material_yeoh.wgsl")),
     ("tensor", include_str!("../../shaders/include/tensor.wgsl")),
+    ("uzawa", include_str!("../../shaders/include/uzawa.wgsl")),
+    ("uzawa_nodal", include_str!("../../shaders/include/uzawa_nodal.wgsl")),
+    ("uzawa_visit", include_str!("../../shaders/include/uzawa_visit.wgsl")),
     ("viscous", include_str!("../../shaders/include/viscous.wgsl")),
 ];
 
@@ -116,6 +120,15 @@ pub fn source(kernel: &str, precision: Precision, variant: Option<ElementVariant
         // The CPU twin's bound, so that both sweeps stop a point's local steps alike.
         module += &format!("const LOCAL_STEPS = {}u;\n", crate::contact::uzawa::LOCAL_STEPS);
         module += include("contact_law")?;
+        if kernel != "uzawa_step" {
+            module += include("uzawa")?;
+        }
+        if matches!(kernel, "uzawa_sweep" | "uzawa_solve") {
+            module += include("uzawa_visit")?;
+        }
+        if matches!(kernel, "uzawa_judge" | "uzawa_solve") {
+            module += include("uzawa_nodal")?;
+        }
     }
     match (is_element_kernel(kernel), variant) {
         (false, _) => {}

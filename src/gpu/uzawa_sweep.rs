@@ -4,13 +4,17 @@
 //! [`crate::contact::uzawa::uzawa_sweep`] and [`crate::cpu::uzawa_judge`];
 //! [`crate::contact::uzawa::solve`] is the whole iteration this one repeats.
 //!
-//! The problems are independent (their points share no body), so colour `c` of the round is
-//! colour `c` of every problem, and a sweep is one dispatch per colour. After every sweep one
-//! dispatch of `uzawa_judge` applies the CPU's stopping rule ([`crate::contact::uzawa::Judge`])
-//! to each problem; a problem that stops leaves its reactions at that sweep, as the CPU's.
-//! Sweeps go to the device in chunks, one submit each, and the host reads back only where each
-//! problem stands and the reactions: the same iterates and iteration counts as on the CPU, with
-//! one submit per chunk instead of one per sweep, and no copy of the reactions per sweep.
+//! Two ways, both with the iterates, stopping rule ([`crate::contact::uzawa::Judge`]) and
+//! iteration counts of the CPU's plain sweeps, a problem that stops keeping the reactions of
+//! that sweep, and the host reading back only where each problem stands and the reactions:
+//! - *Whole* (`uzawa_solve`), when every colour of the round fits a workgroup's share
+//!   ([`SOLVE_WIDEST`]; grains): one workgroup per problem runs its sweeps and judgements, so a
+//!   Newton round's Uzawa iterations are one dispatch and one submit (more only past
+//!   [`SOLVE_SWEEPS`] sweeps).
+//! - *Colour by colour* (`uzawa_sweep`, `uzawa_judge`), for larger colours: the problems are
+//!   independent (their points share no body), so colour `c` of the round is colour `c` of
+//!   every problem, and a sweep is one dispatch per colour across the device, then one of the
+//!   judge. Sweeps go to the device in chunks, one submit each.
 
 use super::world::{buffer, Traffic};
 use super::{Gpu, GpuError};
@@ -23,11 +27,21 @@ use wgpu::{BindGroup, Buffer, BufferUsages};
 
 const KERNEL: &str = "uzawa_sweep";
 const JUDGE: &str = "uzawa_judge";
+const SOLVE: &str = "uzawa_solve";
 const WORKGROUP: u32 = 64;
 /// Sweeps in the first chunk of a solve; each further chunk doubles, up to [`LAST_CHUNK`]: a
 /// warm-started problem often converges in a few sweeps, a hard one needs hundreds.
 const FIRST_CHUNK: usize = 4;
 const LAST_CHUNK: usize = 64;
+
+/// The largest colour (points) that a round's problems may have to be solved whole, one
+/// workgroup per problem (`uzawa_solve`): beyond it, a colour's points are better spread over
+/// the device by `uzawa_sweep`.
+pub const SOLVE_WIDEST: usize = 4 * JUDGE_WORKGROUP;
+
+/// Sweeps one dispatch of `uzawa_solve` may take before the host looks (an interrupt waits for
+/// at most this many).
+const SOLVE_SWEEPS: usize = 512;
 
 /// A contact point's data for the kernel (`struct UzawaLocal` in the shader).
 #[repr(C)]
@@ -65,7 +79,10 @@ pub struct UzawaProblem<R> {
     pub node_start: u32,
     pub node_end: u32,
     pub max_iterations: u32,
-    pub pad: [u32; 3],
+    /// For `uzawa_solve`: its colours' starts in the colour-start array, and how many.
+    pub colour_first: u32,
+    pub colours: u32,
+    pub pad: u32,
     pub tolerance: R,
     pub floor: R,
 }
@@ -110,15 +127,17 @@ pub const JUDGE_LIVE: u32 = 0;
 pub const JUDGE_CONVERGED: u32 = 1;
 pub const JUDGE_SPENT: u32 = 2;
 
-/// Invocations of a `uzawa_judge` workgroup (one problem).
+/// Invocations of a `uzawa_judge` or `uzawa_solve` workgroup (one problem).
 pub const JUDGE_WORKGROUP: usize = 64;
 
-/// The number of problems (`struct JudgeCount` in the shader).
+/// The number of problems, and the sweeps a dispatch of `uzawa_solve` may take (`struct
+/// SolveCount` in the shader).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
-struct JudgeCount {
-    problems: u32,
-    pad: [u32; 3],
+pub struct SolveCount {
+    pub problems: u32,
+    pub sweeps: u32,
+    pub pad: [u32; 2],
 }
 
 /// Where the reactions of a solve's problems land, for `uzawa_judge`: per node (numbered over
@@ -187,6 +206,13 @@ struct Layout {
     /// Each problem's first point, and the end.
     offsets: Vec<usize>,
     nodes: NodeGather,
+    /// For `uzawa_solve`: each problem's points colour by colour, where its colours start
+    /// (`colours + 1` entries per problem, the first at `colour_first[k]`), and the largest
+    /// colour of any problem.
+    solve_order: Vec<u32>,
+    colour_start: Vec<u32>,
+    colour_first: Vec<u32>,
+    widest: usize,
 }
 
 fn key_of(problems: &[Problem]) -> Vec<(u64, usize)> {
@@ -215,6 +241,15 @@ impl Layout {
             }
             m.ranges.push(ColourRange { start, count: m.order.len() as u32 - start });
         }
+        for (p, &offset) in problems.iter().zip(&m.offsets) {
+            m.colour_first.push(m.colour_start.len() as u32);
+            for c in 0..p.colours.count() {
+                m.colour_start.push(m.solve_order.len() as u32);
+                m.solve_order.extend(p.colours.colour(c).iter().map(|&i| offset as u32 + i));
+                m.widest = m.widest.max(p.colours.colour(c).len());
+            }
+            m.colour_start.push(m.solve_order.len() as u32);
+        }
         m
     }
 
@@ -238,7 +273,9 @@ impl Layout {
                 node_start: offsets[k],
                 node_end: offsets[k + 1],
                 max_iterations: p.max_iterations.min(u32::MAX as usize) as u32,
-                pad: [0; 3],
+                colour_first: self.colour_first[k],
+                colours: p.colours.count() as u32,
+                pad: 0,
                 tolerance: p.tolerance,
                 floor: p.floor,
             })
@@ -248,7 +285,8 @@ impl Layout {
 
 /// Device buffers, grown as rounds need more.
 struct Buffers {
-    /// Capacities: points, blocks, row entries, colours, problems, nodes, node entries.
+    /// Capacities: points, blocks, row entries, colours, problems, nodes, node entries,
+    /// colour starts.
     points: usize,
     blocks: usize,
     entries: usize,
@@ -256,6 +294,7 @@ struct Buffers {
     problems: usize,
     nodes: usize,
     node_entries: usize,
+    colour_entries: usize,
     block: Buffer,
     row_start: Buffer,
     row_entries: Buffer,
@@ -270,12 +309,15 @@ struct Buffers {
     node_points: Buffer,
     node_coefs: Buffer,
     frames: Buffer,
+    solve_order: Buffer,
+    colour_start: Buffer,
     count: Buffer,
     /// The reactions, then the problems' states.
     staging: Buffer,
     /// One per colour: the same buffers with that colour's range.
     bind_groups: Vec<BindGroup>,
     judge_group: BindGroup,
+    solve_group: BindGroup,
 }
 
 /// The pipelines and buffers of the device's Uzawa sweeps.
@@ -283,6 +325,7 @@ pub struct UzawaSweeps {
     gpu: Arc<Gpu>,
     pipeline: wgpu::ComputePipeline,
     judge: wgpu::ComputePipeline,
+    solve: wgpu::ComputePipeline,
     buffers: Option<Buffers>,
     /// What the device holds of the last round.
     layout: Layout,
@@ -301,8 +344,9 @@ impl UzawaSweeps {
     pub fn new(gpu: Arc<Gpu>) -> Result<Self, GpuError> {
         let pipeline = gpu.pipeline(KERNEL, None)?;
         let judge = gpu.pipeline(JUDGE, None)?;
+        let solve = gpu.pipeline(SOLVE, None)?;
         let range_stride = (gpu.device.limits().min_uniform_buffer_offset_alignment as u64).max(std::mem::size_of::<ColourRange>() as u64);
-        Ok(Self { gpu, pipeline, judge, buffers: None, layout: Layout::default(), range_stride, submits: 0, traffic: Traffic::default() })
+        Ok(Self { gpu, pipeline, judge, solve, buffers: None, layout: Layout::default(), range_stride, submits: 0, traffic: Traffic::default() })
     }
 
     /// The most items of `bytes` each that one buffer of the device can bind.
@@ -319,13 +363,13 @@ impl UzawaSweeps {
         let local_bytes = std::mem::size_of::<UzawaLocal<f64>>() / 8 * real;
         let problem_bytes = std::mem::size_of::<UzawaProblem<f64>>();
         let (points, blocks, entries, colours) = (m.points(), m.blocks.len() / 9, m.row_entries.len(), m.ranges.len());
-        let (nodes, node_entries) = (m.nodes.start.len() - 1, m.nodes.points.len());
+        let (nodes, node_entries, colour_entries) = (m.nodes.start.len() - 1, m.nodes.points.len(), m.colour_start.len());
         let limits = [self.most(local_bytes).min(self.most(9 * real)), self.most(9 * real), self.most(8), self.most(problem_bytes), self.most(4), self.most(real)];
         let uniform_limit = (self.gpu.device.limits().max_buffer_size / self.range_stride) as usize;
-        if points > limits[0] || blocks > limits[1] || entries > limits[2] || colours > uniform_limit || problems > limits[3] || nodes >= limits[4] || node_entries > limits[5] {
+        if points > limits[0] || blocks > limits[1] || entries > limits[2] || colours > uniform_limit || problems > limits[3] || nodes >= limits[4] || node_entries > limits[5] || colour_entries > limits[4] {
             return None;
         }
-        let fits = |b: &Buffers| b.points >= points && b.blocks >= blocks && b.entries >= entries && b.colours >= colours && b.problems >= problems && b.nodes >= nodes && b.node_entries >= node_entries;
+        let fits = |b: &Buffers| b.points >= points && b.blocks >= blocks && b.entries >= entries && b.colours >= colours && b.problems >= problems && b.nodes >= nodes && b.node_entries >= node_entries && b.colour_entries >= colour_entries;
         if self.buffers.as_ref().is_some_and(fits) {
             return Some(false);
         }
@@ -338,6 +382,7 @@ impl UzawaSweeps {
         let problems = grow(problems, old.map(|b| b.problems), limits[3]);
         let nodes = grow(nodes, old.map(|b| b.nodes), limits[4] - 1);
         let node_entries = grow(node_entries, old.map(|b| b.node_entries), limits[5]);
+        let colour_entries = grow(colour_entries, old.map(|b| b.colour_entries), limits[4]);
         let gpu = &self.gpu;
         let none = BufferUsages::empty();
         let state_bytes = problems * std::mem::size_of::<UzawaJudgeState<Real>>();
@@ -356,7 +401,9 @@ impl UzawaSweeps {
         let node_points = storage(gpu, "uzawa node points", node_entries * 4, none);
         let node_coefs = storage(gpu, "uzawa node coefficients", node_entries * real, none);
         let frames = storage(gpu, "uzawa frames", points * 9 * real, none);
-        let count = buffer(gpu, "uzawa problem count", std::mem::size_of::<JudgeCount>(), BufferUsages::UNIFORM | BufferUsages::COPY_DST);
+        let solve_order = storage(gpu, "uzawa problem colours", points * 4, none);
+        let colour_start = storage(gpu, "uzawa colour starts", colour_entries * 4, none);
+        let count = buffer(gpu, "uzawa problem count", std::mem::size_of::<SolveCount>(), BufferUsages::UNIFORM | BufferUsages::COPY_DST);
         let staging = buffer(gpu, "uzawa read-back", points * 3 * real + state_bytes, BufferUsages::MAP_READ | BufferUsages::COPY_DST);
         let layout = self.pipeline.get_bind_group_layout(0);
         let bind_groups = (0..colours)
@@ -374,6 +421,11 @@ impl UzawaSweeps {
             let entries: Vec<wgpu::BindGroupEntry> = whole.iter().enumerate().map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() }).collect();
             gpu.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(JUDGE), layout: &self.judge.get_bind_group_layout(0), entries: &entries })
         };
+        let solve_group = {
+            let whole = [&block, &row_start, &row_entries, &locals, &solve_order, &colour_start, &r, &dr, &judged, &states, &node_start, &node_points, &node_coefs, &frames, &count];
+            let entries: Vec<wgpu::BindGroupEntry> = whole.iter().enumerate().map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() }).collect();
+            gpu.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(SOLVE), layout: &self.solve.get_bind_group_layout(0), entries: &entries })
+        };
         self.buffers = Some(Buffers {
             points,
             blocks,
@@ -382,6 +434,7 @@ impl UzawaSweeps {
             problems,
             nodes,
             node_entries,
+            colour_entries,
             block,
             row_start,
             row_entries,
@@ -396,10 +449,13 @@ impl UzawaSweeps {
             node_points,
             node_coefs,
             frames,
+            solve_order,
+            colour_start,
             count,
             staging,
             bind_groups,
             judge_group,
+            solve_group,
         });
         Some(true)
     }
@@ -442,6 +498,8 @@ impl UzawaSweeps {
             self.upload(&b.node_points, 0, bytemuck::cast_slice(&nodes.points));
             self.upload(&b.node_coefs, 0, bytemuck::cast_slice(&nodes.coefs));
             self.upload(&b.frames, 0, bytemuck::cast_slice(&nodes.frames));
+            self.upload(&b.solve_order, 0, bytemuck::cast_slice(&layout.solve_order));
+            self.upload(&b.colour_start, 0, bytemuck::cast_slice(&layout.colour_start));
         }
         let locals: Vec<UzawaLocal<Real>> = problems
             .iter()
@@ -457,20 +515,26 @@ impl UzawaSweeps {
         self.upload(&b.locals, 0, bytemuck::cast_slice(&locals));
         self.upload(&b.judged, 0, bytemuck::cast_slice(&judged));
         self.upload(&b.states, 0, bytemuck::cast_slice(&states));
-        self.upload(&b.count, 0, bytemuck::bytes_of(&JudgeCount { problems: problems.len() as u32, pad: [0; 3] }));
-        self.upload(&b.live, 0, bytemuck::cast_slice(&live));
+        let whole = layout.widest <= SOLVE_WIDEST;
+        let most = problems.iter().map(|p| p.max_iterations).max().unwrap_or(0);
+        let sweeps = if whole { most.min(SOLVE_SWEEPS) as u32 } else { 0 };
+        self.upload(&b.count, 0, bytemuck::bytes_of(&SolveCount { problems: problems.len() as u32, sweeps, pad: [0; 2] }));
+        if !whole {
+            self.upload(&b.live, 0, bytemuck::cast_slice(&live));
+        }
         self.upload(&b.r, 0, bytemuck::cast_slice(&start));
         let sweeping = states.iter().any(|s| s.status == JUDGE_LIVE);
-        let result = if sweeping { self.iterate(&b, &layout, problems, &mut outcomes, stop) } else { Ok(()) };
+        let result = if sweeping { self.iterate(&b, &layout, whole, problems, &mut outcomes, stop) } else { Ok(()) };
         self.buffers = Some(b);
         self.layout = layout;
         result.map(|()| Some(outcomes))
     }
 
-    /// The chunks of sweeps, each sweep followed by the device's judgement, until no problem
-    /// is live; after each chunk the host reads back where each problem stands and the
-    /// reactions.
-    fn iterate(&mut self, b: &Buffers, m: &Layout, problems: &mut [Problem], outcomes: &mut [Outcome], stop: Option<&AtomicBool>) -> Result<(), GpuError> {
+    /// Submits until no problem is live: each a dispatch of `uzawa_solve` if `whole`, else a
+    /// chunk of sweeps colour by colour, each followed by the device's judgement; after each
+    /// the host reads back where each problem stands and the reactions.
+    #[allow(clippy::too_many_arguments)]
+    fn iterate(&mut self, b: &Buffers, m: &Layout, whole: bool, problems: &mut [Problem], outcomes: &mut [Outcome], stop: Option<&AtomicBool>) -> Result<(), GpuError> {
         let n = m.points();
         let r_bytes = (n * 3 * std::mem::size_of::<Real>()) as u64;
         let state_bytes = (problems.len() * std::mem::size_of::<UzawaJudgeState<Real>>()) as u64;
@@ -479,19 +543,27 @@ impl UzawaSweeps {
         let (judge_x, judge_y) = super::dispatch_rows(problems.len());
         let mut live = true;
         while live && swept < most && !stop.is_some_and(|s| s.load(Ordering::Relaxed)) {
-            let sweeps = chunk.min(most - swept);
             let mut encoder = self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(KERNEL) });
-            for _ in 0..sweeps {
+            let sweeps = if whole { SOLVE_SWEEPS } else { chunk.min(most - swept) };
+            {
                 let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(KERNEL), timestamp_writes: None });
-                pass.set_pipeline(&self.pipeline);
-                for (range, group) in m.ranges.iter().zip(&b.bind_groups) {
-                    let (x, y) = super::dispatch_rows(range.count.div_ceil(WORKGROUP) as usize);
-                    pass.set_bind_group(0, group, &[]);
-                    pass.dispatch_workgroups(x, y, 1);
+                if whole {
+                    pass.set_pipeline(&self.solve);
+                    pass.set_bind_group(0, &b.solve_group, &[]);
+                    pass.dispatch_workgroups(judge_x, judge_y, 1);
                 }
-                pass.set_pipeline(&self.judge);
-                pass.set_bind_group(0, &b.judge_group, &[]);
-                pass.dispatch_workgroups(judge_x, judge_y, 1);
+                // Colour by colour: each sweep's dispatches, then its judgement.
+                for _ in 0..if whole { 0 } else { sweeps } {
+                    pass.set_pipeline(&self.pipeline);
+                    for (range, group) in m.ranges.iter().zip(&b.bind_groups) {
+                        let (x, y) = super::dispatch_rows(range.count.div_ceil(WORKGROUP) as usize);
+                        pass.set_bind_group(0, group, &[]);
+                        pass.dispatch_workgroups(x, y, 1);
+                    }
+                    pass.set_pipeline(&self.judge);
+                    pass.set_bind_group(0, &b.judge_group, &[]);
+                    pass.dispatch_workgroups(judge_x, judge_y, 1);
+                }
             }
             encoder.copy_buffer_to_buffer(&b.r, 0, &b.staging, 0, r_bytes);
             encoder.copy_buffer_to_buffer(&b.states, 0, &b.staging, r_bytes, state_bytes);

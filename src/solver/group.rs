@@ -519,7 +519,8 @@ fn solve_contact(groups: &mut [Group], waiting: &[bool], world: &mut GpuWorld, c
     let chosen = || groups.iter().zip(waiting).filter(|(_, &w)| w).map(|(g, _)| g);
     let points: usize = chosen().filter_map(|g| g.contact.as_ref()).map(|c| c.points.len()).sum();
     let colours = chosen().filter_map(|g| g.contact.as_ref()).map(|c| c.colours.count()).max().unwrap_or(0);
-    if points > 0 && crate::backend::uzawa_on_device(world, settings, points, colours) {
+    let widest = chosen().filter_map(|g| g.contact.as_ref()).flat_map(|c| (0..c.colours.count()).map(|k| c.colours.colour(k).len())).max().unwrap_or(0);
+    if points > 0 && crate::backend::uzawa_on_device(world, settings, points, colours, widest) {
         let owners: Vec<usize> = (0..groups.len()).filter(|&k| waiting[k]).collect();
         let mut problems: Vec<_> = groups.iter_mut().zip(waiting).filter(|(_, &w)| w).map(|(g, _)| g.contact.as_mut().expect("a waiting group has contact").problem(settings)).collect();
         let solved = world.solve_contact(&mut problems, c.interrupt, times);

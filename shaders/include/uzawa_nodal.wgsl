@@ -1,0 +1,53 @@
+// The largest change of a nodal force over a sweep and the largest nodal force of a problem
+// (`NodalMap::change`: the bodies see the nodal forces, not the split of a reaction between
+// nearly redundant points), over a workgroup; shared by `uzawa_judge` and `uzawa_solve`, which
+// declare the buffers it reads (`node_start`, `node_points`, `node_coefs`, `frames`, `r`, `dr`).
+// CPU twin: `cpu::uzawa_judge`.
+
+var<workgroup> partial: array<vec2<real>, UZAWA_WORKGROUP>;
+
+// x (contact frame of point i) in global coordinates.
+fn global(i: u32, x: vec3<real>) -> vec3<real> {
+    let f = 9u * i;
+    return vec3<real>(
+        x.x * frames[f] + x.y * frames[f + 3u] + x.z * frames[f + 6u],
+        x.x * frames[f + 1u] + x.y * frames[f + 4u] + x.z * frames[f + 7u],
+        x.x * frames[f + 2u] + x.y * frames[f + 5u] + x.z * frames[f + 8u],
+    );
+}
+
+fn reaction_at(i: u32) -> vec3<real> {
+    return vec3<real>(r[3u * i], r[3u * i + 1u], r[3u * i + 2u]);
+}
+
+fn reaction_change(i: u32) -> vec3<real> {
+    return vec3<real>(dr[3u * i], dr[3u * i + 1u], dr[3u * i + 2u]);
+}
+
+// (largest change of a nodal force, largest nodal force) of problem p, each node's sum in point
+// order; every invocation of the workgroup calls it and gets the result.
+fn nodal_extremes(lane: u32, p: UzawaProblem) -> vec2<real> {
+    var most = vec2<real>(real(0.0));
+    for (var n = p.node_start + lane; n < p.node_end; n += UZAWA_WORKGROUP) {
+        var d = vec3<real>(real(0.0));
+        var a = vec3<real>(real(0.0));
+        for (var e = node_start[n]; e < node_start[n + 1u]; e++) {
+            let i = node_points[e];
+            let coef = node_coefs[e];
+            d += coef * global(i, reaction_change(i));
+            a += coef * global(i, reaction_at(i));
+        }
+        most = max(most, vec2<real>(norm(d), norm(a)));
+    }
+    partial[lane] = most;
+    workgroupBarrier();
+    for (var half = UZAWA_WORKGROUP / 2u; half > 0u; half /= 2u) {
+        if lane < half {
+            partial[lane] = max(partial[lane], partial[lane + half]);
+        }
+        workgroupBarrier();
+    }
+    let extremes = partial[0];
+    workgroupBarrier();
+    return extremes;
+}
