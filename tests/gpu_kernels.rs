@@ -351,8 +351,8 @@ fn uzawa_solve_kernel_matches_its_cpu_twin() {
     let mut states: Vec<UzawaJudgeState<f64>> = judged.iter().map(UzawaJudgeState::start).collect();
     let mut r: Vec<f64> = problems.iter().flat_map(|p| p.r.iter().flatten().copied()).collect();
     let mut dr = vec![0.0; r.len()];
-    for k in 0..3 {
-        cpu::uzawa_solve(&list[k], &judged, &mut states, &nodes, &mut r, &mut dr, 500, k);
+    for (k, problem) in list.iter().enumerate() {
+        cpu::uzawa_solve(problem, &judged, &mut states, &nodes, &mut r, &mut dr, 500, k);
     }
     drop(list);
     let mut reactions: Vec<Vec<[f64; 3]>> = problems.iter().map(|p| p.r.clone()).collect();
