@@ -10,7 +10,8 @@
 #           packings-at-scale convention of benches/packings.sh), stack_3d, and the 54 243-dof
 #           Hex8 block of free_flight_3d;
 #   bench   the kernels' throughput and roofline (`bench --elements 1000000`);
-#   sweeps  the contact sweeps' device/CPU ratio by size, from which `--uzawa auto`'s
+#   sweeps  the contact sweeps' device/CPU ratio by size (uzawa_sweep: one large problem colour by
+#           colour; uzawa_solve: a packing's small problems, each solved whole), from which `--uzawa auto`'s
 #           thresholds (backend::AUTO_UZAWA_*) are read.
 #
 #   benches/gpu_table.sh [BINARY] [REPETITIONS] [OUTDIR]
@@ -126,8 +127,10 @@ done
 : >"$out/sweeps.jsonl"
 [[ $sections == *" sweeps "* ]] || sweep_sizes=""
 for e in $sweep_sizes; do
-  timeout "$limit" "$bin" bench --elements "$e" --time 1 --kernel uzawa_sweep --backend gpu --json >>"$out/sweeps.jsonl" \
-    || echo "bench --kernel uzawa_sweep --elements $e stopped (exit $?)" >&2
+  for kernel in uzawa_sweep uzawa_solve; do
+    timeout "$limit" "$bin" bench --elements "$e" --time 1 --kernel "$kernel" --backend gpu --json >>"$out/sweeps.jsonl" \
+      || echo "bench --kernel $kernel --elements $e stopped (exit $?)" >&2
+  done
 done
 
 python3 - "$out" <<'PY'
@@ -191,14 +194,14 @@ if bench:
     print()
 sweeps = list(rows(f"{out}/sweeps.jsonl"))
 if sweeps:
-    print("| points | CPU twin per call | device per call | device / CPU | bytes per call |")
-    print("| --- | --- | --- | --- | --- |")
+    print("| kernel | points | CPU twin per call | device per call | device / CPU | bytes per call |")
+    print("| --- | --- | --- | --- | --- | --- |")
     by_items = defaultdict(dict)
     for r in sweeps:
-        by_items[r["items"]][r["backend"].split()[0]] = r
-    for items, c in sorted(by_items.items()):
+        by_items[(r["kernel"], r["items"])][r["backend"].split()[0]] = r
+    for (kernel, items), c in sorted(by_items.items()):
         if "cpu" in c and "gpu" in c:
             tc, tg = c["cpu"]["seconds_per_call"], c["gpu"]["seconds_per_call"]
-            print(f"| {items} | {1e3 * tc:.3g} ms | {1e3 * tg:.3g} ms | {tg / tc:.2f} | {c['gpu']['bytes_per_call'] / 1e6:.2f} MB |")
+            print(f"| {kernel} | {items} | {1e3 * tc:.3g} ms | {1e3 * tg:.3g} ms | {tg / tc:.2f} | {c['gpu']['bytes_per_call'] / 1e6:.2f} MB |")
 PY
 echo "raw results in $out" >&2

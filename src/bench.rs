@@ -15,6 +15,7 @@ use crate::material::{ArrudaBoyce, BlatzKo, Decoupled, Gent, Lvf, Model, MooneyR
 use crate::mesh::{generate, ElementKind, Mesh};
 use crate::precision::{Precision, Real};
 use crate::solver::PhaseTimes;
+use rayon::prelude::*;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -149,7 +150,7 @@ pub struct BenchRow {
     pub kernel: String,
     pub element: String,
     pub material: String,
-    /// Elements, or contact points for `uzawa_step` and `uzawa_sweep`.
+    /// Elements, or contact points for `uzawa_step`, `uzawa_sweep` and `uzawa_solve`.
     pub items: usize,
     /// `cpu f64`, `gpu f64` or `gpu f32`.
     pub backend: String,
@@ -358,6 +359,9 @@ pub fn run_bench(options: &BenchOptions, gpus: &[Arc<Gpu>], mut row: impl FnMut(
     }
     if wanted(options, "uzawa_sweep") {
         uzawa_sweep_rows(options, gpus, &mut row)?;
+    }
+    if wanted(options, "uzawa_solve") {
+        uzawa_solve_rows(options, gpus, &mut row)?;
     }
     Ok(())
 }
@@ -638,6 +642,48 @@ fn uzawa_sweep_rows(options: &BenchOptions, gpus: &[Arc<Gpu>], row: &mut impl Fn
         let error = r.iter().flatten().zip(reference.iter().flatten()).map(|(a, b)| (a - b).abs()).fold(0.0, Real::max) / scale;
         let traffic = sweeps.traffic.total();
         row(make(format!("gpu {}", gpu.precision.name()), t, traffic, error));
+    }
+    Ok(())
+}
+
+/// Points and bodies of one problem of the `uzawa_solve` rows: a cluster of a few grains.
+const CLUSTER_POINTS: usize = 16;
+const CLUSTER_BODIES: usize = 4;
+
+/// `uzawa_solve`: [`BENCH_SWEEPS`] Gauss-Seidel sweeps of each of the many small problems of a
+/// grain packing (`4 x elements` points in clusters of [`CLUSTER_POINTS`] on
+/// [`CLUSTER_BODIES`] bodies), on the CPU (the problems in parallel, as the groups of a Newton
+/// round) and on each GPU in f64, where each problem is solved whole by one workgroup.
+fn uzawa_solve_rows(options: &BenchOptions, gpus: &[Arc<Gpu>], row: &mut impl FnMut(BenchRow)) -> Result<(), GpuError> {
+    let clusters = (4 * options.elements).div_ceil(CLUSTER_POINTS);
+    let n = clusters * CLUSTER_POINTS;
+    let problems: Vec<ContactProblem> = (0..clusters).into_par_iter().map(|k| bench_contact_problem(1000 + k as u64, CLUSTER_BODIES, CLUSTER_POINTS)).collect();
+    let make = |backend: String, timing: Timing, traffic: u64, error: f64| BenchRow::new("uzawa_solve", "-", "-", n, backend, timing, traffic, error);
+    let mut reference: Vec<Vec<[Real; 3]>> = problems.iter().map(|p| p.r.clone()).collect();
+    let t = time_calls(options.min_time, || {
+        problems.par_iter().zip(&mut reference).for_each(|(p, r)| {
+            r.copy_from_slice(&p.r);
+            uzawa::solve(&mut p.with(r, 0.0, 1e-3, BENCH_SWEEPS), Sweep::GaussSeidel, None);
+        });
+    });
+    row(make("cpu f64".into(), t, 0, 0.0));
+    for gpu in gpus.iter().filter(|g| g.precision == Precision::F64) {
+        let mut sweeps = UzawaSweeps::new(gpu.clone())?;
+        let mut r: Vec<Vec<[Real; 3]>> = problems.iter().map(|p| p.r.clone()).collect();
+        let mut result = Ok(());
+        let t = time_calls(options.min_time, || {
+            let mut list: Vec<Problem> = problems.iter().zip(&mut r).map(|(p, r)| {
+                r.copy_from_slice(&p.r);
+                p.with(r, 0.0, 1e-3, BENCH_SWEEPS)
+            }).collect();
+            if let Err(e) = sweeps.solve(&mut list, None) {
+                result = Err(e);
+            }
+        });
+        result?;
+        let scale = reference.iter().flatten().flatten().fold(Real::MIN_POSITIVE, |m, x| m.max(x.abs()));
+        let error = r.iter().flatten().flatten().zip(reference.iter().flatten().flatten()).map(|(a, b)| (a - b).abs()).fold(0.0, Real::max) / scale;
+        row(make(format!("gpu {}", gpu.precision.name()), t, sweeps.traffic.total(), error));
     }
     Ok(())
 }

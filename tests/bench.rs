@@ -13,8 +13,8 @@ fn rows(args: &[&str]) -> Vec<Value> {
 fn bench_reports_every_kernel_on_the_cpu() {
     let rows = rows(&["--backend", "cpu"]);
     // 6 elements (4 kinds, and F-bar on quad4 and hex8) x 8 materials x 3 kernel groups,
-    // newton_iteration, uzawa_step, uzawa_sweep, and the two peak kernels.
-    assert_eq!(rows.len(), 6 * 8 * 3 + 1 + 2 + 2);
+    // newton_iteration, uzawa_step, uzawa_sweep, uzawa_solve, and the two peak kernels.
+    assert_eq!(rows.len(), 6 * 8 * 3 + 1 + 3 + 2);
     let materials: std::collections::BTreeSet<&str> = rows.iter().filter_map(|r| r["material"].as_str()).filter(|m| *m != "-").collect();
     assert_eq!(materials.len(), 8, "{materials:?}");
     let elements: std::collections::BTreeSet<&str> = rows.iter().filter_map(|r| r["element"].as_str()).collect();
@@ -27,7 +27,7 @@ fn bench_reports_every_kernel_on_the_cpu() {
     }
     let only = self::rows(&["--backend", "cpu", "--kernel", "uzawa"]);
     let kernels: Vec<&str> = only.iter().map(|r| r["kernel"].as_str().unwrap()).collect();
-    assert_eq!(kernels, ["uzawa_step", "uzawa_sweep"]);
+    assert_eq!(kernels, ["uzawa_step", "uzawa_sweep", "uzawa_solve"]);
 }
 
 /// `--kernel element_energy` printed nothing: the filter was matched against shortened names
@@ -56,11 +56,13 @@ fn bench_on_a_gpu_reports_errors_within_the_parity_tolerances() {
         assert!(r["max_relative_error"].as_f64().unwrap() <= tolerance, "{r}");
         assert_eq!(r["bytes_per_call"], 0, "the kernel alone moves nothing between host and device: {r}");
     }
-    // The device's sweeps repeat the CPU's, in f64 only.
-    let sweeps = self::rows(&["--backend", "gpu", "--kernel", "uzawa_sweep"]);
-    let backends: Vec<&str> = sweeps.iter().map(|r| r["backend"].as_str().unwrap()).collect();
-    assert_eq!(backends, ["cpu f64", "gpu f64"]);
-    assert!(sweeps[1]["max_relative_error"].as_f64().unwrap() <= 1e-12 && sweeps[1]["bytes_per_call"].as_u64().unwrap() > 0, "{:?}", sweeps[1]);
+    // The device's sweeps repeat the CPU's, in f64 only, colour by colour and solved whole.
+    for kernel in ["uzawa_sweep", "uzawa_solve"] {
+        let sweeps = self::rows(&["--backend", "gpu", "--kernel", kernel]);
+        let backends: Vec<&str> = sweeps.iter().map(|r| r["backend"].as_str().unwrap()).collect();
+        assert_eq!(backends, ["cpu f64", "gpu f64"], "{kernel}");
+        assert!(sweeps[1]["max_relative_error"].as_f64().unwrap() <= 1e-12 && sweeps[1]["bytes_per_call"].as_u64().unwrap() > 0, "{:?}", sweeps[1]);
+    }
     // A device Newton iteration repeats its CPU twins' (f64 only), and moves states up and down.
     let newton = self::rows(&["--backend", "gpu", "--kernel", "newton_iteration"]);
     let backends: Vec<&str> = newton.iter().map(|r| r["backend"].as_str().unwrap()).collect();

@@ -269,6 +269,10 @@ fn contact_on_the_device_repeats_the_cpu_sweeps() {
     eprintln!("{sweeps} Uzawa sweeps in {extra} device submits; energies differ by {worst:.2e}");
     assert!(worst <= 1e-9, "energies differ by {worst:.3e}");
     assert!(extra > 0 && extra < sweeps, "the sweeps ran on the device in chunks: {extra} submits for {sweeps} sweeps");
+    // The grains' problems are solved whole, one workgroup each: a Newton round's sweeps take
+    // one submit however many they are (before, 4, 8, 16 .. sweeps per submit).
+    let rounds = field(&device, "newton_iterations");
+    assert!(extra <= rounds, "at most one submit per Newton round for the sweeps: {extra} submits, {rounds} rounds, {sweeps} sweeps");
     assert_eq!(field(&auto, "device_submits"), field(&host, "device_submits"), "auto: the CPU's sweeps on a software adapter");
     // In f32 the sweeps stay on the CPU, and the log says why.
     let mut o = options(BackendChoice::Gpu, Some(Precision::F32));
