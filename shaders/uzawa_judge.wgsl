@@ -6,20 +6,11 @@
 // reads back only where each problem ended. One workgroup per problem.
 // CPU twin: `cpu::uzawa_judge`, which this file follows line by line.
 
-@group(0) @binding(0) var<storage, read> problems: array<UzawaProblem>;
-@group(0) @binding(1) var<storage, read_write> states: array<UzawaJudgeState>;
-// Node n gathers the points node_points[node_start[n] .. node_start[n + 1]] (ascending), each
-// with its coefficient in node_coefs.
-@group(0) @binding(2) var<storage, read> node_start: array<u32>;
-@group(0) @binding(3) var<storage, read> node_points: array<u32>;
-@group(0) @binding(4) var<storage, read> node_coefs: array<real>;
-// Point i's frame [n, t1, t2], row by row: 9 reals.
-@group(0) @binding(5) var<storage, read> frames: array<real>;
-// The reactions after the sweep and their change over it, 3 reals per point.
+// The reactions after the sweep and their change over it, 3 reals per point (the problems, their
+// states, the node gather and the count are `include/uzawa_nodal.wgsl`'s).
 @group(0) @binding(6) var<storage, read> r: array<real>;
 @group(0) @binding(7) var<storage, read> dr: array<real>;
-@group(0) @binding(8) var<storage, read_write> live: array<u32>;
-@group(0) @binding(9) var<uniform> count: SolveCount;
+@group(0) @binding(5) var<storage, read_write> live: array<u32>;
 
 var<workgroup> go: u32;
 var<workgroup> ended: u32;

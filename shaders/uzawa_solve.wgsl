@@ -18,13 +18,7 @@
 @group(0) @binding(5) var<storage, read> colour_start: array<u32>;
 @group(0) @binding(6) var<storage, read_write> r: array<real>;
 @group(0) @binding(7) var<storage, read_write> dr: array<real>;
-@group(0) @binding(8) var<storage, read> problems: array<UzawaProblem>;
-@group(0) @binding(9) var<storage, read_write> states: array<UzawaJudgeState>;
-@group(0) @binding(10) var<storage, read> node_start: array<u32>;
-@group(0) @binding(11) var<storage, read> node_points: array<u32>;
-@group(0) @binding(12) var<storage, read> node_coefs: array<real>;
-@group(0) @binding(13) var<storage, read> frames: array<real>;
-@group(0) @binding(14) var<uniform> count: SolveCount;
+// The problems, their states, the node gather and the count are `include/uzawa_nodal.wgsl`'s.
 
 var<workgroup> go: u32;
 var<workgroup> colours: u32;

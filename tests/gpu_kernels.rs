@@ -274,6 +274,21 @@ fn uzawa_step_kernel_matches_its_cpu_twin() {
     }
 }
 
+/// The CPU's plain Gauss-Seidel iterations of each problem at its (tolerance, max iterations),
+/// from its warm start: the outcome and the reactions.
+fn cpu_solves(problems: &[bifirst::bench::ContactProblem], settings: &[(f64, usize)], floor: f64) -> Vec<(bifirst::contact::uzawa::Outcome, Vec<[f64; 3]>)> {
+    use bifirst::contact::uzawa::{solve, Sweep};
+    problems
+        .iter()
+        .zip(settings)
+        .map(|(p, &(tolerance, max))| {
+            let mut r = p.r.clone();
+            let outcome = solve(&mut p.with(&mut r, tolerance, floor, max), Sweep::GaussSeidel, None);
+            (outcome, r)
+        })
+        .collect()
+}
+
 #[test]
 fn uzawa_sweep_kernel_matches_its_cpu_twin() {
     // Three problems in one device solve, as the groups of a Newton round: one that never
@@ -281,19 +296,13 @@ fn uzawa_sweep_kernel_matches_its_cpu_twin() {
     // chunk sweeps the others only; two that converge. Each must end with the CPU's iteration
     // count and outcome, and reactions within 1e-12 of the CPU's, relative to the problem's
     // largest reaction. f64 only: runs take the device's sweeps in f64 only.
-    use bifirst::contact::uzawa::{solve, Sweep};
     use bifirst::gpu::uzawa_sweep::UzawaSweeps;
     let Some(gpu) = gpu_or_skip("uzawa_sweep_kernel_matches_its_cpu_twin", Precision::F64) else { return };
     let mut sweeps = UzawaSweeps::new(Arc::new(gpu)).expect("pipeline");
     let problems = [bifirst::bench::bench_contact_problem(1, 2000, 2500), bifirst::bench::bench_contact_problem(2, 40, 60), bifirst::bench::bench_contact_problem(3, 300, 500)];
     let settings = [(0.0, 3), (1e-10, 500), (1e-14, 500)];
     let floor = 1e-3;
-    let mut on_cpu = Vec::new();
-    for (p, &(tolerance, max)) in problems.iter().zip(&settings) {
-        let mut r = p.r.clone();
-        let outcome = solve(&mut p.with(&mut r, tolerance, floor, max), Sweep::GaussSeidel, None);
-        on_cpu.push((outcome, r));
-    }
+    let on_cpu = cpu_solves(&problems, &settings, floor);
     let mut uploads = Vec::new();
     for _ in 0..2 {
         // Twice: the second solve finds W on the device.
@@ -322,7 +331,6 @@ fn uzawa_solve_kernel_matches_its_cpu_twin() {
     // solve. One problem never converges (tolerance 0) and is spent after 7 sweeps, two
     // converge. Each ends with its twin's iteration count, outcome and change, and that of the
     // CPU's iterations, and reactions within 1e-12 of both, relative to its largest reaction.
-    use bifirst::contact::uzawa::{solve, Sweep};
     use bifirst::gpu::uzawa_sweep::{NodeGather, UzawaJudgeState, UzawaProblem, UzawaSweeps, SOLVE_WIDEST};
     let Some(gpu) = gpu_or_skip("uzawa_solve_kernel_matches_its_cpu_twin", Precision::F64) else { return };
     let mut sweeps = UzawaSweeps::new(Arc::new(gpu)).expect("pipelines");
@@ -331,12 +339,7 @@ fn uzawa_solve_kernel_matches_its_cpu_twin() {
     assert!(widest <= SOLVE_WIDEST && widest > 64, "colours wider than a workgroup, within its share: {widest}");
     let settings = [(0.0, 7), (1e-10, 500), (1e-12, 500)];
     let floor = 1e-3;
-    let mut on_cpu = Vec::new();
-    for (p, &(tolerance, max)) in problems.iter().zip(&settings) {
-        let mut r = p.r.clone();
-        let outcome = solve(&mut p.with(&mut r, tolerance, floor, max), Sweep::GaussSeidel, None);
-        on_cpu.push((outcome, r));
-    }
+    let on_cpu = cpu_solves(&problems, &settings, floor);
     // The twin, over the arrays the device holds.
     let mut unused: Vec<Vec<[f64; 3]>> = problems.iter().map(|p| p.r.clone()).collect();
     let list: Vec<_> = problems.iter().zip(&settings).zip(&mut unused).map(|((p, &(tolerance, max)), r)| p.with(r, tolerance, floor, max)).collect();

@@ -1,8 +1,19 @@
 // The largest change of a nodal force over a sweep and the largest nodal force of a problem
 // (`NodalMap::change`: the bodies see the nodal forces, not the split of a reaction between
-// nearly redundant points), over a workgroup; shared by `uzawa_judge` and `uzawa_solve`, which
-// declare the buffers it reads (`node_start`, `node_points`, `node_coefs`, `frames`, `r`, `dr`).
-// CPU twin: `cpu::uzawa_judge`.
+// nearly redundant points), over a workgroup, and the buffers of the problems and their states
+// at the bindings both `uzawa_judge` and `uzawa_solve` use; each kernel declares the reactions
+// `r` and their changes `dr` (bindings 6 and 7) with its own access. CPU twin: `cpu::uzawa_judge`.
+
+@group(0) @binding(8) var<storage, read> problems: array<UzawaProblem>;
+@group(0) @binding(9) var<storage, read_write> states: array<UzawaJudgeState>;
+// Node n gathers the points node_points[node_start[n] .. node_start[n + 1]] (ascending), each
+// with its coefficient in node_coefs.
+@group(0) @binding(10) var<storage, read> node_start: array<u32>;
+@group(0) @binding(11) var<storage, read> node_points: array<u32>;
+@group(0) @binding(12) var<storage, read> node_coefs: array<real>;
+// Point i's frame [n, t1, t2], row by row: 9 reals.
+@group(0) @binding(13) var<storage, read> frames: array<real>;
+@group(0) @binding(14) var<uniform> count: SolveCount;
 
 var<workgroup> partial: array<vec2<real>, UZAWA_WORKGROUP>;
 
