@@ -327,11 +327,13 @@ fn uzawa_sweep_kernel_matches_its_cpu_twin() {
 #[test]
 fn uzawa_solve_kernel_matches_its_cpu_twin() {
     // Grain-sized problems (every colour within a workgroup's share) are solved whole on the
-    // device, one workgroup per problem: one dispatch and one submit for every sweep of the
-    // solve. One problem never converges (tolerance 0) and is spent after 7 sweeps, two
-    // converge. Each ends with its twin's iteration count, outcome and change, and that of the
-    // CPU's iterations, and reactions within 1e-12 of both, relative to its largest reaction.
-    use bifirst::gpu::uzawa_sweep::{NodeGather, UzawaJudgeState, UzawaProblem, UzawaSweeps, SOLVE_WIDEST};
+    // device, one workgroup per problem: one dispatch and one submit per SOLVE_SWEEPS sweeps.
+    // One problem never converges (tolerance 0) and is spent after 7 sweeps, two converge; then
+    // the first again with a budget past SOLVE_SWEEPS, which a second dispatch finishes from
+    // the state the first left. Each ends with its twin's iteration count, outcome and change,
+    // and that of the CPU's iterations, and reactions within 1e-12 of both, relative to its
+    // largest reaction.
+    use bifirst::gpu::uzawa_sweep::{NodeGather, UzawaJudgeState, UzawaProblem, UzawaSweeps, SOLVE_SWEEPS, SOLVE_WIDEST};
     let Some(gpu) = gpu_or_skip("uzawa_solve_kernel_matches_its_cpu_twin", Precision::F64) else { return };
     let mut sweeps = UzawaSweeps::new(Arc::new(gpu)).expect("pipelines");
     let problems = [bifirst::bench::bench_contact_problem(21, 60, 90), bifirst::bench::bench_contact_problem(22, 30, 40), bifirst::bench::bench_contact_problem(23, 150, 200)];
@@ -378,6 +380,18 @@ fn uzawa_solve_kernel_matches_its_cpu_twin() {
         assert!(worst <= 1e-12, "problem {k}: {worst:.3e}");
     }
     assert!(on_cpu[1].0.converged && on_cpu[2].0.converged && on_cpu[1].0.iterations > 3 && on_cpu[0].0.iterations == 7);
+    // Past one dispatch's sweeps.
+    let long = [(0.0, SOLVE_SWEEPS + 40)];
+    let cpu = cpu_solves(&problems[..1], &long, floor);
+    let mut r = problems[0].r.clone();
+    let submits = sweeps.submits;
+    let outcome = sweeps.solve(&mut [problems[0].with(&mut r, long[0].0, floor, long[0].1)], None).expect("device sweeps").expect("fits")[0];
+    assert_eq!(sweeps.submits - submits, 2, "a second dispatch goes on from the state the first left");
+    assert_eq!((outcome.iterations, outcome.converged), (cpu[0].0.iterations, cpu[0].0.converged));
+    assert_eq!(outcome.iterations, SOLVE_SWEEPS + 40);
+    let scale = cpu[0].1.iter().flatten().fold(1e-300, |m: f64, x| m.max(x.abs()));
+    let worst = r.iter().flatten().zip(cpu[0].1.iter().flatten()).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max) / scale;
+    assert!(worst <= 1e-12, "{worst:.3e}");
 }
 
 fn model_of(material: &str) -> Model {

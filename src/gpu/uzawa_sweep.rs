@@ -41,7 +41,7 @@ pub const SOLVE_WIDEST: usize = 4 * JUDGE_WORKGROUP;
 
 /// Sweeps one dispatch of `uzawa_solve` may take before the host looks (an interrupt waits for
 /// at most this many).
-const SOLVE_SWEEPS: usize = 512;
+pub const SOLVE_SWEEPS: usize = 512;
 
 /// A contact point's data for the kernel (`struct UzawaLocal` in the shader).
 #[repr(C)]
