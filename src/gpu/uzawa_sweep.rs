@@ -552,18 +552,19 @@ impl UzawaSweeps {
                     pass.set_pipeline(&self.solve);
                     pass.set_bind_group(0, &b.solve_group, &[]);
                     pass.dispatch_workgroups(judge_x, judge_y, 1);
-                }
-                // Colour by colour: each sweep's dispatches, then its judgement.
-                for _ in 0..if whole { 0 } else { sweeps } {
-                    pass.set_pipeline(&self.pipeline);
-                    for (range, group) in m.ranges.iter().zip(&b.bind_groups) {
-                        let (x, y) = super::dispatch_rows(range.count.div_ceil(WORKGROUP) as usize);
-                        pass.set_bind_group(0, group, &[]);
-                        pass.dispatch_workgroups(x, y, 1);
+                } else {
+                    // Colour by colour: each sweep's dispatches, then its judgement.
+                    for _ in 0..sweeps {
+                        pass.set_pipeline(&self.pipeline);
+                        for (range, group) in m.ranges.iter().zip(&b.bind_groups) {
+                            let (x, y) = super::dispatch_rows(range.count.div_ceil(WORKGROUP) as usize);
+                            pass.set_bind_group(0, group, &[]);
+                            pass.dispatch_workgroups(x, y, 1);
+                        }
+                        pass.set_pipeline(&self.judge);
+                        pass.set_bind_group(0, &b.judge_group, &[]);
+                        pass.dispatch_workgroups(judge_x, judge_y, 1);
                     }
-                    pass.set_pipeline(&self.judge);
-                    pass.set_bind_group(0, &b.judge_group, &[]);
-                    pass.dispatch_workgroups(judge_x, judge_y, 1);
                 }
             }
             encoder.copy_buffer_to_buffer(&b.r, 0, &b.staging, 0, r_bytes);
