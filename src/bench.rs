@@ -21,6 +21,8 @@ use std::time::Instant;
 
 mod newton;
 
+pub use newton::dense_inverse;
+
 /// The element kinds and materials the kernels are built for, with the parameters benchmarks use.
 pub fn bench_models() -> [Model; 8] {
     [

@@ -870,18 +870,7 @@ fn effective_inverse(c: &Case, coefficients: Coefficients<f64>) -> Vec<f64> {
     cpu::dispatch_element_force_tangent(&c.model, &c.mesh, &c.geometry, c.formulation, None, &c.u, true, &mut results).unwrap();
     let mut values = vec![0.0; c.pattern.nnz()];
     cpu::assemble_csr(&results, &c.gather.csr_start, &c.gather.csr, coefficients, &mut values);
-    let n = c.pattern.n;
-    let mut k = nalgebra::DMatrix::<f64>::zeros(n, n);
-    for col in 0..n {
-        let entries = c.pattern.col_ptr[col] as usize..c.pattern.col_ptr[col + 1] as usize;
-        for (&row, &value) in c.pattern.row_idx[entries.clone()].iter().zip(&values[entries]) {
-            k[(row as usize, col)] = value;
-            k[(col, row as usize)] = value;
-        }
-        k[(col, col)] += coefficients.c1;
-    }
-    let inverse = k.try_inverse().expect("K̄ is invertible");
-    (0..n).flat_map(|f| (0..n).map(move |j| (f, j))).map(|(f, j)| inverse[(f, j)]).collect()
+    bifirst::bench::dense_inverse(&c.pattern, &values, &vec![coefficients.c1; c.pattern.n])
 }
 
 /// The forces and residuals of a case at `u` on the CPU twins.

@@ -5,7 +5,7 @@
 //! body after body on the thread pool.
 
 use super::{blockwise_error, time_calls, BenchCase, BenchOptions, BenchRow};
-use crate::assembly::element_out_stride;
+use crate::assembly::{element_out_stride, StiffnessPattern};
 use crate::cpu;
 use crate::element::Formulation;
 use crate::gpu::peak::Peaks;
@@ -111,18 +111,30 @@ fn effective_inverse(case: &BenchCase) -> Vec<Real> {
     case.cpu_elements(&mut results);
     let mut values = vec![0.0; case.pattern.nnz()];
     cpu::assemble_csr(&results, &case.gather.csr_start, &case.gather.csr, case.coefficients, &mut values);
-    let p = &case.pattern;
-    let mut k = nalgebra::DMatrix::<Real>::zeros(p.n, p.n);
-    for col in 0..p.n {
-        let entries = p.col_ptr[col] as usize..p.col_ptr[col + 1] as usize;
-        for (&r, &v) in p.row_idx[entries.clone()].iter().zip(&values[entries]) {
+    let mut diagonal = vec![0.0; case.pattern.n];
+    for (d, f) in case.dofs.free_pairs() {
+        diagonal[f] = case.coefficients.c1 * case.step[d].mass;
+    }
+    dense_inverse(&case.pattern, &values, &diagonal)
+}
+
+/// The inverse, row by row, of the symmetric matrix whose lower triangle `values` fills
+/// `pattern`, with `diagonal` added to its diagonal: `K̄⁻¹` from `ξ K` and `c1 M`, as
+/// `Body::effective_inverse` gives it from faer's factors (the oracle of the device Newton
+/// iterations).
+pub fn dense_inverse(pattern: &StiffnessPattern, values: &[Real], diagonal: &[Real]) -> Vec<Real> {
+    let n = pattern.n;
+    let mut k = nalgebra::DMatrix::<Real>::zeros(n, n);
+    for col in 0..n {
+        let entries = pattern.col_ptr[col] as usize..pattern.col_ptr[col + 1] as usize;
+        for (&r, &v) in pattern.row_idx[entries.clone()].iter().zip(&values[entries]) {
             k[(r as usize, col)] = v;
             k[(col, r as usize)] = v;
         }
     }
-    for (d, f) in case.dofs.free_pairs() {
-        k[(f, f)] += case.coefficients.c1 * case.step[d].mass;
+    for (f, &x) in diagonal.iter().enumerate() {
+        k[(f, f)] += x;
     }
-    let inverse = k.try_inverse().expect("K̄ of the bench body is invertible");
-    (0..p.n).flat_map(|f| (0..p.n).map(move |j| (f, j))).map(|(f, j)| inverse[(f, j)]).collect()
+    let inverse = k.try_inverse().expect("K̄ is invertible");
+    (0..n).flat_map(|f| (0..n).map(move |j| (f, j))).map(|(f, j)| inverse[(f, j)]).collect()
 }

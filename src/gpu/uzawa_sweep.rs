@@ -511,7 +511,6 @@ impl UzawaSweeps {
             .collect();
         let judged = layout.judged(problems);
         let states: Vec<UzawaJudgeState<Real>> = judged.iter().map(UzawaJudgeState::start).collect();
-        let live: Vec<u32> = judged.iter().zip(&states).flat_map(|(p, s)| std::iter::repeat_n((s.status == JUDGE_LIVE) as u32, (p.point_end - p.point_start) as usize)).collect();
         let start: Vec<Real> = problems.iter().flat_map(|p| p.r.iter().flatten().copied()).collect();
         self.upload(&b.locals, 0, bytemuck::cast_slice(&locals));
         self.upload(&b.judged, 0, bytemuck::cast_slice(&judged));
@@ -521,6 +520,7 @@ impl UzawaSweeps {
         let sweeps = if whole { most.min(SOLVE_SWEEPS) as u32 } else { 0 };
         self.upload(&b.count, 0, bytemuck::bytes_of(&SolveCount { problems: problems.len() as u32, sweeps, pad: [0; 2] }));
         if !whole {
+            let live: Vec<u32> = judged.iter().zip(&states).flat_map(|(p, s)| std::iter::repeat_n((s.status == JUDGE_LIVE) as u32, (p.point_end - p.point_start) as usize)).collect();
             self.upload(&b.live, 0, bytemuck::cast_slice(&live));
         }
         self.upload(&b.r, 0, bytemuck::cast_slice(&start));

@@ -807,6 +807,7 @@ impl Batch {
         let history = buffer(gpu, "history", history * real, write);
         let v = Some(variant);
         let element_buffers = [&geometry, &connectivity, &u, &element_out, &failure, &member_buffer, &material_buffer, &active, &history];
+        let residual_bindings = [&element_out, &dof_start, &dof, coefficients, &u, &step, &dof_out, &member_buffer, &active];
         // The pipelines compile in parallel: a software adapter compiles each on the CPU.
         let tangent = {
             let (gpu, buffers) = (gpu.clone(), element_buffers.map(Buffer::clone));
@@ -815,13 +816,13 @@ impl Batch {
         let (forces, csr_pass, residual, element_energy) = std::thread::scope(|scope| {
             let forces = scope.spawn(|| Pass::new(gpu, "element_force_tangent", "forces", v, &element_buffers));
             let csr = scope.spawn(|| Pass::new(gpu, "assemble_csr", "main", None, &[&element_out, &csr_start, &csr, coefficients, &values, &member_buffer, &active]));
-            let residual = scope.spawn(|| Pass::new(gpu, "assemble_residual", "main", None, &[&element_out, &dof_start, &dof, coefficients, &u, &step, &dof_out, &member_buffer, &active]));
+            let residual = scope.spawn(|| Pass::new(gpu, "assemble_residual", "main", None, &residual_bindings));
             let energy = Pass::new(gpu, "element_energy", "main", v, &[&geometry, &connectivity, &u, &energy, &member_buffer, &material_buffer, &active]);
             let join = |h: std::thread::ScopedJoinHandle<'_, Result<Pass, GpuError>>| h.join().expect("a pipeline compiles without panicking");
             Ok::<_, GpuError>((join(forces)?, join(csr)?, join(residual)?, energy?))
         })?;
         let forces_buffers = element_buffers.iter().map(|&b| b.clone()).collect();
-        let residual_buffers = [&element_out, &dof_start, &dof, coefficients, &u, &step, &dof_out, &member_buffer, &active].iter().map(|&b| b.clone()).collect();
+        let residual_buffers = residual_bindings.iter().map(|&b| b.clone()).collect();
         let (inverse_slot, inverse_entries) = newton::inverse_slots(&free_range.iter().map(|&(_, n)| n as usize).collect::<Vec<_>>(), real, max_bytes);
         Ok(Self {
             members: ranges,
