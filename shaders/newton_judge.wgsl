@@ -1,5 +1,5 @@
 // The convergence test of each active member after an evaluation, as `Body::converged` makes
-// it: the residual |g| over the free dofs against residual_tolerance x the force scale plus the
+// it: the residual |g - f_c| over the free dofs (f_c: the contact forces) against residual_tolerance x the force scale plus the
 // round-off floor, the last increment against increment_tolerance x the step's displacement
 // (or the scene's motion) plus the round-off of u. A member that passes is CONVERGED; one that
 // fails goes on ITERATING while its factorisation contracts the residual at least tenfold
@@ -19,6 +19,7 @@ const NO_FAILURE = 0xffffffffu;
 @group(0) @binding(8) var<storage, read> failure: array<u32>;
 @group(0) @binding(9) var<storage, read> members: array<MemberRange>;
 @group(0) @binding(10) var<storage, read> jobs: array<Active>;
+@group(0) @binding(11) var<storage, read> contact: array<real>;
 
 var<workgroup> go: u32;
 
@@ -57,7 +58,7 @@ fn main(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workg
     var size2 = real(0.0);
     for (var f = lane; f < row.free_count; f += NEWTON_WORKGROUP) {
         let d = range.dof_start + free_dofs[row.free_start + f];
-        let g = dof_out[d].g;
+        let g = dof_out[d].g - contact[d];
         let du = u[d] - u_start[d];
         residual2 += g * g;
         step2 += du * du;
@@ -81,6 +82,7 @@ fn main(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workg
     let tolerance = row.residual_tolerance * scale + row.floor + row.floor_per_travel * most;
     let allowed = row.increment_tolerance * max(moved, row.increment_floor) + row.round_off * size;
     let contraction = residual / max(s.residual, real(2.2250738585072014e-308));
+    s.balanced = u32(residual <= tolerance);
     if residual <= tolerance && s.increment <= allowed {
         s.status = CONVERGED;
     } else if !is_finite(residual) || s.iterations >= row.budget || contraction > real(REFACTOR_CONTRACTION) {

@@ -1,6 +1,7 @@
 // One Newton increment of each active member with its kept factorisation, applied as the dense
 // inverse of its effective stiffness (a small body: at most MAX_FREE free dofs):
-//   Δu = K̄⁻¹ (-g) on the free dofs (no contact force: the member has no contact point),
+//   Δu = K̄⁻¹ (f_c - g) on the free dofs (f_c: the contact forces, zero for a body without
+//   contact points; for a group in contact, those `newton_contact`'s `forces` just applied),
 //   u += Δu,
 // the increment's norm and the count of increments into the member's state. One workgroup per
 // member; a member no longer ITERATING does nothing. CPU twin: `cpu::newton_update`.
@@ -13,6 +14,7 @@
 @group(0) @binding(5) var<storage, read_write> u: array<real>;
 @group(0) @binding(6) var<storage, read> members: array<MemberRange>;
 @group(0) @binding(7) var<storage, read> jobs: array<Active>;
+@group(0) @binding(8) var<storage, read> contact: array<real>;
 
 var<workgroup> rhs: array<real, MAX_FREE>;
 var<workgroup> go: u32;
@@ -32,7 +34,8 @@ fn main(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workg
     let row = newton[m];
     let n = row.free_count;
     for (var j = lane; j < n; j += NEWTON_WORKGROUP) {
-        rhs[j] = -dof_out[dof_start + free_dofs[row.free_start + j]].g;
+        let d = dof_start + free_dofs[row.free_start + j];
+        rhs[j] = contact[d] - dof_out[d].g;
     }
     workgroupBarrier();
     var sum2 = real(0.0);

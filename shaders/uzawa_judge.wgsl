@@ -20,7 +20,7 @@ fn main(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workg
     // Rows of at most 65535 workgroups: problem k sits at (k mod row, k / row).
     let k = workgroup.x + workgroup.y * groups.x;
     if lane == 0u {
-        go = u32(k < count.problems && states[k].status == LIVE);
+        go = u32(k < count.problems && states[k].status == UZAWA_LIVE);
     }
     if workgroupUniformLoad(&go) == 0u {
         return;
@@ -30,7 +30,7 @@ fn main(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workg
     if lane == 0u {
         let s = judged(p, states[k], extremes.x, extremes.y);
         states[k] = s;
-        ended = u32(s.status != LIVE);
+        ended = u32(s.status != UZAWA_LIVE);
     }
     if workgroupUniformLoad(&ended) == 1u {
         for (var i = p.point_start + lane; i < p.point_end; i += UZAWA_WORKGROUP) {

@@ -29,7 +29,7 @@ fn main(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workg
     // Rows of at most 65535 workgroups: problem k sits at (k mod row, k / row).
     let k = workgroup.x + workgroup.y * groups.x;
     if lane == 0u {
-        go = u32(k < count.problems && states[k].status == LIVE);
+        go = u32(k < count.problems && states[k].status == UZAWA_LIVE);
         if go == 1u {
             colours = problems[k].colours;
         }
@@ -52,7 +52,7 @@ fn main(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workg
         if lane == 0u {
             let s = judged(p, states[k], extremes.x, extremes.y);
             states[k] = s;
-            ended = u32(s.status != LIVE);
+            ended = u32(s.status != UZAWA_LIVE);
         }
         if workgroupUniformLoad(&ended) == 1u {
             break;

@@ -9,7 +9,7 @@ use bifirst::contact::Status;
 use bifirst::cpu;
 use bifirst::element::{ElementOutput, Formulation, Patches, ReferenceGeometry};
 use bifirst::gpu::shaders::{is_element_kernel, validate, ElementVariant, DECOUPLED, SHADERS};
-use bifirst::gpu::types::{Active, Coefficients, DofOut, DofStep, MaterialParams, MemberRange, NewtonMember, NewtonState, NEWTON_CONVERGED, NEWTON_HOST, NEWTON_ITERATING};
+use bifirst::gpu::types::{Active, Coefficients, ContactCall, ContactGroup, ContactState, DofOut, DofStep, MaterialParams, MemberRange, NewtonMember, NewtonState, NEWTON_CONVERGED, NEWTON_HOST, NEWTON_ITERATING};
 use bifirst::gpu::uzawa_step::{UzawaPoint, UzawaStepKernel};
 use bifirst::gpu::{ElementFailure, Evaluation, GpuWorld, NewtonCall, WorldBody};
 use bifirst::material::{ArrudaBoyce, BlatzKo, Decoupled, Gent, Lvf, Model, MooneyRivlin, NeoHookean, Ogden, Relaxation, Yeoh};
@@ -158,7 +158,7 @@ fn kernel_structs_match_the_shader_layouts() {
 fn newton_structs_match_the_shader_layout() {
     let u32_fields = ["inverse_start", "free_start", "free_count", "budget"];
     let real_fields = ["residual_tolerance", "floor", "floor_per_travel", "increment_tolerance", "increment_floor", "round_off"];
-    let state_u32 = ["status", "iterations", "moved", "pad"];
+    let state_u32 = ["status", "iterations", "moved", "balanced"];
     let state_real = ["residual", "previous_residual", "increment"];
     for precision in PRECISIONS {
         let real = precision.size() as u32;
@@ -167,7 +167,7 @@ fn newton_structs_match_the_shader_layout() {
             Precision::F64 => [std::mem::size_of::<NewtonMember<f64>>(), std::mem::size_of::<NewtonState<f64>>()],
             Precision::F32 => [std::mem::size_of::<NewtonMember<f32>>(), std::mem::size_of::<NewtonState<f32>>()],
         };
-        for kernel in ["newton_update", "newton_judge", "newton_compact"] {
+        for kernel in ["newton_update", "newton_judge", "newton_compact", "newton_contact"] {
             let module = validate(kernel, precision, None).unwrap();
             let (members, span) = naga_layout(&module, "NewtonMember");
             assert_eq!((members, span as usize), (layout(&u32_fields, &real_fields), sizes[0]), "{kernel} {}", precision.name());
@@ -175,6 +175,25 @@ fn newton_structs_match_the_shader_layout() {
             assert_eq!((members, span as usize), (layout(&state_u32, &state_real), sizes[1]), "{kernel} {}", precision.name());
         }
     }
+    // `newton_contact`'s own structs: four u32, then reals.
+    for precision in PRECISIONS {
+        let real = precision.size() as u32;
+        let module = validate("newton_contact", precision, None).unwrap();
+        let expect = |u: &[&str], r: &[&str]| -> Vec<(String, u32)> { u.iter().enumerate().map(|(i, f)| (f.to_string(), 4 * i as u32)).chain(r.iter().enumerate().map(|(i, f)| (f.to_string(), 16 + real * i as u32))).collect() };
+        let sizes = match precision {
+            Precision::F64 => [size_of::<ContactGroup<f64>>(), size_of::<ContactState<f64>>(), size_of::<ContactCall<f64>>()],
+            Precision::F32 => [size_of::<ContactGroup<f32>>(), size_of::<ContactState<f32>>(), size_of::<ContactCall<f32>>()],
+        };
+        let (members, span) = naga_layout(&module, "ContactGroup");
+        assert_eq!((members, span as usize), (expect(&["member_start", "member_count", "iterations_before", "pad"], &["tolerance"]), sizes[0]), "{}", precision.name());
+        let (members, span) = naga_layout(&module, "ContactState");
+        assert_eq!((members, span as usize), (expect(&["sweeps", "uzawa", "pad0", "pad1"], &["change"]), sizes[1]), "{}", precision.name());
+        let (members, span) = naga_layout(&module, "ContactCall");
+        assert_eq!((members, span as usize), (expect(&["problems", "dim", "pad0", "pad1"], &["theta_dt"]), sizes[2]), "{}", precision.name());
+    }
+    let g = ContactGroup::<f64> { member_start: 1, member_count: 2, iterations_before: 3, pad: 4, tolerance: 5.0 };
+    assert_eq!(bytemuck::cast::<_, [u32; 6]>(g)[..4], [1, 2, 3, 4], "field order");
+    assert_eq!(bytemuck::cast::<_, [f64; 3]>(g)[2], 5.0, "field order");
     let m = NewtonMember::<f64> { inverse_start: 1, free_start: 2, free_count: 3, budget: 4, residual_tolerance: 5.0, floor: 6.0, floor_per_travel: 7.0, increment_tolerance: 8.0, increment_floor: 9.0, round_off: 10.0 };
     let words: [u32; 16] = bytemuck::cast(m);
     assert_eq!(words[..4], [1, 2, 3, 4], "field order");
@@ -900,6 +919,9 @@ fn newton_kernels_match_their_cpu_twins() {
         let starts: Vec<Vec<f64>> = cases.iter().map(|c| c.u.iter().map(|&x| 0.9 * x).collect()).collect();
         let inverses: Vec<Vec<f64>> = cases.iter().map(|c| effective_inverse(c, coefficients)).collect();
         let free: Vec<Vec<u32>> = cases.iter().map(|c| c.dofs.free_pairs().map(|(d, _)| d as u32).collect()).collect();
+        // The second body is pushed by contact forces (constant here), which the increments and
+        // the residual take in.
+        let pushes: Vec<Vec<f64>> = cases.iter().enumerate().map(|(b, c)| (0..c.u.len()).map(|d| if b == 1 { 1e3 * ((d % 7) as f64 - 3.0) * c.u[d].abs().max(1e-3) } else { 0.0 }).collect()).collect();
         for (budgets, tolerance) in [([1u32, 3], 0.0), ([25, 25], 1e-9)] {
             let member = |b: usize| NewtonMember {
                 inverse_start: 0,
@@ -914,7 +936,7 @@ fn newton_kernels_match_their_cpu_twins() {
                 round_off: 0.0,
             };
             let first: Vec<Vec<DofOut<f64>>> = cases.iter().zip(&steps).map(|(c, s)| cpu_residual(c, &c.u, s, coefficients)).collect();
-            let residual0 = |b: usize| free[b].iter().map(|&d| first[b][d as usize].g.powi(2)).sum::<f64>().sqrt();
+            let residual0 = |b: usize| free[b].iter().map(|&d| (first[b][d as usize].g - pushes[b][d as usize]).powi(2)).sum::<f64>().sqrt();
             // The twins, one member at a time.
             let mut expected = Vec::new();
             for (b, c) in cases.iter().enumerate() {
@@ -924,9 +946,9 @@ fn newton_kernels_match_their_cpu_twins() {
                 let call = [Active { member: 0, mode: 1 }];
                 let mut jobs = call;
                 while cpu::newton_compact(&call, &state, &mut jobs) > 0 {
-                    cpu::newton_update(&inverses[b], &free[b], &[member(b)], &mut state, &out, &mut u, &range, 0);
+                    cpu::newton_update(&inverses[b], &free[b], &[member(b)], &mut state, &out, &mut u, &range, &pushes[b], 0);
                     out = cpu_residual(c, &u, &steps[b], coefficients);
-                    cpu::newton_judge(&free[b], &[member(b)], &mut state, &out, &u, &starts[b], &steps[b], coefficients, &[u32::MAX; 2], &range, 0);
+                    cpu::newton_judge(&free[b], &[member(b)], &mut state, &out, &u, &starts[b], &steps[b], coefficients, &[u32::MAX; 2], &range, &pushes[b], 0);
                 }
                 expected.push((state[0], u, out));
             }
@@ -948,12 +970,13 @@ fn newton_kernels_match_their_cpu_twins() {
                     u,
                     dof_out,
                     u_start: &starts[b],
+                    contact_force: Some(&pushes[b]),
                     outcome: NewtonState::default(),
                     failure: None,
                 })
                 .collect();
             assert!(calls.iter().all(|c| world.newton_capable(c.body)));
-            world.newton(&mut calls, &mut [], coefficients, None, &mut Default::default()).expect("device Newton");
+            world.newton(&mut calls, &mut [], &mut [], &mut [], coefficients, (2, 1.0), None, &mut Default::default()).expect("device Newton");
             let got: Vec<(NewtonState<f64>, Option<ElementFailure>)> = calls.iter().map(|c| (c.outcome, c.failure)).collect();
             drop(calls);
             for (b, ((state, failure), (want, u, out))) in got.into_iter().zip(&expected).enumerate() {
@@ -997,17 +1020,18 @@ fn a_device_newton_call_for_one_body_of_a_large_batch_reads_back_only_its_own() 
     let residual0 = free.iter().map(|&d| first[d as usize].g.powi(2)).sum::<f64>().sqrt();
     let start = vec![0.0; c.u.len()];
     let (mut u, mut out) = (c.u.clone(), first.clone());
-    let call = NewtonCall { body: 399, factor: 1, inverse: Some(inverse.clone()), member, residual: residual0, u: &mut u, dof_out: &mut out, u_start: &start, outcome: NewtonState::default(), failure: None };
+    let call = NewtonCall { body: 399, factor: 1, inverse: Some(inverse.clone()), member, residual: residual0, u: &mut u, dof_out: &mut out, u_start: &start, contact_force: None, outcome: NewtonState::default(), failure: None };
     let mut calls = [call];
-    world.newton(&mut calls, &mut [], coefficients, None, &mut Default::default()).expect("device Newton");
+    world.newton(&mut calls, &mut [], &mut [], &mut [], coefficients, (2, 1.0), None, &mut Default::default()).expect("device Newton");
     let (state, failure) = (calls[0].outcome, calls[0].failure);
     let range = [MemberRange { dof_start: 0, dofs: c.u.len() as u32, ..Default::default() }];
     let mut expected = [NewtonState { status: NEWTON_ITERATING, residual: residual0, previous_residual: residual0, ..Default::default() }];
     let (mut u_cpu, mut out_cpu) = (c.u.clone(), first.clone());
     for _ in 0..2 {
-        cpu::newton_update(&inverse, &free, &[member], &mut expected, &out_cpu, &mut u_cpu, &range, 0);
+        let no_contact = vec![0.0; u_cpu.len()];
+        cpu::newton_update(&inverse, &free, &[member], &mut expected, &out_cpu, &mut u_cpu, &range, &no_contact, 0);
         out_cpu = cpu_residual(&c, &u_cpu, &step, coefficients);
-        cpu::newton_judge(&free, &[member], &mut expected, &out_cpu, &u_cpu, &start, &step, coefficients, &[u32::MAX; 2], &range, 0);
+        cpu::newton_judge(&free, &[member], &mut expected, &out_cpu, &u_cpu, &start, &step, coefficients, &[u32::MAX; 2], &range, &no_contact, 0);
     }
     assert_eq!((failure, state.status, state.iterations), (None, NEWTON_HOST, 2));
     assert_eq!((expected[0].status, expected[0].iterations), (NEWTON_HOST, 2));
@@ -1032,10 +1056,205 @@ fn a_device_newton_increment_that_inverts_an_element_fails_the_body() {
     let start = vec![0.0; c.u.len()];
     let (mut u, mut out) = (c.u.clone(), first.clone());
     let member = NewtonMember { free_count: free as u32, budget: 5, ..NewtonMember::default() };
-    let mut calls = [NewtonCall { body: 0, factor: 1, inverse: Some(inverse), member, residual: 1.0, u: &mut u, dof_out: &mut out, u_start: &start, outcome: NewtonState::default(), failure: None }];
-    world.newton(&mut calls, &mut [], coefficients, None, &mut Default::default()).expect("device Newton");
+    let mut calls = [NewtonCall { body: 0, factor: 1, inverse: Some(inverse), member, residual: 1.0, u: &mut u, dof_out: &mut out, u_start: &start, contact_force: None, outcome: NewtonState::default(), failure: None }];
+    world.newton(&mut calls, &mut [], &mut [], &mut [], coefficients, (2, 1.0), None, &mut Default::default()).expect("device Newton");
     let (state, failure) = (calls[0].outcome, calls[0].failure);
     assert_eq!((state.status, state.iterations), (bifirst::gpu::types::NEWTON_FAILED, 1), "{state:?}");
     assert!(matches!(failure, Some(ElementFailure::Inverted(_))), "{failure:?}");
     assert!(relative_error(&u, &c.u) > 1.0, "the failing iterate comes back for the host to word the failure");
+}
+
+/// A group in contact iterating on the device (`newton_contact`'s `prepare`, `uzawa_solve`,
+/// `forces`, the bodies' kernels, `newton_contact`'s `judge`) takes the increments of its CPU
+/// twins, to 1e-12: two bodies pressed together at three node pairs with friction (a dense W
+/// from their inverses), in 2D and 3D, until the group converges or its budget ends.
+#[test]
+fn newton_contact_kernels_match_their_cpu_twins() {
+    use bifirst::contact::uzawa::{Acceleration, Colours, Delassus, Local, NodalMap, Problem, Sweep, SETTLE};
+    use bifirst::gpu::uzawa_sweep::{NodeGather, UzawaJudgeState, UzawaLocal, UzawaProblem, JUDGE_CONVERGED};
+    use bifirst::gpu::{ContactLayout, GroupContact};
+    let Some(gpu) = gpu_or_skip("newton_contact_kernels_match_their_cpu_twins", Precision::F64) else { return };
+    let gpu = Arc::new(gpu);
+    let (theta_dt, c1) = (1e-3, 1e6);
+    let coefficients = Coefficients { factor: 1.0, c1 };
+    for (k, kind) in [ElementKind::Tri3, ElementKind::Tet4].into_iter().enumerate() {
+        let cases = two_bodies(ElementVariant { kind, formulation: Formulation::Displacement, material: "neo_hookean" }, 700 + k as u64);
+        let dim = kind.dim();
+        let steps: Vec<Vec<DofStep<f64>>> = cases.iter().map(|c| c.u.iter().map(|&x| DofStep { mass: 1.0, u_pred: 0.9 * x, f_int_t: 0.0, f_ext: 0.0 }).collect()).collect();
+        let starts: Vec<Vec<f64>> = cases.iter().map(|c| c.u.iter().map(|&x| 0.9 * x).collect()).collect();
+        let bases: Vec<Vec<f64>> = starts.clone();
+        let inverses: Vec<Vec<f64>> = cases.iter().map(|c| effective_inverse(c, coefficients)).collect();
+        let free: Vec<Vec<u32>> = cases.iter().map(|c| c.dofs.free_pairs().map(|(d, _)| d as u32).collect()).collect();
+        let free_index = |b: usize, d: usize| free[b].iter().position(|&x| x as usize == d);
+        // Three points, each node j of body 0 against node j of body 1 (free nodes only).
+        let nodes: Vec<u32> = (0..(cases[0].u.len() / dim) as u32).filter(|&n| (0..dim).all(|c| free_index(0, n as usize * dim + c).is_some() && free_index(1, n as usize * dim + c).is_some())).take(3).collect();
+        let angle = |i: usize| 0.3 + 0.7 * i as f64;
+        let frames: Vec<[[f64; 3]; 3]> = (0..nodes.len()).map(|i| {
+            let (c, s) = (angle(i).cos(), angle(i).sin());
+            [[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]]
+        }).collect();
+        // W = Σ_b H_b K̄_b⁻¹ H_bᵀ / θdt, dense over the points.
+        let column = |b: usize, i: usize, a: usize| -> Vec<f64> {
+            let mut h = vec![0.0; free[b].len()];
+            let coef = if b == 0 { 1.0 } else { -1.0 };
+            for c in 0..dim {
+                h[free_index(b, nodes[i] as usize * dim + c).unwrap()] += coef * frames[i][a][c];
+            }
+            h
+        };
+        let n_points = nodes.len();
+        let mut w = Delassus { rows: vec![Vec::new(); n_points], blocks: Vec::new(), version: 0 };
+        for i in 0..n_points {
+            for j in 0..n_points {
+                let mut block = [0.0; 9];
+                for b in 0..2 {
+                    let n = free[b].len();
+                    for a in 0..dim {
+                        let hi = column(b, i, a);
+                        for e in 0..dim {
+                            let hj = column(b, j, e);
+                            let mut s = 0.0;
+                            for f in 0..n {
+                                for g in 0..n {
+                                    s += hi[f] * inverses[b][f * n + g] * hj[g];
+                                }
+                            }
+                            block[3 * a + e] += s / theta_dt;
+                        }
+                    }
+                }
+                w.rows[i].push((j as u32, w.blocks.len() as u32));
+                w.blocks.push(block);
+            }
+        }
+        w.stamp();
+        let colours = Colours::of(&w);
+        // Pressed together: the shift asks for a closing normal velocity the bodies resist.
+        let mut local: Vec<Local> = (0..n_points).map(|i| Local { v_free: [0.0; 3], shift: -0.05 * (1.0 + i as f64), mu: 0.3, rho: w.rho(i, dim, Sweep::GaussSeidel) }).collect();
+        let nodal = NodalMap { terms: (0..n_points).map(|i| vec![(2 * i as u32, 1.0), (2 * i as u32 + 1, -1.0)]).collect(), frames: frames.clone(), nodes: 2 * n_points };
+        let slot_nodes: Vec<(u32, u32)> = nodes.iter().flat_map(|&n| [(0, n), (1, n)]).collect();
+        let (tolerance, floor, max_sweeps) = (1e-8, 1e-12, 400);
+        for (budget, contact_tolerance) in [(1u32, 1e-6), (12, 1e-6)] {
+            let member = |b: usize, inverse_start: u32, free_start: u32| NewtonMember {
+                inverse_start,
+                free_start,
+                free_count: free[b].len() as u32,
+                budget,
+                residual_tolerance: 1e-9,
+                floor: 0.0,
+                floor_per_travel: 0.0,
+                increment_tolerance: 1e-9,
+                increment_floor: 1e-3,
+                round_off: 0.0,
+            };
+            let first: Vec<Vec<DofOut<f64>>> = cases.iter().zip(&steps).map(|(c, s)| cpu_residual(c, &c.u, s, coefficients)).collect();
+            let residual0 = |b: usize| free[b].iter().map(|&d| first[b][d as usize].g.powi(2)).sum::<f64>().sqrt();
+            // The twins over the batch's arrays: the two members one after the other.
+            let n0 = cases[0].u.len();
+            let cat = |v: &[Vec<f64>]| -> Vec<f64> { v.concat() };
+            let members = [MemberRange { dof_start: 0, dofs: n0 as u32, ..Default::default() }, MemberRange { dof_start: n0 as u32, dofs: cases[1].u.len() as u32, ..Default::default() }];
+            let newton = [member(0, 0, 0), member(1, inverses[0].len() as u32, free[0].len() as u32)];
+            let (inverse_all, free_all) = (cat(&inverses), [free[0].clone(), free[1].clone()].concat());
+            let (u_start, u_base) = (cat(&starts), cat(&bases));
+            let step_all: Vec<DofStep<f64>> = steps.concat();
+            let mut u = cat(&[cases[0].u.clone(), cases[1].u.clone()]);
+            let mut out: Vec<DofOut<f64>> = first.concat();
+            let mut contact = vec![0.0; u.len()];
+            let mut x0 = vec![0.0; u.len()];
+            let mut state = [0, 1].map(|b| NewtonState { status: NEWTON_ITERATING, residual: residual0(b), previous_residual: residual0(b), ..Default::default() });
+            let staged = [UzawaProblem { point_start: 0, point_end: n_points as u32, node_start: 0, node_end: 2 * n_points as u32, max_iterations: max_sweeps, colour_first: 0, colours: colours.count() as u32, pad: 0, tolerance, floor }];
+            let mut r0 = vec![[0.0; 3]; n_points];
+            let problem_of = |local: &[Local], r: &mut Vec<[f64; 3]>| -> NodeGather {
+                let p = Problem { w: &w, colours: &colours, local, nodal: &nodal, r, tolerance, floor, max_iterations: max_sweeps as usize, acceleration: Acceleration::None };
+                NodeGather::of(std::slice::from_ref(&p))
+            };
+            let gather = problem_of(&local, &mut r0);
+            let group = |calls: Vec<usize>| GroupContact { calls, slot_nodes: &slot_nodes, obstacle: vec![[0.0; 3]; n_points], u_base: bases.clone(), iterations_before: 0, tolerance: contact_tolerance, outcome: ContactState::default() };
+            let layout = {
+                let mut r = vec![[0.0; 3]; n_points];
+                let p = Problem { w: &w, colours: &colours, local: &local, nodal: &nodal, r: &mut r, tolerance, floor, max_iterations: max_sweeps as usize, acceleration: Acceleration::None };
+                ContactLayout::of(&[group(vec![0, 1])], std::slice::from_ref(&p), staged.to_vec(), &[0, n_points], &gather, &|c| c as u32, &|m| members[m as usize].dof_start, dim, theta_dt)
+            };
+            let mut locals: Vec<UzawaLocal<f64>> = local.iter().map(|l| UzawaLocal { v_free: l.v_free, shift: l.shift, mu: l.mu, rho: l.rho, floor, settle: SETTLE * tolerance }).collect();
+            let mut ustates = [UzawaJudgeState::start(&staged[0])];
+            let mut cstates = [ContactState::default()];
+            let (mut r, mut dr) = (vec![0.0; 3 * n_points], vec![0.0; 3 * n_points]);
+            let call = [Active { member: 0, mode: 1 }, Active { member: 1, mode: 1 }];
+            let mut jobs = call;
+            while cpu::newton_compact(&call, &state, &mut jobs) > 0 {
+                cpu::newton_contact_prepare(&inverse_all, &free_all, &newton, &state, &out, &u, &members, &mut x0, &u_base, &layout, &mut locals, &mut ustates, 0);
+                for (l, d) in local.iter_mut().zip(&locals) {
+                    l.v_free = d.v_free;
+                }
+                let mut scratch = vec![[0.0; 3]; n_points];
+                let p = Problem { w: &w, colours: &colours, local: &local, nodal: &nodal, r: &mut scratch, tolerance, floor, max_iterations: max_sweeps as usize, acceleration: Acceleration::None };
+                cpu::uzawa_solve(&p, &staged, &mut ustates, &gather, &mut r, &mut dr, max_sweeps, 0);
+                cpu::newton_contact_forces(&state, &mut contact, &layout, &ustates, &r, &mut cstates, 0);
+                for m in 0..2 {
+                    cpu::newton_update(&inverse_all, &free_all, &newton, &mut state, &out, &mut u, &members, &contact, m);
+                }
+                for (b, range) in [0..n0, n0..u.len()].into_iter().enumerate() {
+                    out[range.clone()].copy_from_slice(&cpu_residual(&cases[b], &u[range.clone()], &steps[b], coefficients));
+                }
+                for m in 0..2 {
+                    cpu::newton_judge(&free_all, &newton, &mut state, &out, &u, &u_start, &step_all, coefficients, &[u32::MAX; 4], &members, &contact, m);
+                }
+                cpu::newton_contact_judge(&newton, &mut state, &layout, &cstates, 0);
+            }
+            // The device: both bodies' calls and their group in one call.
+            let mut world = world_of(&gpu, &cases);
+            world.begin_step(&steps.iter().enumerate().map(|(b, s)| (b, &s[..])).collect::<Vec<_>>());
+            let mut us: Vec<Vec<f64>> = cases.iter().map(|c| c.u.clone()).collect();
+            let mut outs = first.clone();
+            let zeros: Vec<Vec<f64>> = cases.iter().map(|c| vec![0.0; c.u.len()]).collect();
+            let mut calls: Vec<NewtonCall> = us
+                .iter_mut()
+                .zip(outs.iter_mut())
+                .enumerate()
+                .map(|(b, (u, dof_out))| NewtonCall { body: b, factor: 1, inverse: Some(inverses[b].clone()), member: member(b, 0, 0), residual: residual0(b), u, dof_out, u_start: &starts[b], contact_force: Some(&zeros[b]), outcome: NewtonState::default(), failure: None })
+                .collect();
+            for l in local.iter_mut() {
+                l.v_free = [0.0; 3];
+            }
+            let mut device_r = vec![[0.0; 3]; n_points];
+            let mut problems = [Problem { w: &w, colours: &colours, local: &local, nodal: &nodal, r: &mut device_r, tolerance, floor, max_iterations: max_sweeps as usize, acceleration: Acceleration::None }];
+            let mut contacts = [group(vec![0, 1])];
+            world.newton(&mut calls, &mut problems, &mut contacts, &mut [], coefficients, (dim, theta_dt), None, &mut Default::default()).expect("device Newton with contact");
+            let got: Vec<NewtonState<f64>> = calls.iter().map(|c| c.outcome).collect();
+            assert!(calls.iter().all(|c| c.failure.is_none()));
+            drop(calls);
+            let device_u = [us[0].clone(), us[1].clone()].concat();
+            let device_r: Vec<f64> = device_r.iter().flatten().copied().collect();
+            let (u_error, r_error) = (relative_error(&device_u, &u), relative_error(&device_r, &r));
+            let outcome = contacts[0].outcome;
+            eprintln!(
+                "{} budget {budget}: statuses {:?} after {} increments (twins {:?}, {}); {} sweeps, change {:.3e}, Uzawa {}; u {u_error:.1e}, r {r_error:.1e}",
+                kind.name(),
+                got.iter().map(|s| s.status).collect::<Vec<_>>(),
+                got[0].iterations,
+                state.iter().map(|s| s.status).collect::<Vec<_>>(),
+                state[0].iterations,
+                outcome.sweeps,
+                outcome.change,
+                outcome.uzawa
+            );
+            for m in 0..2 {
+                assert_eq!((got[m].status, got[m].iterations, got[m].balanced), (state[m].status, state[m].iterations, state[m].balanced), "{} member {m}", kind.name());
+                // Near convergence the residual is round-off of the forces, the increment of u.
+                let force = out.iter().fold(1e-300f64, |a, o| a.max(o.f_int.abs()));
+                assert!((got[m].residual - state[m].residual).abs() <= 1e-12 * force, "{} member {m}: |g - f_c| {:e} against {:e}", kind.name(), got[m].residual, state[m].residual);
+                assert!((got[m].increment - state[m].increment).abs() <= 1e-12 * u.iter().fold(0.0f64, |a, x| a.max(x.abs())), "{} member {m}", kind.name());
+            }
+            assert_eq!((outcome.sweeps, outcome.uzawa), (cstates[0].sweeps, cstates[0].uzawa), "{}", kind.name());
+            assert!((outcome.change - cstates[0].change).abs() <= 1e-12 * cstates[0].change.max(1.0));
+            assert!(u_error <= 1e-12 && r_error <= 1e-12, "{}: u {u_error:.1e}, r {r_error:.1e}", kind.name());
+            assert!(r.iter().step_by(3).any(|&rn| rn > 0.0), "the points press");
+            assert_eq!(cstates[0].uzawa, JUDGE_CONVERGED);
+            if budget == 1 {
+                assert_eq!((state[0].iterations, state[0].status), (1, NEWTON_HOST), "one increment, then the host");
+            } else {
+                assert!(state[0].iterations > 1, "{}: several increments on the device", kind.name());
+            }
+        }
+    }
 }

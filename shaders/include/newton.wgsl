@@ -1,7 +1,7 @@
-// A step's Newton iterations on the device for bodies that keep their factorisation and have no
-// contact point (`newton_update`, `forces`, `assemble_residual`, `newton_judge`,
-// `newton_compact`, recorded several times in one submission). CPU side: `gpu::newton`; the
-// test it repeats: `Body::converged`.
+// A step's Newton iterations on the device for bodies that keep their factorisation
+// (`newton_update`, `forces`, `assemble_residual`, `newton_judge`, `newton_compact`, and for
+// groups in contact `newton_contact` and `uzawa_solve` around them, recorded several times in
+// one submission). CPU side: `gpu::newton`; the test it repeats: `Body::converged`.
 
 // What a member's iterations need, set by the host for the call.
 struct NewtonMember {
@@ -31,7 +31,8 @@ struct NewtonState {
     iterations: u32,
     // Whether an increment changed a displacement.
     moved: u32,
-    pad: u32,
+    // Whether the last evaluation's residual met its tolerance (`Body::balanced`).
+    balanced: u32,
     // Residual norms of the last evaluation and of the one before, and the last increment's norm.
     residual: real,
     previous_residual: real,

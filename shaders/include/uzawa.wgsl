@@ -53,10 +53,10 @@ struct SolveCount {
 }
 
 // `UzawaJudgeState.status`.
-const LIVE = 0u;
-const CONVERGED = 1u;
+const UZAWA_LIVE = 0u;
+const UZAWA_CONVERGED = 1u;
 // max_iterations sweeps without converging.
-const SPENT = 2u;
+const UZAWA_SPENT = 2u;
 
 const UZAWA_WORKGROUP = 64u;
 
@@ -85,9 +85,9 @@ fn judged(p: UzawaProblem, state: UzawaJudgeState, change: real, size: real) -> 
     let converged = change <= real(1e-3) * p.tolerance * scale || (change <= p.tolerance * scale && error <= p.tolerance * scale);
     s.change = change / scale;
     if converged {
-        s.status = CONVERGED;
+        s.status = UZAWA_CONVERGED;
     } else if s.iterations >= p.max_iterations {
-        s.status = SPENT;
+        s.status = UZAWA_SPENT;
     }
     return s;
 }

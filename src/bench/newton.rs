@@ -44,13 +44,14 @@ pub(super) fn newton_rows(options: &BenchOptions, gpus: &[Arc<Gpu>], peaks: &[Pe
 
     let mut reference: Vec<(Vec<Real>, Vec<DofOut<Real>>)> = vec![(case.u.clone(), first.clone()); bodies];
     let range = [MemberRange { dof_start: 0, dofs: case.u.len() as u32, ..MemberRange::default() }];
+    let no_contact = vec![0.0; case.u.len()];
     let t = time_calls(options.min_time, || {
         reference.par_iter_mut().for_each(|(u, out)| {
             u.copy_from_slice(&case.u);
             let mut state = [initial];
-            cpu::newton_update(&inverse, &free, &[member], &mut state, &first, u, &range, 0);
+            cpu::newton_update(&inverse, &free, &[member], &mut state, &first, u, &range, &no_contact, 0);
             *out = residual(&case, u);
-            cpu::newton_judge(&free, &[member], &mut state, out, u, &start, &case.step, case.coefficients, &[u32::MAX; 2], &range, 0);
+            cpu::newton_judge(&free, &[member], &mut state, out, u, &start, &case.step, case.coefficients, &[u32::MAX; 2], &range, &no_contact, 0);
             let call = [Active { member: 0, mode: MODE_FORCES }];
             cpu::newton_compact(&call, &state, &mut [Active::default()]);
         });
@@ -74,10 +75,10 @@ pub(super) fn newton_rows(options: &BenchOptions, gpus: &[Arc<Gpu>], peaks: &[Pe
                     u.copy_from_slice(&case.u);
                     out.copy_from_slice(&first);
                     let inverse = (!world.newton_inverse_current(b, 1)).then(|| inverse.clone());
-                    NewtonCall { body: b, factor: 1, inverse, member, residual: residual0, u, dof_out: out, u_start: &start, outcome: NewtonState::default(), failure: None }
+                    NewtonCall { body: b, factor: 1, inverse, member, residual: residual0, u, dof_out: out, u_start: &start, contact_force: None, outcome: NewtonState::default(), failure: None }
                 })
                 .collect();
-            if let Err(e) = world.newton(&mut calls, &mut [], case.coefficients, None, &mut PhaseTimes::default()) {
+            if let Err(e) = world.newton(&mut calls, &mut [], &mut [], &mut [], case.coefficients, (2, 1.0), None, &mut PhaseTimes::default()) {
                 result = Err(e);
             }
         };

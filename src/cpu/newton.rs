@@ -1,11 +1,13 @@
 //! The CPU twins of a device Newton iteration's own kernels (`shaders/newton_update.wgsl`,
-//! `newton_judge.wgsl`, `newton_compact.wgsl`), each the work of one workgroup, written as the
+//! `newton_judge.wgsl`, `newton_compact.wgsl`, `newton_contact.wgsl`), each the work of one workgroup, written as the
 //! shader spreads it over its invocations so that the sums are taken in the same order. The
 //! engine's CPU path solves with faer instead; these are the oracle of the parity tests.
 
 use crate::gpu::types::{Active, Coefficients, DofOut, DofStep, MemberRange, NewtonMember, NewtonState, NEWTON_CONVERGED, NEWTON_FAILED, NEWTON_HOST, NEWTON_ITERATING, NEWTON_WORKGROUP, NO_FAILURE};
+use crate::gpu::uzawa_sweep::{UzawaJudgeState, UzawaLocal, JUDGE_CONVERGED, JUDGE_LIVE};
+use crate::gpu::ContactLayout;
 use crate::precision::Real;
-use crate::solver::REFACTOR_CONTRACTION;
+use crate::solver::{REFACTOR_CONTRACTION, TIGHTEN_AFTER};
 
 /// The sum of one value per invocation by halves, as `reduce_sum` of `newton.wgsl`.
 fn reduce_sum(mut partial: [Real; NEWTON_WORKGROUP]) -> Real {
@@ -24,10 +26,11 @@ fn reduce_max(partial: [Real; NEWTON_WORKGROUP]) -> Real {
     partial.into_iter().fold(0.0, Real::max)
 }
 
-/// `newton_update` for member `m`: `Δu = K̄⁻¹ (-g)` on its free dofs, `u += Δu`, and the
-/// increment's norm and count into its state; nothing unless it is still iterating.
+/// `newton_update` for member `m`: `Δu = K̄⁻¹ (f_c - g)` on its free dofs (`contact`: the
+/// contact forces per dof), `u += Δu`, and the increment's norm and count into its state;
+/// nothing unless it is still iterating.
 #[allow(clippy::too_many_arguments)]
-pub fn newton_update(inverse: &[Real], free_dofs: &[u32], newton: &[NewtonMember<Real>], state: &mut [NewtonState<Real>], dof_out: &[DofOut<Real>], u: &mut [Real], members: &[MemberRange], m: usize) {
+pub fn newton_update(inverse: &[Real], free_dofs: &[u32], newton: &[NewtonMember<Real>], state: &mut [NewtonState<Real>], dof_out: &[DofOut<Real>], u: &mut [Real], members: &[MemberRange], contact: &[Real], m: usize) {
     if state[m].status != NEWTON_ITERATING {
         return;
     }
@@ -35,7 +38,7 @@ pub fn newton_update(inverse: &[Real], free_dofs: &[u32], newton: &[NewtonMember
     let row = newton[m];
     let n = row.free_count as usize;
     let free = &free_dofs[row.free_start as usize..][..n];
-    let rhs: Vec<Real> = free.iter().map(|&k| -dof_out[dof_start + k as usize].g).collect();
+    let rhs: Vec<Real> = free.iter().map(|&k| contact[dof_start + k as usize] - dof_out[dof_start + k as usize].g).collect();
     let mut sum2 = [0.0; NEWTON_WORKGROUP];
     let mut moved = false;
     for (f, &k) in free.iter().enumerate() {
@@ -54,8 +57,9 @@ pub fn newton_update(inverse: &[Real], free_dofs: &[u32], newton: &[NewtonMember
     s.moved |= moved as u32;
 }
 
-/// `newton_judge` for member `m` after an evaluation: the test of `Body::converged`, and
-/// whether the member goes on iterating, converged, needs the host or failed.
+/// `newton_judge` for member `m` after an evaluation: the test of `Body::converged` (the
+/// residual `g - f_c`), and whether the member goes on iterating, converged, needs the host or
+/// failed.
 #[allow(clippy::too_many_arguments)]
 pub fn newton_judge(
     free_dofs: &[u32],
@@ -68,6 +72,7 @@ pub fn newton_judge(
     coefficients: Coefficients<Real>,
     failure: &[u32],
     members: &[MemberRange],
+    contact: &[Real],
     m: usize,
 ) {
     if state[m].status != NEWTON_ITERATING {
@@ -88,7 +93,7 @@ pub fn newton_judge(
     let (mut residual2, mut step2, mut size2) = ([0.0; NEWTON_WORKGROUP], [0.0; NEWTON_WORKGROUP], [0.0; NEWTON_WORKGROUP]);
     for f in 0..row.free_count as usize {
         let d = range.dof_start as usize + free_dofs[row.free_start as usize + f] as usize;
-        let (g, du) = (dof_out[d].g, u[d] - u_start[d]);
+        let (g, du) = (dof_out[d].g - contact[d], u[d] - u_start[d]);
         residual2[f % NEWTON_WORKGROUP] += g * g;
         step2[f % NEWTON_WORKGROUP] += du * du;
         size2[f % NEWTON_WORKGROUP] += u[d] * u[d];
@@ -106,6 +111,7 @@ pub fn newton_judge(
     let tolerance = row.residual_tolerance * scale + row.floor + row.floor_per_travel * most;
     let allowed = row.increment_tolerance * moved.max(row.increment_floor) + row.round_off * size;
     let contraction = residual / s.residual.max(Real::MIN_POSITIVE);
+    s.balanced = (residual <= tolerance) as u32;
     if residual <= tolerance && s.increment <= allowed {
         s.status = NEWTON_CONVERGED;
     } else if !residual.is_finite() || s.iterations >= row.budget || contraction > REFACTOR_CONTRACTION {
@@ -124,4 +130,128 @@ pub fn newton_compact(call: &[Active], state: &[NewtonState<Real>], jobs: &mut [
         at += 1;
     }
     at
+}
+
+/// Whether group `k` of a device call is still iterating (`iterating` of `newton_contact.wgsl`).
+fn group_iterating(state: &[NewtonState<Real>], c: &ContactLayout, k: usize) -> bool {
+    state[c.group_members[c.groups[k].member_start as usize] as usize].status == NEWTON_ITERATING
+}
+
+/// `newton_contact`'s `prepare` for group `k`: `x0 = K̄⁻¹(-g)` of every member, each point's free
+/// velocity into `locals`, and its Uzawa state back to the first sweep.
+#[allow(clippy::too_many_arguments)]
+pub fn newton_contact_prepare(
+    inverse: &[Real],
+    free_dofs: &[u32],
+    newton: &[NewtonMember<Real>],
+    state: &[NewtonState<Real>],
+    dof_out: &[DofOut<Real>],
+    u: &[Real],
+    members: &[MemberRange],
+    x0: &mut [Real],
+    u_base: &[Real],
+    c: &ContactLayout,
+    locals: &mut [UzawaLocal<Real>],
+    uzawa_states: &mut [UzawaJudgeState<Real>],
+    k: usize,
+) {
+    if !group_iterating(state, c, k) {
+        return;
+    }
+    let grp = c.groups[k];
+    for a in 0..grp.member_count as usize {
+        let m = c.group_members[grp.member_start as usize + a] as usize;
+        let row = newton[m];
+        let n = row.free_count as usize;
+        let dof_start = members[m].dof_start as usize;
+        let free = &free_dofs[row.free_start as usize..][..n];
+        let rhs: Vec<Real> = free.iter().map(|&j| -dof_out[dof_start + j as usize].g).collect();
+        for (f, &j) in free.iter().enumerate() {
+            let mut x = 0.0;
+            for (i, r) in rhs.iter().enumerate() {
+                x += inverse[row.inverse_start as usize + i * n + f] * r;
+            }
+            x0[dof_start + j as usize] = x;
+        }
+    }
+    let p = c.problems[k];
+    let tdt = c.call.theta_dt;
+    for (i, local) in locals.iter_mut().enumerate().take(p.point_end as usize).skip(p.point_start as usize) {
+        let mut g = [-c.obstacle[3 * i], -c.obstacle[3 * i + 1], -c.obstacle[3 * i + 2]];
+        for e in c.term_start[i] as usize..c.term_start[i + 1] as usize {
+            let d0 = c.node_dof[c.term_slots[e] as usize] as usize;
+            let coef = c.term_coefs[e];
+            for (comp, g) in g.iter_mut().enumerate().take(c.call.dim as usize) {
+                let d = d0 + comp;
+                *g += coef * ((u[d] - u_base[d]) / tdt + x0[d] / tdt);
+            }
+        }
+        let f = &c.frames[9 * i..9 * i + 9];
+        local.v_free = [0, 1, 2].map(|a| f[3 * a] * g[0] + f[3 * a + 1] * g[1] + f[3 * a + 2] * g[2]);
+    }
+    uzawa_states[k] = UzawaJudgeState { status: JUDGE_LIVE, previous: -1.0, ..Default::default() };
+}
+
+/// `newton_contact`'s `forces` for group `k`: the reactions `r` as contact forces per dof, their
+/// relative change and the solve's sweeps and outcome into `contact_states`.
+pub fn newton_contact_forces(state: &[NewtonState<Real>], contact: &mut [Real], c: &ContactLayout, uzawa_states: &[UzawaJudgeState<Real>], r: &[Real], contact_states: &mut [crate::gpu::types::ContactState<Real>], k: usize) {
+    if !group_iterating(state, c, k) {
+        return;
+    }
+    let p = c.problems[k];
+    let (mut change, mut size): (Real, Real) = (0.0, 0.0);
+    for n in p.node_start as usize..p.node_end as usize {
+        let mut f = [0.0; 3];
+        for e in c.node_start[n] as usize..c.node_start[n + 1] as usize {
+            let i = c.node_points[e] as usize;
+            let fr = &c.frames[9 * i..9 * i + 9];
+            let x = &r[3 * i..3 * i + 3];
+            let global = [0, 1, 2].map(|a| x[0] * fr[a] + x[1] * fr[3 + a] + x[2] * fr[6 + a]);
+            for a in 0..3 {
+                f[a] += c.node_coefs[e] * global[a];
+            }
+        }
+        let d0 = c.node_dof[n] as usize;
+        for (comp, &fc) in f.iter().enumerate().take(c.call.dim as usize) {
+            change = change.max((fc - contact[d0 + comp]).abs());
+            size = size.max(fc.abs());
+            contact[d0 + comp] = fc;
+        }
+    }
+    let s = &mut contact_states[k];
+    let solved = uzawa_states[k];
+    s.sweeps += solved.iterations;
+    s.uzawa = solved.status;
+    s.change = change / size.max(p.floor).max(Real::MIN_POSITIVE);
+}
+
+/// `newton_contact`'s `judge` for group `k`: one verdict for all its members.
+pub fn newton_contact_judge(newton: &[NewtonMember<Real>], state: &mut [NewtonState<Real>], c: &ContactLayout, contact_states: &[crate::gpu::types::ContactState<Real>], k: usize) {
+    let grp = c.groups[k];
+    let list = &c.group_members[grp.member_start as usize..][..grp.member_count as usize];
+    let lead = list[0] as usize;
+    let (mut all_converged, mut all_balanced, mut to_host) = (true, true, false);
+    for &m in list {
+        let s = state[m as usize];
+        all_converged &= s.status == NEWTON_CONVERGED;
+        all_balanced &= s.balanced == 1;
+        to_host |= s.status == NEWTON_HOST || s.status == NEWTON_FAILED;
+    }
+    let cs = contact_states[k];
+    let settled = cs.change <= grp.tolerance && cs.uzawa == JUDGE_CONVERGED;
+    let iterations = state[lead].iterations;
+    let verdict = if to_host {
+        NEWTON_HOST
+    } else if all_converged && settled {
+        NEWTON_CONVERGED
+    } else if cs.uzawa != JUDGE_CONVERGED || iterations >= newton[lead].budget || ((grp.iterations_before + iterations) as usize >= TIGHTEN_AFTER && settled && all_balanced) {
+        NEWTON_HOST
+    } else {
+        NEWTON_ITERATING
+    };
+    for &m in list {
+        if state[m as usize].status != NEWTON_FAILED {
+            state[m as usize].status = verdict;
+        }
+    }
 }

@@ -12,7 +12,7 @@ pub mod uzawa_step;
 pub mod uzawa_sweep;
 pub mod world;
 
-pub use world::{ElementFailure, Evaluation, GpuWorld, NewtonCall, Traffic, WorldBody, WorldKernel};
+pub use world::{ContactLayout, ElementFailure, Evaluation, GpuWorld, GroupContact, NewtonCall, Traffic, WorldBody, WorldKernel};
 pub use context::{describe_adapters, hardware_adapter, open, AdapterReport, Gpu, GpuError};
 pub use shaders::ElementVariant;
 

@@ -15,6 +15,7 @@ pub const SHADERS: &[(&str, &str)] = &[
     ("element_energy", include_str!("../../shaders/element_energy.wgsl")),
     ("element_force_tangent", include_str!("../../shaders/element_force_tangent.wgsl")),
     ("newton_compact", include_str!("../../shaders/newton_compact.wgsl")),
+    ("newton_contact", include_str!("../../shaders/newton_contact.wgsl")),
     ("newton_judge", include_str!("../../shaders/newton_judge.wgsl")),
     ("newton_update", include_str!("../../shaders/newton_update.wgsl")),
     ("peak_copy", include_str!("../../shaders/peak_copy.wgsl")),
@@ -115,6 +116,11 @@ pub fn source(kernel: &str, precision: Precision, variant: Option<ElementVariant
             crate::solver::REFACTOR_CONTRACTION
         );
         module += include("newton")?;
+        if kernel == "newton_contact" {
+            // The Uzawa points, problems and states it prepares and reads (`uzawa_solve`'s).
+            module += &format!("const TIGHTEN_AFTER = {}u;\n", crate::solver::TIGHTEN_AFTER);
+            module += include("uzawa")?;
+        }
     }
     if is_contact_kernel(kernel) {
         // The CPU twin's bound, so that both sweeps stop a point's local steps alike.

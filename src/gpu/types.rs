@@ -123,7 +123,8 @@ pub struct NewtonState<R> {
     pub status: u32,
     pub iterations: u32,
     pub moved: u32,
-    pub pad: u32,
+    /// Whether the last evaluation's residual met its tolerance (`Body::balanced`).
+    pub balanced: u32,
     pub residual: R,
     pub previous_residual: R,
     pub increment: R,
@@ -143,8 +144,53 @@ pub const NEWTON_MAX_FREE: usize = 1024;
 /// `NEWTON_WORKGROUP` of `newton.wgsl`: the invocations of a member's reductions.
 pub const NEWTON_WORKGROUP: usize = 64;
 
+/// `struct ContactGroup` of `shaders/newton_contact.wgsl`: a group in contact that iterates on
+/// the device, with its members at `member_start..member_start + member_count` of the call's
+/// member list (the first its leader).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ContactGroup<R> {
+    pub member_start: u32,
+    pub member_count: u32,
+    /// Newton iterations the group took on the host in this step, before the call.
+    pub iterations_before: u32,
+    pub pad: u32,
+    /// `contact.tolerance`, the bound on the contact forces' change.
+    pub tolerance: R,
+}
+
+/// `struct ContactState` of `shaders/newton_contact.wgsl`: where a device group's contact stands.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ContactState<R> {
+    /// Uzawa sweeps in the call, and the status of the last solve
+    /// ([`crate::gpu::uzawa_sweep::JUDGE_CONVERGED`] or `JUDGE_SPENT`).
+    pub sweeps: u32,
+    pub uzawa: u32,
+    pub pad: [u32; 2],
+    /// The change of the contact forces over the last increment, relative
+    /// ([`crate::solver::coupling::ContactStep::apply`]).
+    pub change: R,
+}
+
+/// `struct ContactCall` of `shaders/newton_contact.wgsl`.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ContactCall<R> {
+    pub problems: u32,
+    pub dim: u32,
+    pub pad: [u32; 2],
+    pub theta_dt: R,
+}
+
 // SAFETY: four u32 (16 bytes, a multiple of either real's alignment) then fields of one type
 // `R`: no padding, and every bit pattern is valid.
+unsafe impl<R: Pod> Zeroable for ContactGroup<R> {}
+unsafe impl<R: Pod> Pod for ContactGroup<R> {}
+unsafe impl<R: Pod> Zeroable for ContactState<R> {}
+unsafe impl<R: Pod> Pod for ContactState<R> {}
+unsafe impl<R: Pod> Zeroable for ContactCall<R> {}
+unsafe impl<R: Pod> Pod for ContactCall<R> {}
 unsafe impl<R: Pod> Zeroable for NewtonMember<R> {}
 unsafe impl<R: Pod> Pod for NewtonMember<R> {}
 unsafe impl<R: Pod> Zeroable for NewtonState<R> {}

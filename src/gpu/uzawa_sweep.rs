@@ -284,7 +284,7 @@ impl Layout {
 }
 
 /// Device buffers, grown as rounds need more.
-struct Buffers {
+pub(crate) struct Buffers {
     /// Capacities: points, blocks, row entries, colours, problems, nodes, node entries,
     /// colour starts.
     points: usize,
@@ -298,17 +298,17 @@ struct Buffers {
     block: Buffer,
     row_start: Buffer,
     row_entries: Buffer,
-    locals: Buffer,
+    pub(crate) locals: Buffer,
     order: Buffer,
     live: Buffer,
-    r: Buffer,
+    pub(crate) r: Buffer,
     ranges: Buffer,
-    judged: Buffer,
-    states: Buffer,
-    node_start: Buffer,
-    node_points: Buffer,
-    node_coefs: Buffer,
-    frames: Buffer,
+    pub(crate) judged: Buffer,
+    pub(crate) states: Buffer,
+    pub(crate) node_start: Buffer,
+    pub(crate) node_points: Buffer,
+    pub(crate) node_coefs: Buffer,
+    pub(crate) frames: Buffer,
     solve_order: Buffer,
     colour_start: Buffer,
     count: Buffer,
@@ -474,16 +474,33 @@ impl UzawaSweeps {
     /// done) when the round is too large for the device's buffers. f64 kernels only (the
     /// engine's sweeps run in f64).
     pub fn solve(&mut self, problems: &mut [Problem], stop: Option<&AtomicBool>) -> Result<Option<Vec<Outcome>>, GpuError> {
-        let precision = self.gpu.precision;
-        assert_eq!(precision, Precision::F64, "the device's Uzawa sweeps need f64 kernels");
         let mut outcomes = vec![Outcome::default(); problems.len()];
         if problems.iter().all(|p| p.local.is_empty()) {
             return Ok(Some(outcomes));
         }
+        let Some(whole) = self.stage(problems, SOLVE_SWEEPS) else {
+            return Ok(None);
+        };
+        let b = self.buffers.take().expect("staged");
+        let layout = std::mem::take(&mut self.layout);
+        let result = self.iterate(&b, &layout, whole, problems, &mut outcomes, stop);
+        self.buffers = Some(b);
+        self.layout = layout;
+        result.map(|()| Some(outcomes))
+    }
+
+    /// Uploads the problems: W, the colour orders and the node gather when they changed, the
+    /// points, the problems with their states before the first sweep, and the reactions; a
+    /// whole solve may take `sweeps` sweeps per dispatch. Whether they are solved whole
+    /// ([`SOLVE_WIDEST`]), or `None` (nothing uploaded) when they do not fit the device's
+    /// buffers. f64 kernels only.
+    pub(crate) fn stage(&mut self, problems: &[Problem], sweeps: usize) -> Option<bool> {
+        assert_eq!(self.gpu.precision, Precision::F64, "the device's Uzawa sweeps need f64 kernels");
         let resident = self.layout.key == key_of(problems);
         let layout = if resident { std::mem::take(&mut self.layout) } else { Layout::of(problems) };
         let Some(reallocated) = self.reserve(&layout, problems.len()) else {
-            return Ok(None);
+            self.layout = if resident { layout } else { Layout::default() };
+            return None;
         };
         let b = self.buffers.take().expect("reserved");
         if !resident || reallocated {
@@ -517,18 +534,40 @@ impl UzawaSweeps {
         self.upload(&b.states, 0, bytemuck::cast_slice(&states));
         let whole = layout.widest <= SOLVE_WIDEST;
         let most = problems.iter().map(|p| p.max_iterations).max().unwrap_or(0);
-        let sweeps = if whole { most.min(SOLVE_SWEEPS) as u32 } else { 0 };
+        let sweeps = if whole { most.min(sweeps).min(u32::MAX as usize) as u32 } else { 0 };
         self.upload(&b.count, 0, bytemuck::bytes_of(&SolveCount { problems: problems.len() as u32, sweeps, pad: [0; 2] }));
         if !whole {
             let live: Vec<u32> = judged.iter().zip(&states).flat_map(|(p, s)| std::iter::repeat_n((s.status == JUDGE_LIVE) as u32, (p.point_end - p.point_start) as usize)).collect();
             self.upload(&b.live, 0, bytemuck::cast_slice(&live));
         }
         self.upload(&b.r, 0, bytemuck::cast_slice(&start));
-        let sweeping = states.iter().any(|s| s.status == JUDGE_LIVE);
-        let result = if sweeping { self.iterate(&b, &layout, whole, problems, &mut outcomes, stop) } else { Ok(()) };
         self.buffers = Some(b);
         self.layout = layout;
-        result.map(|()| Some(outcomes))
+        Some(whole)
+    }
+
+    /// What the last staged problems are on the device: each problem for the kernels, where
+    /// each problem's points start (and the end), and the node gather.
+    pub(crate) fn staged(&self, problems: &[Problem]) -> (Vec<UzawaProblem<Real>>, &[usize], &NodeGather) {
+        (self.layout.judged(problems), &self.layout.offsets, &self.layout.nodes)
+    }
+
+    /// The staged problems' buffers (after [`UzawaSweeps::stage`]).
+    pub(crate) fn buffers(&self) -> &Buffers {
+        self.buffers.as_ref().expect("staged")
+    }
+
+    /// Records one dispatch of `uzawa_solve` over `problems` staged problems.
+    pub(crate) fn record_solve(&self, pass: &mut wgpu::ComputePass, problems: usize) {
+        let (x, y) = super::dispatch_rows(problems);
+        pass.set_pipeline(&self.solve);
+        pass.set_bind_group(0, &self.buffers().solve_group, &[]);
+        pass.dispatch_workgroups(x, y, 1);
+    }
+
+    /// Bytes moved since the last call.
+    pub(crate) fn take_traffic(&mut self) -> Traffic {
+        std::mem::take(&mut self.traffic)
     }
 
     /// Submits until no problem is live: each a dispatch of `uzawa_solve` if `whole`, else a

@@ -9,8 +9,10 @@
 //! residuals of the evaluated bodies, and the stiffness values only of the bodies whose tangent
 //! was asked for (those that refactorise).
 
+mod contact;
 mod newton;
 
+pub use contact::{ContactLayout, GroupContact};
 pub use newton::NewtonCall;
 
 use super::uzawa_sweep::UzawaSweeps;
@@ -246,6 +248,9 @@ enum Source {
 #[derive(Default)]
 struct ReadBack {
     copies: Vec<Copy>,
+    /// Copies from buffers outside the batches (the contact of device Newton calls):
+    /// `(buffer, source offset, bytes, target)`.
+    others: Vec<(Buffer, u64, u64, u64)>,
     end: u64,
 }
 
@@ -256,6 +261,14 @@ impl ReadBack {
         self.end += (source.end - source.start).div_ceil(8) * 8;
         self.copies.push(Copy { batch, what, source, target });
         target
+    }
+
+    /// Queues a copy of the first `bytes` of a buffer outside the batches; returns where it lands.
+    fn queue_buffer(&mut self, buffer: &Buffer, bytes: u64) -> usize {
+        let target = self.end;
+        self.end += bytes.div_ceil(8) * 8;
+        self.others.push((buffer.clone(), 0, bytes, target));
+        target as usize
     }
 
     /// Queues the byte span of each listed member (sorted), one copy per run of consecutive
@@ -290,6 +303,8 @@ pub struct GpuWorld {
     newton_readback: Option<(Buffer, u64)>,
     /// Compiled by the first device Newton call.
     newton_pipelines: Option<newton::NewtonPipelines>,
+    /// Compiled by the first device Newton call with groups in contact.
+    contact_pipelines: Option<contact::ContactPipelines>,
 }
 
 pub(super) fn buffer(gpu: &Gpu, label: &str, bytes: usize, usage: BufferUsages) -> Buffer {
@@ -352,7 +367,7 @@ impl GpuWorld {
             batches.push(batch);
         }
         let readback = buffer(&gpu, "readback", readback_bytes, BufferUsages::MAP_READ | BufferUsages::COPY_DST);
-        Ok(Self { gpu, batches, place, coefficients, readback, traffic, submits: 0, contact: None, uzawa: UzawaPlacement::default(), rounds: RoundPlacement::default(), newton_readback: None, newton_pipelines: None })
+        Ok(Self { gpu, batches, place, coefficients, readback, traffic, submits: 0, contact: None, uzawa: UzawaPlacement::default(), rounds: RoundPlacement::default(), newton_readback: None, newton_pipelines: None, contact_pipelines: None })
     }
 
     pub fn precision(&self) -> Precision {
@@ -371,6 +386,11 @@ impl GpuWorld {
 
     /// Queue submits so far: one per [`GpuWorld::evaluate`] and per [`GpuWorld::element_energies`],
     /// and one per chunk of Uzawa sweeps ([`GpuWorld::solve_contact`]).
+    /// The batch a body's elements are in.
+    pub fn batch_of(&self, body: usize) -> usize {
+        self.place[body].0
+    }
+
     pub fn submits(&self) -> u64 {
         self.submits + self.contact.as_ref().map_or(0, |c| c.submits)
     }
@@ -646,6 +666,9 @@ impl GpuWorld {
                 Source::NewtonState => &b.newton.as_ref().expect("a batch whose Newton states are read has them").state,
             };
             encoder.copy_buffer_to_buffer(source, c.source.start, target, c.target, c.source.end - c.source.start);
+        }
+        for (source, offset, bytes, at) in &readback.others {
+            encoder.copy_buffer_to_buffer(source, *offset, target, *at, *bytes);
         }
         let submitted = Instant::now();
         self.gpu.queue.submit([encoder.finish()]);

@@ -734,6 +734,12 @@ impl Body {
         self.still
     }
 
+    /// Per dof, `u_t + dt (1 - θ) v_t`: the trial velocity is `(u - base) / θdt` (a device
+    /// that takes the increments of a group in contact computes it so).
+    pub fn trial_velocity_base(&self, p: &StepParams) -> Vec<Real> {
+        self.state.u.iter().zip(&self.state.v).map(|(u, v)| u + p.dt * (1.0 - p.theta) * v).collect()
+    }
+
     /// Velocity of dof `d` implied by the trial displacement (eq. 15).
     pub fn trial_velocity(&self, p: &StepParams, d: usize) -> Real {
         (self.trial.u[d] - self.state.u[d] - p.dt * (1.0 - p.theta) * self.state.v[d]) / (p.theta * p.dt)
@@ -950,6 +956,7 @@ impl Body {
             u: &mut self.trial.u,
             dof_out: &mut self.dof_out,
             u_start: &self.state.u,
+            contact_force: Some(&self.contact_force),
             outcome: NewtonState::default(),
             failure: None,
         }

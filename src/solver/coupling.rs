@@ -42,6 +42,8 @@ pub struct ContactStep {
     pub r: Vec<[Real; 3]>,
     pub local: Vec<Local>,
     nodal: NodalMap,
+    /// Per node slot of `nodal`: (body, node).
+    slot_nodes: Vec<(u32, u32)>,
     dim: usize,
     /// A velocity that matters in this step (the fastest body or obstacle, or what gravity adds
     /// in one step): reactions are compared with `max ρ` times it, so that round-off in a
@@ -140,17 +142,52 @@ impl ContactStep {
         let local: Vec<Local> = points.iter().zip(&previous).map(|(c, p)| Local { v_free: [0.0; 3], shift: c.shift, mu: c.friction, rho: p.1 }).collect();
         let floor = velocity_scale * local.iter().map(|l| l.rho).fold(0.0, Real::max);
         let mut slots: HashMap<(u32, u32), u32> = HashMap::new();
+        let mut slot_nodes = Vec::new();
         let mut nodal = NodalMap { terms: Vec::with_capacity(points.len()), frames: points.iter().map(|c| c.frame).collect(), nodes: 0 };
         for c in &points {
             let terms = c.terms().iter().map(|t| {
                 let next = slots.len() as u32;
-                (*slots.entry((t.body, t.node)).or_insert(next), t.coef)
+                let slot = *slots.entry((t.body, t.node)).or_insert_with(|| {
+                    slot_nodes.push((t.body, t.node));
+                    next
+                });
+                (slot, t.coef)
             });
             nodal.terms.push(terms.collect());
         }
         nodal.nodes = slots.len();
         let responses = bodies.iter().map(|_| None).collect();
-        Self { points, delassus, colours, per_body, h, r, local, nodal, dim, velocity_scale, floor, inner: INNER_TOLERANCE, shares: Vec::new(), free_increment: Vec::new(), responses }
+        Self { points, delassus, colours, per_body, h, r, local, nodal, slot_nodes, dim, velocity_scale, floor, inner: INNER_TOLERANCE, shares: Vec::new(), free_increment: Vec::new(), responses }
+    }
+
+    /// Whether the Delassus blocks of `bodies` bodies are built for the step (by the first
+    /// increment): until a body refactorises, the increments can go on without the host.
+    pub fn delassus_built(&self, bodies: usize) -> bool {
+        self.shares.len() == bodies
+    }
+
+    /// The most points of one colour of the Gauss-Seidel sweeps.
+    pub fn widest_colour(&self) -> usize {
+        (0..self.colours.count()).map(|k| self.colours.colour(k).len()).max().unwrap_or(0)
+    }
+
+    /// The prepared problem ([`ContactStep::problem`]) with what a device that takes the
+    /// increments needs besides: each node slot's (body, node), and each point's obstacle
+    /// velocity at the end of the step.
+    pub fn device_problem(&mut self, settings: &Settings) -> (Problem<'_>, &[(u32, u32)], Vec<[Real; 3]>) {
+        let obstacle = self.points.iter().map(|c| c.obstacle_velocity[1]).collect();
+        let problem = Problem {
+            w: &self.delassus,
+            colours: &self.colours,
+            local: &self.local,
+            nodal: &self.nodal,
+            r: &mut self.r,
+            tolerance: self.inner * settings.tolerance,
+            floor: self.floor,
+            max_iterations: settings.max_iterations,
+            acceleration: settings.acceleration,
+        };
+        (problem, &self.slot_nodes, obstacle)
     }
 
     /// Whether every point has a step length (carried over from the last step), so that the

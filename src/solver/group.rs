@@ -7,9 +7,11 @@
 use super::body::{coefficients, Body, StepFailure, StepParams};
 use super::coupling::ContactStep;
 use super::PhaseTimes;
-use crate::contact::uzawa::Outcome;
+use crate::contact::uzawa::{Outcome, Problem};
 use crate::contact::{ContactPoint, Settings, WarmStart};
-use crate::gpu::{ElementFailure, Evaluation, GpuWorld, NewtonCall};
+use crate::gpu::types::ContactState;
+use crate::gpu::uzawa_sweep::{JUDGE_CONVERGED, SOLVE_WIDEST};
+use crate::gpu::{ElementFailure, Evaluation, GpuWorld, GroupContact, NewtonCall};
 use crate::mesh::ElementKind;
 use crate::precision::{Precision, Real};
 use rayon::prelude::*;
@@ -215,7 +217,7 @@ const UZAWA_STALLS: usize = 3;
 
 /// Newton iterations after which a group whose only unmet criterion is the increment solves its
 /// contact problems tighter ([`ContactStep::tighten`]).
-const TIGHTEN_AFTER: usize = 4;
+pub const TIGHTEN_AFTER: usize = 4;
 
 /// A contact criterion a group's convergence test found unmet, worded only for a failure
 /// message (as the bodies' own, [`Body::unmet`]).
@@ -474,13 +476,42 @@ fn newton_in_lockstep(groups: &mut [Group], world: &mut GpuWorld, c: &Context, t
 }
 
 /// The `continuing` groups whose next Newton iterations go to the device
-/// ([`GpuWorld::newton`], with the next round's pass): no contact problem, one body that keeps
-/// its factorisation and has a slot for `K̄⁻¹` there, and element work worth device passes
-/// ([`crate::backend::round_on_device`]). They leave `continuing` for this round.
+/// ([`GpuWorld::newton`], with the next round's pass): bodies that keep their factorisation and
+/// have a slot for `K̄⁻¹` there, and element work worth device passes
+/// ([`crate::backend::round_on_device`]); either one body without contact points, or a group in
+/// contact after its first increment of the step (which built W) with its Uzawa solves
+/// converging, problems solved whole on the device ([`crate::backend::uzawa_on_device`],
+/// colours of at most [`SOLVE_WIDEST`] points) and its bodies in one batch (the batch of the
+/// first such group). They leave `continuing` for this round.
 fn iterate_on_device(groups: &[Group], continuing: &mut [bool], world: &GpuWorld, c: &Context) -> Vec<bool> {
     let p = c.p;
-    let takes = |g: &Group| g.contact.is_none() && g.bodies.len() == 1 && g.newton.report.iterations < p.max_iterations && world.newton_capable(g.ids[0]) && g.bodies[0].iterates_on_device(p);
-    let chosen: Vec<bool> = groups.iter().zip(continuing.iter()).map(|(g, &go)| go && takes(g)).collect();
+    let capable = |g: &Group| g.newton.report.iterations < p.max_iterations && g.bodies.iter().zip(g.ids).all(|(b, &id)| world.newton_capable(id) && b.iterates_on_device(p));
+    let settled = |g: &Group| g.newton.uzawa_ran && g.newton.uzawa_converged && g.contact.as_ref().is_some_and(|k| k.delassus_built(g.bodies.len()) && k.widest_colour() <= SOLVE_WIDEST);
+    let mut chosen = vec![false; groups.len()];
+    let mut in_contact = vec![false; groups.len()];
+    let mut contact_batch = None;
+    for (k, g) in groups.iter().enumerate() {
+        if !continuing[k] || !capable(g) {
+            continue;
+        }
+        if g.contact.is_none() {
+            chosen[k] = g.bodies.len() == 1;
+        } else if settled(g) {
+            let batch = world.batch_of(g.ids[0]);
+            in_contact[k] = g.ids.iter().all(|&id| world.batch_of(id) == batch) && *contact_batch.get_or_insert(batch) == batch;
+        }
+    }
+    if let (Some(settings), true) = (c.settings, in_contact.contains(&true)) {
+        let problems = || groups.iter().zip(&in_contact).filter(|(_, &yes)| yes).filter_map(|(g, _)| g.contact.as_ref());
+        let points = problems().map(|k| k.points.len()).sum();
+        let colours = problems().map(|k| k.colours.count()).max().unwrap_or(0);
+        let widest = problems().map(|k| k.widest_colour()).max().unwrap_or(0);
+        if crate::backend::uzawa_on_device(world, settings, points, colours, widest) {
+            for (chosen, &yes) in chosen.iter_mut().zip(&in_contact) {
+                *chosen |= yes;
+            }
+        }
+    }
     if !chosen.contains(&true) || !crate::backend::round_on_device(world, false, &element_work(groups, &chosen, &|_| true)) {
         return vec![false; groups.len()];
     }
@@ -596,16 +627,52 @@ fn device_pass(
     }
     // `K̄⁻¹` of each factorisation the device lacks (after a step that refactorised many
     // grains: all of them), in parallel.
-    let stale: Vec<bool> = groups.iter().zip(iterating).map(|(g, &yes)| yes && !world.newton_inverse_current(g.ids[0], g.bodies[0].factor_version())).collect();
-    let mut inverses: Vec<Option<Vec<Real>>> =
-        groups.par_iter_mut().zip(&stale).map(|(g, &stale)| stale.then(|| g.bodies[0].effective_inverse(&mut g.newton.report.wall))).collect();
+    let shared: &GpuWorld = world;
+    let mut inverses: Vec<Vec<Option<Vec<Real>>>> = groups
+        .par_iter_mut()
+        .zip(iterating)
+        .map(|(g, &yes)| {
+            if !yes {
+                return Vec::new();
+            }
+            let wall = &mut g.newton.report.wall;
+            g.bodies.iter_mut().zip(g.ids).map(|(b, &id)| (!shared.newton_inverse_current(id, b.factor_version())).then(|| b.effective_inverse(wall))).collect()
+        })
+        .collect();
     let motion_scale = c.velocity_scale * p.dt;
     let mut list: Vec<Evaluation> = Vec::new();
     let mut calls: Vec<NewtonCall> = Vec::new();
+    let mut problems: Vec<Problem> = Vec::new();
+    let mut contacts: Vec<GroupContact> = Vec::new();
+    // Per group iterating on the device: its calls, and its contact's index in `contacts`.
+    let mut call_ranges: Vec<(std::ops::Range<usize>, Option<usize>)> = vec![(0..0, None); groups.len()];
+    let dim = groups.first().and_then(|g| g.bodies.first()).map_or(2, |b| b.dim);
     for (k, (g, chosen)) in groups.iter_mut().zip(&chosen).enumerate() {
         if iterating[k] {
             let budget = p.max_iterations - g.newton.report.iterations;
-            calls.push(g.bodies[0].newton_call(g.ids[0], p, motion_scale, budget, inverses[k].take()));
+            let Group { ids, bodies, contact, newton, .. } = g;
+            let start = calls.len();
+            let u_base: Vec<Vec<Real>> = if contact.is_some() { bodies.iter().map(|b| b.trial_velocity_base(p)).collect() } else { Vec::new() };
+            for ((body, &id), inverse) in bodies.iter_mut().zip(ids.iter()).zip(std::mem::take(&mut inverses[k])) {
+                calls.push(body.newton_call(id, p, motion_scale, budget, inverse));
+            }
+            let mut index = None;
+            if let Some(contact) = contact {
+                let settings = c.settings.expect("contact points need contact settings");
+                let (problem, slot_nodes, obstacle) = contact.device_problem(settings);
+                index = Some(contacts.len());
+                problems.push(problem);
+                contacts.push(GroupContact {
+                    calls: (start..calls.len()).collect(),
+                    slot_nodes,
+                    obstacle,
+                    u_base,
+                    iterations_before: newton.report.iterations as u32,
+                    tolerance: settings.tolerance,
+                    outcome: ContactState::default(),
+                });
+            }
+            call_ranges[k] = (start..calls.len(), index);
             continue;
         }
         for ((body, &id), &yes) in g.bodies.iter_mut().zip(g.ids).zip(chosen) {
@@ -614,27 +681,47 @@ fn device_pass(
             }
         }
     }
-    let passed = if calls.is_empty() { world.evaluate(&mut list, coefficients(p), times) } else { world.newton(&mut calls, &mut list, coefficients(p), c.interrupt, times) };
+    let passed = if calls.is_empty() {
+        world.evaluate(&mut list, coefficients(p), times)
+    } else {
+        world.newton(&mut calls, &mut problems, &mut contacts, &mut list, coefficients(p), (dim, p.theta * p.dt), c.interrupt, times)
+    };
     let failures: Vec<Option<ElementFailure>> = list.iter().map(|e| e.failure).collect();
     let ends: Vec<_> = calls.iter().map(|call| (call.outcome, call.failure)).collect();
+    let contact_outcomes: Vec<ContactState<Real>> = contacts.iter().map(|g| g.outcome).collect();
     drop(list);
     drop(calls);
-    let (mut failures, mut ends) = (failures.into_iter(), ends.into_iter());
+    drop(contacts);
+    drop(problems);
+    let mut failures = failures.into_iter();
     for (k, ((g, chosen), result)) in groups.iter_mut().zip(&chosen).zip(&mut results).enumerate() {
         if iterating[k] {
-            let (state, failure) = ends.next().expect("one end per device Newton call");
-            let body = &mut *g.bodies[0];
-            *result = match &passed {
-                Err(e) => Err(body.device_failure(e)),
-                Ok(()) => {
-                    // Each increment is followed by an evaluation; the last one counts in the
-                    // convergence test that follows, which takes it again.
-                    g.newton.report.iterations += state.iterations as usize;
-                    g.newton.report.device_iterations += state.iterations as usize;
-                    g.newton.report.bodies_iterated += (state.iterations as usize).saturating_sub(1);
-                    body.finish_device_newton(p, &state, failure)
+            let (range, index) = call_ranges[k].clone();
+            if let Err(e) = &passed {
+                *result = Err(g.bodies[0].device_failure(e));
+                continue;
+            }
+            // The members took their increments in lockstep. Each increment is followed by an
+            // evaluation; the last one counts in the convergence test that follows, which takes
+            // it again.
+            let iterations = ends[range.start].0.iterations as usize;
+            let state = &mut g.newton;
+            state.report.iterations += iterations;
+            state.report.device_iterations += iterations;
+            state.report.bodies_iterated += iterations.saturating_sub(1) * g.bodies.len();
+            for (body, (end, failure)) in g.bodies.iter_mut().zip(&ends[range]) {
+                if let (Ok(()), Err(e)) = (&*result, body.finish_device_newton(p, end, *failure)) {
+                    *result = Err(e);
                 }
-            };
+            }
+            if let (Some(j), true) = (index, iterations > 0) {
+                let o = contact_outcomes[j];
+                state.report.uzawa_iterations += o.sweeps as usize;
+                state.uzawa_ran = true;
+                state.uzawa_converged = o.uzawa == JUDGE_CONVERGED;
+                state.uzawa_stalls = if state.uzawa_converged { 0 } else { state.uzawa_stalls + 1 };
+                state.last_change = Some(o.change);
+            }
             continue;
         }
         for (body, &yes) in g.bodies.iter_mut().zip(chosen) {

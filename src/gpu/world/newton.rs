@@ -8,8 +8,11 @@
 //! iterations per submission. The host reads back the members' states, displacements and
 //! residuals once per submission.
 
+use super::contact::{ContactLayout, ContactPasses, ContactPipelines, GroupContact};
 use super::{buffer, to_device, Batch, Evaluation, GpuWorld, Pass, ReadBack, Source, FORCES_JOBS, RESIDUAL_JOBS, WORKGROUP};
-use crate::gpu::types::{Active, Coefficients, DofOut, NewtonMember, NewtonState, MODE_FORCES, NEWTON_FAILED, NEWTON_ITERATING, NEWTON_MAX_FREE, NO_FAILURE};
+use crate::contact::uzawa::Problem;
+use crate::gpu::uzawa_sweep::UzawaSweeps;
+use crate::gpu::types::{Active, Coefficients, ContactState, DofOut, NewtonMember, NewtonState, MODE_FORCES, NEWTON_FAILED, NEWTON_ITERATING, NEWTON_MAX_FREE, NO_FAILURE};
 use crate::gpu::{ElementFailure, Gpu, GpuError};
 use crate::precision::{Precision, Real};
 use crate::solver::PhaseTimes;
@@ -45,6 +48,8 @@ pub struct NewtonCall<'a> {
     pub dof_out: &'a mut [DofOut<Real>],
     /// The displacements at the start of the step.
     pub u_start: &'a [Real],
+    /// The contact forces per dof (`None`: zero, a body without contact points).
+    pub contact_force: Option<&'a [Real]>,
     /// Out: where the iterations ended.
     pub outcome: NewtonState<Real>,
     pub failure: Option<ElementFailure>,
@@ -53,9 +58,15 @@ pub struct NewtonCall<'a> {
 /// A batch's buffers and pipelines for device Newton iterations, made when a call first needs
 /// them (a scene that never iterates on the device pays nothing).
 pub(super) struct NewtonBuffers {
-    inverse: Buffer,
-    newton: Buffer,
+    pub(super) inverse: Buffer,
+    pub(super) free: Buffer,
+    pub(super) newton: Buffer,
     pub(super) state: Buffer,
+    /// Per dof: the contact forces (zero but for groups in contact), and for those groups the
+    /// contact-free increment and `u_t + dt (1 - θ) v_t` (`newton_contact.wgsl`).
+    pub(super) contact: Buffer,
+    pub(super) x0: Buffer,
+    pub(super) u_base: Buffer,
     u_start: Buffer,
     call: Buffer,
     /// The members still iterating, which every kernel of an iteration runs over: a list of
@@ -72,6 +83,7 @@ pub(super) struct NewtonBuffers {
     /// factorisation whose inverse its slot holds.
     newton_host: Vec<NewtonMember<Real>>,
     start_host: Vec<Real>,
+    contact_host: Vec<Real>,
     inverse_version: Vec<Option<u64>>,
 }
 
@@ -119,6 +131,9 @@ impl NewtonBuffers {
         let newton = buffer(gpu, "newton members", members * std::mem::size_of::<NewtonMember<Real>>(), write);
         let state = buffer(gpu, "newton state", members * std::mem::size_of::<NewtonState<Real>>(), write | BufferUsages::COPY_SRC);
         let u_start = buffer(gpu, "u start", dofs * real, write);
+        let contact = buffer(gpu, "contact forces", dofs * real, write);
+        let x0 = buffer(gpu, "contact-free increments", dofs * real, write);
+        let u_base = buffer(gpu, "u base", dofs * real, write);
         let call = buffer(gpu, "newton call", members * 8, write);
         let jobs = buffer(gpu, "newton jobs", members * 8, write);
         let dispatch = buffer(gpu, "newton dispatch", DISPATCH_WORDS * 4, write | BufferUsages::INDIRECT);
@@ -130,13 +145,17 @@ impl NewtonBuffers {
         let (forces_buffers, residual_buffers) = (with_jobs(&b.forces_buffers, FORCES_JOBS), with_jobs(&b.residual_buffers, RESIDUAL_JOBS));
         let forces = b.forces.rebound(gpu, &forces_buffers.iter().collect::<Vec<_>>());
         let residual = b.residual.rebound(gpu, &residual_buffers.iter().collect::<Vec<_>>());
-        let update = Pass::bound(gpu, pipelines.update.clone(), &[&inverse, &free, &newton, &state, &b.dof_out, &b.u, &b.member_buffer, &jobs]);
-        let judge = Pass::bound(gpu, pipelines.judge.clone(), &[&free, &newton, &state, &b.dof_out, &b.u, &u_start, &b.step, coefficients, &b.failure, &b.member_buffer, &jobs]);
+        let update = Pass::bound(gpu, pipelines.update.clone(), &[&inverse, &free, &newton, &state, &b.dof_out, &b.u, &b.member_buffer, &jobs, &contact]);
+        let judge = Pass::bound(gpu, pipelines.judge.clone(), &[&free, &newton, &state, &b.dof_out, &b.u, &u_start, &b.step, coefficients, &b.failure, &b.member_buffer, &jobs, &contact]);
         let compact = Pass::bound(gpu, pipelines.compact.clone(), &[&call, &state, &jobs, &dispatch]);
         Ok(Self {
             inverse,
+            free,
             newton,
             state,
+            contact,
+            x0,
+            u_base,
             u_start,
             call,
             jobs,
@@ -148,6 +167,7 @@ impl NewtonBuffers {
             compact,
             newton_host: vec![NewtonMember::default(); members],
             start_host: vec![Real::NAN; dofs],
+            contact_host: vec![Real::NAN; dofs],
             inverse_version: vec![None; members],
         })
     }
@@ -176,7 +196,24 @@ impl GpuWorld {
     /// The evaluation pass of other bodies (`list`, as [`GpuWorld::evaluate`] takes it) shares
     /// the first submission: a Newton round that evaluates the groups in contact and iterates
     /// the free bodies costs one submit.
-    pub fn newton(&mut self, calls: &mut [NewtonCall], list: &mut [Evaluation], coefficients: Coefficients<Real>, interrupt: Option<&AtomicBool>, times: &mut PhaseTimes) -> Result<(), GpuError> {
+    ///
+    /// Groups in contact (`contacts`, each with its problem in `problems`, their bodies' calls
+    /// among `calls`, all in one batch, their problems solved whole by `uzawa_solve`) iterate
+    /// in the same submissions: per increment `newton_contact`'s `prepare`, `uzawa_solve` and
+    /// `forces` before the bodies' kernels, its `judge` after theirs. Their problems' reactions
+    /// and outcomes come back with the states. `dim` and `theta_dt` are the scene's.
+    #[allow(clippy::too_many_arguments)]
+    pub fn newton(
+        &mut self,
+        calls: &mut [NewtonCall],
+        problems: &mut [Problem],
+        contacts: &mut [GroupContact],
+        list: &mut [Evaluation],
+        coefficients: Coefficients<Real>,
+        (dim, theta_dt): (usize, Real),
+        interrupt: Option<&AtomicBool>,
+        times: &mut PhaseTimes,
+    ) -> Result<(), GpuError> {
         let started = Instant::now();
         let precision = self.gpu.precision;
         assert_eq!(precision, Precision::F64, "device Newton iterations need f64 kernels");
@@ -199,11 +236,14 @@ impl GpuWorld {
             self.stage_newton(batch, &mine, calls);
             work.push((batch, mine));
         }
+        let contact = if contacts.is_empty() { None } else { Some(self.stage_contact(calls, problems, contacts, dim, theta_dt)?) };
         let total_dofs: usize = work.iter().map(|(b, mine)| mine.iter().map(|&(_, m)| self.batches[*b].members[m].dofs as usize).sum::<usize>()).sum();
         let total_members: usize = work.iter().map(|(_, mine)| mine.len()).sum();
         // Per member its failure flags and state, per dof its displacement and residual (every
         // span a multiple of 8 bytes), after an evaluation pass's read-back when one shares it.
-        let bytes = (total_members * (8 + std::mem::size_of::<NewtonState<Real>>()) + total_dofs * 3 * real) as u64 + if list.is_empty() { 0 } else { self.readback.size() };
+        let points = problems.iter().map(|p| p.local.len()).sum::<usize>();
+        let contact_bytes = if contact.is_some() { (points * 3 * real + contacts.len() * std::mem::size_of::<ContactState<Real>>() + 16) as u64 } else { 0 };
+        let bytes = (total_members * (8 + std::mem::size_of::<NewtonState<Real>>()) + total_dofs * 3 * real) as u64 + if list.is_empty() { 0 } else { self.readback.size() } + contact_bytes;
         if self.newton_readback.as_ref().is_none_or(|(_, size)| *size < bytes) {
             self.newton_readback = Some((buffer(&self.gpu, "newton readback", bytes as usize, BufferUsages::MAP_READ | BufferUsages::COPY_DST), bytes));
         }
@@ -221,10 +261,20 @@ impl GpuWorld {
                     for (batch, _) in &work {
                         let b = &self.batches[*batch];
                         let n = b.newton.as_ref().expect("staged");
+                        let mine = contact.as_ref().filter(|(at, _)| at == batch).map(|(_, passes)| passes);
+                        let pipelines = self.contact_pipelines.as_ref();
+                        if let (Some(c), Some(p)) = (mine, pipelines) {
+                            c.record_prepare(&mut pass, p);
+                            self.contact.as_ref().expect("staged").record_solve(&mut pass, contacts.len());
+                            c.record_forces(&mut pass, p);
+                        }
                         n.update.dispatch_indirect(&mut pass, &n.dispatch, 0);
                         n.forces.dispatch_indirect(&mut pass, &n.dispatch, 12);
                         n.residual.dispatch_indirect(&mut pass, &n.dispatch, 24);
                         n.judge.dispatch_indirect(&mut pass, &n.dispatch, 36);
+                        if let (Some(c), Some(p)) = (mine, pipelines) {
+                            c.record_judge(&mut pass, p);
+                        }
                         n.compact.dispatch(&mut pass, 1);
                     }
                 }
@@ -251,6 +301,10 @@ impl GpuWorld {
                     landing[i] = [states[k], flags[k], us[k], outs[k]];
                 }
             }
+            let contact_landing = contact.as_ref().map(|(_, passes)| {
+                let r = readback.queue_buffer(&self.contact.as_ref().expect("staged").buffers().r, (points * 3 * real) as u64);
+                (r, readback.queue_buffer(&passes.states, (contacts.len() * std::mem::size_of::<ContactState<Real>>()) as u64))
+            });
             let mut iterating = false;
             self.read_back_into(&target, encoder, &readback, "newton_update", times, t0, |bytes| {
                 if let Some(landing) = &evaluated {
@@ -266,6 +320,19 @@ impl GpuWorld {
                     let reals = super::from_device(precision, &bytes[*out_at..out_at + n * 2 * real]);
                     call.dof_out.copy_from_slice(bytemuck::cast_slice(&reals));
                 }
+                if let Some((r_at, states_at)) = contact_landing {
+                    let reactions = super::from_device(precision, &bytes[r_at..r_at + points * 3 * real]);
+                    let mut at = 0;
+                    for p in problems.iter_mut() {
+                        let n = p.local.len();
+                        p.r.copy_from_slice(bytemuck::cast_slice(&reactions[3 * at..3 * (at + n)]));
+                        at += n;
+                    }
+                    let size = std::mem::size_of::<ContactState<Real>>();
+                    for (k, g) in contacts.iter_mut().enumerate() {
+                        g.outcome = bytemuck::pod_read_unaligned(&bytes[states_at + k * size..states_at + (k + 1) * size]);
+                    }
+                }
             })?;
             first = false;
             if !iterating || interrupt.is_some_and(|f| f.load(Ordering::SeqCst)) {
@@ -275,13 +342,60 @@ impl GpuWorld {
             t0 = Instant::now();
         }
         // The device's displacements are the host's now: the mirror follows, so that the next
-        // pass does not send them back.
+        // pass does not send them back. The contact forces the device computed are not the
+        // host's: they go up again next time.
         for call in calls.iter() {
             let (batch, m) = self.place[call.body];
             let dofs = super::dof_span(&self.batches[batch].members, &[m]);
-            self.batches[batch].u_host[dofs].copy_from_slice(call.u);
+            self.batches[batch].u_host[dofs.clone()].copy_from_slice(call.u);
+            if contact.is_some() {
+                self.batches[batch].newton.as_mut().expect("staged").contact_host[dofs].fill(Real::NAN);
+            }
+        }
+        if let Some(sweeps) = &mut self.contact {
+            let moved = sweeps.take_traffic();
+            self.traffic.up += moved.up;
+            self.traffic.down += moved.down;
         }
         Ok(())
+    }
+
+    /// Stages the groups in contact of a Newton call: their problems into the Uzawa solve's
+    /// buffers, each member's `u_t + dt (1 - θ) v_t`, the layout `newton_contact` reads. Returns
+    /// their batch and the bound passes.
+    fn stage_contact(&mut self, calls: &[NewtonCall], problems: &[Problem], contacts: &[GroupContact], dim: usize, theta_dt: Real) -> Result<(usize, ContactPasses), GpuError> {
+        let batch = self.place[calls[contacts[0].calls[0]].body].0;
+        assert!(contacts.iter().flat_map(|g| &g.calls).all(|&c| self.place[calls[c].body].0 == batch), "a call's groups in contact lie in one batch");
+        if self.contact.is_none() {
+            self.contact = Some(UzawaSweeps::new(self.gpu.clone())?);
+        }
+        if self.contact_pipelines.is_none() {
+            self.contact_pipelines = Some(ContactPipelines::new(&self.gpu)?);
+        }
+        let sweeps = self.contact.as_mut().expect("made above");
+        let most = problems.iter().map(|p| p.max_iterations).max().unwrap_or(0);
+        let whole = sweeps.stage(problems, most).ok_or_else(|| GpuError::Kernel { kernel: "uzawa_solve".into(), message: "the contact problems do not fit the device's buffers".into() })?;
+        assert!(whole, "groups in contact iterate on the device only with problems solved whole");
+        let precision = self.gpu.precision;
+        let real = precision.size() as u64;
+        let b = &self.batches[batch];
+        let (staged, offsets, nodes) = sweeps.staged(problems);
+        let layout = ContactLayout::of(contacts, problems, staged, offsets, nodes, &|c| self.place[calls[c].body].1 as u32, &|m| b.members[m as usize].dof_start, dim, theta_dt);
+        let mut up = 0;
+        let n = b.newton.as_ref().expect("made before staging");
+        let passes = ContactPasses::new(&self.gpu, self.contact_pipelines.as_ref().expect("made above"), &layout, b, n, sweeps.buffers(), &mut up);
+        let mut uploads = Vec::new();
+        for g in contacts {
+            for (&c, base) in g.calls.iter().zip(&g.u_base) {
+                let dofs = super::dof_span(&b.members, &[self.place[calls[c].body].1]);
+                uploads.push((n.u_base.clone(), dofs.start as u64 * real, to_device(precision, base)));
+            }
+        }
+        self.traffic.up += up;
+        for (buffer, offset, bytes) in uploads {
+            self.upload(&buffer, offset, &bytes);
+        }
+        Ok((batch, passes))
     }
 
     /// Uploads what the listed calls (`(call, member)`, member order) of one batch need: stale
@@ -294,6 +408,7 @@ impl GpuWorld {
         let b = &mut self.batches[batch];
         let n = b.newton.as_mut().expect("made before staging");
         let mut start_changed = Vec::new();
+        let mut contact_changed = Vec::new();
         let mut states = Vec::with_capacity(mine.len());
         for &(i, m) in mine {
             let call = &mut calls[i];
@@ -308,6 +423,17 @@ impl GpuWorld {
             states.push(NewtonState { status: NEWTON_ITERATING, residual: call.residual, previous_residual: call.residual, ..NewtonState::default() });
             if super::update_mirror(&mut n.start_host[super::dof_span(&b.members, &[m])], call.u_start) {
                 start_changed.push(m);
+            }
+            let zeros;
+            let contact = match call.contact_force {
+                Some(f) => f,
+                None => {
+                    zeros = vec![0.0; call.u.len()];
+                    &zeros
+                }
+            };
+            if super::update_mirror(&mut n.contact_host[super::dof_span(&b.members, &[m])], contact) {
+                contact_changed.push(m);
             }
         }
         let members: Vec<usize> = mine.iter().map(|&(_, m)| m).collect();
@@ -327,6 +453,11 @@ impl GpuWorld {
         for run in super::runs(&start_changed) {
             let dofs = super::dof_span(&b.members, &run);
             uploads.push((n.u_start.clone(), dofs.start as u64 * real, to_device(precision, &n.start_host[dofs])));
+        }
+        contact_changed.sort_unstable();
+        for run in super::runs(&contact_changed) {
+            let dofs = super::dof_span(&b.members, &run);
+            uploads.push((n.contact.clone(), dofs.start as u64 * real, to_device(precision, &n.contact_host[dofs])));
         }
         let list: Vec<Active> = members.iter().map(|&m| Active { member: m as u32, mode: MODE_FORCES }).collect();
         uploads.push((n.call.clone(), 0, bytemuck::cast_slice(&list).to_vec()));

@@ -1,0 +1,237 @@
+// The contact of the groups that take their Newton iterations on the device, around the bodies'
+// own kernels: per iteration `prepare` (the contact-free increment and the free velocities),
+// `uzawa_solve` (the reactions), `forces` (the contact forces `Hᵀ r` and how much they changed),
+// then `newton_update` with those forces, the evaluation, `newton_judge`, and `judge`, which
+// holds a group's members to one verdict. One workgroup per group (each group has one contact
+// problem, numbered as `uzawa_solve` numbers them); a group no longer iterating does nothing.
+// The Delassus operator stays the one the host built for the step: no member refactorises here.
+// The host's increment this repeats: `ContactStep::prepare` and `ContactStep::apply`; its test:
+// `Group::converged`. CPU twins: `cpu::newton_contact_prepare`, `cpu::newton_contact_forces`,
+// `cpu::newton_contact_judge`, which follow this file line by line.
+
+// A group: its members (batch member indices, the first its leader) and what its test needs.
+struct ContactGroup {
+    member_start: u32,
+    member_count: u32,
+    // Newton iterations the group took on the host this step, before the call.
+    iterations_before: u32,
+    pad: u32,
+    // contact.tolerance: the contact forces' change must be below it.
+    tolerance: real,
+}
+
+// Where a group's contact stands after its last increment, written by `forces`.
+struct ContactState {
+    // Uzawa sweeps in this call, and the status of the last solve (`UzawaJudgeState.status`).
+    sweeps: u32,
+    uzawa: u32,
+    pad0: u32,
+    pad1: u32,
+    // The change of the contact forces over the last increment, over their scale
+    // max(largest contact force, floor) (`ContactStep::apply`).
+    change: real,
+}
+
+struct ContactCall {
+    problems: u32,
+    dim: u32,
+    pad0: u32,
+    pad1: u32,
+    theta_dt: real,
+}
+
+@group(0) @binding(0) var<storage, read> inverse: array<real>;
+@group(0) @binding(1) var<storage, read> free_dofs: array<u32>;
+@group(0) @binding(2) var<storage, read> newton: array<NewtonMember>;
+@group(0) @binding(3) var<storage, read_write> state: array<NewtonState>;
+@group(0) @binding(4) var<storage, read> dof_out: array<DofOut>;
+@group(0) @binding(5) var<storage, read> u: array<real>;
+@group(0) @binding(6) var<storage, read> members: array<MemberRange>;
+// Per dof: the contact-free increment K̄⁻¹(-g) (zero off the free dofs), u_t + dt (1 - θ) v_t
+// (the trial velocity is (u - u_base) / θdt), the contact forces.
+@group(0) @binding(7) var<storage, read_write> x0: array<real>;
+@group(0) @binding(8) var<storage, read> u_base: array<real>;
+@group(0) @binding(9) var<storage, read_write> contact: array<real>;
+@group(0) @binding(10) var<storage, read> groups: array<ContactGroup>;
+@group(0) @binding(11) var<storage, read> group_members: array<u32>;
+@group(0) @binding(12) var<storage, read_write> locals: array<UzawaLocal>;
+@group(0) @binding(13) var<storage, read_write> uzawa_states: array<UzawaJudgeState>;
+@group(0) @binding(14) var<storage, read> problems: array<UzawaProblem>;
+// Point i's terms: (node slot, coefficient) for e in term_start[i] .. term_start[i + 1].
+@group(0) @binding(15) var<storage, read> term_start: array<u32>;
+@group(0) @binding(16) var<storage, read> term_slots: array<u32>;
+@group(0) @binding(17) var<storage, read> term_coefs: array<real>;
+// Point i's obstacle velocity at the end of the step (global), and its frame [n, t1, t2] row by
+// row.
+@group(0) @binding(18) var<storage, read> obstacle: array<real>;
+@group(0) @binding(19) var<storage, read> frames: array<real>;
+// Node slot n: the batch dof of its first component, and the points acting on it (ascending)
+// with their coefficients.
+@group(0) @binding(20) var<storage, read> node_dof: array<u32>;
+@group(0) @binding(21) var<storage, read> node_start: array<u32>;
+@group(0) @binding(22) var<storage, read> node_points: array<u32>;
+@group(0) @binding(23) var<storage, read> node_coefs: array<real>;
+@group(0) @binding(24) var<storage, read> r: array<real>;
+@group(0) @binding(25) var<storage, read_write> contact_states: array<ContactState>;
+@group(0) @binding(26) var<uniform> call: ContactCall;
+
+var<workgroup> go: u32;
+var<workgroup> rhs: array<real, MAX_FREE>;
+
+// Whether group k (of the rows of workgroups) exists and is still iterating; the same for every
+// invocation of the workgroup.
+fn iterating(lane: u32, k: u32) -> bool {
+    if lane == 0u {
+        go = u32(k < call.problems && state[group_members[groups[k].member_start]].status == ITERATING);
+    }
+    return workgroupUniformLoad(&go) == 1u;
+}
+
+fn problem_index(workgroup: vec3<u32>, count: vec3<u32>) -> u32 {
+    return workgroup.x + workgroup.y * count.x;
+}
+
+// The contact-free increment x0 = K̄⁻¹(-g) of every member, then each point's free velocity
+// (the trial velocity plus x0 / θdt, in the contact frame) into the Uzawa points, and the
+// problem live again from its first sweep.
+@compute @workgroup_size(NEWTON_WORKGROUP)
+fn prepare(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workgroup: vec3<u32>, @builtin(num_workgroups) count: vec3<u32>) {
+    let k = problem_index(workgroup, count);
+    if !iterating(lane, k) {
+        return;
+    }
+    let grp = groups[k];
+    for (var a = 0u; a < grp.member_count; a++) {
+        let m = group_members[grp.member_start + a];
+        let row = newton[m];
+        let n = row.free_count;
+        let dof_start = members[m].dof_start;
+        for (var j = lane; j < n; j += NEWTON_WORKGROUP) {
+            rhs[j] = -dof_out[dof_start + free_dofs[row.free_start + j]].g;
+        }
+        workgroupBarrier();
+        for (var f = lane; f < n; f += NEWTON_WORKGROUP) {
+            var x = real(0.0);
+            for (var j = 0u; j < n; j++) {
+                x += inverse[row.inverse_start + j * n + f] * rhs[j];
+            }
+            x0[dof_start + free_dofs[row.free_start + f]] = x;
+        }
+        workgroupBarrier();
+    }
+    // The points read the increments of every lane.
+    storageBarrier();
+    let p = problems[k];
+    let tdt = call.theta_dt;
+    for (var i = p.point_start + lane; i < p.point_end; i += NEWTON_WORKGROUP) {
+        var g = -vec3<real>(obstacle[3u * i], obstacle[3u * i + 1u], obstacle[3u * i + 2u]);
+        for (var e = term_start[i]; e < term_start[i + 1u]; e++) {
+            let d0 = node_dof[term_slots[e]];
+            let coef = term_coefs[e];
+            for (var c = 0u; c < call.dim; c++) {
+                let d = d0 + c;
+                g[c] += coef * ((u[d] - u_base[d]) / tdt + x0[d] / tdt);
+            }
+        }
+        let f = 9u * i;
+        locals[i].v_free_n = frames[f] * g.x + frames[f + 1u] * g.y + frames[f + 2u] * g.z;
+        locals[i].v_free_t1 = frames[f + 3u] * g.x + frames[f + 4u] * g.y + frames[f + 5u] * g.z;
+        locals[i].v_free_t2 = frames[f + 6u] * g.x + frames[f + 7u] * g.y + frames[f + 8u] * g.z;
+    }
+    if lane == 0u {
+        var s = UzawaJudgeState();
+        s.status = UZAWA_LIVE;
+        s.previous = real(-1.0);
+        uzawa_states[k] = s;
+    }
+}
+
+// x (contact frame of point i) in global coordinates (`ContactPoint::to_global`).
+fn global(i: u32, x: vec3<real>) -> vec3<real> {
+    let f = 9u * i;
+    return vec3<real>(
+        x.x * frames[f] + x.y * frames[f + 3u] + x.z * frames[f + 6u],
+        x.x * frames[f + 1u] + x.y * frames[f + 4u] + x.z * frames[f + 7u],
+        x.x * frames[f + 2u] + x.y * frames[f + 5u] + x.z * frames[f + 8u],
+    );
+}
+
+// The solved reactions as the members' contact forces, each node's sum in point order, and the
+// largest change of a contact force over the largest one (or the floor); the solve's sweeps and
+// outcome into the group's contact state.
+@compute @workgroup_size(NEWTON_WORKGROUP)
+fn forces(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workgroup: vec3<u32>, @builtin(num_workgroups) count: vec3<u32>) {
+    let k = problem_index(workgroup, count);
+    if !iterating(lane, k) {
+        return;
+    }
+    let p = problems[k];
+    var change = real(0.0);
+    var size = real(0.0);
+    for (var n = p.node_start + lane; n < p.node_end; n += NEWTON_WORKGROUP) {
+        var f = vec3<real>(real(0.0));
+        for (var e = node_start[n]; e < node_start[n + 1u]; e++) {
+            let i = node_points[e];
+            f += node_coefs[e] * global(i, vec3<real>(r[3u * i], r[3u * i + 1u], r[3u * i + 2u]));
+        }
+        let d0 = node_dof[n];
+        for (var c = 0u; c < call.dim; c++) {
+            let before = contact[d0 + c];
+            change = max(change, abs(f[c] - before));
+            size = max(size, abs(f[c]));
+            contact[d0 + c] = f[c];
+        }
+    }
+    change = reduce_max(lane, change);
+    size = reduce_max(lane, size);
+    if lane == 0u {
+        var s = contact_states[k];
+        let solved = uzawa_states[k];
+        s.sweeps += solved.iterations;
+        s.uzawa = solved.status;
+        s.change = change / max(max(size, p.floor), REAL_MIN_POSITIVE);
+        contact_states[k] = s;
+    }
+}
+
+// After `newton_judge`: the group's verdict for all its members, as `Group::converged` gives
+// it. Converged when every member passed its own test and the contact forces settled with a
+// converged solve; the host takes the group (every member HOST) when a member needs it or
+// failed, the solve spent its sweeps, the budget is spent, or only the increments are left after
+// TIGHTEN_AFTER iterations (the host then solves tighter); else every member iterates on. One
+// invocation per group.
+@compute @workgroup_size(NEWTON_WORKGROUP)
+fn judge(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) count: vec3<u32>) {
+    let k = id.x + id.y * count.x * NEWTON_WORKGROUP;
+    if k >= call.problems {
+        return;
+    }
+    let grp = groups[k];
+    let lead = group_members[grp.member_start];
+    var all_converged = true;
+    var all_balanced = true;
+    var to_host = false;
+    for (var a = 0u; a < grp.member_count; a++) {
+        let s = state[group_members[grp.member_start + a]];
+        all_converged = all_converged && s.status == CONVERGED;
+        all_balanced = all_balanced && s.balanced == 1u;
+        to_host = to_host || s.status == HOST || s.status == FAILED;
+    }
+    let c = contact_states[k];
+    let settled = c.change <= grp.tolerance && c.uzawa == UZAWA_CONVERGED;
+    let iterations = state[lead].iterations;
+    var verdict = ITERATING;
+    if to_host {
+        verdict = HOST;
+    } else if all_converged && settled {
+        verdict = CONVERGED;
+    } else if c.uzawa != UZAWA_CONVERGED || iterations >= newton[lead].budget || (grp.iterations_before + iterations >= TIGHTEN_AFTER && settled && all_balanced) {
+        verdict = HOST;
+    }
+    for (var a = 0u; a < grp.member_count; a++) {
+        let m = group_members[grp.member_start + a];
+        if state[m].status != FAILED {
+            state[m].status = verdict;
+        }
+    }
+}

@@ -1,0 +1,205 @@
+//! The contact of groups that take their Newton iterations on the device
+//! ([`GpuWorld::newton`] with [`GroupContact`]s): the layout `shaders/newton_contact.wgsl` reads
+//! (built on the host once per call, from the problems as `uzawa_solve` holds them), and its
+//! buffers and bind groups.
+
+use super::{buffer_init, Batch};
+use crate::contact::uzawa::Problem;
+use crate::gpu::types::{ContactCall, ContactGroup, ContactState};
+use crate::gpu::uzawa_sweep::{Buffers as UzawaBuffers, NodeGather, UzawaProblem};
+use crate::gpu::Gpu;
+use crate::precision::Real;
+use wgpu::{BindGroup, Buffer, BufferUsages, ComputePipeline};
+
+/// One group in contact whose Newton iterations go to the device with its bodies' calls, beside
+/// its contact problem as the host prepared it for the step (W, colours, points, their step
+/// lengths, the Uzawa tolerance), whose reactions the call leaves at those of the last
+/// increment.
+pub struct GroupContact<'a> {
+    /// Its bodies' indices in the call list, in the group's body order (the local body
+    /// numbers of `slot_nodes`).
+    pub calls: Vec<usize>,
+    /// Per node slot of the problem's nodal map: (body in the group, node).
+    pub slot_nodes: &'a [(u32, u32)],
+    /// Per point, the obstacle's velocity at the end of the step (global).
+    pub obstacle: Vec<[Real; 3]>,
+    /// Per body (group order), `u_t + dt (1 - θ) v_t`: the trial velocity is
+    /// `(u - u_base) / θdt`.
+    pub u_base: Vec<Vec<Real>>,
+    pub iterations_before: u32,
+    /// `contact.tolerance`.
+    pub tolerance: Real,
+    /// Out: where its contact stood after the last increment.
+    pub outcome: ContactState<Real>,
+}
+
+/// What `newton_contact` reads of a call's groups, besides the batch's and the Uzawa solve's
+/// buffers: the host copy, and the CPU twins' input.
+#[derive(Debug, Clone, Default)]
+pub struct ContactLayout {
+    pub groups: Vec<ContactGroup<Real>>,
+    /// Batch member indices, each group's in a run (its leader first).
+    pub group_members: Vec<u32>,
+    /// Each group's problem as the Uzawa kernels see it.
+    pub problems: Vec<UzawaProblem<Real>>,
+    /// Point `i`'s terms: `(node slot, coefficient)` for `e` in `term_start[i]..term_start[i + 1]`.
+    pub term_start: Vec<u32>,
+    pub term_slots: Vec<u32>,
+    pub term_coefs: Vec<Real>,
+    /// Per point, the obstacle's end velocity, 3 reals.
+    pub obstacle: Vec<Real>,
+    /// Per point, its frame row by row (9 reals), and the node gather: `NodeGather`'s.
+    pub frames: Vec<Real>,
+    pub node_start: Vec<u32>,
+    pub node_points: Vec<u32>,
+    pub node_coefs: Vec<Real>,
+    /// Per node slot, the batch dof of its first component.
+    pub node_dof: Vec<u32>,
+    pub call: ContactCall<Real>,
+}
+
+impl ContactLayout {
+    /// The layout of `contacts` whose problems `staged` the Uzawa solve holds as `problems`,
+    /// `offsets` (each problem's first point) and `nodes`; `member_of(call)` is a call's batch member and
+    /// `dof_start(member)` its first dof.
+    #[allow(clippy::too_many_arguments)]
+    pub fn of(contacts: &[GroupContact], staged: &[Problem], problems: Vec<UzawaProblem<Real>>, offsets: &[usize], nodes: &NodeGather, member_of: &dyn Fn(usize) -> u32, dof_start: &dyn Fn(u32) -> u32, dim: usize, theta_dt: Real) -> Self {
+        let mut l = ContactLayout { problems, term_start: vec![0], frames: nodes.frames.clone(), node_start: nodes.start.clone(), node_points: nodes.points.clone(), node_coefs: nodes.coefs.clone(), ..Default::default() };
+        for (k, g) in contacts.iter().enumerate() {
+            l.groups.push(ContactGroup { member_start: l.group_members.len() as u32, member_count: g.calls.len() as u32, iterations_before: g.iterations_before, pad: 0, tolerance: g.tolerance });
+            l.group_members.extend(g.calls.iter().map(|&c| member_of(c)));
+            let slot0 = nodes.node_offsets[k];
+            for terms in &staged[k].nodal.terms {
+                l.term_slots.extend(terms.iter().map(|&(slot, _)| slot0 + slot));
+                l.term_coefs.extend(terms.iter().map(|&(_, coef)| coef));
+                l.term_start.push(l.term_slots.len() as u32);
+            }
+            l.obstacle.extend(g.obstacle.iter().flatten());
+            debug_assert_eq!(g.slot_nodes.len(), (nodes.node_offsets[k + 1] - slot0) as usize);
+            l.node_dof.extend(g.slot_nodes.iter().map(|&(body, node)| dof_start(member_of(g.calls[body as usize])) + node * dim as u32));
+            debug_assert_eq!(offsets[k + 1], l.term_start.len() - 1);
+        }
+        l.call = ContactCall { problems: contacts.len() as u32, dim: dim as u32, pad: [0; 2], theta_dt };
+        l
+    }
+}
+
+/// The pipelines of `newton_contact`'s entry points, compiled by the first call with contact.
+pub(super) struct ContactPipelines {
+    prepare: ComputePipeline,
+    forces: ComputePipeline,
+    judge: ComputePipeline,
+}
+
+impl ContactPipelines {
+    pub(super) fn new(gpu: &Gpu) -> Result<Self, crate::gpu::GpuError> {
+        Ok(Self { prepare: gpu.pipeline_at("newton_contact", "prepare", None)?, forces: gpu.pipeline_at("newton_contact", "forces", None)?, judge: gpu.pipeline_at("newton_contact", "judge", None)? })
+    }
+}
+
+/// A call's `newton_contact` bind groups, and the contact states it reads back.
+pub(super) struct ContactPasses {
+    prepare: BindGroup,
+    forces: BindGroup,
+    judge: BindGroup,
+    pub(super) states: Buffer,
+    problems: u32,
+}
+
+fn bind(gpu: &Gpu, pipeline: &ComputePipeline, bound: &[(u32, &Buffer)]) -> BindGroup {
+    let entries: Vec<wgpu::BindGroupEntry> = bound.iter().map(|&(i, b)| wgpu::BindGroupEntry { binding: i, resource: b.as_entire_binding() }).collect();
+    gpu.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some("newton_contact"), layout: &pipeline.get_bind_group_layout(0), entries: &entries })
+}
+
+impl ContactPasses {
+    /// Uploads the layout (buffers made for the call: a few kilobytes per group) and binds it
+    /// with the batch's Newton buffers and the staged Uzawa problems.
+    pub(super) fn new(gpu: &Gpu, pipelines: &ContactPipelines, l: &ContactLayout, b: &Batch, newton: &super::newton::NewtonBuffers, uzawa: &UzawaBuffers, up: &mut u64) -> Self {
+        let storage = BufferUsages::STORAGE;
+        let mut made = |label: &str, bytes: &[u8], usage: BufferUsages| {
+            *up += bytes.len() as u64;
+            buffer_init(gpu, label, bytes, usage)
+        };
+        let groups = made("contact groups", bytemuck::cast_slice(&l.groups), storage);
+        let group_members = made("contact group members", bytemuck::cast_slice(&l.group_members), storage);
+        let term_start = made("contact term starts", bytemuck::cast_slice(&l.term_start), storage);
+        let term_slots = made("contact term slots", bytemuck::cast_slice(&l.term_slots), storage);
+        let term_coefs = made("contact term coefficients", bytemuck::cast_slice(&l.term_coefs), storage);
+        let obstacle = made("contact obstacle velocities", bytemuck::cast_slice(&l.obstacle), storage);
+        let node_dof = made("contact node dofs", bytemuck::cast_slice(&l.node_dof), storage);
+        let states = made("contact states", bytemuck::cast_slice(&vec![ContactState::<Real>::default(); l.groups.len()]), storage | BufferUsages::COPY_SRC);
+        let call = made("contact call", bytemuck::bytes_of(&l.call), BufferUsages::UNIFORM);
+        let n = newton;
+        let prepare = bind(
+            gpu,
+            &pipelines.prepare,
+            &[
+                (0, &n.inverse),
+                (1, &n.free),
+                (2, &n.newton),
+                (3, &n.state),
+                (4, &b.dof_out),
+                (5, &b.u),
+                (6, &b.member_buffer),
+                (7, &n.x0),
+                (8, &n.u_base),
+                (10, &groups),
+                (11, &group_members),
+                (12, &uzawa.locals),
+                (13, &uzawa.states),
+                (14, &uzawa.judged),
+                (15, &term_start),
+                (16, &term_slots),
+                (17, &term_coefs),
+                (18, &obstacle),
+                (19, &uzawa.frames),
+                (20, &node_dof),
+                (26, &call),
+            ],
+        );
+        let forces = bind(
+            gpu,
+            &pipelines.forces,
+            &[
+                (3, &n.state),
+                (9, &n.contact),
+                (10, &groups),
+                (11, &group_members),
+                (13, &uzawa.states),
+                (14, &uzawa.judged),
+                (19, &uzawa.frames),
+                (20, &node_dof),
+                (21, &uzawa.node_start),
+                (22, &uzawa.node_points),
+                (23, &uzawa.node_coefs),
+                (24, &uzawa.r),
+                (25, &states),
+                (26, &call),
+            ],
+        );
+        let judge = bind(gpu, &pipelines.judge, &[(2, &n.newton), (3, &n.state), (10, &groups), (11, &group_members), (25, &states), (26, &call)]);
+        Self { prepare, forces, judge, states, problems: l.groups.len() as u32 }
+    }
+
+    fn dispatch(&self, pass: &mut wgpu::ComputePass, pipeline: &ComputePipeline, group: &BindGroup, workgroups: usize) {
+        let (x, y) = crate::gpu::dispatch_rows(workgroups);
+        pass.set_pipeline(pipeline);
+        pass.set_bind_group(0, group, &[]);
+        pass.dispatch_workgroups(x, y, 1);
+    }
+
+    /// `prepare`, one workgroup per group.
+    pub(super) fn record_prepare(&self, pass: &mut wgpu::ComputePass, p: &ContactPipelines) {
+        self.dispatch(pass, &p.prepare, &self.prepare, self.problems as usize);
+    }
+
+    /// `forces`, one workgroup per group.
+    pub(super) fn record_forces(&self, pass: &mut wgpu::ComputePass, p: &ContactPipelines) {
+        self.dispatch(pass, &p.forces, &self.forces, self.problems as usize);
+    }
+
+    /// `judge`, one invocation per group.
+    pub(super) fn record_judge(&self, pass: &mut wgpu::ComputePass, p: &ContactPipelines) {
+        self.dispatch(pass, &p.judge, &self.judge, (self.problems as usize).div_ceil(crate::gpu::types::NEWTON_WORKGROUP));
+    }
+}
