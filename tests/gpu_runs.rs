@@ -384,43 +384,49 @@ fn falling_grains_iterate_on_the_device_in_the_passes_of_the_grains_in_contact()
 
 #[test]
 fn groups_in_contact_take_their_newton_increments_on_the_device() {
-    // Grains pressed by the moving wall: after a group's first increment of a step (which builds
-    // W on the host), its next increments go to the device with its bodies' (`newton_contact`
-    // around `uzawa_solve` and the bodies' kernels), several per submission, and the host only
-    // confirms the end. The energies are the CPU backend's; the Newton iterations too. Without
-    // the device's sweeps (`--uzawa cpu`) the groups in contact stay on the host.
+    // Grains pressed by the moving wall (2D), and grains falling into a box (3D): after a
+    // group's first increment of a step (which builds W on the host), its next increments go to
+    // the device with its bodies' (`newton_contact` around `uzawa_solve` and the bodies'
+    // kernels), several per submission, and the host only confirms the end. The energies are
+    // the CPU backend's; the Newton iterations too. Without the device's sweeps (`--uzawa cpu`)
+    // the groups in contact stay on the host.
     let test = "groups_in_contact_take_their_newton_increments_on_the_device";
     if !gpu_available(test) {
         return;
     }
-    let path = scene_path("grains_many");
-    let sets = ["packing.count=30", "time.end=0.3", "output.every=1", "output.scene_every=0", "contact.acceleration=\"none\""];
-    let cpu = run_with(&path, &sets, &format!("{test}_cpu"), &options(BackendChoice::Cpu, None));
-    let with = |uzawa: UzawaPlacement| {
-        let mut o = options(BackendChoice::Gpu, Some(Precision::F64));
-        o.backend.uzawa = uzawa;
-        o.backend.rounds = RoundPlacement::Gpu;
-        run_with(&path, &sets, &format!("{test}_{}", uzawa.name()), &o)
-    };
-    let (host, device) = (with(UzawaPlacement::Cpu), with(UzawaPlacement::Gpu));
-    let field = |log: &Log, name: &str| log.topics["/summary"][0][name].as_u64().unwrap_or_else(|| panic!("{name}"));
-    let worst = energy_difference(&cpu, &device);
-    eprintln!(
-        "device iterations {} (sweeps on the host: {}), submits {} (host: {}), Newton {} (CPU {}), factorisations {} (CPU {}); energies differ by {worst:.2e}",
-        field(&device, "device_iterations"),
-        field(&host, "device_iterations"),
-        field(&device, "device_submits"),
-        field(&host, "device_submits"),
-        field(&device, "newton_iterations"),
-        field(&cpu, "newton_iterations"),
-        field(&device, "factorizations"),
-        field(&cpu, "factorizations")
-    );
-    assert!(worst <= 1e-9, "energies differ by {worst:.3e}");
-    assert_eq!(field(&device, "newton_iterations"), field(&cpu, "newton_iterations"));
-    assert!(field(&device, "device_iterations") > 10 * field(&host, "device_iterations").max(1), "the groups in contact iterate on the device");
-    assert!(field(&device, "device_submits") < field(&host, "device_submits"), "fewer submits than with an evaluation and a Uzawa submit per contact round");
-    // A member that meets its own test while its group goes on keeps its factorisation (the
-    // host refactorises it when its round-off residual contracts less than tenfold).
-    assert!(field(&device, "factorizations") <= field(&cpu, "factorizations"));
+    for (scene, sets) in [
+        ("grains_many", vec!["packing.count=30", "time.end=0.3", "output.every=1", "output.scene_every=0", "contact.acceleration=\"none\""]),
+        ("grains_3d", vec!["time.end=0.1", "output.every=1", "output.scene_every=0", "contact.acceleration=\"none\""]),
+    ] {
+        let path = scene_path(scene);
+        let cpu = run_with(&path, &sets, &format!("{test}_{scene}_cpu"), &options(BackendChoice::Cpu, None));
+        let with = |uzawa: UzawaPlacement| {
+            let mut o = options(BackendChoice::Gpu, Some(Precision::F64));
+            o.backend.uzawa = uzawa;
+            o.backend.rounds = RoundPlacement::Gpu;
+            run_with(&path, &sets, &format!("{test}_{scene}_{}", uzawa.name()), &o)
+        };
+        let (host, device) = (with(UzawaPlacement::Cpu), with(UzawaPlacement::Gpu));
+        let field = |log: &Log, name: &str| log.topics["/summary"][0][name].as_u64().unwrap_or_else(|| panic!("{name}"));
+        let worst = energy_difference(&cpu, &device);
+        eprintln!(
+            "{scene}: device iterations {} (sweeps on the host: {}), submits {} (host: {}), Newton {} (CPU {}), factorisations {} (CPU {}); energies differ by {worst:.2e}",
+            field(&device, "device_iterations"),
+            field(&host, "device_iterations"),
+            field(&device, "device_submits"),
+            field(&host, "device_submits"),
+            field(&device, "newton_iterations"),
+            field(&cpu, "newton_iterations"),
+            field(&device, "factorizations"),
+            field(&cpu, "factorizations")
+        );
+        assert!(cpu.series("/contact", "active").iter().any(|&a| a > 2.0), "{scene}: the grains touch");
+        assert!(worst <= 1e-9, "{scene}: energies differ by {worst:.3e}");
+        assert_eq!(field(&device, "newton_iterations"), field(&cpu, "newton_iterations"), "{scene}");
+        assert!(field(&device, "device_iterations") > 10 * field(&host, "device_iterations").max(1), "{scene}: the groups in contact iterate on the device");
+        assert!(field(&device, "device_submits") < field(&host, "device_submits"), "{scene}: fewer submits than with an evaluation and a Uzawa submit per contact round");
+        // A member that meets its own test while its group goes on keeps its factorisation (the
+        // host refactorises it when its round-off residual contracts less than tenfold).
+        assert!(field(&device, "factorizations") <= field(&cpu, "factorizations"), "{scene}");
+    }
 }

@@ -171,23 +171,10 @@ impl ContactStep {
         (0..self.colours.count()).map(|k| self.colours.colour(k).len()).max().unwrap_or(0)
     }
 
-    /// The prepared problem ([`ContactStep::problem`]) with what a device that takes the
-    /// increments needs besides: each node slot's (body, node), and each point's obstacle
-    /// velocity at the end of the step.
-    pub fn device_problem(&mut self, settings: &Settings) -> (Problem<'_>, &[(u32, u32)], Vec<[Real; 3]>) {
-        let obstacle = self.points.iter().map(|c| c.obstacle_velocity[1]).collect();
-        let problem = Problem {
-            w: &self.delassus,
-            colours: &self.colours,
-            local: &self.local,
-            nodal: &self.nodal,
-            r: &mut self.r,
-            tolerance: self.inner * settings.tolerance,
-            floor: self.floor,
-            max_iterations: settings.max_iterations,
-            acceleration: settings.acceleration,
-        };
-        (problem, &self.slot_nodes, obstacle)
+    /// Each point's obstacle velocity at the end of the step, for a device that takes the
+    /// increments (it computes the free velocities).
+    pub fn obstacle_velocities(&self) -> Vec<[Real; 3]> {
+        self.points.iter().map(|c| c.obstacle_velocity[1]).collect()
     }
 
     /// Whether every point has a step length (carried over from the last step), so that the
@@ -294,7 +281,13 @@ impl ContactStep {
 
     /// The prepared problem, as [`uzawa::solve`] and the device's sweeps take it.
     pub fn problem(&mut self, settings: &Settings) -> Problem<'_> {
-        Problem {
+        self.problem_and_slots(settings).0
+    }
+
+    /// [`ContactStep::problem`], and each node slot of its nodal map as (body, node), for a
+    /// device that takes the increments (it applies the reactions to the bodies' dofs).
+    pub fn problem_and_slots(&mut self, settings: &Settings) -> (Problem<'_>, &[(u32, u32)]) {
+        let problem = Problem {
             w: &self.delassus,
             colours: &self.colours,
             local: &self.local,
@@ -304,7 +297,8 @@ impl ContactStep {
             floor: self.floor,
             max_iterations: settings.max_iterations,
             acceleration: settings.acceleration,
-        }
+        };
+        (problem, &self.slot_nodes)
     }
 
     /// Applies the solved reactions: each body's contact forces and Newton increment

@@ -659,7 +659,8 @@ fn device_pass(
             let mut index = None;
             if let Some(contact) = contact {
                 let settings = c.settings.expect("contact points need contact settings");
-                let (problem, slot_nodes, obstacle) = contact.device_problem(settings);
+                let obstacle = contact.obstacle_velocities();
+                let (problem, slot_nodes) = contact.problem_and_slots(settings);
                 index = Some(contacts.len());
                 problems.push(problem);
                 contacts.push(GroupContact {
