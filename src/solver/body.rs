@@ -914,6 +914,13 @@ impl Body {
         self.dofs.free_count > 0 && !self.needs_factorization(p)
     }
 
+    /// Whether the body's factorisation is one for this step's `c1` that the next increment may
+    /// use, right after [`Body::refresh_factor`] (which keeps or renews it): its next increment
+    /// can be taken on the device.
+    pub fn factor_fit(&self, p: &StepParams) -> bool {
+        self.dofs.free_count > 0 && self.reuse_factorization && self.factor_c1 == Some(coefficients(p).c1)
+    }
+
     /// Which factorisation the body holds (a new number for each).
     pub fn factor_version(&self) -> u64 {
         self.factor_version

@@ -160,6 +160,16 @@ impl ContactStep {
         Self { points, delassus, colours, per_body, h, r, local, nodal, slot_nodes, dim, velocity_scale, floor, inner: INNER_TOLERANCE, shares: Vec::new(), free_increment: Vec::new(), responses }
     }
 
+    /// Builds the Delassus blocks with the bodies' current factorisations, for a device that takes
+    /// the step's increments from the first (without the contact-free increment of
+    /// [`ContactStep::prepare`], which the device computes).
+    pub fn build_delassus_for(&mut self, bodies: &mut [&mut Body], p: &StepParams, settings: &Settings, times: &mut PhaseTimes) {
+        let started = std::time::Instant::now();
+        let solve_before = times.solve;
+        self.build_delassus(bodies, |_| true, p.theta * p.dt, settings, times);
+        times.contact += started.elapsed().as_secs_f64() - (times.solve - solve_before);
+    }
+
     /// Whether the Delassus blocks of `bodies` bodies are built for the step (by the first
     /// increment): until a body refactorises, the increments can go on without the host.
     pub fn delassus_built(&self, bodies: usize) -> bool {

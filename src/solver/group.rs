@@ -387,8 +387,10 @@ fn newton_in_lockstep(groups: &mut [Group], world: &mut GpuWorld, c: &Context, t
     let device_residual = world.precision() == Precision::F64;
     let mut first = true;
     let none = vec![false; groups.len()];
-    // The groups whose Newton iterations go to the device with this round's pass.
+    // The groups whose Newton iterations go to the device with this round's pass, and the
+    // batch of those in contact.
     let mut iterating = none.clone();
+    let mut contact_batch = None;
     loop {
         let live: Vec<bool> = outcome.iter().map(Option::is_none).collect();
         if !live.iter().any(|&l| l) {
@@ -443,7 +445,8 @@ fn newton_in_lockstep(groups: &mut [Group], world: &mut GpuWorld, c: &Context, t
                 Some(Err(e)) => outcome[k] = Some(Err(e)),
             }
         }
-        iterating = if device_residual { iterate_on_device(groups, &mut continuing, world, c) } else { none.clone() };
+        iterating = if device_residual { iterate_on_device(groups, &mut continuing, world, c, &mut contact_batch, false) } else { none.clone() };
+        build_for_device(groups, &iterating, c);
         let p = c.p;
         let needs_tangent = |b: &Body| b.needs_tangent(p);
         // Else each body's `refresh_factor` assembles its tangent on the CPU.
@@ -460,6 +463,14 @@ fn newton_in_lockstep(groups: &mut [Group], world: &mut GpuWorld, c: &Context, t
                 Some(Err(e)) => outcome[k] = Some(Err(e)),
                 Some(Ok(true)) => waiting[k] = true,
                 _ => {}
+            }
+        }
+        // A group whose bodies just refactorised (W rebuilt for them) takes this increment on
+        // the device with the next round's pass rather than on the host, where it may.
+        if device_residual {
+            let deferred = iterate_on_device(groups, &mut waiting, world, c, &mut contact_batch, true);
+            for (i, d) in iterating.iter_mut().zip(deferred) {
+                *i |= d;
             }
         }
         let solved = solve_contact(groups, &waiting, world, c, times);
@@ -479,17 +490,20 @@ fn newton_in_lockstep(groups: &mut [Group], world: &mut GpuWorld, c: &Context, t
 /// ([`GpuWorld::newton`], with the next round's pass): bodies that keep their factorisation and
 /// have a slot for `K̄⁻¹` there, and element work worth device passes
 /// ([`crate::backend::round_on_device`]); either one body without contact points, or a group in
-/// contact after its first increment of the step (which built W) with its Uzawa solves
-/// converging, problems solved whole on the device ([`crate::backend::uzawa_on_device`],
-/// colours of at most [`SOLVE_WIDEST`] points) and its bodies in one batch (the batch of the
-/// first such group). They leave `continuing` for this round.
-fn iterate_on_device(groups: &[Group], continuing: &mut [bool], world: &GpuWorld, c: &Context) -> Vec<bool> {
+/// contact whose last Uzawa solve (if any) converged, with problems solved whole on the device
+/// ([`crate::backend::uzawa_on_device`], colours of at most [`SOLVE_WIDEST`] points) and its
+/// bodies in the step's `contact_batch` (that of the first such group); such a group's W is
+/// built by [`build_for_device`] when no increment of the step built it yet. `refreshed`: the
+/// groups' factorisations were just refreshed for their next increment. They leave `continuing`
+/// for this round.
+fn iterate_on_device(groups: &[Group], continuing: &mut [bool], world: &GpuWorld, c: &Context, contact_batch: &mut Option<usize>, refreshed: bool) -> Vec<bool> {
     let p = c.p;
-    let capable = |g: &Group| g.newton.report.iterations < p.max_iterations && g.bodies.iter().zip(g.ids).all(|(b, &id)| world.newton_capable(id) && b.iterates_on_device(p));
-    let settled = |g: &Group| g.newton.uzawa_ran && g.newton.uzawa_converged && g.contact.as_ref().is_some_and(|k| k.delassus_built(g.bodies.len()) && k.widest_colour() <= SOLVE_WIDEST);
+    let fit = |b: &Body| if refreshed { b.factor_fit(p) } else { b.iterates_on_device(p) };
+    let capable = |g: &Group| g.newton.report.iterations < p.max_iterations && g.bodies.iter().zip(g.ids).all(|(b, &id)| world.newton_capable(id) && fit(b));
+    let settled = |g: &Group| (!g.newton.uzawa_ran || g.newton.uzawa_converged) && g.contact.as_ref().is_some_and(|k| k.widest_colour() <= SOLVE_WIDEST);
     let mut chosen = vec![false; groups.len()];
     let mut in_contact = vec![false; groups.len()];
-    let mut contact_batch = None;
+    let mut batch_taken = *contact_batch;
     for (k, g) in groups.iter().enumerate() {
         if !continuing[k] || !capable(g) {
             continue;
@@ -498,7 +512,7 @@ fn iterate_on_device(groups: &[Group], continuing: &mut [bool], world: &GpuWorld
             chosen[k] = g.bodies.len() == 1;
         } else if settled(g) {
             let batch = world.batch_of(g.ids[0]);
-            in_contact[k] = g.ids.iter().all(|&id| world.batch_of(id) == batch) && *contact_batch.get_or_insert(batch) == batch;
+            in_contact[k] = g.ids.iter().all(|&id| world.batch_of(id) == batch) && *batch_taken.get_or_insert(batch) == batch;
         }
     }
     if let (Some(settings), true) = (c.settings, in_contact.contains(&true)) {
@@ -510,6 +524,8 @@ fn iterate_on_device(groups: &[Group], continuing: &mut [bool], world: &GpuWorld
             for (chosen, &yes) in chosen.iter_mut().zip(&in_contact) {
                 *chosen |= yes;
             }
+        } else {
+            batch_taken = *contact_batch;
         }
     }
     if !chosen.contains(&true) || !crate::backend::round_on_device(world, false, &element_work(groups, &chosen, &|_| true)) {
@@ -518,7 +534,19 @@ fn iterate_on_device(groups: &[Group], continuing: &mut [bool], world: &GpuWorld
     for (go, &chosen) in continuing.iter_mut().zip(&chosen) {
         *go &= !chosen;
     }
+    if chosen.iter().zip(&in_contact).any(|(&c, &i)| c && i) {
+        *contact_batch = batch_taken;
+    }
     chosen
+}
+
+/// The Delassus operators of the `iterating` groups in contact that no increment of the step
+/// built yet (their first increment goes to the device), in parallel.
+fn build_for_device(groups: &mut [Group], iterating: &[bool], c: &Context) {
+    groups.par_iter_mut().zip(iterating).filter(|(g, &yes)| yes && g.contact.as_ref().is_some_and(|k| !k.delassus_built(g.bodies.len()))).for_each(|(g, _)| {
+        let contact = g.contact.as_mut().expect("filtered");
+        contact.build_delassus_for(g.bodies, c.p, c.settings.expect("contact points need contact settings"), &mut g.newton.report.wall);
+    });
 }
 
 /// Whether the round's pass over the bodies of the `live` groups that `wanted` selects goes to
