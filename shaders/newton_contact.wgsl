@@ -20,13 +20,15 @@ struct ContactGroup {
     tolerance: real,
 }
 
-// Where a group's contact stands after its last increment, written by `forces`.
+// Where a group's contact stands after its last increment, written by `forces` (and
+// `tightened` by `judge`).
 struct ContactState {
     // Uzawa sweeps in this call, and the status of the last solve (`UzawaJudgeState.status`).
     sweeps: u32,
     uzawa: u32,
-    pad0: u32,
-    pad1: u32,
+    // Times `judge` solved the group's problem tighter (`ContactStep::tighten`).
+    tightened: u32,
+    pad: u32,
     // The change of the contact forces over the last increment, over their scale
     // max(largest contact force, floor) (`ContactStep::apply`).
     change: real,
@@ -56,7 +58,7 @@ struct ContactCall {
 @group(0) @binding(11) var<storage, read> group_members: array<u32>;
 @group(0) @binding(12) var<storage, read_write> locals: array<UzawaLocal>;
 @group(0) @binding(13) var<storage, read_write> uzawa_states: array<UzawaJudgeState>;
-@group(0) @binding(14) var<storage, read> problems: array<UzawaProblem>;
+@group(0) @binding(14) var<storage, read_write> problems: array<UzawaProblem>;
 // Point i's terms: (node slot, coefficient) for e in term_start[i] .. term_start[i + 1].
 @group(0) @binding(15) var<storage, read> term_start: array<u32>;
 @group(0) @binding(16) var<storage, read> term_slots: array<u32>;
@@ -92,8 +94,8 @@ fn problem_index(workgroup: vec3<u32>, count: vec3<u32>) -> u32 {
 }
 
 // The contact-free increment x0 = K̄⁻¹(-g) of every member, then each point's free velocity
-// (the trial velocity plus x0 / θdt, in the contact frame) into the Uzawa points, and the
-// problem live again from its first sweep.
+// (the trial velocity plus x0 / θdt, in the contact frame) and the settling bound of its local
+// steps into the Uzawa points, and the problem live again from its first sweep.
 @compute @workgroup_size(NEWTON_WORKGROUP)
 fn prepare(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workgroup: vec3<u32>, @builtin(num_workgroups) count: vec3<u32>) {
     let k = problem_index(workgroup, count);
@@ -137,6 +139,7 @@ fn prepare(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) wo
         locals[i].v_free_n = frames[f] * g.x + frames[f + 1u] * g.y + frames[f + 2u] * g.z;
         locals[i].v_free_t1 = frames[f + 3u] * g.x + frames[f + 4u] * g.y + frames[f + 5u] * g.z;
         locals[i].v_free_t2 = frames[f + 6u] * g.x + frames[f + 7u] * g.y + frames[f + 8u] * g.z;
+        locals[i].settle = SETTLE * p.tolerance;
     }
     if lane == 0u {
         var s = UzawaJudgeState();
@@ -197,8 +200,9 @@ fn forces(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) wor
 // After `newton_judge`: the group's verdict for all its members, as `Group::converged` gives
 // it. Converged when every member passed its own test and the contact forces settled with a
 // converged solve; the host takes the group (every member HOST) when a member needs it or
-// failed, the solve spent its sweeps, the budget is spent, or only the increments are left after
-// TIGHTEN_AFTER iterations (the host then solves tighter); else every member iterates on. One
+// failed, the solve spent its sweeps, or the budget is spent; else every member iterates on,
+// and when only the increments are left after TIGHTEN_AFTER iterations the problem is solved
+// ten times tighter from then on (down to TIGHTEST_INNER of the contact tolerance). One
 // invocation per group.
 @compute @workgroup_size(NEWTON_WORKGROUP)
 fn judge(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) count: vec3<u32>) {
@@ -225,8 +229,11 @@ fn judge(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) 
         verdict = HOST;
     } else if all_converged && settled {
         verdict = CONVERGED;
-    } else if c.uzawa != UZAWA_CONVERGED || iterations >= newton[lead].budget || (grp.iterations_before + iterations >= TIGHTEN_AFTER && settled && all_balanced) {
+    } else if c.uzawa != UZAWA_CONVERGED || iterations >= newton[lead].budget {
         verdict = HOST;
+    } else if grp.iterations_before + iterations >= TIGHTEN_AFTER && settled && all_balanced {
+        problems[k].tolerance = max(real(0.1) * problems[k].tolerance, real(TIGHTEST_INNER) * grp.tolerance);
+        contact_states[k].tightened += 1u;
     }
     for (var a = 0u; a < grp.member_count; a++) {
         let m = group_members[grp.member_start + a];

@@ -7,6 +7,8 @@ use crate::gpu::types::{Active, Coefficients, DofOut, DofStep, MemberRange, Newt
 use crate::gpu::uzawa_sweep::{UzawaJudgeState, UzawaLocal, JUDGE_CONVERGED, JUDGE_LIVE};
 use crate::gpu::ContactLayout;
 use crate::precision::Real;
+use crate::contact::uzawa::SETTLE;
+use crate::solver::coupling::TIGHTEST_INNER;
 use crate::solver::{REFACTOR_CONTRACTION, TIGHTEN_AFTER};
 
 /// The sum of one value per invocation by halves, as `reduce_sum` of `newton.wgsl`.
@@ -188,6 +190,7 @@ pub fn newton_contact_prepare(
         }
         let f = &c.frames[9 * i..9 * i + 9];
         local.v_free = [0, 1, 2].map(|a| f[3 * a] * g[0] + f[3 * a + 1] * g[1] + f[3 * a + 2] * g[2]);
+        local.settle = SETTLE * p.tolerance;
     }
     uzawa_states[k] = UzawaJudgeState { status: JUDGE_LIVE, previous: -1.0, ..Default::default() };
 }
@@ -225,8 +228,9 @@ pub fn newton_contact_forces(state: &[NewtonState<Real>], contact: &mut [Real], 
     s.change = change / size.max(p.floor).max(Real::MIN_POSITIVE);
 }
 
-/// `newton_contact`'s `judge` for group `k`: one verdict for all its members.
-pub fn newton_contact_judge(newton: &[NewtonMember<Real>], state: &mut [NewtonState<Real>], c: &ContactLayout, contact_states: &[crate::gpu::types::ContactState<Real>], k: usize) {
+/// `newton_contact`'s `judge` for group `k`: one verdict for all its members, and its problem
+/// solved tighter when only the increments are left.
+pub fn newton_contact_judge(newton: &[NewtonMember<Real>], state: &mut [NewtonState<Real>], c: &mut ContactLayout, contact_states: &mut [crate::gpu::types::ContactState<Real>], k: usize) {
     let grp = c.groups[k];
     let list = &c.group_members[grp.member_start as usize..][..grp.member_count as usize];
     let lead = list[0] as usize;
@@ -244,9 +248,14 @@ pub fn newton_contact_judge(newton: &[NewtonMember<Real>], state: &mut [NewtonSt
         NEWTON_HOST
     } else if all_converged && settled {
         NEWTON_CONVERGED
-    } else if cs.uzawa != JUDGE_CONVERGED || iterations >= newton[lead].budget || ((grp.iterations_before + iterations) as usize >= TIGHTEN_AFTER && settled && all_balanced) {
+    } else if cs.uzawa != JUDGE_CONVERGED || iterations >= newton[lead].budget {
         NEWTON_HOST
     } else {
+        if (grp.iterations_before + iterations) as usize >= TIGHTEN_AFTER && settled && all_balanced {
+            let p = &mut c.problems[k];
+            p.tolerance = (0.1 * p.tolerance).max(TIGHTEST_INNER * grp.tolerance);
+            contact_states[k].tightened += 1;
+        }
         NEWTON_ITERATING
     };
     for &m in list {

@@ -118,7 +118,12 @@ pub fn source(kernel: &str, precision: Precision, variant: Option<ElementVariant
         module += include("newton")?;
         if kernel == "newton_contact" {
             // The Uzawa points, problems and states it prepares and reads (`uzawa_solve`'s).
-            module += &format!("const TIGHTEN_AFTER = {}u;\n", crate::solver::TIGHTEN_AFTER);
+            module += &format!(
+                "const TIGHTEN_AFTER = {}u;\nconst TIGHTEST_INNER = {:?};\nconst SETTLE = {:?};\n",
+                crate::solver::TIGHTEN_AFTER,
+                crate::solver::coupling::TIGHTEST_INNER,
+                crate::contact::uzawa::SETTLE
+            );
             module += include("uzawa")?;
         }
     }

@@ -167,7 +167,10 @@ pub struct ContactState<R> {
     /// ([`crate::gpu::uzawa_sweep::JUDGE_CONVERGED`] or `JUDGE_SPENT`).
     pub sweeps: u32,
     pub uzawa: u32,
-    pub pad: [u32; 2],
+    /// Times the device solved the group's problem tighter
+    /// ([`crate::solver::coupling::ContactStep::tighten`]).
+    pub tightened: u32,
+    pub pad: u32,
     /// The change of the contact forces over the last increment, relative
     /// ([`crate::solver::coupling::ContactStep::apply`]).
     pub change: R,

@@ -22,7 +22,7 @@ const INNER_TOLERANCE: Real = 0.1;
 
 /// How far [`ContactStep::tighten`] takes the inner tolerance down, at most (relative to the
 /// contact tolerance).
-const TIGHTEST_INNER: Real = 1e-4;
+pub const TIGHTEST_INNER: Real = 1e-4;
 
 /// Columns solved together: bounds the dense right-hand-side block to `64 x free dofs`.
 const COLUMN_BATCH: usize = 64;

@@ -750,6 +750,10 @@ fn device_pass(
                 state.uzawa_converged = o.uzawa == JUDGE_CONVERGED;
                 state.uzawa_stalls = if state.uzawa_converged { 0 } else { state.uzawa_stalls + 1 };
                 state.last_change = Some(o.change);
+                let contact = g.contact.as_mut().expect("a group with a contact outcome has contact");
+                for _ in 0..o.tightened {
+                    contact.tighten();
+                }
             }
             continue;
         }

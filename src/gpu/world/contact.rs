@@ -177,7 +177,7 @@ impl ContactPasses {
                 (26, &call),
             ],
         );
-        let judge = bind(gpu, &pipelines.judge, &[(2, &n.newton), (3, &n.state), (10, &groups), (11, &group_members), (25, &states), (26, &call)]);
+        let judge = bind(gpu, &pipelines.judge, &[(2, &n.newton), (3, &n.state), (10, &groups), (11, &group_members), (14, &uzawa.judged), (25, &states), (26, &call)]);
         Self { prepare, forces, judge, states, problems: l.groups.len() as u32 }
     }
 
