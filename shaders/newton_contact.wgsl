@@ -200,7 +200,9 @@ fn forces(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) wor
 // After `newton_judge`: the group's verdict for all its members, as `Group::converged` gives
 // it. Converged when every member passed its own test and the contact forces settled with a
 // converged solve; the host takes the group (every member HOST) when a member needs it or
-// failed, the solve spent its sweeps, or the budget is spent; else every member iterates on,
+// failed, a member's residual contracted less than tenfold (the host refactorises it, as it
+// would one that passed its own test), the solve spent its sweeps, or the budget is spent;
+// else every member iterates on,
 // and when only the increments are left after TIGHTEN_AFTER iterations the problem is solved
 // ten times tighter from then on (down to TIGHTEST_INNER of the contact tolerance). One
 // invocation per group.
@@ -215,11 +217,15 @@ fn judge(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) 
     var all_converged = true;
     var all_balanced = true;
     var to_host = false;
+    var slow = false;
     for (var a = 0u; a < grp.member_count; a++) {
         let s = state[group_members[grp.member_start + a]];
         all_converged = all_converged && s.status == CONVERGED;
         all_balanced = all_balanced && s.balanced == 1u;
         to_host = to_host || s.status == HOST || s.status == FAILED;
+        // A member that passed its own test while the group goes on is refactorised by the host
+        // as any other whose residual contracts less than tenfold (`Body::refresh_factor`).
+        slow = slow || s.residual > real(REFACTOR_CONTRACTION) * max(s.previous_residual, REAL_MIN_POSITIVE);
     }
     let c = contact_states[k];
     let settled = c.change <= grp.tolerance && c.uzawa == UZAWA_CONVERGED;
@@ -229,7 +235,7 @@ fn judge(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) 
         verdict = HOST;
     } else if all_converged && settled {
         verdict = CONVERGED;
-    } else if c.uzawa != UZAWA_CONVERGED || iterations >= newton[lead].budget {
+    } else if c.uzawa != UZAWA_CONVERGED || iterations >= newton[lead].budget || slow {
         verdict = HOST;
     } else if grp.iterations_before + iterations >= TIGHTEN_AFTER && settled && all_balanced {
         problems[k].tolerance = max(real(0.1) * problems[k].tolerance, real(TIGHTEST_INNER) * grp.tolerance);

@@ -425,8 +425,9 @@ fn groups_in_contact_take_their_newton_increments_on_the_device() {
         assert_eq!(field(&device, "newton_iterations"), field(&cpu, "newton_iterations"), "{scene}");
         assert!(field(&device, "device_iterations") > 10 * field(&host, "device_iterations").max(1), "{scene}: the groups in contact iterate on the device");
         assert!(field(&device, "device_submits") < field(&host, "device_submits"), "{scene}: fewer submits than with an evaluation and a Uzawa submit per contact round");
-        // A member that meets its own test while its group goes on keeps its factorisation (the
-        // host refactorises it when its round-off residual contracts less than tenfold).
-        assert!(field(&device, "factorizations") <= field(&cpu, "factorizations"), "{scene}");
+        // The device hands a group back for refactorisation where the host would refactorise:
+        // also for a member that passed its own test while its group goes on.
+        let (f_device, f_cpu) = (field(&device, "factorizations") as f64, field(&cpu, "factorizations") as f64);
+        assert!((f_device - f_cpu).abs() <= 0.02 * f_cpu + 1.0, "{scene}: {f_device} factorisations against {f_cpu}");
     }
 }

@@ -234,12 +234,13 @@ pub fn newton_contact_judge(newton: &[NewtonMember<Real>], state: &mut [NewtonSt
     let grp = c.groups[k];
     let list = &c.group_members[grp.member_start as usize..][..grp.member_count as usize];
     let lead = list[0] as usize;
-    let (mut all_converged, mut all_balanced, mut to_host) = (true, true, false);
+    let (mut all_converged, mut all_balanced, mut to_host, mut slow) = (true, true, false, false);
     for &m in list {
         let s = state[m as usize];
         all_converged &= s.status == NEWTON_CONVERGED;
         all_balanced &= s.balanced == 1;
         to_host |= s.status == NEWTON_HOST || s.status == NEWTON_FAILED;
+        slow |= s.residual > REFACTOR_CONTRACTION * s.previous_residual.max(Real::MIN_POSITIVE);
     }
     let cs = contact_states[k];
     let settled = cs.change <= grp.tolerance && cs.uzawa == JUDGE_CONVERGED;
@@ -248,7 +249,7 @@ pub fn newton_contact_judge(newton: &[NewtonMember<Real>], state: &mut [NewtonSt
         NEWTON_HOST
     } else if all_converged && settled {
         NEWTON_CONVERGED
-    } else if cs.uzawa != JUDGE_CONVERGED || iterations >= newton[lead].budget {
+    } else if cs.uzawa != JUDGE_CONVERGED || iterations >= newton[lead].budget || slow {
         NEWTON_HOST
     } else {
         if (grp.iterations_before + iterations) as usize >= TIGHTEN_AFTER && settled && all_balanced {
