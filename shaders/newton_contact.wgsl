@@ -4,7 +4,7 @@
 // then `newton_update` with those forces, the evaluation, `newton_judge`, and `judge`, which
 // holds a group's members to one verdict. One workgroup per group (each group has one contact
 // problem, numbered as `uzawa_solve` numbers them); a group no longer iterating does nothing.
-// The Delassus operator stays the one the host built for the step: no member refactorises here.
+// The Delassus operator stays the one the host built: no member refactorises here.
 // The host's increment this repeats: `ContactStep::prepare` and `ContactStep::apply`; its test:
 // `Group::converged`. CPU twins: `cpu::newton_contact_prepare`, `cpu::newton_contact_forces`,
 // `cpu::newton_contact_judge`, which follow this file line by line.
@@ -202,10 +202,10 @@ fn forces(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) wor
 // converged solve; the host takes the group (every member HOST) when a member needs it or
 // failed, a member's residual contracted less than tenfold (the host refactorises it, as it
 // would one that passed its own test), the solve spent its sweeps, or the budget is spent;
-// else every member iterates on,
-// and when only the increments are left after TIGHTEN_AFTER iterations the problem is solved
-// ten times tighter from then on (down to TIGHTEST_INNER of the contact tolerance). One
-// invocation per group.
+// else every member iterates on, and when only the increments are left after TIGHTEN_AFTER
+// iterations the problem is solved ten times tighter from then on (down to TIGHTEST_INNER of
+// the contact tolerance). A group that stopped earlier keeps its verdict. One invocation per
+// group.
 @compute @workgroup_size(NEWTON_WORKGROUP)
 fn judge(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) count: vec3<u32>) {
     let k = id.x + id.y * count.x * NEWTON_WORKGROUP;
