@@ -89,10 +89,6 @@ fn iterating(lane: u32, k: u32) -> bool {
     return workgroupUniformLoad(&go) == 1u;
 }
 
-fn problem_index(workgroup: vec3<u32>, count: vec3<u32>) -> u32 {
-    return workgroup.x + workgroup.y * count.x;
-}
-
 // The contact-free increment x0 = K̄⁻¹(-g) of every member, then each point's free velocity
 // (the trial velocity plus x0 / θdt, in the contact frame) and the settling bound of its local
 // steps into the Uzawa points, and the problem live again from its first sweep.
@@ -147,16 +143,6 @@ fn prepare(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) wo
         s.previous = real(-1.0);
         uzawa_states[k] = s;
     }
-}
-
-// x (contact frame of point i) in global coordinates (`ContactPoint::to_global`).
-fn global(i: u32, x: vec3<real>) -> vec3<real> {
-    let f = 9u * i;
-    return vec3<real>(
-        x.x * frames[f] + x.y * frames[f + 3u] + x.z * frames[f + 6u],
-        x.x * frames[f + 1u] + x.y * frames[f + 4u] + x.z * frames[f + 7u],
-        x.x * frames[f + 2u] + x.y * frames[f + 5u] + x.z * frames[f + 8u],
-    );
 }
 
 // The solved reactions as the members' contact forces, each node's sum in point order, and the

@@ -12,17 +12,12 @@
 @group(0) @binding(7) var<storage, read> dr: array<real>;
 @group(0) @binding(5) var<storage, read_write> live: array<u32>;
 
-var<workgroup> go: u32;
 var<workgroup> ended: u32;
 
 @compute @workgroup_size(UZAWA_WORKGROUP)
 fn main(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workgroup: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
-    // Rows of at most 65535 workgroups: problem k sits at (k mod row, k / row).
-    let k = workgroup.x + workgroup.y * groups.x;
-    if lane == 0u {
-        go = u32(k < count.problems && states[k].status == UZAWA_LIVE);
-    }
-    if workgroupUniformLoad(&go) == 0u {
+    let k = problem_index(workgroup, groups);
+    if !live_problem(lane, k) {
         return;
     }
     let p = problems[k];

@@ -20,25 +20,16 @@
 @group(0) @binding(7) var<storage, read_write> dr: array<real>;
 // The problems, their states, the node gather and the count are `include/uzawa_nodal.wgsl`'s.
 
-var<workgroup> go: u32;
-var<workgroup> colours: u32;
 var<workgroup> ended: u32;
 
 @compute @workgroup_size(UZAWA_WORKGROUP)
 fn main(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workgroup: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
-    // Rows of at most 65535 workgroups: problem k sits at (k mod row, k / row).
-    let k = workgroup.x + workgroup.y * groups.x;
-    if lane == 0u {
-        go = u32(k < count.problems && states[k].status == UZAWA_LIVE);
-        if go == 1u {
-            colours = problems[k].colours;
-        }
-    }
-    if workgroupUniformLoad(&go) == 0u {
+    let k = problem_index(workgroup, groups);
+    if !live_problem(lane, k) {
         return;
     }
     let p = problems[k];
-    let colour_count = workgroupUniformLoad(&colours);
+    let colour_count = p.colours;
     for (var sweep = 0u; sweep < count.sweeps; sweep++) {
         for (var c = 0u; c < colour_count; c++) {
             let end = colour_start[p.colour_first + c + 1u];

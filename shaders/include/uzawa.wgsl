@@ -60,6 +60,12 @@ const UZAWA_SPENT = 2u;
 
 const UZAWA_WORKGROUP = 64u;
 
+// Problem k of a dispatch of one workgroup per problem, in rows of at most 65535 workgroups:
+// it sits at (k mod row, k / row).
+fn problem_index(workgroup: vec3<u32>, count: vec3<u32>) -> u32 {
+    return workgroup.x + workgroup.y * count.x;
+}
+
 fn norm(x: vec3<real>) -> real {
     return sqrt(x.x * x.x + x.y * x.y + x.z * x.z);
 }

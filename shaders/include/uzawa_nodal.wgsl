@@ -16,15 +16,15 @@
 @group(0) @binding(14) var<uniform> count: SolveCount;
 
 var<workgroup> partial: array<vec2<real>, UZAWA_WORKGROUP>;
+var<workgroup> go: u32;
 
-// x (contact frame of point i) in global coordinates.
-fn global(i: u32, x: vec3<real>) -> vec3<real> {
-    let f = 9u * i;
-    return vec3<real>(
-        x.x * frames[f] + x.y * frames[f + 3u] + x.z * frames[f + 6u],
-        x.x * frames[f + 1u] + x.y * frames[f + 4u] + x.z * frames[f + 7u],
-        x.x * frames[f + 2u] + x.y * frames[f + 5u] + x.z * frames[f + 8u],
-    );
+// Whether problem k of the dispatch exists and is still live; the same for every invocation of
+// the workgroup.
+fn live_problem(lane: u32, k: u32) -> bool {
+    if lane == 0u {
+        go = u32(k < count.problems && states[k].status == UZAWA_LIVE);
+    }
+    return workgroupUniformLoad(&go) == 1u;
 }
 
 fn reaction_at(i: u32) -> vec3<real> {

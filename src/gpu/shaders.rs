@@ -29,6 +29,7 @@ pub const SHADERS: &[(&str, &str)] = &[
 /// The shared includes of `shaders/include/`.
 pub const INCLUDES: &[(&str, &str)] = &[
     ("batch", include_str!("../../shaders/include/batch.wgsl")),
+    ("contact_frame", include_str!("../../shaders/include/contact_frame.wgsl")),
     ("contact_law", include_str!("../../shaders/include/contact_law.wgsl")),
     ("decoupled", include_str!("../../shaders/include/decoupled.wgsl")),
     ("element", include_str!("../../shaders/include/element.wgsl")),
@@ -125,6 +126,7 @@ pub fn source(kernel: &str, precision: Precision, variant: Option<ElementVariant
                 crate::contact::uzawa::SETTLE
             );
             module += include("uzawa")?;
+            module += include("contact_frame")?;
         }
     }
     if is_contact_kernel(kernel) {
@@ -139,6 +141,7 @@ pub fn source(kernel: &str, precision: Precision, variant: Option<ElementVariant
         }
         if matches!(kernel, "uzawa_judge" | "uzawa_solve") {
             module += include("uzawa_nodal")?;
+            module += include("contact_frame")?;
         }
     }
     match (is_element_kernel(kernel), variant) {
