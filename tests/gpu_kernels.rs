@@ -1163,7 +1163,7 @@ fn newton_contact_kernels_match_their_cpu_twins() {
             let mut contact = vec![0.0; u.len()];
             let mut x0 = vec![0.0; u.len()];
             let mut state = [0, 1].map(|b| NewtonState { status: NEWTON_ITERATING, residual: residual0(b), previous_residual: residual0(b), ..Default::default() });
-            let staged = [UzawaProblem { point_start: 0, point_end: n_points as u32, node_start: 0, node_end: 2 * n_points as u32, max_iterations: max_sweeps, colour_first: 0, colours: colours.count() as u32, pad: 0, tolerance, floor }];
+            let mut staged = [UzawaProblem { point_start: 0, point_end: n_points as u32, node_start: 0, node_end: 2 * n_points as u32, max_iterations: max_sweeps, colour_first: 0, colours: colours.count() as u32, pad: 0, tolerance, floor }];
             let mut r0 = vec![[0.0; 3]; n_points];
             let problem_of = |local: &[Local], r: &mut Vec<[f64; 3]>| -> NodeGather {
                 let p = Problem { w: &w, colours: &colours, local, nodal: &nodal, r, tolerance, floor, max_iterations: max_sweeps as usize, acceleration: Acceleration::None };
@@ -1171,10 +1171,10 @@ fn newton_contact_kernels_match_their_cpu_twins() {
             };
             let gather = problem_of(&local, &mut r0);
             let group = |calls: Vec<usize>| GroupContact { calls, slot_nodes: &slot_nodes, obstacle: vec![[0.0; 3]; n_points], u_base: bases.clone(), iterations_before: 0, tolerance: contact_tolerance, outcome: ContactState::default() };
-            let mut layout = {
+            let layout = {
                 let mut r = vec![[0.0; 3]; n_points];
                 let p = Problem { w: &w, colours: &colours, local: &local, nodal: &nodal, r: &mut r, tolerance, floor, max_iterations: max_sweeps as usize, acceleration: Acceleration::None };
-                ContactLayout::of(&[group(vec![0, 1])], std::slice::from_ref(&p), staged.to_vec(), &[0, n_points], &gather, &|c| c as u32, &|m| members[m as usize].dof_start, dim, theta_dt)
+                ContactLayout::of(&[group(vec![0, 1])], std::slice::from_ref(&p), &gather, &|c| c as u32, &|m| members[m as usize].dof_start, dim, theta_dt)
             };
             let mut locals: Vec<UzawaLocal<f64>> = local.iter().map(|l| UzawaLocal { v_free: l.v_free, shift: l.shift, mu: l.mu, rho: l.rho, floor, settle: SETTLE * tolerance }).collect();
             let mut ustates = [UzawaJudgeState::start(&staged[0])];
@@ -1183,14 +1183,14 @@ fn newton_contact_kernels_match_their_cpu_twins() {
             let call = [Active { member: 0, mode: 1 }, Active { member: 1, mode: 1 }];
             let mut jobs = call;
             while cpu::newton_compact(&call, &state, &mut jobs) > 0 {
-                cpu::newton_contact_prepare(&inverse_all, &free_all, &newton, &state, &out, &u, &members, &mut x0, &u_base, &layout, &mut locals, &mut ustates, 0);
+                cpu::newton_contact_prepare(&inverse_all, &free_all, &newton, &state, &out, &u, &members, &mut x0, &u_base, &layout, &staged, &gather, &mut locals, &mut ustates, 0);
                 for (l, d) in local.iter_mut().zip(&locals) {
                     l.v_free = d.v_free;
                 }
                 let mut scratch = vec![[0.0; 3]; n_points];
                 let p = Problem { w: &w, colours: &colours, local: &local, nodal: &nodal, r: &mut scratch, tolerance, floor, max_iterations: max_sweeps as usize, acceleration: Acceleration::None };
-                cpu::uzawa_solve(&p, &layout.problems, &mut ustates, &gather, &mut r, &mut dr, max_sweeps, 0);
-                cpu::newton_contact_forces(&state, &mut contact, &layout, &ustates, &r, &mut cstates, 0);
+                cpu::uzawa_solve(&p, &staged, &mut ustates, &gather, &mut r, &mut dr, max_sweeps, 0);
+                cpu::newton_contact_forces(&state, &mut contact, &layout, &staged, &gather, &ustates, &r, &mut cstates, 0);
                 for m in 0..2 {
                     cpu::newton_update(&inverse_all, &free_all, &newton, &mut state, &out, &mut u, &members, &contact, m);
                 }
@@ -1200,7 +1200,7 @@ fn newton_contact_kernels_match_their_cpu_twins() {
                 for m in 0..2 {
                     cpu::newton_judge(&free_all, &newton, &mut state, &out, &u, &u_start, &step_all, coefficients, &[u32::MAX; 4], &members, &contact, m);
                 }
-                cpu::newton_contact_judge(&newton, &mut state, &mut layout, &mut cstates, 0);
+                cpu::newton_contact_judge(&newton, &mut state, &layout, &mut staged, &mut cstates, 0);
             }
             // The device: both bodies' calls and their group in one call.
             let mut world = world_of(&gpu, &cases);

@@ -4,7 +4,8 @@
 //! engine's CPU path solves with faer instead; these are the oracle of the parity tests.
 
 use crate::gpu::types::{Active, Coefficients, DofOut, DofStep, MemberRange, NewtonMember, NewtonState, NEWTON_CONVERGED, NEWTON_FAILED, NEWTON_HOST, NEWTON_ITERATING, NEWTON_WORKGROUP, NO_FAILURE};
-use crate::gpu::uzawa_sweep::{UzawaJudgeState, UzawaLocal, JUDGE_CONVERGED, JUDGE_LIVE};
+use super::uzawa::{global, triple};
+use crate::gpu::uzawa_sweep::{NodeGather, UzawaJudgeState, UzawaLocal, UzawaProblem, JUDGE_CONVERGED, JUDGE_LIVE};
 use crate::gpu::ContactLayout;
 use crate::precision::Real;
 use crate::contact::uzawa::SETTLE;
@@ -28,6 +29,17 @@ fn reduce_max(partial: [Real; NEWTON_WORKGROUP]) -> Real {
     partial.into_iter().fold(0.0, Real::max)
 }
 
+/// Entry `f` of `K̄⁻¹ rhs` for a member whose `K̄⁻¹` is at `row.inverse_start`: column `f` read
+/// as row `f` (`K̄⁻¹` is symmetric), as the shaders read it, summed in `rhs`'s order.
+fn inverse_times(inverse: &[Real], row: &NewtonMember<Real>, f: usize, rhs: &[Real]) -> Real {
+    let n = row.free_count as usize;
+    let mut x = 0.0;
+    for (j, r) in rhs.iter().enumerate() {
+        x += inverse[row.inverse_start as usize + j * n + f] * r;
+    }
+    x
+}
+
 /// `newton_update` for member `m`: `Δu = K̄⁻¹ (f_c - g)` on its free dofs (`contact`: the
 /// contact forces per dof), `u += Δu`, and the increment's norm and count into its state;
 /// nothing unless it is still iterating.
@@ -44,11 +56,7 @@ pub fn newton_update(inverse: &[Real], free_dofs: &[u32], newton: &[NewtonMember
     let mut sum2 = [0.0; NEWTON_WORKGROUP];
     let mut moved = false;
     for (f, &k) in free.iter().enumerate() {
-        // Column f as row f (K̄⁻¹ is symmetric), as the shader reads it.
-        let mut du = 0.0;
-        for (j, r) in rhs.iter().enumerate() {
-            du += inverse[row.inverse_start as usize + j * n + f] * r;
-        }
+        let du = inverse_times(inverse, &row, f, &rhs);
         u[dof_start + k as usize] += du;
         sum2[f % NEWTON_WORKGROUP] += du * du;
         moved |= du != 0.0;
@@ -153,6 +161,8 @@ pub fn newton_contact_prepare(
     x0: &mut [Real],
     u_base: &[Real],
     c: &ContactLayout,
+    problems: &[UzawaProblem<Real>],
+    nodes: &NodeGather,
     locals: &mut [UzawaLocal<Real>],
     uzawa_states: &mut [UzawaJudgeState<Real>],
     k: usize,
@@ -169,14 +179,10 @@ pub fn newton_contact_prepare(
         let free = &free_dofs[row.free_start as usize..][..n];
         let rhs: Vec<Real> = free.iter().map(|&j| -dof_out[dof_start + j as usize].g).collect();
         for (f, &j) in free.iter().enumerate() {
-            let mut x = 0.0;
-            for (i, r) in rhs.iter().enumerate() {
-                x += inverse[row.inverse_start as usize + i * n + f] * r;
-            }
-            x0[dof_start + j as usize] = x;
+            x0[dof_start + j as usize] = inverse_times(inverse, &row, f, &rhs);
         }
     }
-    let p = c.problems[k];
+    let p = problems[k];
     let tdt = c.call.theta_dt;
     for (i, local) in locals.iter_mut().enumerate().take(p.point_end as usize).skip(p.point_start as usize) {
         let mut g = [-c.obstacle[3 * i], -c.obstacle[3 * i + 1], -c.obstacle[3 * i + 2]];
@@ -188,30 +194,39 @@ pub fn newton_contact_prepare(
                 *g += coef * ((u[d] - u_base[d]) / tdt + x0[d] / tdt);
             }
         }
-        let f = &c.frames[9 * i..9 * i + 9];
+        let f = &nodes.frames[9 * i..9 * i + 9];
         local.v_free = [0, 1, 2].map(|a| f[3 * a] * g[0] + f[3 * a + 1] * g[1] + f[3 * a + 2] * g[2]);
         local.settle = SETTLE * p.tolerance;
     }
     uzawa_states[k] = UzawaJudgeState { status: JUDGE_LIVE, previous: -1.0, ..Default::default() };
 }
 
-/// `newton_contact`'s `forces` for group `k`: the reactions `r` as contact forces per dof, their
-/// relative change and the solve's sweeps and outcome into `contact_states`.
-pub fn newton_contact_forces(state: &[NewtonState<Real>], contact: &mut [Real], c: &ContactLayout, uzawa_states: &[UzawaJudgeState<Real>], r: &[Real], contact_states: &mut [crate::gpu::types::ContactState<Real>], k: usize) {
+/// `newton_contact`'s `forces` for group `k` (`problems` and `nodes` as the Uzawa kernels hold
+/// them): the reactions `r` as contact forces per dof, their relative change and the solve's sweeps and outcome into `contact_states`.
+#[allow(clippy::too_many_arguments)]
+pub fn newton_contact_forces(
+    state: &[NewtonState<Real>],
+    contact: &mut [Real],
+    c: &ContactLayout,
+    problems: &[UzawaProblem<Real>],
+    nodes: &NodeGather,
+    uzawa_states: &[UzawaJudgeState<Real>],
+    r: &[Real],
+    contact_states: &mut [crate::gpu::types::ContactState<Real>],
+    k: usize,
+) {
     if !group_iterating(state, c, k) {
         return;
     }
-    let p = c.problems[k];
+    let p = problems[k];
     let (mut change, mut size): (Real, Real) = (0.0, 0.0);
     for n in p.node_start as usize..p.node_end as usize {
         let mut f = [0.0; 3];
-        for e in c.node_start[n] as usize..c.node_start[n + 1] as usize {
-            let i = c.node_points[e] as usize;
-            let fr = &c.frames[9 * i..9 * i + 9];
-            let x = &r[3 * i..3 * i + 3];
-            let global = [0, 1, 2].map(|a| x[0] * fr[a] + x[1] * fr[3 + a] + x[2] * fr[6 + a]);
+        for e in nodes.start[n] as usize..nodes.start[n + 1] as usize {
+            let i = nodes.points[e] as usize;
+            let global = global(&nodes.frames, i, triple(r, i));
             for a in 0..3 {
-                f[a] += c.node_coefs[e] * global[a];
+                f[a] += nodes.coefs[e] * global[a];
             }
         }
         let d0 = c.node_dof[n] as usize;
@@ -230,7 +245,7 @@ pub fn newton_contact_forces(state: &[NewtonState<Real>], contact: &mut [Real], 
 
 /// `newton_contact`'s `judge` for group `k`: one verdict for all its members, and its problem
 /// solved tighter when only the increments are left.
-pub fn newton_contact_judge(newton: &[NewtonMember<Real>], state: &mut [NewtonState<Real>], c: &mut ContactLayout, contact_states: &mut [crate::gpu::types::ContactState<Real>], k: usize) {
+pub fn newton_contact_judge(newton: &[NewtonMember<Real>], state: &mut [NewtonState<Real>], c: &ContactLayout, problems: &mut [UzawaProblem<Real>], contact_states: &mut [crate::gpu::types::ContactState<Real>], k: usize) {
     let grp = c.groups[k];
     let list = &c.group_members[grp.member_start as usize..][..grp.member_count as usize];
     let lead = list[0] as usize;
@@ -253,7 +268,7 @@ pub fn newton_contact_judge(newton: &[NewtonMember<Real>], state: &mut [NewtonSt
         NEWTON_HOST
     } else {
         if (grp.iterations_before + iterations) as usize >= TIGHTEN_AFTER && settled && all_balanced {
-            let p = &mut c.problems[k];
+            let p = &mut problems[k];
             p.tolerance = (0.1 * p.tolerance).max(TIGHTEST_INNER * grp.tolerance);
             contact_states[k].tightened += 1;
         }

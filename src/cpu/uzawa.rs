@@ -11,12 +11,13 @@ use crate::gpu::uzawa_sweep::{NodeGather, UzawaJudgeState, UzawaProblem, JUDGE_C
 use crate::precision::Real;
 
 /// `x` (in the contact frame of point `i`) in global coordinates.
-fn global(frames: &[Real], i: usize, x: [Real; 3]) -> [Real; 3] {
+pub(super) fn global(frames: &[Real], i: usize, x: [Real; 3]) -> [Real; 3] {
     let f = 9 * i;
     [0, 1, 2].map(|c| x[0] * frames[f + c] + x[1] * frames[f + 3 + c] + x[2] * frames[f + 6 + c])
 }
 
-fn triple(a: &[Real], i: usize) -> [Real; 3] {
+/// Point `i`'s three reals of a flat array of them.
+pub(super) fn triple(a: &[Real], i: usize) -> [Real; 3] {
     [a[3 * i], a[3 * i + 1], a[3 * i + 2]]
 }
 

@@ -546,10 +546,9 @@ impl UzawaSweeps {
         Some(whole)
     }
 
-    /// What the last staged problems are on the device: each problem for the kernels, where
-    /// each problem's points start (and the end), and the node gather.
-    pub(crate) fn staged(&self, problems: &[Problem]) -> (Vec<UzawaProblem<Real>>, &[usize], &NodeGather) {
-        (self.layout.judged(problems), &self.layout.offsets, &self.layout.nodes)
+    /// The node gather of the last staged problems.
+    pub(crate) fn staged_nodes(&self) -> &NodeGather {
+        &self.layout.nodes
     }
 
     /// The staged problems' buffers (after [`UzawaSweeps::stage`]).

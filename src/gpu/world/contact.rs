@@ -6,7 +6,7 @@
 use super::{buffer_init, Batch};
 use crate::contact::uzawa::Problem;
 use crate::gpu::types::{ContactCall, ContactGroup, ContactState};
-use crate::gpu::uzawa_sweep::{Buffers as UzawaBuffers, NodeGather, UzawaProblem};
+use crate::gpu::uzawa_sweep::{Buffers as UzawaBuffers, NodeGather};
 use crate::gpu::Gpu;
 use crate::precision::Real;
 use wgpu::{BindGroup, Buffer, BufferUsages, ComputePipeline};
@@ -33,38 +33,32 @@ pub struct GroupContact<'a> {
     pub outcome: ContactState<Real>,
 }
 
-/// What `newton_contact` reads of a call's groups, besides the batch's and the Uzawa solve's
-/// buffers: the host copy, and the CPU twins' input.
+/// What `newton_contact` reads of a call's groups, besides the batch's buffers and the Uzawa
+/// solve's (the problems, the node gather and the frames): the host copy, and the CPU twins'
+/// input.
 #[derive(Debug, Clone, Default)]
 pub struct ContactLayout {
     pub groups: Vec<ContactGroup<Real>>,
     /// Batch member indices, each group's in a run (its leader first).
     pub group_members: Vec<u32>,
-    /// Each group's problem as the Uzawa kernels see it.
-    pub problems: Vec<UzawaProblem<Real>>,
     /// Point `i`'s terms: `(node slot, coefficient)` for `e` in `term_start[i]..term_start[i + 1]`.
     pub term_start: Vec<u32>,
     pub term_slots: Vec<u32>,
     pub term_coefs: Vec<Real>,
     /// Per point, the obstacle's end velocity, 3 reals.
     pub obstacle: Vec<Real>,
-    /// Per point, its frame row by row (9 reals), and the node gather: `NodeGather`'s.
-    pub frames: Vec<Real>,
-    pub node_start: Vec<u32>,
-    pub node_points: Vec<u32>,
-    pub node_coefs: Vec<Real>,
     /// Per node slot, the batch dof of its first component.
     pub node_dof: Vec<u32>,
     pub call: ContactCall<Real>,
 }
 
 impl ContactLayout {
-    /// The layout of `contacts` whose problems `staged` the Uzawa solve holds as `problems`,
-    /// `offsets` (each problem's first point) and `nodes`; `member_of(call)` is a call's batch member and
-    /// `dof_start(member)` its first dof.
+    /// The layout of `contacts` whose problems `staged` the Uzawa solve holds with the node
+    /// gather `nodes`; `member_of(call)` is a call's batch member and `dof_start(member)` its
+    /// first dof.
     #[allow(clippy::too_many_arguments)]
-    pub fn of(contacts: &[GroupContact], staged: &[Problem], problems: Vec<UzawaProblem<Real>>, offsets: &[usize], nodes: &NodeGather, member_of: &dyn Fn(usize) -> u32, dof_start: &dyn Fn(u32) -> u32, dim: usize, theta_dt: Real) -> Self {
-        let mut l = ContactLayout { problems, term_start: vec![0], frames: nodes.frames.clone(), node_start: nodes.start.clone(), node_points: nodes.points.clone(), node_coefs: nodes.coefs.clone(), ..Default::default() };
+    pub fn of(contacts: &[GroupContact], staged: &[Problem], nodes: &NodeGather, member_of: &dyn Fn(usize) -> u32, dof_start: &dyn Fn(u32) -> u32, dim: usize, theta_dt: Real) -> Self {
+        let mut l = ContactLayout { term_start: vec![0], ..Default::default() };
         for (k, g) in contacts.iter().enumerate() {
             l.groups.push(ContactGroup { member_start: l.group_members.len() as u32, member_count: g.calls.len() as u32, iterations_before: g.iterations_before, pad: 0, tolerance: g.tolerance });
             l.group_members.extend(g.calls.iter().map(|&c| member_of(c)));
@@ -77,7 +71,6 @@ impl ContactLayout {
             l.obstacle.extend(g.obstacle.iter().flatten());
             debug_assert_eq!(g.slot_nodes.len(), (nodes.node_offsets[k + 1] - slot0) as usize);
             l.node_dof.extend(g.slot_nodes.iter().map(|&(body, node)| dof_start(member_of(g.calls[body as usize])) + node * dim as u32));
-            debug_assert_eq!(offsets[k + 1], l.term_start.len() - 1);
         }
         l.call = ContactCall { problems: contacts.len() as u32, dim: dim as u32, pad: [0; 2], theta_dt };
         l

@@ -382,8 +382,7 @@ impl GpuWorld {
         let precision = self.gpu.precision;
         let real = precision.size() as u64;
         let b = &self.batches[batch];
-        let (staged, offsets, nodes) = sweeps.staged(problems);
-        let layout = ContactLayout::of(contacts, problems, staged, offsets, nodes, &|c| self.place[calls[c].body].1 as u32, &|m| b.members[m as usize].dof_start, dim, theta_dt);
+        let layout = ContactLayout::of(contacts, problems, sweeps.staged_nodes(), &|c| self.place[calls[c].body].1 as u32, &|m| b.members[m as usize].dof_start, dim, theta_dt);
         let mut up = 0;
         let n = b.newton.as_ref().expect("made before staging");
         let passes = ContactPasses::new(&self.gpu, self.contact_pipelines.as_ref().expect("made above"), &layout, b, n, sweeps.buffers(), &mut up);
