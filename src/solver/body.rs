@@ -857,8 +857,12 @@ impl Body {
 
     /// Whether [`Body::refresh_factor`] would refactorise now.
     pub fn needs_factorization(&self, p: &StepParams) -> bool {
-        let fresh = self.reuse_factorization && self.factor_c1 == Some(coefficients(p).c1) && self.contraction.is_none_or(|r| r <= REFACTOR_CONTRACTION);
-        !fresh
+        !(self.factor_kept_for(p) && self.contraction.is_none_or(|r| r <= REFACTOR_CONTRACTION))
+    }
+
+    /// Whether the body keeps factorisations and holds one for this step's `c1`.
+    fn factor_kept_for(&self, p: &StepParams) -> bool {
+        self.reuse_factorization && self.factor_c1 == Some(coefficients(p).c1)
     }
 
     /// Whether [`Body::refresh_factor`] needs a tangent it does not have: a GPU world computes
@@ -918,7 +922,7 @@ impl Body {
     /// use, right after [`Body::refresh_factor`] (which keeps or renews it): its next increment
     /// can be taken on the device.
     pub fn factor_fit(&self, p: &StepParams) -> bool {
-        self.dofs.free_count > 0 && self.reuse_factorization && self.factor_c1 == Some(coefficients(p).c1)
+        self.dofs.free_count > 0 && self.factor_kept_for(p)
     }
 
     /// Which factorisation the body holds (a new number for each).
