@@ -379,9 +379,16 @@ impl GpuWorld {
         self.gpu.adapter.software()
     }
 
-    /// Bytes moved since the last call (the upload of the bodies' data counts in the first).
+    /// Bytes moved since the last call (the upload of the bodies' data counts in the first),
+    /// the Uzawa sweeps' included.
     pub fn take_traffic(&mut self) -> Traffic {
-        std::mem::take(&mut self.traffic)
+        let mut moved = std::mem::take(&mut self.traffic);
+        if let Some(sweeps) = &mut self.contact {
+            let swept = sweeps.take_traffic();
+            moved.up += swept.up;
+            moved.down += swept.down;
+        }
+        moved
     }
 
     /// Queue submits so far: one per [`GpuWorld::evaluate`] and per [`GpuWorld::element_energies`],
@@ -405,9 +412,6 @@ impl GpuWorld {
         }
         let sweeps = self.contact.as_mut().expect("made above");
         let outcomes = sweeps.solve(problems, stop);
-        let moved = std::mem::take(&mut sweeps.traffic);
-        self.traffic.up += moved.up;
-        self.traffic.down += moved.down;
         times.contact += started.elapsed().as_secs_f64();
         outcomes
     }

@@ -345,20 +345,17 @@ impl GpuWorld {
             t0 = Instant::now();
         }
         // The device's displacements are the host's now: the mirror follows, so that the next
-        // pass does not send them back. The contact forces the device computed are not the
-        // host's: they go up again next time.
+        // pass does not send them back. The contact forces the device computed for the groups
+        // in contact are not the host's: theirs go up again next time.
         for call in calls.iter() {
             let (batch, m) = self.place[call.body];
             let dofs = super::dof_span(&self.batches[batch].members, &[m]);
-            self.batches[batch].u_host[dofs.clone()].copy_from_slice(call.u);
-            if contact.is_some() {
-                self.batches[batch].newton.as_mut().expect("staged").contact_host[dofs].fill(Real::NAN);
-            }
+            self.batches[batch].u_host[dofs].copy_from_slice(call.u);
         }
-        if let Some(sweeps) = &mut self.contact {
-            let moved = sweeps.take_traffic();
-            self.traffic.up += moved.up;
-            self.traffic.down += moved.down;
+        for &c in contacts.iter().flat_map(|g| &g.calls) {
+            let (batch, m) = self.place[calls[c].body];
+            let dofs = super::dof_span(&self.batches[batch].members, &[m]);
+            self.batches[batch].newton.as_mut().expect("staged").contact_host[dofs].fill(Real::NAN);
         }
         Ok(())
     }
