@@ -516,11 +516,7 @@ fn iterate_on_device(groups: &[Group], continuing: &mut [bool], world: &GpuWorld
         }
     }
     if let (Some(settings), true) = (c.settings, in_contact.contains(&true)) {
-        let problems = || groups.iter().zip(&in_contact).filter(|(_, &yes)| yes).filter_map(|(g, _)| g.contact.as_ref());
-        let points = problems().map(|k| k.points.len()).sum();
-        let colours = problems().map(|k| k.colours.count()).max().unwrap_or(0);
-        let widest = problems().map(|k| k.widest_colour()).max().unwrap_or(0);
-        if crate::backend::uzawa_on_device(world, settings, points, colours, widest) {
+        if sweeps_on_device(groups, &in_contact, world, settings) {
             for (chosen, &yes) in chosen.iter_mut().zip(&in_contact) {
                 *chosen |= yes;
             }
@@ -569,17 +565,24 @@ fn element_work(groups: &[Group], live: &[bool], wanted: &dyn Fn(&Body) -> bool)
     work
 }
 
+/// Whether the Uzawa sweeps of the `chosen` groups' contact problems go to the device
+/// ([`crate::backend::uzawa_on_device`], from their points, colours and widest colour); never
+/// without a point.
+fn sweeps_on_device(groups: &[Group], chosen: &[bool], world: &GpuWorld, settings: &Settings) -> bool {
+    let problems = || groups.iter().zip(chosen).filter(|(_, &yes)| yes).filter_map(|(g, _)| g.contact.as_ref());
+    let points: usize = problems().map(|k| k.points.len()).sum();
+    let colours = problems().map(|k| k.colours.count()).max().unwrap_or(0);
+    let widest = problems().map(|k| k.widest_colour()).max().unwrap_or(0);
+    points > 0 && crate::backend::uzawa_on_device(world, settings, points, colours, widest)
+}
+
 /// The Uzawa iterations of the `waiting` groups' contact problems: on the device, all in one
 /// solve, where [`crate::backend::uzawa_on_device`] says so (and they fit the device's
 /// buffers), else each group's on the CPU, in parallel. A device error fails every waiting
 /// group.
 fn solve_contact(groups: &mut [Group], waiting: &[bool], world: &mut GpuWorld, c: &Context, times: &mut PhaseTimes) -> Vec<Result<Outcome, StepFailure>> {
     let Some(settings) = c.settings else { return groups.iter().map(|_| Ok(Outcome::default())).collect() };
-    let chosen = || groups.iter().zip(waiting).filter(|(_, &w)| w).map(|(g, _)| g);
-    let points: usize = chosen().filter_map(|g| g.contact.as_ref()).map(|c| c.points.len()).sum();
-    let colours = chosen().filter_map(|g| g.contact.as_ref()).map(|c| c.colours.count()).max().unwrap_or(0);
-    let widest = chosen().filter_map(|g| g.contact.as_ref()).flat_map(|c| (0..c.colours.count()).map(|k| c.colours.colour(k).len())).max().unwrap_or(0);
-    if points > 0 && crate::backend::uzawa_on_device(world, settings, points, colours, widest) {
+    if sweeps_on_device(groups, waiting, world, settings) {
         let owners: Vec<usize> = (0..groups.len()).filter(|&k| waiting[k]).collect();
         let mut problems: Vec<_> = groups.iter_mut().zip(waiting).filter(|(_, &w)| w).map(|(g, _)| g.contact.as_mut().expect("a waiting group has contact").problem(settings)).collect();
         let solved = world.solve_contact(&mut problems, c.interrupt, times);
