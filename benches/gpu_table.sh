@@ -19,7 +19,8 @@
 # Prints the date, the machine and Markdown tables; OUTDIR (default: a temporary folder) keeps
 # every run's `--json` summary and bench's JSON rows. QUICK=1 runs small sizes, to try the
 # script on lavapipe; BENCH_ELEMENTS (default 1000000) sizes the kernel benchmark, whose every
-# kernel is stopped after BENCH_LIMIT seconds (default 80). SECTIONS (default "runs bench
+# kernel is stopped after BENCH_LIMIT seconds (default 80), and every run after RUN_LIMIT seconds
+# (default 600; a stopped run is reported and left out of the table). SECTIONS (default "runs bench
 # sweeps") picks the parts, so that a device call's 10 minutes can hold them: "runs bench
 # sweeps" took about 8 minutes next to an H100, most of it the kernel benchmark; "scale" takes
 # about 4 minutes of CPU runs on 2 cores per repetition, less on 16 (call it on its own).
@@ -47,12 +48,13 @@ else
   scale_2d=("1000 0.2" "10000 0.1" "100000 0.05") scale_3d=("1000 0.1" "10000 0.05") stack_end=5.0 block=(40 20 20) block_end=0.02
 fi
 limit=${BENCH_LIMIT:-80}
+run_limit=${RUN_LIMIT:-600}
 sections=" ${SECTIONS:-runs bench sweeps} "
 
 run() { # label backend scene [arguments...]: one run, its summary appended to runs.jsonl
   local label=$1 backend=$2 scene=$3
   shift 3
-  if "$bin" run "scenes/$scene.toml" "$@" --backend "$backend" --quiet --json --out "$out/run.mcap" >"$out/run.json" 2>"$out/run.err"; then
+  if timeout "$run_limit" "$bin" run "scenes/$scene.toml" "$@" --backend "$backend" --quiet --json --out "$out/run.mcap" >"$out/run.json" 2>"$out/run.err"; then
     python3 -c 'import json,sys; d=json.load(open(sys.argv[1])); d["label"]=sys.argv[2]; d["mode"]=sys.argv[3]; print(json.dumps(d))' \
       "$out/run.json" "$label" "$backend$UZAWA_LABEL" >>"$out/runs.jsonl"
   else
@@ -101,15 +103,16 @@ for r in $(seq "$scale_reps"); do
     done
     run "stack_3d, t <= $stack_end" "$backend" stack_3d --set time.end="$stack_end"
     if [[ $backend == gpu ]]; then
-      # Every round on the device: the falling grains take their Newton iterations there
-      # (doc/ARCHITECTURE.md, "Newton iterations on the device"), whatever `auto`'s threshold.
-      UZAWA_LABEL=" --rounds gpu"
+      # The whole step on the device: the falling grains take their Newton iterations there,
+      # their contact sweeps with them (doc/ARCHITECTURE.md, "Newton iterations on the device",
+      # "Groups in contact on the device"), whatever `auto`'s thresholds.
+      UZAWA_LABEL=" --rounds gpu --uzawa gpu"
       read -r n end <<<"${scale_2d[-1]}"
       run "grains_many, N = $n, falling, t <= $end" gpu grains_many --set packing.count="$n" --set time.end="$end" \
-        --set 'gravity=[0.0,-9.81]' --set output.scene_every=0 --rounds gpu
+        --set 'gravity=[0.0,-9.81]' --set output.scene_every=0 --rounds gpu --uzawa gpu
       read -r n end <<<"${scale_3d[-1]}"
       run "grains_3d, N = $n, falling, t <= $end" gpu grains_3d --set packing.count="$n" --set time.end="$end" \
-        --set 'gravity=[0.0,-9.81,0.0]' --set output.scene_every=0 --rounds gpu
+        --set 'gravity=[0.0,-9.81,0.0]' --set output.scene_every=0 --rounds gpu --uzawa gpu
       UZAWA_LABEL=""
     fi
     run "free_flight_3d, ${block[0]}x${block[1]}x${block[2]} Hex8, t <= $block_end" "$backend" free_flight_3d \
@@ -149,13 +152,14 @@ print("| --- | --- | --- | --- | --- | --- | --- | --- | --- |")
 labels = list(dict.fromkeys(r["label"] for r in runs))
 for label in labels:
     cpu = by.get((label, "cpu"))
-    for mode in ("gpu", "gpu --uzawa gpu", "gpu --rounds gpu"):
+    for mode in ("gpu", "gpu --uzawa gpu", "gpu --rounds gpu", "gpu --rounds gpu --uzawa gpu"):
         gpu = by.get((label, mode))
         if not cpu or not gpu:
             continue
         wc, wg = med(cpu, lambda r: r["wall_s"]), med(gpu, lambda r: r["wall_s"])
         ratio = f"{wc / wg:.2f}x faster" if wg < wc else f"{wg / wc:.2f}x slower"
-        name = label + (" (contact on the device)" if "uzawa" in mode else " (every round on the device)" if "rounds" in mode else "")
+        name = label + {"gpu --uzawa gpu": " (contact on the device)", "gpu --rounds gpu": " (every round on the device)",
+                         "gpu --rounds gpu --uzawa gpu": " (the whole step on the device)"}.get(mode, "")
         print(f"| {name} | {wc:.2f} s | {wg:.2f} s | {ratio} | {med(cpu, lambda r: r['wall_by_phase']['total']):.2f} s "
               f"| {med(gpu, lambda r: r['wall_by_phase']['total']):.2f} s | {med(gpu, lambda r: r['device_submits']):.0f} "
               f"| {med(gpu, lambda r: r.get('device_iterations', 0)):.0f} "

@@ -179,6 +179,10 @@ pub struct BenchOptions {
     pub elements: usize,
     /// Only kernels whose name contains this.
     pub kernel: Option<String>,
+    /// Only element rows whose element (`hex8`, `quad4+fbar`) contains this.
+    pub element: Option<String>,
+    /// Only element rows whose material (`blatz_ko`, `ogden`) contains this.
+    pub material: Option<String>,
     /// Seconds of calls per measurement (at least three calls).
     pub min_time: f64,
 }
@@ -257,9 +261,13 @@ fn element_energies(case: &BenchCase) -> Vec<Real> {
 pub fn run_bench(options: &BenchOptions, gpus: &[Arc<Gpu>], mut row: impl FnMut(BenchRow)) -> Result<(), GpuError> {
     let peaks = peak_rows(options, gpus, &mut row)?;
     let element_kernels = [FORCE_TANGENT, ASSEMBLY, EVALUATE, ENERGY].iter().any(|k| wanted(options, k));
+    let matches = |filter: &Option<String>, name: &str| filter.as_ref().is_none_or(|f| name.contains(f.as_str()));
     for (kind, formulation) in bench_elements().into_iter().filter(|_| element_kernels) {
         let label = element_label(kind, formulation);
-        for model in bench_models() {
+        if !matches(&options.element, &label) {
+            continue;
+        }
+        for model in bench_models().into_iter().filter(|m| matches(&options.material, m.name())) {
             let case = BenchCase::new(kind, formulation, model, options.elements);
             let n = case.elements();
             let make = |kernel: &str, backend: String, timing: Timing, traffic: u64, error: f64| {

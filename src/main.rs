@@ -209,6 +209,12 @@ enum Command {
         /// Only kernels whose name contains this.
         #[arg(long)]
         kernel: Option<String>,
+        /// Only element rows whose element (`hex8`, `quad4+fbar`) contains this.
+        #[arg(long)]
+        element: Option<String>,
+        /// Only element rows whose material (`blatz_ko`, `ogden`) contains this.
+        #[arg(long)]
+        material: Option<String>,
         /// `auto`: the GPU columns when an adapter exists; `gpu`: they are required; `cpu`: none.
         #[arg(long, default_value = "auto", value_parser = parse_backend)]
         backend: BackendChoice,
@@ -856,7 +862,7 @@ fn main() -> ExitCode {
             }
             Ok(ExitCode::SUCCESS)
         }),
-        Command::Bench { elements, kernel, backend, adapter, time, json } => bench_command(BenchOptions { elements, kernel, min_time: time }, backend, adapter, json),
+        Command::Bench { elements, kernel, element, material, backend, adapter, time, json } => bench_command(BenchOptions { elements, kernel, element, material, min_time: time }, backend, adapter, json),
         Command::Info => {
             println!("bifirst {} (git {})", env!("CARGO_PKG_VERSION"), bifirst::run::GIT_REVISION.unwrap_or("unknown"));
             println!("build: {} profile, rustc target {}-{}", if cfg!(debug_assertions) { "debug" } else { "release" }, std::env::consts::ARCH, std::env::consts::OS);

@@ -41,6 +41,18 @@ fn bench_kernel_filter_takes_a_rows_full_name() {
     }
 }
 
+/// A device call has minutes, not the half hour of every element and material at a million
+/// elements: `--element` and `--material` pick the element rows' cases, by part of their names.
+#[test]
+fn bench_element_and_material_filters_pick_the_cases() {
+    let rows = self::rows(&["--backend", "cpu", "--kernel", "element_force_tangent", "--element", "hex8", "--material", "blatz_ko"]);
+    let cases: Vec<(&str, &str)> = rows.iter().map(|r| (r["element"].as_str().unwrap(), r["material"].as_str().unwrap())).collect();
+    assert_eq!(cases, [("hex8", "blatz_ko"), ("hex8+fbar", "blatz_ko")]);
+    let rows = self::rows(&["--backend", "cpu", "--kernel", "element_energy", "--element", "quad4+fbar"]);
+    assert_eq!(rows.len(), 8);
+    assert!(rows.iter().all(|r| r["element"] == "quad4+fbar"), "{rows:?}");
+}
+
 #[test]
 fn bench_on_a_gpu_reports_errors_within_the_parity_tolerances() {
     if let Err(e) = bifirst::gpu::open(None, None) {
