@@ -421,6 +421,21 @@ impl GpuWorld {
         self.gpu.queue.write_buffer(buffer, offset, bytes);
     }
 
+    /// Uploads `pieces` one after the other from `offset`, in one write: each piece is copied
+    /// once, into the staging memory (a write costs a staging allocation, and building one
+    /// vector of the pieces first costs another copy).
+    fn upload_pieces(&mut self, buffer: &Buffer, offset: u64, pieces: &[&[u8]]) {
+        let total: usize = pieces.iter().map(|p| p.len()).sum();
+        let Some(size) = wgpu::BufferSize::new(total as u64) else { return };
+        self.traffic.up += total as u64;
+        let mut view = self.gpu.queue.write_buffer_with(buffer, offset, size).expect("a write inside the buffer");
+        let mut at = 0;
+        for piece in pieces {
+            view.slice(at..at + piece.len()).copy_from_slice(piece);
+            at += piece.len();
+        }
+    }
+
     /// The step's start values of the listed bodies, for `assemble_residual` (once per step;
     /// they go up with the next submit, one write per run of consecutive members whose values
     /// changed: a grain at rest starts every step from the same ones).
@@ -703,11 +718,10 @@ fn unpack_evaluation(precision: Precision, list: &mut [Evaluation], landing: &[[
             continue;
         }
         if let Some(out) = e.dof_out.as_deref_mut() {
-            let reals = from_device(precision, &bytes[dof_at..dof_at + out.len() * 2 * real]);
-            out.copy_from_slice(bytemuck::cast_slice(&reals));
+            copy_from_device(precision, &bytes[dof_at..dof_at + out.len() * 2 * real], bytemuck::cast_slice_mut(out));
         }
         if e.tangent && !e.values.is_empty() {
-            e.values.copy_from_slice(&from_device(precision, &bytes[values_at..values_at + e.values.len() * real]));
+            copy_from_device(precision, &bytes[values_at..values_at + e.values.len() * real], &mut e.values);
         }
     }
 }
@@ -893,6 +907,19 @@ pub fn to_device(precision: Precision, reals: &[Real]) -> Vec<u8> {
     match precision {
         Precision::F64 => bytemuck::cast_slice(reals).to_vec(),
         Precision::F32 => bytemuck::cast_slice(&reals.iter().map(|&x| x as f32).collect::<Vec<f32>>()).to_vec(),
+    }
+}
+
+/// Reals read back from the device into `out` (of `bytes`' length in reals), without a vector
+/// between: a read-back lands in every iterate's displacements and residuals.
+pub fn copy_from_device(precision: Precision, bytes: &[u8], out: &mut [Real]) {
+    match precision {
+        Precision::F64 => bytemuck::cast_slice_mut::<Real, u8>(out).copy_from_slice(bytes),
+        Precision::F32 => {
+            for (x, b) in out.iter_mut().zip(bytes.chunks_exact(4)) {
+                *x = Real::from(f32::from_ne_bytes(b.try_into().expect("four bytes")));
+            }
+        }
     }
 }
 

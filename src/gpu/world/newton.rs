@@ -319,9 +319,8 @@ impl GpuWorld {
                     let flags: [u32; 2] = bytemuck::pod_read_unaligned(&bytes[*flags_at..flags_at + 8]);
                     call.failure = (call.outcome.status == NEWTON_FAILED).then(|| super::failure_of(flags)).flatten();
                     let n = call.u.len();
-                    call.u.copy_from_slice(&super::from_device(precision, &bytes[*u_at..u_at + n * real]));
-                    let reals = super::from_device(precision, &bytes[*out_at..out_at + n * 2 * real]);
-                    call.dof_out.copy_from_slice(bytemuck::cast_slice(&reals));
+                    super::copy_from_device(precision, &bytes[*u_at..u_at + n * real], call.u);
+                    super::copy_from_device(precision, &bytes[*out_at..out_at + n * 2 * real], bytemuck::cast_slice_mut(call.dof_out));
                 }
                 if let Some((r_at, states_at)) = contact_landing {
                     let reactions = super::from_device(precision, &bytes[r_at..r_at + points * 3 * real]);
@@ -409,13 +408,23 @@ impl GpuWorld {
         let mut start_changed = Vec::new();
         let mut contact_changed = Vec::new();
         let mut states = Vec::with_capacity(mine.len());
+        // New inverses of members whose slots follow each other go up in one write (after a
+        // step that refactorised every grain, one inverse per grain): (offset, end, inverses).
+        let mut inverse_runs: Vec<(u64, u64, Vec<Vec<Real>>)> = Vec::new();
         for &(i, m) in mine {
             let call = &mut calls[i];
             let slot = b.inverse_slot[m].expect("a capable body has an inverse slot");
             let (free_start, free_count) = b.free_range[m];
             if let Some(inverse) = call.inverse.take() {
                 assert_eq!(inverse.len(), (free_count * free_count) as usize, "K̄⁻¹ of the member's free dofs");
-                uploads.push((n.inverse.clone(), slot as u64 * real, to_device(precision, &inverse)));
+                let (offset, bytes) = (slot as u64 * real, inverse.len() as u64 * real);
+                match inverse_runs.last_mut() {
+                    Some((_, end, run)) if *end == offset => {
+                        *end += bytes;
+                        run.push(inverse);
+                    }
+                    _ => inverse_runs.push((offset, offset + bytes, vec![inverse])),
+                }
                 n.inverse_version[m] = Some(call.factor);
             }
             n.newton_host[m] = NewtonMember { inverse_start: slot, free_start, free_count, ..call.member };
@@ -471,8 +480,14 @@ impl GpuWorld {
         let dispatch: [u32; DISPATCH_WORDS] = [1, 1, count, fx, fy, count, rx, ry, count, 1, 1, count, count];
         debug_assert_eq!(DISPATCHES * 3 + 1, DISPATCH_WORDS);
         uploads.push((n.dispatch.clone(), 0, bytemuck::cast_slice(&dispatch).to_vec()));
+        let inverse = n.inverse.clone();
         for (buffer, offset, bytes) in uploads {
             self.upload(&buffer, offset, &bytes);
+        }
+        // Device Newton iterations run in f64 only (asserted by `newton`): the host's reals are
+        // the device's bytes.
+        for (offset, _, run) in inverse_runs {
+            self.upload_pieces(&inverse, offset, &run.iter().map(|x| bytemuck::cast_slice(x)).collect::<Vec<&[u8]>>());
         }
     }
 }
