@@ -162,6 +162,12 @@ impl Gpu {
 
     /// Maps the first `bytes` of a buffer (after what was submitted) and copies them out.
     pub fn read_range(&self, kernel: &str, buffer: &wgpu::Buffer, bytes: u64) -> Result<Vec<u8>, GpuError> {
+        self.read_range_with(kernel, buffer, bytes, <[u8]>::to_vec)
+    }
+
+    /// Maps the first `bytes` of a buffer (after what was submitted) and hands them to `read`
+    /// while mapped: a large read-back is taken where it lies instead of copied out first.
+    pub fn read_range_with<R>(&self, kernel: &str, buffer: &wgpu::Buffer, bytes: u64, read: impl FnOnce(&[u8]) -> R) -> Result<R, GpuError> {
         let err = |message: String| GpuError::Kernel { kernel: kernel.into(), message };
         let (sender, receiver) = std::sync::mpsc::channel();
         buffer.map_async(wgpu::MapMode::Read, ..bytes, move |result| {
@@ -169,7 +175,7 @@ impl Gpu {
         });
         self.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| err(e.to_string()))?;
         receiver.recv().map_err(|e| err(e.to_string()))?.map_err(|e| err(e.to_string()))?;
-        let out = buffer.get_mapped_range(..bytes).map_err(|e| err(e.to_string()))?.to_vec();
+        let out = read(&buffer.get_mapped_range(..bytes).map_err(|e| err(e.to_string()))?);
         buffer.unmap();
         Ok(out)
     }

@@ -693,15 +693,18 @@ impl GpuWorld {
         self.gpu.queue.submit([encoder.finish()]);
         self.submits += 1;
         let end = readback.end;
-        let bytes = if end == 0 {
+        let mut mapped = submitted;
+        if end == 0 {
             self.gpu.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Kernel { kernel: kernel.into(), message: e.to_string() })?;
-            Vec::new()
+            mapped = Instant::now();
+            unpack(&[]);
         } else {
-            self.gpu.read_range(kernel, target, end)?
-        };
+            self.gpu.read_range_with(kernel, target, end, |bytes| {
+                mapped = Instant::now();
+                unpack(bytes);
+            })?;
+        }
         self.traffic.down += end;
-        let mapped = Instant::now();
-        unpack(&bytes);
         times.transfer += (submitted - started).as_secs_f64() + mapped.elapsed().as_secs_f64();
         times.elements += (mapped - submitted).as_secs_f64();
         Ok(())

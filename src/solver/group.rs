@@ -637,7 +637,7 @@ fn device_pass(
     // A forces pass leaves out the bodies whose inputs are those of their last evaluation (a
     // grain at rest): their results are still there, as on the CPU.
     let chosen: Vec<Vec<bool>> = groups
-        .iter_mut()
+        .par_iter_mut()
         .zip(live)
         .map(|(g, &l)| {
             g.bodies
@@ -671,47 +671,62 @@ fn device_pass(
         })
         .collect();
     let motion_scale = c.velocity_scale * p.dt;
-    let mut list: Vec<Evaluation> = Vec::new();
-    let mut calls: Vec<NewtonCall> = Vec::new();
-    let mut problems: Vec<Problem> = Vec::new();
-    let mut contacts: Vec<GroupContact> = Vec::new();
-    // Per group iterating on the device: its calls, and its contact's index in `contacts`.
-    let mut call_ranges: Vec<(std::ops::Range<usize>, Option<usize>)> = vec![(0..0, None); groups.len()];
     let dim = groups.first().and_then(|g| g.bodies.first()).map_or(2, |b| b.dim);
-    for (k, (g, chosen)) in groups.iter_mut().zip(&chosen).enumerate() {
-        if iterating[k] {
+    let group_count = groups.len();
+    // Each group's share, made in parallel: its calls and contact (iterating on the device), or
+    // its evaluations; then laid end to end.
+    let shares: Vec<(Vec<NewtonCall>, Option<(Problem, GroupContact)>, Vec<Evaluation>)> = groups
+        .par_iter_mut()
+        .zip(&chosen)
+        .zip(inverses.par_iter_mut())
+        .zip(iterating)
+        .map(|(((g, chosen), inverses), &on_device)| {
+            if !on_device {
+                let evaluations = g.bodies.iter_mut().zip(g.ids).zip(chosen).filter(|(_, &yes)| yes).map(|((body, &id), _)| body.device_evaluation(id, tangent, !tangent)).collect();
+                return (Vec::new(), None, evaluations);
+            }
             let budget = p.max_iterations - g.newton.report.iterations;
             let Group { ids, bodies, contact, newton, .. } = g;
-            let start = calls.len();
             let u_base: Vec<Vec<Real>> = if contact.is_some() { bodies.iter().map(|b| b.trial_velocity_base(p)).collect() } else { Vec::new() };
-            for ((body, &id), inverse) in bodies.iter_mut().zip(ids.iter()).zip(std::mem::take(&mut inverses[k])) {
-                calls.push(body.newton_call(id, p, motion_scale, budget, inverse));
-            }
-            let mut index = None;
-            if let Some(contact) = contact {
+            let calls: Vec<NewtonCall> = bodies.iter_mut().zip(ids.iter()).zip(std::mem::take(inverses)).map(|((body, &id), inverse)| body.newton_call(id, p, motion_scale, budget, inverse)).collect();
+            let contact = contact.as_mut().map(|contact| {
                 let settings = c.settings.expect("contact points need contact settings");
                 let obstacle = contact.obstacle_velocities();
                 let (problem, slot_nodes) = contact.problem_and_slots(settings);
-                index = Some(contacts.len());
-                problems.push(problem);
-                contacts.push(GroupContact {
-                    calls: (start..calls.len()).collect(),
+                let group = GroupContact {
+                    calls: Vec::new(),
                     slot_nodes,
                     obstacle,
                     u_base,
                     iterations_before: newton.report.iterations as u32,
                     tolerance: settings.tolerance,
                     outcome: ContactState::default(),
-                });
-            }
-            call_ranges[k] = (start..calls.len(), index);
+                };
+                (problem, group)
+            });
+            (calls, contact, Vec::new())
+        })
+        .collect();
+    let mut list: Vec<Evaluation> = Vec::new();
+    let mut calls: Vec<NewtonCall> = Vec::new();
+    let mut problems: Vec<Problem> = Vec::new();
+    let mut contacts: Vec<GroupContact> = Vec::new();
+    // Per group iterating on the device: its calls, and its contact's index in `contacts`.
+    let mut call_ranges: Vec<(std::ops::Range<usize>, Option<usize>)> = vec![(0..0, None); group_count];
+    for (k, (group_calls, contact, evaluations)) in shares.into_iter().enumerate() {
+        list.extend(evaluations);
+        if !iterating[k] {
             continue;
         }
-        for ((body, &id), &yes) in g.bodies.iter_mut().zip(g.ids).zip(chosen) {
-            if yes {
-                list.push(body.device_evaluation(id, tangent, !tangent));
-            }
-        }
+        let start = calls.len();
+        calls.extend(group_calls);
+        let index = contact.map(|(problem, mut group)| {
+            group.calls = (start..calls.len()).collect();
+            problems.push(problem);
+            contacts.push(group);
+            contacts.len() - 1
+        });
+        call_ranges[k] = (start..calls.len(), index);
     }
     let passed = if calls.is_empty() {
         world.evaluate(&mut list, coefficients(p), times)
@@ -725,13 +740,23 @@ fn device_pass(
     drop(calls);
     drop(contacts);
     drop(problems);
-    let mut failures = failures.into_iter();
-    for (k, ((g, chosen), result)) in groups.iter_mut().zip(&chosen).zip(&mut results).enumerate() {
+    // Where each group's evaluations start in the list (the groups iterating on the device
+    // have none), so that the groups take their results in parallel.
+    let mut evaluations_start = Vec::with_capacity(groups.len());
+    let mut at = 0;
+    for (chosen, &on_device) in chosen.iter().zip(iterating) {
+        evaluations_start.push(at);
+        if !on_device {
+            at += chosen.iter().filter(|&&yes| yes).count();
+        }
+    }
+    let passed = &passed;
+    groups.par_iter_mut().zip(&chosen).zip(results.par_iter_mut()).enumerate().for_each(|(k, ((g, chosen), result))| {
         if iterating[k] {
             let (range, index) = call_ranges[k].clone();
-            if let Err(e) = &passed {
+            if let Err(e) = passed {
                 *result = Err(g.bodies[0].device_failure(e));
-                continue;
+                return;
             }
             // The members took their increments in lockstep. Each increment is followed by an
             // evaluation; the last one counts in the convergence test that follows, which takes
@@ -758,14 +783,15 @@ fn device_pass(
                     contact.tighten();
                 }
             }
-            continue;
+            return;
         }
+        let mut failures = failures[evaluations_start[k]..].iter();
         for (body, &yes) in g.bodies.iter_mut().zip(chosen) {
             if !yes {
                 continue;
             }
-            let failure = failures.next().expect("one result per evaluation");
-            let finished = match &passed {
+            let failure = *failures.next().expect("one result per evaluation");
+            let finished = match passed {
                 Err(e) => Err(body.device_failure(e)),
                 Ok(()) => body.finish_device_evaluation(p, failure, tangent, !tangent),
             };
@@ -773,6 +799,6 @@ fn device_pass(
                 *result = Err(e);
             }
         }
-    }
+    });
     results
 }
