@@ -270,9 +270,12 @@ fn contact_on_the_device_repeats_the_cpu_sweeps() {
     assert!(worst <= 1e-9, "energies differ by {worst:.3e}");
     assert!(extra > 0 && extra < sweeps, "the sweeps ran on the device in chunks: {extra} submits for {sweeps} sweeps");
     // The grains' problems are solved whole, one workgroup each: a Newton round's sweeps take
-    // one submit however many they are (before, 4, 8, 16 .. sweeps per submit).
+    // one submit however many they are (before, 4, 8, 16 .. sweeps per submit). On a software
+    // adapter a dispatch takes only the sweeps llvmpipe's loop guard lets through
+    // (`SOFTWARE_LOOP_BUDGET`), so the rare round past them takes a second.
     let rounds = field(&device, "newton_iterations");
-    assert!(extra <= rounds, "at most one submit per Newton round for the sweeps: {extra} submits, {rounds} rounds, {sweeps} sweeps");
+    let allowed = if bifirst::gpu::open(None, None).is_ok_and(|g| g.adapter.software()) { rounds + rounds / 10 } else { rounds };
+    assert!(extra <= allowed, "at most one submit per Newton round for the sweeps: {extra} submits, {rounds} rounds, {sweeps} sweeps");
     assert_eq!(field(&auto, "device_submits"), field(&host, "device_submits"), "auto: the CPU's sweeps on a software adapter");
     // In f32 the sweeps stay on the CPU, and the log says why.
     let mut o = options(BackendChoice::Gpu, Some(Precision::F32));
@@ -308,6 +311,37 @@ fn the_sliding_block_keeps_its_known_answer_with_contact_on_the_device() {
     eprintln!("sliding block error: {host:.6e} (CPU sweeps), {device:.6e} (device sweeps)");
     assert!(host < 1e-2, "within 1 % of the closed form: {host:.3e}");
     assert!((device - host).abs() <= 1e-9 * host, "{device:.9e} vs {host:.9e}");
+}
+
+/// hertz_cylinder with its Uzawa sweeps on lavapipe sank into its plane (509 Newton iterations
+/// and 16 cut-backs against the CPU's 122 and 1): one body's dense problem ran past llvmpipe's
+/// loop guard in a whole solve (`uzawa_solve_of_a_dense_problem_matches_the_cpu`). The contact
+/// strip and peak pressure against Hertz's must be the CPU sweeps' with the device's.
+#[test]
+fn hertz_contact_keeps_its_known_answer_with_its_dense_problem_on_the_device() {
+    let test = "hertz_contact_keeps_its_known_answer_with_its_dense_problem_on_the_device";
+    if !gpu_available(test) {
+        return;
+    }
+    let out = temp_path(test);
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_bifirst"))
+        .args(["accuracy", "scenes/hertz_cylinder.toml", "--over", "uzawa=cpu,gpu", "--backend", "gpu", "--out"])
+        .arg(&out)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let csv = std::fs::read_to_string(out.join("accuracy.csv")).unwrap();
+    let rows: Vec<Vec<&str>> = csv.lines().map(|l| l.split(',').collect()).collect();
+    let column = |name: &str| rows[0].iter().position(|h| *h == name).unwrap_or_else(|| panic!("column {name} in {:?}", rows[0]));
+    assert_eq!(rows.iter().skip(1).map(|r| r[column("uzawa")]).collect::<Vec<_>>(), ["cpu", "gpu"]);
+    for name in ["half-width", "peak pressure"] {
+        let (host, device): (f64, f64) = (rows[1][column(name)].parse().unwrap(), rows[2][column(name)].parse().unwrap());
+        eprintln!("{name}: {host:.9e} (CPU sweeps), {device:.9e} (device sweeps)");
+        assert!((device - host).abs() <= 1e-6 * host.abs(), "{name}: {device:.9e} vs {host:.9e}");
+    }
+    let error: f64 = rows[2][column("half-width error")].parse().unwrap();
+    assert!(error < 0.05, "half-width within 5 % of Hertz's: {error:.3e}");
 }
 
 #[test]

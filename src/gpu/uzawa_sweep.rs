@@ -18,7 +18,7 @@
 
 use super::world::{buffer, Traffic};
 use super::{Gpu, GpuError};
-use crate::contact::uzawa::{Outcome, Problem, SETTLE};
+use crate::contact::uzawa::{Colours, Delassus, NodalMap, Outcome, Problem, LOCAL_STEPS, SETTLE};
 use crate::precision::{Precision, Real};
 use bytemuck::{Pod, Zeroable};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -42,6 +42,29 @@ pub const SOLVE_WIDEST: usize = 4 * JUDGE_WORKGROUP;
 /// Sweeps one dispatch of `uzawa_solve` may take before the host looks (an interrupt waits for
 /// at most this many).
 pub const SOLVE_SWEEPS: usize = 512;
+
+/// Loop iterations one invocation may run on a software adapter. llvmpipe (lavapipe) ends every
+/// loop of an invocation, silently, once their iterations together pass 65 535 (gallivm's
+/// `LP_MAX_TGSI_LOOP_ITERATIONS`, a guard against endless loops): a whole solve of a dense
+/// problem (one body's points, a colour each) stopped after a few dozen sweeps with the problem
+/// live, or judged converged on reactions the cut loops had left wrong.
+pub const SOFTWARE_LOOP_BUDGET: usize = 60_000;
+
+/// An upper bound on the loop iterations of one `uzawa_solve` invocation per sweep of a
+/// problem: its share of each colour's visits (the row of W and the local steps of each), the
+/// colour and sweep loops, and its share of the nodal sums and their reduction.
+pub fn solve_loops_per_sweep(w: &Delassus, colours: &Colours, nodal: &NodalMap) -> usize {
+    let share = |n: usize| n.div_ceil(JUDGE_WORKGROUP);
+    let widest_row = w.rows.iter().map(Vec::len).max().unwrap_or(0);
+    let visit = widest_row + 1 + LOCAL_STEPS + 1;
+    let colour_loops: usize = (0..colours.count()).map(|c| 2 + share(colours.colour(c).len()) * visit).sum();
+    let mut per_node = vec![0usize; nodal.nodes];
+    for term in nodal.terms.iter().flatten() {
+        per_node[term.0 as usize] += 1;
+    }
+    let node_loops = share(nodal.nodes) * (per_node.iter().max().copied().unwrap_or(0) + 2);
+    2 + colour_loops + node_loops + 2 + JUDGE_WORKGROUP.ilog2() as usize
+}
 
 /// A contact point's data for the kernel (`struct UzawaLocal` in the shader).
 #[repr(C)]
@@ -331,6 +354,8 @@ pub struct UzawaSweeps {
     layout: Layout,
     /// Stride of the colour ranges in their uniform buffer (the device's offset alignment).
     range_stride: u64,
+    /// Sweeps a dispatch of the staged whole solve takes (`count.sweeps`).
+    whole_sweeps: usize,
     pub submits: u64,
     /// Bytes moved so far.
     pub traffic: Traffic,
@@ -346,7 +371,7 @@ impl UzawaSweeps {
         let judge = gpu.pipeline(JUDGE, None)?;
         let solve = gpu.pipeline(SOLVE, None)?;
         let range_stride = (gpu.device.limits().min_uniform_buffer_offset_alignment as u64).max(std::mem::size_of::<ColourRange>() as u64);
-        Ok(Self { gpu, pipeline, judge, solve, buffers: None, layout: Layout::default(), range_stride, submits: 0, traffic: Traffic::default() })
+        Ok(Self { gpu, pipeline, judge, solve, buffers: None, layout: Layout::default(), range_stride, whole_sweeps: 0, submits: 0, traffic: Traffic::default() })
     }
 
     /// The most items of `bytes` each that one buffer of the device can bind.
@@ -532,9 +557,15 @@ impl UzawaSweeps {
         self.upload(&b.locals, 0, bytemuck::cast_slice(&locals));
         self.upload(&b.judged, 0, bytemuck::cast_slice(&judged));
         self.upload(&b.states, 0, bytemuck::cast_slice(&states));
-        let whole = layout.widest <= SOLVE_WIDEST;
+        // On a software adapter a dispatch takes only the sweeps its loop guard lets through,
+        // and a problem of which one sweep is too many goes colour by colour.
+        let budget = self.gpu.adapter.software().then_some(SOFTWARE_LOOP_BUDGET);
+        let loops = problems.iter().map(|p| solve_loops_per_sweep(p.w, p.colours, p.nodal)).max().unwrap_or(0).max(1);
+        let whole = layout.widest <= SOLVE_WIDEST && budget.is_none_or(|b| loops <= b);
         let most = problems.iter().map(|p| p.max_iterations).max().unwrap_or(0);
+        let sweeps = budget.map_or(sweeps, |b| sweeps.min(b / loops));
         let sweeps = if whole { most.min(sweeps).min(u32::MAX as usize) as u32 } else { 0 };
+        self.whole_sweeps = sweeps as usize;
         self.upload(&b.count, 0, bytemuck::bytes_of(&SolveCount { problems: problems.len() as u32, sweeps, pad: [0; 2] }));
         if !whole {
             let live: Vec<u32> = judged.iter().zip(&states).flat_map(|(p, s)| std::iter::repeat_n((s.status == JUDGE_LIVE) as u32, (p.point_end - p.point_start) as usize)).collect();
@@ -583,7 +614,7 @@ impl UzawaSweeps {
         let mut live = true;
         while live && swept < most && !stop.is_some_and(|s| s.load(Ordering::Relaxed)) {
             let mut encoder = self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(KERNEL) });
-            let sweeps = if whole { SOLVE_SWEEPS } else { chunk.min(most - swept) };
+            let sweeps = if whole { self.whole_sweeps } else { chunk.min(most - swept) };
             {
                 let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(KERNEL), timestamp_writes: None });
                 if whole {

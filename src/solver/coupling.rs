@@ -10,6 +10,7 @@ use super::body::{Body, StepParams};
 use super::PhaseTimes;
 use crate::contact::uzawa::{self, Colours, Delassus, Local, NodalMap, Outcome, Problem};
 use crate::contact::{uzawa_step, ContactPoint, Settings, Status, WarmStart};
+use crate::gpu::uzawa_sweep::{solve_loops_per_sweep, SOFTWARE_LOOP_BUDGET, SOLVE_WIDEST};
 use crate::precision::Real;
 use std::collections::HashMap;
 use std::sync::atomic::AtomicBool;
@@ -179,6 +180,13 @@ impl ContactStep {
     /// The most points of one colour of the Gauss-Seidel sweeps.
     pub fn widest_colour(&self) -> usize {
         (0..self.colours.count()).map(|k| self.colours.colour(k).len()).max().unwrap_or(0)
+    }
+
+    /// Whether a device solves this problem whole, one workgroup for all its sweeps: colours
+    /// within [`SOLVE_WIDEST`], and on a software adapter a sweep within its loop guard
+    /// ([`crate::gpu::uzawa_sweep::SOFTWARE_LOOP_BUDGET`]).
+    pub fn solved_whole(&self, software: bool) -> bool {
+        self.widest_colour() <= SOLVE_WIDEST && (!software || solve_loops_per_sweep(&self.delassus, &self.colours, &self.nodal) <= SOFTWARE_LOOP_BUDGET)
     }
 
     /// Each point's obstacle velocity at the end of the step, for a device that takes the

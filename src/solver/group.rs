@@ -10,7 +10,7 @@ use super::PhaseTimes;
 use crate::contact::uzawa::{Outcome, Problem};
 use crate::contact::{ContactPoint, Settings, WarmStart};
 use crate::gpu::types::ContactState;
-use crate::gpu::uzawa_sweep::{JUDGE_CONVERGED, SOLVE_WIDEST};
+use crate::gpu::uzawa_sweep::JUDGE_CONVERGED;
 use crate::gpu::{ElementFailure, Evaluation, GpuWorld, GroupContact, NewtonCall};
 use crate::mesh::ElementKind;
 use crate::precision::{Precision, Real};
@@ -500,7 +500,8 @@ fn iterate_on_device(groups: &[Group], continuing: &mut [bool], world: &GpuWorld
     let p = c.p;
     let fit = |b: &Body| if refreshed { b.factor_fit(p) } else { b.iterates_on_device(p) };
     let capable = |g: &Group| g.newton.report.iterations < p.max_iterations && g.bodies.iter().zip(g.ids).all(|(b, &id)| world.newton_capable(id) && fit(b));
-    let settled = |g: &Group| (!g.newton.uzawa_ran || g.newton.uzawa_converged) && g.contact.as_ref().is_some_and(|k| k.widest_colour() <= SOLVE_WIDEST);
+    let software = world.software();
+    let settled = |g: &Group| (!g.newton.uzawa_ran || g.newton.uzawa_converged) && g.contact.as_ref().is_some_and(|k| k.solved_whole(software));
     let mut chosen = vec![false; groups.len()];
     let mut in_contact = vec![false; groups.len()];
     let mut batch_taken = *contact_batch;
