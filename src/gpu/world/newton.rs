@@ -16,6 +16,7 @@ use crate::gpu::types::{Active, Coefficients, ContactState, DofOut, NewtonMember
 use crate::gpu::{ElementFailure, Gpu, GpuError};
 use crate::precision::{Precision, Real};
 use crate::solver::PhaseTimes;
+use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
@@ -313,15 +314,17 @@ impl GpuWorld {
                 if let Some(landing) = &evaluated {
                     super::unpack_evaluation(precision, list, landing, bytes);
                 }
-                for (call, [state_at, flags_at, u_at, out_at]) in calls.iter_mut().zip(&landing) {
+                // Every member's state, displacements and residuals, in parallel (100 000 grains
+                // a call).
+                calls.par_iter_mut().zip(&landing).for_each(|(call, [state_at, flags_at, u_at, out_at])| {
                     call.outcome = bytemuck::pod_read_unaligned(&bytes[*state_at..state_at + std::mem::size_of::<NewtonState<Real>>()]);
-                    iterating |= call.outcome.status == NEWTON_ITERATING;
                     let flags: [u32; 2] = bytemuck::pod_read_unaligned(&bytes[*flags_at..flags_at + 8]);
                     call.failure = (call.outcome.status == NEWTON_FAILED).then(|| super::failure_of(flags)).flatten();
                     let n = call.u.len();
                     super::copy_from_device(precision, &bytes[*u_at..u_at + n * real], call.u);
                     super::copy_from_device(precision, &bytes[*out_at..out_at + n * 2 * real], bytemuck::cast_slice_mut(call.dof_out));
-                }
+                });
+                iterating = calls.iter().any(|call| call.outcome.status == NEWTON_ITERATING);
                 if let Some((r_at, states_at)) = contact_landing {
                     let reactions = super::from_device(precision, &bytes[r_at..r_at + points * 3 * real]);
                     let mut at = 0;
@@ -448,14 +451,14 @@ impl GpuWorld {
         let member_size = std::mem::size_of::<NewtonMember<Real>>() as u64;
         let state_size = std::mem::size_of::<NewtonState<Real>>() as u64;
         let mut k = 0;
+        // Per run of members: where its residuals go, and its calls (in `mine`).
+        let mut residual_runs: Vec<(u64, std::ops::Range<usize>)> = Vec::new();
         for run in super::runs(&members) {
             let first = run[0] as u64;
             uploads.push((n.newton.clone(), first * member_size, bytemuck::cast_slice(&n.newton_host[run[0]..=*run.last().expect("a run has members")]).to_vec()));
             uploads.push((n.state.clone(), first * state_size, bytemuck::cast_slice(&states[k..k + run.len()]).to_vec()));
             let dofs = super::dof_span(&b.members, &run);
-            let outs: Vec<Real> = mine[k..k + run.len()].iter().flat_map(|&(i, _)| bytemuck::cast_slice::<DofOut<Real>, Real>(calls[i].dof_out).iter().copied()).collect();
-            debug_assert_eq!(outs.len(), 2 * dofs.len());
-            uploads.push((b.dof_out.clone(), dofs.start as u64 * 2 * real, to_device(precision, &outs)));
+            residual_runs.push((dofs.start as u64 * 2 * real, k..k + run.len()));
             k += run.len();
         }
         for run in super::runs(&start_changed) {
@@ -480,14 +483,19 @@ impl GpuWorld {
         let dispatch: [u32; DISPATCH_WORDS] = [1, 1, count, fx, fy, count, rx, ry, count, 1, 1, count, count];
         debug_assert_eq!(DISPATCHES * 3 + 1, DISPATCH_WORDS);
         uploads.push((n.dispatch.clone(), 0, bytemuck::cast_slice(&dispatch).to_vec()));
-        let inverse = n.inverse.clone();
+        let (inverse, residuals) = (n.inverse.clone(), b.dof_out.clone());
         for (buffer, offset, bytes) in uploads {
             self.upload(&buffer, offset, &bytes);
         }
         // Device Newton iterations run in f64 only (asserted by `newton`): the host's reals are
         // the device's bytes.
+        debug_assert_eq!(precision, Precision::F64);
         for (offset, _, run) in inverse_runs {
             self.upload_pieces(&inverse, offset, &run.iter().map(|x| bytemuck::cast_slice(x)).collect::<Vec<&[u8]>>());
+        }
+        for (offset, range) in residual_runs {
+            let pieces: Vec<&[u8]> = mine[range].iter().map(|&(i, _)| bytemuck::cast_slice::<DofOut<Real>, u8>(calls[i].dof_out)).collect();
+            self.upload_pieces(&residuals, offset, &pieces);
         }
     }
 }
