@@ -285,6 +285,34 @@ fn contact_on_the_device_repeats_the_cpu_sweeps() {
     assert!(warned, "the log says the sweeps stayed on the CPU");
 }
 
+/// `bifirst accuracy` of a scene with `uzawa` as its axis (`cpu,gpu`) on the GPU backend: each
+/// variant's value of a column of its table, the CPU sweeps' first.
+fn accuracy_over_uzawa(test: &str, scene: &str, sets: &[&str]) -> impl Fn(&str) -> [f64; 2] {
+    let out = temp_path(test);
+    let mut args = vec!["accuracy".to_string(), format!("scenes/{scene}.toml"), "--over".into(), "uzawa=cpu,gpu".into()];
+    for set in sets {
+        args.extend(["--set".to_string(), set.to_string()]);
+    }
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_bifirst"))
+        .args(&args)
+        .args(["--backend", "gpu", "--out"])
+        .arg(&out)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let csv = std::fs::read_to_string(out.join("accuracy.csv")).unwrap();
+    let rows: Vec<Vec<String>> = csv.lines().map(|l| l.split(',').map(str::to_string).collect()).collect();
+    let header = rows[0].clone();
+    let column = move |name: &str| header.iter().position(|h| h == name).unwrap_or_else(|| panic!("column {name} in {header:?}"));
+    let labels: Vec<String> = rows.iter().skip(1).map(|r| r[column("uzawa")].clone()).collect();
+    assert_eq!(labels, ["cpu", "gpu"]);
+    move |name: &str| {
+        let c = column(name);
+        [rows[1][c].parse().unwrap(), rows[2][c].parse().unwrap()]
+    }
+}
+
 #[test]
 fn the_sliding_block_keeps_its_known_answer_with_contact_on_the_device() {
     // The stopping distance and friction dissipation against their closed forms, through
@@ -294,20 +322,8 @@ fn the_sliding_block_keeps_its_known_answer_with_contact_on_the_device() {
     if !gpu_available(test) {
         return;
     }
-    let out = temp_path(test);
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_bifirst"))
-        .args(["accuracy", "scenes/sliding_block.toml", "--over", "uzawa=cpu,gpu", "--set", "time.dt=0.004", "--set", "body.block.mesh.divisions=[4,2]", "--backend", "gpu", "--out"])
-        .arg(&out)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let csv = std::fs::read_to_string(out.join("accuracy.csv")).unwrap();
-    let rows: Vec<Vec<&str>> = csv.lines().map(|l| l.split(',').collect()).collect();
-    let column = |name: &str| rows[0].iter().position(|h| *h == name).unwrap_or_else(|| panic!("column {name} in {:?}", rows[0]));
-    let (label, error) = (column("uzawa"), column("error"));
-    assert_eq!(rows.iter().skip(1).map(|r| r[label]).collect::<Vec<_>>(), ["cpu", "gpu"]);
-    let (host, device): (f64, f64) = (rows[1][error].parse().unwrap(), rows[2][error].parse().unwrap());
+    let value = accuracy_over_uzawa(test, "sliding_block", &["time.dt=0.004", "body.block.mesh.divisions=[4,2]"]);
+    let [host, device] = value("error");
     eprintln!("sliding block error: {host:.6e} (CPU sweeps), {device:.6e} (device sweeps)");
     assert!(host < 1e-2, "within 1 % of the closed form: {host:.3e}");
     assert!((device - host).abs() <= 1e-9 * host, "{device:.9e} vs {host:.9e}");
@@ -323,24 +339,13 @@ fn hertz_contact_keeps_its_known_answer_with_its_dense_problem_on_the_device() {
     if !gpu_available(test) {
         return;
     }
-    let out = temp_path(test);
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_bifirst"))
-        .args(["accuracy", "scenes/hertz_cylinder.toml", "--over", "uzawa=cpu,gpu", "--backend", "gpu", "--out"])
-        .arg(&out)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let csv = std::fs::read_to_string(out.join("accuracy.csv")).unwrap();
-    let rows: Vec<Vec<&str>> = csv.lines().map(|l| l.split(',').collect()).collect();
-    let column = |name: &str| rows[0].iter().position(|h| *h == name).unwrap_or_else(|| panic!("column {name} in {:?}", rows[0]));
-    assert_eq!(rows.iter().skip(1).map(|r| r[column("uzawa")]).collect::<Vec<_>>(), ["cpu", "gpu"]);
+    let value = accuracy_over_uzawa(test, "hertz_cylinder", &[]);
     for name in ["half-width", "peak pressure"] {
-        let (host, device): (f64, f64) = (rows[1][column(name)].parse().unwrap(), rows[2][column(name)].parse().unwrap());
+        let [host, device] = value(name);
         eprintln!("{name}: {host:.9e} (CPU sweeps), {device:.9e} (device sweeps)");
         assert!((device - host).abs() <= 1e-6 * host.abs(), "{name}: {device:.9e} vs {host:.9e}");
     }
-    let error: f64 = rows[2][column("half-width error")].parse().unwrap();
+    let [_, error] = value("half-width error");
     assert!(error < 0.05, "half-width within 5 % of Hertz's: {error:.3e}");
 }
 
