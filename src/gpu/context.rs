@@ -130,6 +130,12 @@ fn open_adapter(adapter: Adapter, precision: Option<Precision>) -> Result<Gpu, G
 }
 
 impl Gpu {
+    /// A bind group of `pipeline`'s group 0: each `(binding, buffer)` bound whole.
+    pub fn bind(&self, label: Option<&str>, pipeline: &wgpu::ComputePipeline, bound: &[(u32, &wgpu::Buffer)]) -> wgpu::BindGroup {
+        let entries: Vec<wgpu::BindGroupEntry> = bound.iter().map(|&(binding, b)| wgpu::BindGroupEntry { binding, resource: b.as_entire_binding() }).collect();
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor { label, layout: &pipeline.get_bind_group_layout(0), entries: &entries })
+    }
+
     /// A compute pipeline for a shader of `shaders/` at this device's precision; shader errors
     /// come back as [`GpuError::Kernel`] instead of wgpu's default panic.
     pub fn pipeline(&self, kernel: &str, variant: Option<ElementVariant>) -> Result<wgpu::ComputePipeline, GpuError> {

@@ -39,9 +39,7 @@ impl Probe {
         let usage = BufferUsages::STORAGE | BufferUsages::COPY_SRC;
         let first = gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some("peak"), contents: &bytes, usage });
         let second = gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some("peak result"), size: bytes.len() as u64, usage, mapped_at_creation: false });
-        let buffers = [&first, &second];
-        let entries: Vec<wgpu::BindGroupEntry> = buffers.iter().enumerate().map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() }).collect();
-        let bind_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some("peak"), layout: &self.pipeline.get_bind_group_layout(0), entries: &entries });
+        let bind_group = gpu.bind(Some("peak"), &self.pipeline, &[(0, &first), (1, &second)]);
         let items = if vec4s { values.len() / 4 } else { values.len() };
         let groups = items.div_ceil(WORKGROUP);
         let dispatch = |encoder: &mut wgpu::CommandEncoder| {

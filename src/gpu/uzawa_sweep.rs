@@ -441,17 +441,10 @@ impl UzawaSweeps {
                 gpu.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(KERNEL), layout: &layout, entries: &entries })
             })
             .collect();
-        let judge_group = {
-            let bound = [(5, &live), (6, &r), (7, &dr), (8, &judged), (9, &states), (10, &node_start), (11, &node_points), (12, &node_coefs), (13, &frames), (14, &count)];
-            let entries: Vec<wgpu::BindGroupEntry> = bound.iter().map(|&(i, b)| wgpu::BindGroupEntry { binding: i, resource: b.as_entire_binding() }).collect();
-            gpu.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(JUDGE), layout: &self.judge.get_bind_group_layout(0), entries: &entries })
-        };
-        let solve_group = {
-            // Bindings 0 to 14: the judge's from 6 on (`include/uzawa_nodal.wgsl`).
-            let whole = [&block, &row_start, &row_entries, &locals, &solve_order, &colour_start, &r, &dr, &judged, &states, &node_start, &node_points, &node_coefs, &frames, &count];
-            let entries: Vec<wgpu::BindGroupEntry> = whole.iter().enumerate().map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() }).collect();
-            gpu.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(SOLVE), layout: &self.solve.get_bind_group_layout(0), entries: &entries })
-        };
+        let judge_group = gpu.bind(Some(JUDGE), &self.judge, &[(5, &live), (6, &r), (7, &dr), (8, &judged), (9, &states), (10, &node_start), (11, &node_points), (12, &node_coefs), (13, &frames), (14, &count)]);
+        // Bindings 0 to 14: the judge's from 6 on (`include/uzawa_nodal.wgsl`).
+        let whole = [&block, &row_start, &row_entries, &locals, &solve_order, &colour_start, &r, &dr, &judged, &states, &node_start, &node_points, &node_coefs, &frames, &count];
+        let solve_group = gpu.bind(Some(SOLVE), &self.solve, &whole.iter().enumerate().map(|(i, &b)| (i as u32, b)).collect::<Vec<_>>());
         self.buffers = Some(Buffers {
             points,
             blocks,

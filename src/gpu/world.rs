@@ -101,9 +101,7 @@ impl Pass {
     }
 
     fn bound(gpu: &Gpu, pipeline: ComputePipeline, buffers: &[&Buffer]) -> Self {
-        let entries: Vec<wgpu::BindGroupEntry> =
-            buffers.iter().enumerate().map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() }).collect();
-        let bind_group = gpu.device.create_bind_group(&wgpu::BindGroupDescriptor { label: None, layout: &pipeline.get_bind_group_layout(0), entries: &entries });
+        let bind_group = gpu.bind(None, &pipeline, &buffers.iter().enumerate().map(|(i, &b)| (i as u32, b)).collect::<Vec<_>>());
         Self { pipeline, bind_group }
     }
 

@@ -99,11 +99,6 @@ pub(super) struct ContactPasses {
     problems: u32,
 }
 
-fn bind(gpu: &Gpu, pipeline: &ComputePipeline, bound: &[(u32, &Buffer)]) -> BindGroup {
-    let entries: Vec<wgpu::BindGroupEntry> = bound.iter().map(|&(i, b)| wgpu::BindGroupEntry { binding: i, resource: b.as_entire_binding() }).collect();
-    gpu.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some("newton_contact"), layout: &pipeline.get_bind_group_layout(0), entries: &entries })
-}
-
 impl ContactPasses {
     /// Uploads the layout (buffers made for the call: a few kilobytes per group) and binds it
     /// with the batch's Newton buffers and the staged Uzawa problems.
@@ -123,8 +118,8 @@ impl ContactPasses {
         let states = made("contact states", bytemuck::cast_slice(&vec![ContactState::<Real>::default(); l.groups.len()]), storage | BufferUsages::COPY_SRC);
         let call = made("contact call", bytemuck::bytes_of(&l.call), BufferUsages::UNIFORM);
         let n = newton;
-        let prepare = bind(
-            gpu,
+        let prepare = gpu.bind(
+            Some("newton_contact"),
             &pipelines.prepare,
             &[
                 (0, &n.inverse),
@@ -150,8 +145,8 @@ impl ContactPasses {
                 (26, &call),
             ],
         );
-        let forces = bind(
-            gpu,
+        let forces = gpu.bind(
+            Some("newton_contact"),
             &pipelines.forces,
             &[
                 (3, &n.state),
@@ -170,7 +165,7 @@ impl ContactPasses {
                 (26, &call),
             ],
         );
-        let judge = bind(gpu, &pipelines.judge, &[(2, &n.newton), (3, &n.state), (10, &groups), (11, &group_members), (14, &uzawa.judged), (25, &states), (26, &call)]);
+        let judge = gpu.bind(Some("newton_contact"), &pipelines.judge, &[(2, &n.newton), (3, &n.state), (10, &groups), (11, &group_members), (14, &uzawa.judged), (25, &states), (26, &call)]);
         Self { prepare, forces, judge, states, problems: l.groups.len() as u32 }
     }
 
