@@ -722,7 +722,7 @@ fn unpack_evaluation(precision: Precision, list: &mut [Evaluation], landing: &[[
             copy_from_device(precision, &bytes[dof_at..dof_at + out.len() * 2 * real], bytemuck::cast_slice_mut(out));
         }
         if e.tangent && !e.values.is_empty() {
-            copy_from_device(precision, &bytes[values_at..values_at + e.values.len() * real], &mut e.values);
+            copy_from_device(precision, &bytes[values_at..values_at + e.values.len() * real], e.values);
         }
     }
 }

@@ -210,6 +210,18 @@ struct NewtonState {
     uzawa_stalls: usize,
 }
 
+impl NewtonState {
+    /// What an increment's Uzawa solve (on the host or the device) leaves for the group's
+    /// convergence test: its sweeps, whether it converged, the contact forces' last change.
+    fn record_solve(&mut self, sweeps: usize, converged: bool, change: Real) {
+        self.report.uzawa_iterations += sweeps;
+        self.uzawa_ran = true;
+        self.uzawa_converged = converged;
+        self.uzawa_stalls = if converged { 0 } else { self.uzawa_stalls + 1 };
+        self.last_change = Some(change);
+    }
+}
+
 /// Newton iterations in a row with stalled Uzawa sweeps after which a step is given up (to be
 /// retried thinned or cut back) rather than iterated to `max_iterations`: each costs up to
 /// `contact.max_iterations` sweeps, and a stall that lasts this long did not clear in any run.
@@ -354,11 +366,7 @@ impl Group<'_, '_> {
         }
         let state = &mut self.newton;
         let change = self.contact.as_mut().expect("a group with an outcome has contact").apply(self.bodies, &mut state.report.wall);
-        state.report.uzawa_iterations += outcome.iterations;
-        state.uzawa_ran = true;
-        state.uzawa_converged = outcome.converged;
-        state.uzawa_stalls = if outcome.converged { 0 } else { state.uzawa_stalls + 1 };
-        state.last_change = Some(change);
+        state.record_solve(outcome.iterations, outcome.converged, change);
         state.report.iterations += 1;
         Ok(())
     }
@@ -617,6 +625,10 @@ fn solve_contact(groups: &mut [Group], waiting: &[bool], world: &mut GpuWorld, c
         .collect()
 }
 
+/// A group's share of a device pass: its calls and contact when it iterates on the device, else
+/// its evaluations.
+type PassShare<'a> = (Vec<NewtonCall<'a>>, Option<(Problem<'a>, GroupContact<'a>)>, Vec<Evaluation<'a>>);
+
 /// One device pass over the bodies of the `live` groups that `wanted` selects: the tangent and
 /// stiffness values if `tangent`, else forces and residuals; and in the same submission the
 /// Newton iterations of the `iterating` groups ([`GpuWorld::newton`]). Returns each group's
@@ -676,7 +688,7 @@ fn device_pass(
     let group_count = groups.len();
     // Each group's share, made in parallel: its calls and contact (iterating on the device), or
     // its evaluations; then laid end to end.
-    let shares: Vec<(Vec<NewtonCall>, Option<(Problem, GroupContact)>, Vec<Evaluation>)> = groups
+    let shares: Vec<PassShare> = groups
         .par_iter_mut()
         .zip(&chosen)
         .zip(inverses.par_iter_mut())
@@ -714,7 +726,11 @@ fn device_pass(
     let mut contacts: Vec<GroupContact> = Vec::new();
     // Per group iterating on the device: its calls, and its contact's index in `contacts`.
     let mut call_ranges: Vec<(std::ops::Range<usize>, Option<usize>)> = vec![(0..0, None); group_count];
+    // Where each group's evaluations start in the list, so that the groups take their results
+    // in parallel.
+    let mut evaluations_start = Vec::with_capacity(group_count);
     for (k, (group_calls, contact, evaluations)) in shares.into_iter().enumerate() {
+        evaluations_start.push(list.len());
         list.extend(evaluations);
         if !iterating[k] {
             continue;
@@ -741,16 +757,6 @@ fn device_pass(
     drop(calls);
     drop(contacts);
     drop(problems);
-    // Where each group's evaluations start in the list (the groups iterating on the device
-    // have none), so that the groups take their results in parallel.
-    let mut evaluations_start = Vec::with_capacity(groups.len());
-    let mut at = 0;
-    for (chosen, &on_device) in chosen.iter().zip(iterating) {
-        evaluations_start.push(at);
-        if !on_device {
-            at += chosen.iter().filter(|&&yes| yes).count();
-        }
-    }
     let passed = &passed;
     groups.par_iter_mut().zip(&chosen).zip(results.par_iter_mut()).enumerate().for_each(|(k, ((g, chosen), result))| {
         if iterating[k] {
@@ -774,11 +780,7 @@ fn device_pass(
             }
             if let (Some(j), true) = (index, iterations > 0) {
                 let o = contact_outcomes[j];
-                state.report.uzawa_iterations += o.sweeps as usize;
-                state.uzawa_ran = true;
-                state.uzawa_converged = o.uzawa == JUDGE_CONVERGED;
-                state.uzawa_stalls = if state.uzawa_converged { 0 } else { state.uzawa_stalls + 1 };
-                state.last_change = Some(o.change);
+                state.record_solve(o.sweeps as usize, o.uzawa == JUDGE_CONVERGED, o.change);
                 let contact = g.contact.as_mut().expect("a group with a contact outcome has contact");
                 for _ in 0..o.tightened {
                     contact.tighten();

@@ -326,12 +326,11 @@ impl GpuWorld {
                 });
                 iterating = calls.iter().any(|call| call.outcome.status == NEWTON_ITERATING);
                 if let Some((r_at, states_at)) = contact_landing {
-                    let reactions = super::from_device(precision, &bytes[r_at..r_at + points * 3 * real]);
-                    let mut at = 0;
+                    let mut at = r_at;
                     for p in problems.iter_mut() {
-                        let n = p.local.len();
-                        p.r.copy_from_slice(bytemuck::cast_slice(&reactions[3 * at..3 * (at + n)]));
-                        at += n;
+                        let end = at + p.r.len() * 3 * real;
+                        super::copy_from_device(precision, &bytes[at..end], bytemuck::cast_slice_mut(p.r));
+                        at = end;
                     }
                     let size = std::mem::size_of::<ContactState<Real>>();
                     for (k, g) in contacts.iter_mut().enumerate() {
@@ -465,7 +464,6 @@ impl GpuWorld {
             let dofs = super::dof_span(&b.members, &run);
             uploads.push((n.u_start.clone(), dofs.start as u64 * real, to_device(precision, &n.start_host[dofs])));
         }
-        contact_changed.sort_unstable();
         for run in super::runs(&contact_changed) {
             let dofs = super::dof_span(&b.members, &run);
             uploads.push((n.contact.clone(), dofs.start as u64 * real, to_device(precision, &n.contact_host[dofs])));
