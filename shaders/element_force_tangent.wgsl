@@ -28,9 +28,9 @@ const PACKED = NDOF * (NDOF + 1u) / 2u;
 const OUT_STRIDE = NDOF + PACKED;
 const PAIRS = NEN * (NEN + 1u) / 2u;
 const WORKGROUP = 64u;
-// The tangent entry point: one quadrature point per invocation in phase 1 (32 points of dV D,
-// dV S and F fit the 16 KiB of workgroup memory every adapter has, in f64).
-const TANGENT_WORKGROUP = 32u;
+// The tangent entry point: one quadrature point per invocation in phase 1. TANGENT_WORKGROUP
+// (32 or 64) comes with the module, the most points whose dV D, dV S and F fit the device's
+// workgroup memory (`gpu::shaders::tangent_workgroup`).
 const ELEMENTS_PER_GROUP = TANGENT_WORKGROUP / NQP;
 const POINTS_PER_GROUP = ELEMENTS_PER_GROUP * NQP;
 const INVERTED = 0u;
@@ -233,6 +233,9 @@ fn element_ok(base: u32) -> bool {
 fn pair_block(member: u32, e: u32, local: u32, base: u32, pair_index: u32) {
     var pair = pair_index;
     var a = 0u;
+    // Not a counted `for`: a build with the bound `a < NEN` here (and no workgroup zero fill)
+    // ran the f64 kernels 1.5x to 3x slower on an H100, probably unrolled (doc/benchmarks.md,
+    // "Shader runtime checks").
     while pair >= NEN - a {
         pair -= NEN - a;
         a++;

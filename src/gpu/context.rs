@@ -129,6 +129,14 @@ fn open_adapter(adapter: Adapter, precision: Option<Precision>) -> Result<Gpu, G
     Ok(Gpu { device, queue, adapter: report, precision })
 }
 
+/// The checks wgpu would add to our kernels, all left out: every loop counts up to a bound and
+/// every integer division is by a non-zero constant (tests/shader_promises.rs), and the
+/// kernels index their arrays within bounds (their parity tests against the CPU twins). On an
+/// NVIDIA H100 the checks cost more than the work (doc/benchmarks.md, "Shader runtime checks"):
+/// with them the Hex8 force+tangent kernel ran 2.3x slower in f64 and 11x in f32, most of it
+/// the loop counters wgpu adds, which probably keep the driver from unrolling the loops.
+const SHADER_CHECKS: wgpu::ShaderRuntimeChecks = wgpu::ShaderRuntimeChecks::unchecked();
+
 impl Gpu {
     /// A bind group of `pipeline`'s group 0: each `(binding, buffer)` bound whole.
     pub fn bind(&self, label: Option<&str>, pipeline: &wgpu::ComputePipeline, bound: &[(u32, &wgpu::Buffer)]) -> wgpu::BindGroup {
@@ -144,9 +152,13 @@ impl Gpu {
 
     /// [`Gpu::pipeline`] for another entry point of the kernel's module.
     pub fn pipeline_at(&self, kernel: &str, entry: &str, variant: Option<ElementVariant>) -> Result<wgpu::ComputePipeline, GpuError> {
-        let source = super::shaders::source(kernel, self.precision, variant).map_err(|message| GpuError::Kernel { kernel: kernel.into(), message })?;
+        let source = super::shaders::source(kernel, self.precision, variant, self.device.limits().max_compute_workgroup_storage_size).map_err(|message| GpuError::Kernel { kernel: kernel.into(), message })?;
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let module = self.device.create_shader_module(wgpu::ShaderModuleDescriptor { label: Some(kernel), source: wgpu::ShaderSource::Wgsl(source.into()) });
+        let descriptor = wgpu::ShaderModuleDescriptor { label: Some(kernel), source: wgpu::ShaderSource::Wgsl(source.into()) };
+        // SAFETY: `SHADER_CHECKS` holds for every kernel of `shaders/` (tests/shader_promises.rs
+        // checks each module); the storage buffers stay bounded by the device's robust buffer
+        // access, which wgpu turns on wherever there is one.
+        let module = unsafe { self.device.create_shader_module_trusted(descriptor, SHADER_CHECKS) };
         let pipeline = self.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
             label: Some(kernel),
             layout: None,

@@ -103,8 +103,26 @@ fn include(name: &str) -> Result<&'static str, String> {
     INCLUDES.iter().find(|(n, _)| *n == name).map(|(_, text)| *text).ok_or_else(|| format!("no include `{name}`"))
 }
 
-/// The module of a kernel at `precision`; element kernels need their variant.
-pub fn source(kernel: &str, precision: Precision, variant: Option<ElementVariant>) -> Result<String, String> {
+/// The workgroup memory every adapter has (WebGPU's least `maxComputeWorkgroupStorageSize`).
+pub const LEAST_WORKGROUP_BYTES: u32 = 16384;
+
+/// Quadrature points per workgroup of `element_force_tangent`'s tangent entry point (one per
+/// invocation): 64 where their F, dV S and dV D fit `workgroup_bytes`, else 32, which fit
+/// [`LEAST_WORKGROUP_BYTES`] in f64. On an H100, 64 ran the Hex8 f64 kernel 1.4x faster than
+/// 32 (doc/benchmarks.md, "Shader runtime checks").
+pub fn tangent_workgroup(precision: Precision, workgroup_bytes: u32) -> u32 {
+    // Per point: two 3x3 matrices (columns padded to 4) and 36 reals, and a flag.
+    let per_point = (2 * 12 + 36) * precision.size() as u32 + 4;
+    if 64 * per_point <= workgroup_bytes {
+        64
+    } else {
+        32
+    }
+}
+
+/// The module of a kernel at `precision`; element kernels need their variant. `workgroup_bytes`
+/// is the device's workgroup memory, which sizes `element_force_tangent`'s workgroups.
+pub fn source(kernel: &str, precision: Precision, variant: Option<ElementVariant>, workgroup_bytes: u32) -> Result<String, String> {
     let text = SHADERS.iter().find(|(name, _)| *name == kernel).map(|(_, text)| *text).ok_or_else(|| format!("no shader `{kernel}`"))?;
     let mut module = precision.wgsl_prelude();
     if is_batch_kernel(kernel) {
@@ -162,15 +180,17 @@ pub fn source(kernel: &str, precision: Precision, variant: Option<ElementVariant
             module += include(&format!("material_{}", v.material))?;
             if kernel == "element_force_tangent" {
                 module += include("viscous")?;
+                module += &format!("const TANGENT_WORKGROUP = {}u;\n", tangent_workgroup(precision, workgroup_bytes));
             }
         }
     }
     Ok(module + text)
 }
 
-/// Parses and validates a kernel with naga, as the device would (no GPU needed).
+/// Parses and validates a kernel with naga, as the device would (no GPU needed), as composed
+/// for an adapter with the least workgroup memory.
 pub fn validate(kernel: &str, precision: Precision, variant: Option<ElementVariant>) -> Result<naga::Module, String> {
-    let text = source(kernel, precision, variant)?;
+    let text = source(kernel, precision, variant, LEAST_WORKGROUP_BYTES)?;
     let module = naga::front::wgsl::parse_str(&text).map_err(|e| e.emit_to_string(&text))?;
     let capabilities = match precision {
         Precision::F64 => naga::valid::Capabilities::FLOAT64,

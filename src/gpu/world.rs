@@ -35,9 +35,6 @@ use wgpu::{BindGroup, Buffer, BufferUsages, ComputePipeline};
 
 /// Invocations per workgroup of the kernels that take one item per invocation.
 const WORKGROUP: usize = 64;
-/// Invocations per workgroup of the tangent entry point (`TANGENT_WORKGROUP`): one per
-/// quadrature point of its elements.
-const TANGENT_WORKGROUP: usize = 32;
 /// The binding of the job list (`jobs`) in `element_force_tangent` and `assemble_residual`.
 const FORCES_JOBS: usize = 7;
 const RESIDUAL_JOBS: usize = 8;
@@ -869,7 +866,7 @@ impl Batch {
         Ok(Self {
             members: ranges,
             stride,
-            tangent_elements_per_group: TANGENT_WORKGROUP / crate::element::shape::quadrature(kind).len(),
+            tangent_elements_per_group: super::shaders::tangent_workgroup(gpu.precision, gpu.device.limits().max_compute_workgroup_storage_size) as usize / crate::element::shape::quadrature(kind).len(),
             u_host: vec![0.0; dofs],
             step_host: vec![0.0; 4 * dofs],
             u,
