@@ -12,12 +12,15 @@
 //   `forces`: one element per invocation, the internal force only (Newton evaluations that keep
 //             a factorisation need no tangent).
 //   `main`:   force and tangent of ELEMENTS_PER_GROUP elements per workgroup. Phase 1: one
-//             invocation per quadrature point computes F, then dV S and dV D (at F̄ for
-//             F-bar, which needs the element's other points' J) into workgroup memory.
-//             Phase 2: the node pairs (a <= b) of those elements, spread over the invocations,
-//             each integrating the DIM x DIM block K_ab = Σ_q B_aᵀ (dV D) B_b + (g_a · dV S g_b) I
-//             and, for a == b, the force of node a (F-bar: `fbar_pair`, whose blocks couple
-//             every point of the element through θ).
+//             invocation per quadrature point computes F, then the material at F (or F̄ for
+//             F-bar, which needs the element's other points' J) and leaves in workgroup memory
+//             what phase 2 reads. Phase 2: the node pairs (a <= b) of those elements, spread
+//             over the invocations, each integrating the DIM x DIM block K_ab and, for a == b,
+//             the force of node a. The displacement element contracts each point's pair tensor,
+//             (K_ab)_ij = Σ_q g_a · A_ij g_b with A_(iL)(jN) = dV (F_iK C_KLMN F_jM + δ_ij S_LN):
+//             the twin's B_aᵀ (dV D) B_b + (g_a · dV S g_b) I, summed in another order (the
+//             sums of D B_b a pair would repeat are made once per point). F-bar: `fbar_pair`,
+//             from F, dV S and dV D, whose blocks couple every point of the element through θ.
 //
 // Per element out: NDOF forces, then the upper triangle (row <= col) of the tangent packed row
 // by row, local order (node a, component i) -> a * DIM + i.
@@ -51,11 +54,75 @@ const NON_FINITE = 1u;
 
 var<private> material: MaterialParams;
 
-// What phase 1 leaves for phase 2, per quadrature point of the workgroup's elements.
-var<workgroup> point_f: array<Mat3, POINTS_PER_GROUP>;
-var<workgroup> point_s: array<Mat3, POINTS_PER_GROUP>;
-var<workgroup> point_d: array<Tangent, POINTS_PER_GROUP>;
+// What phase 1 leaves for phase 2, POINT_REALS per quadrature point of the workgroup's elements
+// (`gpu::shaders::tangent_workgroup` sizes the workgroups by it). Every point first holds its F
+// at F_AT. Then the displacement element holds the packed upper triangle of the pair tensor
+// A (row i DIM + L, column j DIM + N) from 0 and dV F S at P_AT, over F; F-bar holds dV S at
+// S_AT and dV D at D_AT, beside F. Matrices are column-major, 9 reals.
+const POINT_REALS = 54u;
+const F_AT = 0u;
+const S_AT = 9u;
+const D_AT = 18u;
+const P_AT = 45u;
+var<workgroup> point_data: array<array<real, POINT_REALS>, POINTS_PER_GROUP>;
 var<workgroup> point_ok: array<u32, POINTS_PER_GROUP>;
+
+fn point_matrix(slot: u32, at: u32) -> Mat3 {
+    var m: Mat3;
+    for (var k = 0u; k < 3u; k++) {
+        for (var i = 0u; i < 3u; i++) {
+            m[k][i] = point_data[slot][at + k * 3u + i];
+        }
+    }
+    return m;
+}
+
+fn store_point_matrix(slot: u32, at: u32, m: Mat3) {
+    for (var k = 0u; k < 3u; k++) {
+        for (var i = 0u; i < 3u; i++) {
+            point_data[slot][at + k * 3u + i] = m[k][i];
+        }
+    }
+}
+
+// The Voigt index of the pair (k, l), either order: the inverse of `voigt_i`, `voigt_j`.
+fn voigt_of(k: u32, l: u32) -> u32 {
+    let sum = k + l;
+    return select(select(select(5u, 4u, sum == 3u), 3u, sum == 1u), k, k == l);
+}
+
+// Index of entry (row, col), row <= col, of the packed triangle of a DIM² x DIM² matrix.
+fn packed_pair(row: u32, col: u32) -> u32 {
+    return row * DIM * DIM - row * (row + 1u) / 2u + col;
+}
+
+// Entry (row, col) of the pair tensor at `slot`, from its upper triangle.
+fn pair_tensor(slot: u32, row: u32, col: u32) -> real {
+    return point_data[slot][packed_pair(min(row, col), max(row, col))];
+}
+
+// A_(iL)(jN) = dV (Σ_KM F_iK C_KLMN F_jM + δ_ij S_LN) (indices below DIM: a plane element's
+// F_iz and dN/dz are zero), C_KLMN = D[voigt(K, L)][voigt(M, N)], into `slot`'s upper triangle.
+fn store_pair_tensor(slot: u32, f: Mat3, st: StressTangent, dv: real) {
+    for (var row = 0u; row < DIM * DIM; row++) {
+        let i = row / DIM;
+        let l = row % DIM;
+        for (var col = row; col < DIM * DIM; col++) {
+            let j = col / DIM;
+            let n = col % DIM;
+            var sum = real(0.0);
+            for (var k = 0u; k < DIM; k++) {
+                for (var m = 0u; m < DIM; m++) {
+                    sum += at(f, i, k) * st.d[voigt_of(k, l) * 6u + voigt_of(m, n)] * at(f, j, m);
+                }
+            }
+            if i == j {
+                sum += at(st.s, l, n);
+            }
+            point_data[slot][packed_pair(row, col)] = sum * dv;
+        }
+    }
+}
 
 fn is_finite(x: real) -> bool {
     return abs(x) <= REAL_MAX;
@@ -174,7 +241,7 @@ fn main(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workg
     point_ok[lane] = 0u;
     if busy {
         let f = deformation_gradient(point, element_displacements(e));
-        point_f[lane] = f;
+        store_point_matrix(lane, F_AT, f);
         if determinant(f) > real(0.0) {
             point_ok[lane] = 1u;
         } else {
@@ -185,11 +252,11 @@ fn main(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workg
     let base = lane - lane % NQP;
     if busy && element_ok(base) {
         material = materials[range.material];
-        var f = point_f[lane];
+        var f = point_matrix(lane, F_AT);
         if FBAR {
             var fq: array<Mat3, NQP>;
             for (var q = 0u; q < NQP; q++) {
-                fq[q] = point_f[base + q];
+                fq[q] = point_matrix(base + q, F_AT);
             }
             f = fbar_scale(f, fbar_alpha(mean_dilatation(e, fq), determinant(f)));
         }
@@ -199,9 +266,15 @@ fn main(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workg
             st = relax(st, strain, step_relaxation(range.history), point_history(range.history, point_element * NQP + lane % NQP));
         }
         let dv = point_volume(point);
-        point_s[lane] = st.s * dv;
-        for (var r = 0u; r < 36u; r++) {
-            point_d[lane][r] = st.d[r] * dv;
+        if FBAR {
+            store_point_matrix(lane, S_AT, st.s * dv);
+            for (var r = 0u; r < 36u; r++) {
+                point_data[lane][D_AT + r] = st.d[r] * dv;
+            }
+        } else {
+            // Over F, which only this invocation reads.
+            store_point_matrix(lane, P_AT, f * st.s * dv);
+            store_pair_tensor(lane, f, st, dv);
         }
     }
     workgroupBarrier();
@@ -252,32 +325,24 @@ fn pair_block(member: u32, e: u32, local: u32, base: u32, pair_index: u32) {
     } else {
         for (var q = 0u; q < NQP; q++) {
             let point = (e * NQP + q) * POINT_STRIDE;
-            let f = point_f[base + q];
-            let s = point_s[base + q];
+            let slot = base + q;
             let ga = gradient(point, a);
             let gb = gradient(point, b);
-            // (dV D) B_b, one column per component j of node b.
-            var db: array<vec3<real>, 6>;
-            for (var c = 0u; c < 6u; c++) {
-                let bc = b_row(f, gb, c);
-                for (var r = 0u; r < 6u; r++) {
-                    db[r] += point_d[base + q][r * 6u + c] * bc;
-                }
-            }
-            let geometric = dot(ga, s * gb);
-            for (var r = 0u; r < 6u; r++) {
-                let ba = b_row(f, ga, r);
-                for (var i = 0u; i < DIM; i++) {
-                    for (var j = 0u; j < DIM; j++) {
-                        k[i][j] += ba[i] * db[r][j];
-                    }
-                }
-            }
             for (var i = 0u; i < DIM; i++) {
-                k[i][i] += geometric;
+                for (var j = 0u; j < DIM; j++) {
+                    var sum = real(0.0);
+                    for (var l = 0u; l < DIM; l++) {
+                        var row = real(0.0);
+                        for (var n = 0u; n < DIM; n++) {
+                            row += pair_tensor(slot, i * DIM + l, j * DIM + n) * gb[n];
+                        }
+                        sum += ga[l] * row;
+                    }
+                    k[i][j] += sum;
+                }
             }
             if a == b {
-                force += f * (s * ga);
+                force += point_matrix(slot, P_AT) * ga;
             }
         }
     }
@@ -314,7 +379,7 @@ fn fbar_pair(e: u32, base: u32, a: u32, b: u32, k: ptr<function, array<array<rea
     var theta_ab: array<array<real, 3>, 3>;
     for (var q = 0u; q < NQP; q++) {
         let point = (e * NQP + q) * POINT_STRIDE;
-        let f = point_f[base + q];
+        let f = point_matrix(base + q, F_AT);
         let dv = point_volume(point);
         let w = dv * determinant(f);
         let inv_t = transpose(inverse3(f));
@@ -338,8 +403,8 @@ fn fbar_pair(e: u32, base: u32, a: u32, b: u32, k: ptr<function, array<array<rea
     theta_b = theta_b * inverse_theta;
     for (var q = 0u; q < NQP; q++) {
         let point = (e * NQP + q) * POINT_STRIDE;
-        let f = point_f[base + q];
-        let s = point_s[base + q];
+        let f = point_matrix(base + q, F_AT);
+        let s = point_matrix(base + q, S_AT);
         let ga = gradient(point, a);
         let gb = gradient(point, b);
         let alpha = fbar_alpha(theta, determinant(f));
@@ -358,7 +423,7 @@ fn fbar_pair(e: u32, base: u32, a: u32, b: u32, k: ptr<function, array<array<rea
         for (var col = 0u; col < 6u; col++) {
             let bc = (b_row(f, gb, col) + scaled_voigt(c, col) * beta_b) * alpha2;
             for (var r = 0u; r < 6u; r++) {
-                db[r] += point_d[base + q][r * 6u + col] * bc;
+                db[r] += point_data[base + q][D_AT + r * 6u + col] * bc;
             }
         }
         for (var r = 0u; r < 6u; r++) {

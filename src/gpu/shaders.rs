@@ -107,12 +107,12 @@ fn include(name: &str) -> Result<&'static str, String> {
 pub const LEAST_WORKGROUP_BYTES: u32 = 16384;
 
 /// Quadrature points per workgroup of `element_force_tangent`'s tangent entry point (one per
-/// invocation): 64 where their F, dV S and dV D fit `workgroup_bytes`, else 32, which fit
+/// invocation): 64 where what their phase 1 leaves fits `workgroup_bytes`, else 32, which fit
 /// [`LEAST_WORKGROUP_BYTES`] in f64. On an H100, 64 ran the Hex8 f64 kernel 1.4x faster than
 /// 32 (doc/benchmarks.md, "Shader runtime checks").
 pub fn tangent_workgroup(precision: Precision, workgroup_bytes: u32) -> u32 {
-    // Per point: two 3x3 matrices (columns padded to 4) and 36 reals, and a flag.
-    let per_point = (2 * 12 + 36) * precision.size() as u32 + 4;
+    // Per point: its `POINT_REALS` (54) reals and a flag.
+    let per_point = 54 * precision.size() as u32 + 4;
     if 64 * per_point <= workgroup_bytes {
         64
     } else {
