@@ -85,6 +85,9 @@ pub fn peak_fma(gpu: &Gpu, values: &[Real], calls: u32) -> Result<(Vec<Real>, f6
 /// Floating-point operations of `peak_fma` per value.
 pub const FMA_FLOPS_PER_VALUE: f64 = (8 * 2 * PEAK_FMA_STEPS) as f64;
 
+/// A probe on some values: its results and seconds per call.
+type ProbeRun<'a> = dyn Fn(&[Real]) -> Result<(Vec<Real>, f64), GpuError> + 'a;
+
 /// Repetitions of the last size of [`measure`], of which the fastest counts.
 const REPETITIONS: usize = 4;
 
@@ -96,7 +99,7 @@ const REPETITIONS: usize = 4;
 pub fn measure(gpu: &Gpu, min_seconds: f64) -> Result<Peaks, GpuError> {
     let limits = gpu.device.limits();
     let largest = (limits.max_storage_buffer_binding_size.min(limits.max_buffer_size) / 2).min(1 << 30) as usize / gpu.precision.size();
-    let grow = |mut n: usize, run: &dyn Fn(&[Real]) -> Result<(Vec<Real>, f64), GpuError>| loop {
+    let grow = |mut n: usize, run: &ProbeRun| loop {
         let values = vec![1.0; n];
         let (_, seconds) = run(&values)?;
         if seconds >= min_seconds || 4 * n > largest {
