@@ -32,7 +32,7 @@ const OUT_STRIDE = NDOF + PACKED;
 const PAIRS = NEN * (NEN + 1u) / 2u;
 const WORKGROUP = 64u;
 // The tangent entry point: one quadrature point per invocation in phase 1. TANGENT_WORKGROUP
-// (32 or 64) comes with the module, the most points whose dV D, dV S and F fit the device's
+// (32 or 64) comes with the module, the most points whose POINT_REALS fit the device's
 // workgroup memory (`gpu::shaders::tangent_workgroup`).
 const ELEMENTS_PER_GROUP = TANGENT_WORKGROUP / NQP;
 const POINTS_PER_GROUP = ELEMENTS_PER_GROUP * NQP;

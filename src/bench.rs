@@ -414,15 +414,20 @@ fn kernel_cost(kernel: Costed, case: &BenchCase, real: usize) -> (f64, f64) {
     match kernel {
         Costed::ForceTangent => {
             let pairs = nen * (nen + 1.0) / 2.0;
-            // Phase 1 per point: F, det F, E, the material, the weighting; phase 2 per point
-            // and node pair: D B_b, the geometric term, B_aᵀ (D B_b); the forces per node.
+            // Phase 1 per point: F, det F, E, the material, the weighting.
             let per_point = 18.0 * nen + 116.0 + tangent_flops;
-            let per_pair = 36.0 * dim + 236.0 + 12.0 * dim * dim + dim;
-            // F-bar: every point's J for θ and α in phase 1; per point and pair, F⁻¹ twice, h_a,
-            // h_b, θ's sums and second derivative, C, S̄ : C, the β and r terms.
             let (per_point, per_pair) = match case.formulation {
-                Formulation::Displacement => (per_point, per_pair),
-                Formulation::Fbar => (per_point + 20.0 * nqp + 30.0, per_pair + 300.0 + 12.0 * dim + 10.0 * dim * dim),
+                // Then the pair tensor's packed triangle (w = DIM² rows, DIM² terms of three
+                // flops per entry) and dV F S; per point and node pair the DIM² entries
+                // g_a · A_ij g_b.
+                Formulation::Displacement => {
+                    let w = dim * dim;
+                    (per_point + w * (w + 1.0) / 2.0 * (3.0 * w + 1.0) + 63.0, w * dim * (2.0 * dim + 2.0))
+                }
+                // F-bar: every point's J for θ and α in phase 1; per point and pair D B_b, the
+                // geometric term and B_aᵀ (D B_b), then F⁻¹ twice, h_a, h_b, θ's sums and second
+                // derivative, C, S̄ : C, the β and r terms.
+                Formulation::Fbar => (per_point + 20.0 * nqp + 30.0, 36.0 * dim + 236.0 + 12.0 * dim * dim + dim + 300.0 + 12.0 * dim + 10.0 * dim * dim),
             };
             (n * (element_inputs + real * stride), n * nqp * (per_point + pairs * per_pair + nen * 36.0))
         }
