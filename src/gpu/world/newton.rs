@@ -384,17 +384,22 @@ impl GpuWorld {
         let mut up = 0;
         let n = b.newton.as_ref().expect("made before staging");
         let passes = ContactPasses::new(&self.gpu, self.contact_pipelines.as_ref().expect("made above"), &layout, b, n, sweeps.buffers(), &mut up);
-        let mut uploads = Vec::new();
-        for g in contacts {
-            for (&c, base) in g.calls.iter().zip(&g.u_base) {
-                let dofs = super::dof_span(&b.members, &[self.place[calls[c].body].1]);
-                uploads.push((n.u_base.clone(), dofs.start as u64 * real, to_device(precision, base)));
-            }
+        // Each member's `u_base`, one write per run of consecutive members (every grain of a
+        // packing in contact: one write, not one per grain). Device Newton iterations run in
+        // f64 only: the host's reals are the device's bytes.
+        debug_assert_eq!(precision, Precision::F64);
+        let mut bases: Vec<(usize, &[Real])> = contacts.iter().flat_map(|g| g.calls.iter().zip(&g.u_base).map(|(&c, base)| (self.place[calls[c].body].1, &base[..]))).collect();
+        bases.sort_unstable_by_key(|&(m, _)| m);
+        let members: Vec<usize> = bases.iter().map(|&(m, _)| m).collect();
+        let u_base = n.u_base.clone();
+        let runs: Vec<(u64, usize)> = super::runs(&members).iter().map(|run| (super::dof_span(&b.members, run).start as u64 * real, run.len())).collect();
+        let mut k = 0;
+        for (offset, len) in runs {
+            let pieces: Vec<&[u8]> = bases[k..k + len].iter().map(|&(_, base)| bytemuck::cast_slice(base)).collect();
+            k += len;
+            self.upload_pieces(&u_base, offset, &pieces);
         }
         self.traffic.up += up;
-        for (buffer, offset, bytes) in uploads {
-            self.upload(&buffer, offset, &bytes);
-        }
         Ok((batch, passes))
     }
 
