@@ -66,6 +66,14 @@ pub fn solve_loops_per_sweep(w: &Delassus, colours: &Colours, nodal: &NodalMap) 
     2 + colour_loops + node_loops + 2 + JUDGE_WORKGROUP.ilog2() as usize
 }
 
+/// Whether problems whose widest colour has `widest` points and whose sweep runs at most
+/// `loops_per_sweep` loop iterations ([`solve_loops_per_sweep`]) are solved whole, one
+/// workgroup for all their sweeps: colours within [`SOLVE_WIDEST`], and on a software adapter
+/// a sweep within its loop guard ([`SOFTWARE_LOOP_BUDGET`]); else colour by colour.
+pub fn solved_whole(widest: usize, loops_per_sweep: usize, software: bool) -> bool {
+    widest <= SOLVE_WIDEST && (!software || loops_per_sweep <= SOFTWARE_LOOP_BUDGET)
+}
+
 /// A contact point's data for the kernel (`struct UzawaLocal` in the shader).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
@@ -552,9 +560,10 @@ impl UzawaSweeps {
         self.upload(&b.states, 0, bytemuck::cast_slice(&states));
         // On a software adapter a dispatch takes only the sweeps its loop guard lets through,
         // and a problem of which one sweep is too many goes colour by colour.
-        let budget = self.gpu.adapter.software().then_some(SOFTWARE_LOOP_BUDGET);
+        let software = self.gpu.adapter.software();
+        let budget = software.then_some(SOFTWARE_LOOP_BUDGET);
         let loops = problems.iter().map(|p| solve_loops_per_sweep(p.w, p.colours, p.nodal)).max().unwrap_or(0).max(1);
-        let whole = layout.widest <= SOLVE_WIDEST && budget.is_none_or(|b| loops <= b);
+        let whole = solved_whole(layout.widest, loops, software);
         let most = problems.iter().map(|p| p.max_iterations).max().unwrap_or(0);
         let sweeps = budget.map_or(sweeps, |b| sweeps.min(b / loops));
         let sweeps = if whole { most.min(sweeps).min(u32::MAX as usize) as u32 } else { 0 };

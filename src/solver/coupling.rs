@@ -10,7 +10,7 @@ use super::body::{Body, StepParams};
 use super::PhaseTimes;
 use crate::contact::uzawa::{self, Colours, Delassus, Local, NodalMap, Outcome, Problem};
 use crate::contact::{uzawa_step, ContactPoint, Settings, Status, WarmStart};
-use crate::gpu::uzawa_sweep::{solve_loops_per_sweep, SOFTWARE_LOOP_BUDGET, SOLVE_WIDEST};
+use crate::gpu::uzawa_sweep::{self, solve_loops_per_sweep};
 use crate::precision::Real;
 use std::collections::HashMap;
 use std::sync::atomic::AtomicBool;
@@ -182,11 +182,10 @@ impl ContactStep {
         (0..self.colours.count()).map(|k| self.colours.colour(k).len()).max().unwrap_or(0)
     }
 
-    /// Whether a device solves this problem whole, one workgroup for all its sweeps: colours
-    /// within [`SOLVE_WIDEST`], and on a software adapter a sweep within its loop guard
-    /// ([`crate::gpu::uzawa_sweep::SOFTWARE_LOOP_BUDGET`]).
+    /// Whether a device solves this problem whole, one workgroup for all its sweeps
+    /// ([`uzawa_sweep::solved_whole`], the rule its staging follows).
     pub fn solved_whole(&self, software: bool) -> bool {
-        self.widest_colour() <= SOLVE_WIDEST && (!software || solve_loops_per_sweep(&self.delassus, &self.colours, &self.nodal) <= SOFTWARE_LOOP_BUDGET)
+        uzawa_sweep::solved_whole(self.widest_colour(), solve_loops_per_sweep(&self.delassus, &self.colours, &self.nodal), software)
     }
 
     /// Each point's obstacle velocity at the end of the step, for a device that takes the
