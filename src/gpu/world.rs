@@ -431,6 +431,19 @@ impl GpuWorld {
         }
     }
 
+    /// Uploads each member's bytes (`pieces`, in member order) to its dofs in a buffer of the
+    /// batch's, `per_dof` bytes a dof: one write per run of consecutive members.
+    fn upload_member_runs(&mut self, batch: usize, buffer: &Buffer, per_dof: u64, pieces: &[(usize, &[u8])]) {
+        let members: Vec<usize> = pieces.iter().map(|&(m, _)| m).collect();
+        let runs: Vec<(u64, usize)> = runs(&members).iter().map(|run| (dof_span(&self.batches[batch].members, run).start as u64 * per_dof, run.len())).collect();
+        let mut k = 0;
+        for (offset, len) in runs {
+            let run: Vec<&[u8]> = pieces[k..k + len].iter().map(|&(_, bytes)| bytes).collect();
+            self.upload_pieces(buffer, offset, &run);
+            k += len;
+        }
+    }
+
     /// The step's start values of the listed bodies, for `assemble_residual` (once per step;
     /// they go up with the next submit, one write per run of consecutive members whose values
     /// changed: a grain at rest starts every step from the same ones).

@@ -388,17 +388,10 @@ impl GpuWorld {
         // packing in contact: one write, not one per grain). Device Newton iterations run in
         // f64 only: the host's reals are the device's bytes.
         debug_assert_eq!(precision, Precision::F64);
-        let mut bases: Vec<(usize, &[Real])> = contacts.iter().flat_map(|g| g.calls.iter().zip(&g.u_base).map(|(&c, base)| (self.place[calls[c].body].1, &base[..]))).collect();
+        let mut bases: Vec<(usize, &[u8])> = contacts.iter().flat_map(|g| g.calls.iter().zip(&g.u_base).map(|(&c, base)| (self.place[calls[c].body].1, bytemuck::cast_slice(base)))).collect();
         bases.sort_unstable_by_key(|&(m, _)| m);
-        let members: Vec<usize> = bases.iter().map(|&(m, _)| m).collect();
         let u_base = n.u_base.clone();
-        let runs: Vec<(u64, usize)> = super::runs(&members).iter().map(|run| (super::dof_span(&b.members, run).start as u64 * real, run.len())).collect();
-        let mut k = 0;
-        for (offset, len) in runs {
-            let pieces: Vec<&[u8]> = bases[k..k + len].iter().map(|&(_, base)| bytemuck::cast_slice(base)).collect();
-            k += len;
-            self.upload_pieces(&u_base, offset, &pieces);
-        }
+        self.upload_member_runs(batch, &u_base, real, &bases);
         self.traffic.up += up;
         Ok((batch, passes))
     }
@@ -455,14 +448,10 @@ impl GpuWorld {
         let member_size = std::mem::size_of::<NewtonMember<Real>>() as u64;
         let state_size = std::mem::size_of::<NewtonState<Real>>() as u64;
         let mut k = 0;
-        // Per run of members: where its residuals go, and its calls (in `mine`).
-        let mut residual_runs: Vec<(u64, std::ops::Range<usize>)> = Vec::new();
         for run in super::runs(&members) {
             let first = run[0] as u64;
             uploads.push((n.newton.clone(), first * member_size, bytemuck::cast_slice(&n.newton_host[run[0]..=*run.last().expect("a run has members")]).to_vec()));
             uploads.push((n.state.clone(), first * state_size, bytemuck::cast_slice(&states[k..k + run.len()]).to_vec()));
-            let dofs = super::dof_span(&b.members, &run);
-            residual_runs.push((dofs.start as u64 * 2 * real, k..k + run.len()));
             k += run.len();
         }
         for run in super::runs(&start_changed) {
@@ -496,9 +485,7 @@ impl GpuWorld {
         for (offset, _, run) in inverse_runs {
             self.upload_pieces(&inverse, offset, &run.iter().map(|x| bytemuck::cast_slice(x)).collect::<Vec<&[u8]>>());
         }
-        for (offset, range) in residual_runs {
-            let pieces: Vec<&[u8]> = mine[range].iter().map(|&(i, _)| bytemuck::cast_slice::<DofOut<Real>, u8>(calls[i].dof_out)).collect();
-            self.upload_pieces(&residuals, offset, &pieces);
-        }
+        let evaluated: Vec<(usize, &[u8])> = mine.iter().map(|&(i, m)| (m, bytemuck::cast_slice::<DofOut<Real>, u8>(calls[i].dof_out))).collect();
+        self.upload_member_runs(batch, &residuals, 2 * real, &evaluated);
     }
 }
