@@ -936,8 +936,7 @@ pub fn copy_from_device(precision: Precision, bytes: &[u8], out: &mut [Real]) {
 
 /// Reals read back from the device (copied: mapped bytes need not be aligned for f64).
 pub fn from_device(precision: Precision, bytes: &[u8]) -> Vec<Real> {
-    match precision {
-        Precision::F64 => bytemuck::pod_collect_to_vec(bytes),
-        Precision::F32 => bytemuck::pod_collect_to_vec::<u8, f32>(bytes).into_iter().map(Real::from).collect(),
-    }
+    let mut out = vec![0.0; bytes.len() / precision.size()];
+    copy_from_device(precision, bytes, &mut out);
+    out
 }
