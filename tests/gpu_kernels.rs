@@ -927,7 +927,9 @@ fn newton_kernels_match_their_cpu_twins() {
         // The second body is pushed by contact forces (constant here), which the increments and
         // the residual take in.
         let pushes: Vec<Vec<f64>> = cases.iter().enumerate().map(|(b, c)| (0..c.u.len()).map(|d| if b == 1 { 1e3 * ((d % 7) as f64 - 3.0) * c.u[d].abs().max(1e-3) } else { 0.0 }).collect()).collect();
-        for (budgets, tolerance) in [([1u32, 3], 0.0), ([25, 25], 1e-9)] {
+        // `evaluated`: the call brings the evaluation of its iterates, else the device makes it
+        // and judges it first (the first round of a step), as the twins do.
+        for (budgets, tolerance, evaluated) in [([1u32, 3], 0.0, true), ([25, 25], 1e-9, true), ([1, 3], 0.0, false), ([25, 25], 1e-9, false)] {
             let member = |b: usize| NewtonMember {
                 inverse_start: 0,
                 free_start: 0,
@@ -946,8 +948,12 @@ fn newton_kernels_match_their_cpu_twins() {
             let mut expected = Vec::new();
             for (b, c) in cases.iter().enumerate() {
                 let range = [MemberRange { dof_start: 0, dofs: c.u.len() as u32, ..Default::default() }];
-                let mut state = [NewtonState { status: NEWTON_ITERATING, residual: residual0(b), previous_residual: residual0(b), ..Default::default() }];
+                let before = if evaluated { residual0(b) } else { f64::MAX };
+                let mut state = [NewtonState { status: NEWTON_ITERATING, residual: before, previous_residual: before, ..Default::default() }];
                 let (mut u, mut out) = (c.u.clone(), first[b].clone());
+                if !evaluated {
+                    cpu::newton_judge(&free[b], &[member(b)], &mut state, &out, &u, &starts[b], &steps[b], coefficients, &[u32::MAX; 2], &range, &pushes[b], 0);
+                }
                 let call = [Active { member: 0, mode: 1 }];
                 let mut jobs = call;
                 while cpu::newton_compact(&call, &state, &mut jobs) > 0 {
@@ -961,7 +967,8 @@ fn newton_kernels_match_their_cpu_twins() {
             let mut world = world_of(&gpu, &cases);
             world.begin_step(&steps.iter().enumerate().map(|(b, s)| (b, &s[..])).collect::<Vec<_>>());
             let mut us: Vec<Vec<f64>> = cases.iter().map(|c| c.u.clone()).collect();
-            let mut outs = first.clone();
+            // Results the device must not take in when it evaluates first.
+            let mut outs = if evaluated { first.clone() } else { first.iter().map(|o| vec![DofOut { f_int: f64::NAN, g: f64::NAN }; o.len()]).collect() };
             let mut calls: Vec<NewtonCall> = us
                 .iter_mut()
                 .zip(outs.iter_mut())
@@ -971,7 +978,7 @@ fn newton_kernels_match_their_cpu_twins() {
                     factor: 1,
                     inverse: Some(inverses[b].clone()),
                     member: member(b),
-                    residual: residual0(b),
+                    residual: evaluated.then(|| residual0(b)),
                     u,
                     dof_out,
                     u_start: &starts[b],
@@ -992,7 +999,7 @@ fn newton_kernels_match_their_cpu_twins() {
                 let r_error = (state.residual - want.residual).abs() / f(out).iter().fold(1e-300f64, |m, x| m.max(x.abs()));
                 // Near convergence the increment is round-off of u: measured against u.
                 let du_error = (state.increment - want.increment).abs() / u.iter().fold(1e-300f64, |m, x| m.max(x.abs()));
-                eprintln!("{} body {b} budgets {budgets:?}: status {} after {} increments; u {u_error:.1e}, f_int {f_error:.1e}, g {g_error:.1e}, |g| {r_error:.1e}, |du| {du_error:.1e}", kind.name(), state.status, state.iterations);
+                eprintln!("{} body {b} budgets {budgets:?}, evaluated {evaluated}: status {} after {} increments; u {u_error:.1e}, f_int {f_error:.1e}, g {g_error:.1e}, |g| {r_error:.1e}, |du| {du_error:.1e}", kind.name(), state.status, state.iterations);
                 assert_eq!(failure, None);
                 assert_eq!((state.status, state.iterations, state.moved), (want.status, want.iterations, want.moved), "{} body {b}", kind.name());
                 assert!(u_error <= 1e-12 && f_error <= 1e-12 && g_error <= 1e-12 && r_error <= 1e-12 && du_error <= 1e-12, "{} body {b}", kind.name());
@@ -1025,7 +1032,7 @@ fn a_device_newton_call_for_one_body_of_a_large_batch_reads_back_only_its_own() 
     let residual0 = free.iter().map(|&d| first[d as usize].g.powi(2)).sum::<f64>().sqrt();
     let start = vec![0.0; c.u.len()];
     let (mut u, mut out) = (c.u.clone(), first.clone());
-    let call = NewtonCall { body: 399, factor: 1, inverse: Some(inverse.clone()), member, residual: residual0, u: &mut u, dof_out: &mut out, u_start: &start, contact_force: None, outcome: NewtonState::default(), failure: None };
+    let call = NewtonCall { body: 399, factor: 1, inverse: Some(inverse.clone()), member, residual: Some(residual0), u: &mut u, dof_out: &mut out, u_start: &start, contact_force: None, outcome: NewtonState::default(), failure: None };
     let mut calls = [call];
     world.newton(&mut calls, &mut [], &mut [], &mut [], coefficients, (2, 1.0), None, &mut Default::default()).expect("device Newton");
     let (state, failure) = (calls[0].outcome, calls[0].failure);
@@ -1061,7 +1068,7 @@ fn a_device_newton_increment_that_inverts_an_element_fails_the_body() {
     let start = vec![0.0; c.u.len()];
     let (mut u, mut out) = (c.u.clone(), first.clone());
     let member = NewtonMember { free_count: free as u32, budget: 5, ..NewtonMember::default() };
-    let mut calls = [NewtonCall { body: 0, factor: 1, inverse: Some(inverse), member, residual: 1.0, u: &mut u, dof_out: &mut out, u_start: &start, contact_force: None, outcome: NewtonState::default(), failure: None }];
+    let mut calls = [NewtonCall { body: 0, factor: 1, inverse: Some(inverse), member, residual: Some(1.0), u: &mut u, dof_out: &mut out, u_start: &start, contact_force: None, outcome: NewtonState::default(), failure: None }];
     world.newton(&mut calls, &mut [], &mut [], &mut [], coefficients, (2, 1.0), None, &mut Default::default()).expect("device Newton");
     let (state, failure) = (calls[0].outcome, calls[0].failure);
     assert_eq!((state.status, state.iterations), (bifirst::gpu::types::NEWTON_FAILED, 1), "{state:?}");
@@ -1217,7 +1224,7 @@ fn newton_contact_kernels_match_their_cpu_twins() {
                 .iter_mut()
                 .zip(outs.iter_mut())
                 .enumerate()
-                .map(|(b, (u, dof_out))| NewtonCall { body: b, factor: 1, inverse: Some(inverses[b].clone()), member: member(b, 0, 0), residual: residual0(b), u, dof_out, u_start: &starts[b], contact_force: Some(&zeros[b]), outcome: NewtonState::default(), failure: None })
+                .map(|(b, (u, dof_out))| NewtonCall { body: b, factor: 1, inverse: Some(inverses[b].clone()), member: member(b, 0, 0), residual: Some(residual0(b)), u, dof_out, u_start: &starts[b], contact_force: Some(&zeros[b]), outcome: NewtonState::default(), failure: None })
                 .collect();
             for l in local.iter_mut() {
                 l.v_free = [0.0; 3];

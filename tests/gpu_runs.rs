@@ -422,6 +422,41 @@ fn falling_grains_iterate_on_the_device_in_the_passes_of_the_grains_in_contact()
 }
 
 #[test]
+fn a_falling_grain_is_evaluated_judged_and_iterated_in_one_submission_a_step() {
+    // Issue 31: in the first round of a step, a grain in flight that keeps its factorisation
+    // goes to the device unevaluated: the device evaluates it, judges the evaluation as the host
+    // would and takes its increments, in one submission. Before, the round's evaluation pass
+    // came first (its residuals read back, judged, and sent up again): a step in flight took
+    // three submissions (that pass, the Newton call, the strain energies), now two. The
+    // iterations, body evaluations and energies are the CPU backend's.
+    let test = "a_falling_grain_is_evaluated_judged_and_iterated_in_one_submission_a_step";
+    if !gpu_available(test) {
+        return;
+    }
+    let path = scene_path("grains_many");
+    let sets = ["packing.count=12", "time.end=0.05", "gravity=[0.0,-9.81]", "output.every=1", "output.scene_every=0"];
+    let field = |log: &Log, name: &str| log.topics["/summary"][0][name].as_u64().unwrap_or_else(|| panic!("{name}"));
+    let cpu = run_with(&path, &sets, &format!("{test}_cpu"), &options(BackendChoice::Cpu, None));
+    let mut every = options(BackendChoice::Gpu, Some(Precision::F64));
+    every.backend.rounds = RoundPlacement::Gpu;
+    let gpu = run_with(&path, &sets, &format!("{test}_gpu"), &every);
+    for name in ["newton_iterations", "bodies_iterated", "factorizations"] {
+        assert_eq!(field(&gpu, name), field(&cpu, name), "{name}");
+    }
+    let worst = energy_difference(&cpu, &gpu);
+    assert!(worst <= 1e-9, "energies differ by {worst:.3e}");
+    let (submits, device, factorizations, sweeps) = (gpu.series("/solver", "device_submits"), gpu.series("/solver", "device_iterations"), gpu.series("/solver", "factorizations"), gpu.series("/solver", "uzawa_iterations"));
+    eprintln!("energies differ by {worst:.2e}; per step: submits {submits:?}, device iterations {device:?}, factorisations {factorizations:?}, Uzawa sweeps {sweeps:?}");
+    // The last steps, the lowest grains near the floor, have contact points.
+    let in_flight: Vec<usize> = (0..submits.len()).filter(|&s| sweeps[s] == 0.0 && factorizations[s] == 0.0).collect();
+    assert!(in_flight.len() >= 5, "steps in flight without factorisations: {in_flight:?}");
+    for s in in_flight {
+        assert!(device[s] > 0.0, "step {s}: the grains iterate on the device");
+        assert!(submits[s] <= 2.0, "step {s}: {} submits", submits[s]);
+    }
+}
+
+#[test]
 fn groups_in_contact_take_their_newton_increments_on_the_device() {
     // Grains pressed by the moving wall (2D), and grains falling into a box (3D): after a
     // group's first increment of a step (which builds W on the host), its next increments go to

@@ -944,8 +944,10 @@ impl Body {
 
     /// The body's share of device Newton iterations from its evaluated iterate: the tolerances
     /// of [`Body::converged`] (the parts that do not change while it iterates), at most
-    /// `budget` increments, `inverse` when the device does not hold this factorisation's.
-    pub fn newton_call(&mut self, body: usize, p: &StepParams, motion_scale: Real, budget: usize, inverse: Option<Vec<Real>>) -> NewtonCall<'_> {
+    /// `budget` increments, `inverse` when the device does not hold this factorisation's;
+    /// `evaluated`: the trial displacement's evaluation is the body's (else the device evaluates
+    /// it first).
+    pub fn newton_call(&mut self, body: usize, p: &StepParams, motion_scale: Real, budget: usize, inverse: Option<Vec<Real>>, evaluated: bool) -> NewtonCall<'_> {
         let [constant, per_travel, stiffness] = self.residual_floor_terms(p);
         let member = NewtonMember {
             budget: budget as u32,
@@ -957,7 +959,10 @@ impl Body {
             round_off: 1e3 * Real::EPSILON * self.stiffness_spread(),
             ..NewtonMember::default()
         };
-        let residual = self.residual_norm();
+        let residual = evaluated.then(|| self.residual_norm());
+        if !evaluated {
+            self.evaluated.valid = false;
+        }
         NewtonCall {
             body,
             factor: self.factor_version,
@@ -976,15 +981,18 @@ impl Body {
     /// Takes the end of device Newton iterations ([`Body::newton_call`]): the last iterate and
     /// its evaluation, as if the host had taken the increments, so that the next convergence
     /// test ([`Body::converged`], the host's word) sees the last increment and the residual
-    /// before the last.
+    /// before the last. A call that evaluated the body first and stopped there took no increment:
+    /// the test then sees a first evaluation.
     pub fn finish_device_newton(&mut self, p: &StepParams, outcome: &NewtonState<Real>, failure: Option<ElementFailure>) -> Result<(), StepFailure> {
         if let Some(failure) = failure {
             return Err(self.element_failure(&self.trial.u, failure));
         }
         self.tangent_current = false;
         self.still &= outcome.moved == 0;
-        self.last_increment = Some(outcome.increment);
-        self.previous_residual = Some(outcome.previous_residual);
+        if outcome.iterations > 0 {
+            self.last_increment = Some(outcome.increment);
+            self.previous_residual = Some(outcome.previous_residual);
+        }
         self.evaluated.record(&self.trial.u, &self.step_inputs, coefficients(p));
         self.absorb_residual(p);
         Ok(())

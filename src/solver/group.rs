@@ -395,9 +395,9 @@ fn newton_in_lockstep(groups: &mut [Group], world: &mut GpuWorld, c: &Context, t
     let device_residual = world.precision() == Precision::F64;
     let mut first = true;
     let none = vec![false; groups.len()];
-    // The groups whose Newton iterations go to the device with this round's pass, and the
-    // batch of those in contact.
-    let mut iterating = none.clone();
+    // The groups whose Newton iterations go to the device with this round's pass (in the first
+    // round, unevaluated), and the batch of those in contact.
+    let mut iterating = if device_residual { evaluate_on_device_first(groups, world, c) } else { none.clone() };
     let mut contact_batch = None;
     loop {
         let live: Vec<bool> = outcome.iter().map(Option::is_none).collect();
@@ -408,7 +408,7 @@ fn newton_in_lockstep(groups: &mut [Group], world: &mut GpuWorld, c: &Context, t
         let evaluating: Vec<bool> = live.iter().zip(&iterating).map(|(&l, &i)| l && !i).collect();
         let others_on_device = device_residual && on_device(groups, &evaluating, &wanted, world, first);
         let mut evaluated = if others_on_device || iterating.contains(&true) {
-            device_pass(groups, if others_on_device { &evaluating } else { &none }, &iterating, world, c, false, &wanted, times)
+            device_pass(groups, if others_on_device { &evaluating } else { &none }, (&iterating, first), world, c, false, &wanted, times)
         } else {
             groups.iter().map(|_| Ok(())).collect()
         };
@@ -459,7 +459,7 @@ fn newton_in_lockstep(groups: &mut [Group], world: &mut GpuWorld, c: &Context, t
         let needs_tangent = |b: &Body| b.needs_tangent(p);
         // Else each body's `refresh_factor` assembles its tangent on the CPU.
         let tangents = if on_device(groups, &continuing, &needs_tangent, world, first) {
-            device_pass(groups, &continuing, &none, world, c, true, &needs_tangent, times)
+            device_pass(groups, &continuing, (&none, false), world, c, true, &needs_tangent, times)
         } else {
             groups.iter().map(|_| Ok(())).collect()
         };
@@ -492,6 +492,28 @@ fn newton_in_lockstep(groups: &mut [Group], world: &mut GpuWorld, c: &Context, t
         first = false;
     }
     outcome.into_iter().map(|o| o.expect("every group has an outcome")).collect()
+}
+
+/// The groups whose first evaluation of a step goes to the device with their Newton iterations
+/// ([`GpuWorld::newton`] evaluates and judges them before the first increment): one body
+/// without contact points that keeps its factorisation, whose `K̄⁻¹` the device holds, and
+/// whose trial displacement is not that of its last evaluation (a grain at rest takes that one
+/// again), with element work worth device passes. A falling grain then costs one submission a
+/// step, not an evaluation pass, its read-back and the Newton call's upload of the same
+/// residuals.
+fn evaluate_on_device_first(groups: &[Group], world: &GpuWorld, c: &Context) -> Vec<bool> {
+    let p = c.p;
+    let chosen: Vec<bool> = groups
+        .par_iter()
+        .map(|g| {
+            let fits = |b: &Body, id: usize| world.newton_capable(id) && b.iterates_on_device(p) && world.newton_inverse_current(id, b.factor_version()) && !b.evaluation_holds(p);
+            g.contact.is_none() && g.bodies.len() == 1 && p.max_iterations > 0 && fits(&g.bodies[0], g.ids[0])
+        })
+        .collect();
+    if !chosen.contains(&true) || !crate::backend::round_on_device(world, false, &element_work(groups, &chosen, &|_| true)) {
+        return vec![false; groups.len()];
+    }
+    chosen
 }
 
 /// The `continuing` groups whose next Newton iterations go to the device
@@ -631,14 +653,14 @@ type PassShare<'a> = (Vec<NewtonCall<'a>>, Option<(Problem<'a>, GroupContact<'a>
 
 /// One device pass over the bodies of the `live` groups that `wanted` selects: the tangent and
 /// stiffness values if `tangent`, else forces and residuals; and in the same submission the
-/// Newton iterations of the `iterating` groups ([`GpuWorld::newton`]). Returns each group's
-/// result (a body's element failure or a device error fails its group); no pass when nothing
-/// is wanted.
+/// Newton iterations of the `iterating` groups ([`GpuWorld::newton`]), which the device
+/// evaluates first if they come `unevaluated`. Returns each group's result (a body's element
+/// failure or a device error fails its group); no pass when nothing is wanted.
 #[allow(clippy::too_many_arguments)]
 fn device_pass(
     groups: &mut [Group],
     live: &[bool],
-    iterating: &[bool],
+    (iterating, unevaluated): (&[bool], bool),
     world: &mut GpuWorld,
     c: &Context,
     tangent: bool,
@@ -701,7 +723,7 @@ fn device_pass(
             let budget = p.max_iterations - g.newton.report.iterations;
             let Group { ids, bodies, contact, newton, .. } = g;
             let u_base: Vec<Vec<Real>> = if contact.is_some() { bodies.iter().map(|b| b.trial_velocity_base(p)).collect() } else { Vec::new() };
-            let calls: Vec<NewtonCall> = bodies.iter_mut().zip(ids.iter()).zip(std::mem::take(inverses)).map(|((body, &id), inverse)| body.newton_call(id, p, motion_scale, budget, inverse)).collect();
+            let calls: Vec<NewtonCall> = bodies.iter_mut().zip(ids.iter()).zip(std::mem::take(inverses)).map(|((body, &id), inverse)| body.newton_call(id, p, motion_scale, budget, inverse, !unevaluated)).collect();
             let contact = contact.as_mut().map(|contact| {
                 let settings = c.settings.expect("contact points need contact settings");
                 let obstacle = contact.obstacle_velocities();
@@ -767,12 +789,13 @@ fn device_pass(
             }
             // The members took their increments in lockstep. Each increment is followed by an
             // evaluation; the last one counts in the convergence test that follows, which takes
-            // it again.
+            // it again (the first evaluation, when the device made it, is the last one of a call
+            // without increments).
             let iterations = ends[range.start].0.iterations as usize;
             let state = &mut g.newton;
             state.report.iterations += iterations;
             state.report.device_iterations += iterations;
-            state.report.bodies_iterated += iterations.saturating_sub(1) * g.bodies.len();
+            state.report.bodies_iterated += if unevaluated { iterations } else { iterations.saturating_sub(1) } * g.bodies.len();
             for (body, (end, failure)) in g.bodies.iter_mut().zip(&ends[range]) {
                 if let (Ok(()), Err(e)) = (&*result, body.finish_device_newton(p, end, *failure)) {
                     *result = Err(e);

@@ -6,7 +6,8 @@
 //! `forces`, `assemble_residual`), the convergence test (`newton_judge`) and drops the members
 //! that are done from the next iteration's list and dispatch counts (`newton_compact`), several
 //! iterations per submission. The host reads back the members' states, displacements and
-//! residuals once per submission.
+//! residuals once per submission. In the first round of a step the members come unevaluated,
+//! and the device evaluates and judges them first, in the same submission.
 
 use super::contact::{ContactLayout, ContactPasses, ContactPipelines, GroupContact};
 use super::{buffer, to_device, Batch, Evaluation, GpuWorld, Pass, ReadBack, Source, FORCES_JOBS, RESIDUAL_JOBS, WORKGROUP};
@@ -45,9 +46,11 @@ pub struct NewtonCall<'a> {
     /// The body's tolerances and budget (`inverse_start`, `free_start` and `free_count` are the
     /// world's to set).
     pub member: NewtonMember<Real>,
-    /// The residual norm of the evaluation at `u`.
-    pub residual: Real,
-    /// In: the evaluated iterate and its results; out: the device's last ones.
+    /// The residual norm of the evaluation at `u`; `None`: `u` is not evaluated yet (the first
+    /// round of a step), and the device evaluates and judges it before the first increment, as
+    /// the host would have, without a round trip between.
+    pub residual: Option<Real>,
+    /// In: the iterate and, when it was evaluated, its results; out: the device's last ones.
     pub u: &'a mut [Real],
     pub dof_out: &'a mut [DofOut<Real>],
     /// The displacements at the start of the step.
@@ -199,7 +202,8 @@ impl GpuWorld {
     ///
     /// The evaluation pass of other bodies (`list`, as [`GpuWorld::evaluate`] takes it) shares
     /// the first submission: a Newton round that evaluates the groups in contact and iterates
-    /// the free bodies costs one submit.
+    /// the free bodies costs one submit. Calls without a residual ([`NewtonCall::residual`],
+    /// all or none of them) are evaluated and judged first in that submission.
     ///
     /// Groups in contact (`contacts`, each with its problem in `problems`, their bodies' calls
     /// among `calls`, all in one batch, their problems solved whole by `uzawa_solve`) iterate
@@ -254,6 +258,9 @@ impl GpuWorld {
         let target = self.newton_readback.as_ref().expect("made above").0.clone();
         let mut t0 = started;
         let mut iterations = calls.iter().map(|c| c.member.budget).max().unwrap_or(0).min(ITERATIONS_PER_SUBMIT);
+        let evaluate_first = calls.first().is_some_and(|c| c.residual.is_none());
+        assert!(calls.iter().all(|c| c.residual.is_none() == evaluate_first), "a call's members are all evaluated, or none");
+        assert!(!evaluate_first || contacts.is_empty(), "groups in contact come to the device evaluated");
         let mut first = true;
         loop {
             let mut encoder = self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("newton") });
@@ -261,6 +268,18 @@ impl GpuWorld {
             let evaluated = if first { Some(self.record_evaluation(list, &mut encoder, &mut readback)?) } else { None };
             {
                 let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("newton"), timestamp_writes: None });
+                // The members' first evaluation and its convergence test: `newton_judge` from a
+                // state without a residual before (`Real::MAX`) and without an increment tests
+                // it as `Body::converged` tests a step's first evaluation.
+                if first && evaluate_first {
+                    for (batch, _) in &work {
+                        let n = self.batches[*batch].newton.as_ref().expect("staged");
+                        n.forces.dispatch_indirect(&mut pass, &n.dispatch, 12);
+                        n.residual.dispatch_indirect(&mut pass, &n.dispatch, 24);
+                        n.judge.dispatch_indirect(&mut pass, &n.dispatch, 36);
+                        n.compact.dispatch(&mut pass, 1);
+                    }
+                }
                 for _ in 0..iterations {
                     for (batch, _) in &work {
                         let b = &self.batches[*batch];
@@ -428,7 +447,8 @@ impl GpuWorld {
                 n.inverse_version[m] = Some(call.factor);
             }
             n.newton_host[m] = NewtonMember { inverse_start: slot, free_start, free_count, ..call.member };
-            states.push(NewtonState { status: NEWTON_ITERATING, residual: call.residual, previous_residual: call.residual, ..NewtonState::default() });
+            let residual = call.residual.unwrap_or(Real::MAX);
+            states.push(NewtonState { status: NEWTON_ITERATING, residual, previous_residual: residual, ..NewtonState::default() });
             if super::update_mirror(&mut n.start_host[super::dof_span(&b.members, &[m])], call.u_start) {
                 start_changed.push(m);
             }
@@ -485,7 +505,9 @@ impl GpuWorld {
         for (offset, _, run) in inverse_runs {
             self.upload_pieces(&inverse, offset, &run.iter().map(|x| bytemuck::cast_slice(x)).collect::<Vec<&[u8]>>());
         }
-        let evaluated: Vec<(usize, &[u8])> = mine.iter().map(|&(i, m)| (m, bytemuck::cast_slice::<DofOut<Real>, u8>(calls[i].dof_out))).collect();
+        // Members evaluated on the host side of the call: their results; the others' the
+        // device computes first.
+        let evaluated: Vec<(usize, &[u8])> = mine.iter().filter(|&&(i, _)| calls[i].residual.is_some()).map(|&(i, m)| (m, bytemuck::cast_slice::<DofOut<Real>, u8>(calls[i].dof_out))).collect();
         self.upload_member_runs(batch, &residuals, 2 * real, &evaluated);
     }
 }
