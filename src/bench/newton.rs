@@ -121,21 +121,11 @@ fn effective_inverse(case: &BenchCase) -> Vec<Real> {
 
 /// The inverse, row by row, of the symmetric matrix whose lower triangle `values` fills
 /// `pattern`, with `diagonal` added to its diagonal: `K̄⁻¹` from `ξ K` and `c1 M`, as
-/// `Body::effective_inverse` gives it from faer's factors (the oracle of the device Newton
-/// iterations).
+/// `Body::effective_inverse` gives it (the oracle of the device Newton iterations).
 pub fn dense_inverse(pattern: &StiffnessPattern, values: &[Real], diagonal: &[Real]) -> Vec<Real> {
-    let n = pattern.n;
-    let mut k = nalgebra::DMatrix::<Real>::zeros(n, n);
-    for col in 0..n {
-        let entries = pattern.col_ptr[col] as usize..pattern.col_ptr[col + 1] as usize;
-        for (&r, &v) in pattern.row_idx[entries.clone()].iter().zip(&values[entries]) {
-            k[(r as usize, col)] = v;
-            k[(col, r as usize)] = v;
-        }
+    let mut k = values.to_vec();
+    for (&at, &x) in pattern.diagonal.iter().zip(diagonal) {
+        k[at as usize] += x;
     }
-    for (f, &x) in diagonal.iter().enumerate() {
-        k[(f, f)] += x;
-    }
-    let inverse = k.try_inverse().expect("K̄ is invertible");
-    (0..n).flat_map(|f| (0..n).map(move |j| (f, j))).map(|(f, j)| inverse[(f, j)]).collect()
+    crate::solver::linear::dense_inverse(&pattern.col_ptr, &pattern.row_idx, &k).expect("K̄ is positive definite")
 }

@@ -930,9 +930,19 @@ impl Body {
         self.factor_version
     }
 
-    /// `K̄⁻¹` of the free dofs from the kept factorisation, row by row (the columns of the
-    /// solves with the identity: `K̄` is symmetric), for a device that applies it.
+    /// `K̄⁻¹` of the free dofs of the kept factorisation, row by row, for a device that applies
+    /// it: a dense inverse of the values factorised, which the body holds while it has no newer
+    /// tangent ([`Body::kept_factor`]); else, or if the dense factorisation fails, the columns
+    /// of the factor's solves with the identity (`K̄` is symmetric).
     pub fn effective_inverse(&mut self, times: &mut PhaseTimes) -> Vec<Real> {
+        if !self.tangent_current {
+            let t0 = Instant::now();
+            let dense = self.solver.dense_inverse(&self.values);
+            times.solve += t0.elapsed().as_secs_f64();
+            if let Some(inverse) = dense {
+                return inverse;
+            }
+        }
         let n = self.dofs.free_count;
         let mut x = vec![0.0; n * n];
         for f in 0..n {
