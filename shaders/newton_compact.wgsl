@@ -2,7 +2,9 @@
 // next iteration's kernels run over (`jobs`), and their count into every indirect dispatch's z,
 // so that converged members cost nothing more. One workgroup: each invocation takes a
 // contiguous share of the call's list; the shares' counts are summed in order by invocation 0.
-// CPU twin: `cpu::newton_compact`.
+// When the last compaction left no member (no status goes back to ITERATING), the list and the
+// counts stay as they are: the empty iterations recorded after a call's members converged
+// then cost no scan of the call's list. CPU twin: `cpu::newton_compact`.
 
 @group(0) @binding(0) var<storage, read> call: array<Active>;
 @group(0) @binding(1) var<storage, read> state: array<NewtonState>;
@@ -10,9 +12,16 @@
 @group(0) @binding(3) var<storage, read_write> dispatch: array<u32>;
 
 var<workgroup> counts: array<u32, NEWTON_WORKGROUP>;
+var<workgroup> left: u32;
 
 @compute @workgroup_size(NEWTON_WORKGROUP)
 fn main(@builtin(local_invocation_index) lane: u32) {
+    if lane == 0u {
+        left = dispatch[2];
+    }
+    if workgroupUniformLoad(&left) == 0u {
+        return;
+    }
     let total = dispatch[CALL_COUNT];
     let share = (total + NEWTON_WORKGROUP - 1u) / NEWTON_WORKGROUP;
     let first = min(lane * share, total);

@@ -955,8 +955,11 @@ fn newton_kernels_match_their_cpu_twins() {
                     cpu::newton_judge(&free[b], &[member(b)], &mut state, &out, &u, &starts[b], &steps[b], coefficients, &[u32::MAX; 2], &range, &pushes[b], 0);
                 }
                 let call = [Active { member: 0, mode: 1 }];
-                let mut jobs = call;
-                while cpu::newton_compact(&call, &state, &mut jobs) > 0 {
+                let (mut jobs, mut left) = (call, call.len());
+                while {
+                    left = cpu::newton_compact(&call, &state, &mut jobs, left);
+                    left > 0
+                } {
                     cpu::newton_update(&inverses[b], &free[b], &[member(b)], &mut state, &out, &mut u, &range, &pushes[b], 0);
                     out = cpu_residual(c, &u, &steps[b], coefficients);
                     cpu::newton_judge(&free[b], &[member(b)], &mut state, &out, &u, &starts[b], &steps[b], coefficients, &[u32::MAX; 2], &range, &pushes[b], 0);
@@ -984,14 +987,20 @@ fn newton_kernels_match_their_cpu_twins() {
                     u_start: &starts[b],
                     contact_force: Some(&pushes[b]),
                     outcome: NewtonState::default(),
+                    strain_energy: None,
                     failure: None,
                 })
                 .collect();
             assert!(calls.iter().all(|c| world.newton_capable(c.body)));
             world.newton(&mut calls, &mut [], &mut [], &mut [], coefficients, (2, 1.0), None, &mut Default::default()).expect("device Newton");
             let got: Vec<(NewtonState<f64>, Option<ElementFailure>)> = calls.iter().map(|c| (c.outcome, c.failure)).collect();
+            let strains: Vec<f64> = calls.iter().map(|c| c.strain_energy.expect("the call's energies")).collect();
             drop(calls);
             for (b, ((state, failure), (want, u, out))) in got.into_iter().zip(&expected).enumerate() {
+                // The strain energy at the returned iterate, as the twin gives it there.
+                let c = &cases[b];
+                let twin: f64 = (0..c.mesh.element_count()).map(|e| cpu::element_energy(&c.model, c.geometry.element_points(e), &c.mesh.element_displacements(&us[b], e), c.mesh.dim(), c.formulation)).sum();
+                assert!((strains[b] - twin).abs() <= 1e-12 * twin.abs(), "{} body {b}: strain energy {} against the twin's {twin}", kind.name(), strains[b]);
                 let g = |o: &[DofOut<f64>]| o.iter().map(|o| o.g).collect::<Vec<_>>();
                 let f = |o: &[DofOut<f64>]| o.iter().map(|o| o.f_int).collect::<Vec<_>>();
                 let (u_error, f_error) = (relative_error(&us[b], u), relative_error(&f(&outs[b]), &f(out)));
@@ -1032,7 +1041,7 @@ fn a_device_newton_call_for_one_body_of_a_large_batch_reads_back_only_its_own() 
     let residual0 = free.iter().map(|&d| first[d as usize].g.powi(2)).sum::<f64>().sqrt();
     let start = vec![0.0; c.u.len()];
     let (mut u, mut out) = (c.u.clone(), first.clone());
-    let call = NewtonCall { body: 399, factor: 1, inverse: Some(inverse.clone()), member, residual: Some(residual0), u: &mut u, dof_out: &mut out, u_start: &start, contact_force: None, outcome: NewtonState::default(), failure: None };
+    let call = NewtonCall { body: 399, factor: 1, inverse: Some(inverse.clone()), member, residual: Some(residual0), u: &mut u, dof_out: &mut out, u_start: &start, contact_force: None, outcome: NewtonState::default(), strain_energy: None, failure: None };
     let mut calls = [call];
     world.newton(&mut calls, &mut [], &mut [], &mut [], coefficients, (2, 1.0), None, &mut Default::default()).expect("device Newton");
     let (state, failure) = (calls[0].outcome, calls[0].failure);
@@ -1068,7 +1077,7 @@ fn a_device_newton_increment_that_inverts_an_element_fails_the_body() {
     let start = vec![0.0; c.u.len()];
     let (mut u, mut out) = (c.u.clone(), first.clone());
     let member = NewtonMember { free_count: free as u32, budget: 5, ..NewtonMember::default() };
-    let mut calls = [NewtonCall { body: 0, factor: 1, inverse: Some(inverse), member, residual: Some(1.0), u: &mut u, dof_out: &mut out, u_start: &start, contact_force: None, outcome: NewtonState::default(), failure: None }];
+    let mut calls = [NewtonCall { body: 0, factor: 1, inverse: Some(inverse), member, residual: Some(1.0), u: &mut u, dof_out: &mut out, u_start: &start, contact_force: None, outcome: NewtonState::default(), strain_energy: None, failure: None }];
     world.newton(&mut calls, &mut [], &mut [], &mut [], coefficients, (2, 1.0), None, &mut Default::default()).expect("device Newton");
     let (state, failure) = (calls[0].outcome, calls[0].failure);
     assert_eq!((state.status, state.iterations), (bifirst::gpu::types::NEWTON_FAILED, 1), "{state:?}");
@@ -1193,8 +1202,11 @@ fn newton_contact_kernels_match_their_cpu_twins() {
             let mut cstates = [ContactState::default()];
             let (mut r, mut dr) = (vec![0.0; 3 * n_points], vec![0.0; 3 * n_points]);
             let call = [Active { member: 0, mode: 1 }, Active { member: 1, mode: 1 }];
-            let mut jobs = call;
-            while cpu::newton_compact(&call, &state, &mut jobs) > 0 {
+            let (mut jobs, mut left) = (call, call.len());
+            while {
+                left = cpu::newton_compact(&call, &state, &mut jobs, left);
+                left > 0
+            } {
                 cpu::newton_contact_prepare(&inverse_all, &free_all, &newton, &state, &out, &u, &members, &mut x0, &u_base, &layout, &staged, &gather, &mut locals, &mut ustates, 0);
                 for (l, d) in local.iter_mut().zip(&locals) {
                     l.v_free = d.v_free;
@@ -1224,7 +1236,7 @@ fn newton_contact_kernels_match_their_cpu_twins() {
                 .iter_mut()
                 .zip(outs.iter_mut())
                 .enumerate()
-                .map(|(b, (u, dof_out))| NewtonCall { body: b, factor: 1, inverse: Some(inverses[b].clone()), member: member(b, 0, 0), residual: Some(residual0(b)), u, dof_out, u_start: &starts[b], contact_force: Some(&zeros[b]), outcome: NewtonState::default(), failure: None })
+                .map(|(b, (u, dof_out))| NewtonCall { body: b, factor: 1, inverse: Some(inverses[b].clone()), member: member(b, 0, 0), residual: Some(residual0(b)), u, dof_out, u_start: &starts[b], contact_force: Some(&zeros[b]), outcome: NewtonState::default(), strain_energy: None, failure: None })
                 .collect();
             for l in local.iter_mut() {
                 l.v_free = [0.0; 3];

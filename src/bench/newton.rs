@@ -53,7 +53,7 @@ pub(super) fn newton_rows(options: &BenchOptions, gpus: &[Arc<Gpu>], peaks: &[Pe
             *out = residual(&case, u);
             cpu::newton_judge(&free, &[member], &mut state, out, u, &start, &case.step, case.coefficients, &[u32::MAX; 2], &range, &no_contact, 0);
             let call = [Active { member: 0, mode: MODE_FORCES }];
-            cpu::newton_compact(&call, &state, &mut [Active::default()]);
+            cpu::newton_compact(&call, &state, &mut [Active::default()], call.len());
         });
     });
     row(make("cpu f64".into(), t, 0, 0.0));
@@ -75,7 +75,7 @@ pub(super) fn newton_rows(options: &BenchOptions, gpus: &[Arc<Gpu>], peaks: &[Pe
                     u.copy_from_slice(&case.u);
                     out.copy_from_slice(&first);
                     let inverse = (!world.newton_inverse_current(b, 1)).then(|| inverse.clone());
-                    NewtonCall { body: b, factor: 1, inverse, member, residual: Some(residual0), u, dof_out: out, u_start: &start, contact_force: None, outcome: NewtonState::default(), failure: None }
+                    NewtonCall { body: b, factor: 1, inverse, member, residual: Some(residual0), u, dof_out: out, u_start: &start, contact_force: None, outcome: NewtonState::default(), strain_energy: None, failure: None }
                 })
                 .collect();
             if let Err(e) = world.newton(&mut calls, &mut [], &mut [], &mut [], case.coefficients, (2, 1.0), None, &mut PhaseTimes::default()) {

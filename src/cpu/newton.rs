@@ -132,8 +132,12 @@ pub fn newton_judge(
 }
 
 /// `newton_compact`: the members of the call's list still iterating, in its order, into `jobs`;
-/// returns their count (the dispatches' z).
-pub fn newton_compact(call: &[Active], state: &[NewtonState<Real>], jobs: &mut [Active]) -> usize {
+/// returns their count (the dispatches' z). `left`: the count the last compaction returned
+/// (the call's length before the first); none left, nothing changes.
+pub fn newton_compact(call: &[Active], state: &[NewtonState<Real>], jobs: &mut [Active], left: usize) -> usize {
+    if left == 0 {
+        return 0;
+    }
     let mut at = 0;
     for c in call.iter().filter(|c| state[c.member as usize].status == NEWTON_ITERATING) {
         jobs[at] = *c;

@@ -38,6 +38,7 @@ const WORKGROUP: usize = 64;
 /// The binding of the job list (`jobs`) in `element_force_tangent` and `assemble_residual`.
 const FORCES_JOBS: usize = 7;
 const RESIDUAL_JOBS: usize = 8;
+const ENERGY_JOBS: usize = 6;
 
 /// Why the element kernel rejected a body's state: its lowest failing element of each kind.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -129,9 +130,14 @@ impl Pass {
 
     /// `groups` workgroups in a pass being recorded.
     fn dispatch(&self, pass: &mut wgpu::ComputePass, groups: u32) {
+        self.dispatch_xyz(pass, [groups, 1, 1]);
+    }
+
+    /// `x * y * z` workgroups in a pass being recorded.
+    fn dispatch_xyz(&self, pass: &mut wgpu::ComputePass, [x, y, z]: [u32; 3]) {
         pass.set_pipeline(&self.pipeline);
         pass.set_bind_group(0, &self.bind_group, &[]);
-        pass.dispatch_workgroups(groups, 1, 1);
+        pass.dispatch_workgroups(x, y, z);
     }
 }
 
@@ -157,11 +163,12 @@ struct Batch {
     /// The viscoelastic members' step relaxation and point histories (`MemberRange.history`).
     history: Buffer,
     member_buffer: Buffer,
-    /// What the `forces` and `assemble_residual` passes are bound to (their job lists at
-    /// [`FORCES_JOBS`] and [`RESIDUAL_JOBS`]), so that device Newton iterations can bind them to
-    /// a list of their own.
+    /// What the `forces`, `assemble_residual` and `element_energy` passes are bound to (their
+    /// job lists at [`FORCES_JOBS`], [`RESIDUAL_JOBS`] and [`ENERGY_JOBS`]), so that device
+    /// Newton iterations can bind them to lists of their own.
     forces_buffers: Vec<Buffer>,
     residual_buffers: Vec<Buffer>,
+    energy_buffers: Vec<Buffer>,
     /// Each member's free dofs (indices into its dofs, ascending), `(start, count)` in `free_dofs`.
     free_dofs: Vec<u32>,
     free_range: Vec<(u32, u32)>,
@@ -860,6 +867,7 @@ impl Batch {
         let v = Some(variant);
         let element_buffers = [&geometry, &connectivity, &u, &element_out, &failure, &member_buffer, &material_buffer, &active, &history];
         let residual_bindings = [&element_out, &dof_start, &dof, coefficients, &u, &step, &dof_out, &member_buffer, &active];
+        let energy_bindings = [&geometry, &connectivity, &u, &energy, &member_buffer, &material_buffer, &active];
         // The pipelines compile in parallel: a software adapter compiles each on the CPU.
         let tangent = {
             let (gpu, buffers) = (gpu.clone(), element_buffers.map(Buffer::clone));
@@ -869,12 +877,13 @@ impl Batch {
             let forces = scope.spawn(|| Pass::new(gpu, "element_force_tangent", "forces", v, &element_buffers));
             let csr = scope.spawn(|| Pass::new(gpu, "assemble_csr", "main", None, &[&element_out, &csr_start, &csr, coefficients, &values, &member_buffer, &active]));
             let residual = scope.spawn(|| Pass::new(gpu, "assemble_residual", "main", None, &residual_bindings));
-            let energy = Pass::new(gpu, "element_energy", "main", v, &[&geometry, &connectivity, &u, &energy, &member_buffer, &material_buffer, &active]);
+            let energy = Pass::new(gpu, "element_energy", "main", v, &energy_bindings);
             let join = |h: std::thread::ScopedJoinHandle<'_, Result<Pass, GpuError>>| h.join().expect("a pipeline compiles without panicking");
             Ok::<_, GpuError>((join(forces)?, join(csr)?, join(residual)?, energy?))
         })?;
         let forces_buffers = element_buffers.iter().map(|&b| b.clone()).collect();
         let residual_buffers = residual_bindings.iter().map(|&b| b.clone()).collect();
+        let energy_buffers = energy_bindings.iter().map(|&b| b.clone()).collect();
         let (inverse_slot, inverse_entries) = newton::inverse_slots(&free_range.iter().map(|&(_, n)| n as usize).collect::<Vec<_>>(), real, max_bytes);
         Ok(Self {
             members: ranges,
@@ -894,6 +903,7 @@ impl Batch {
             member_buffer,
             forces_buffers,
             residual_buffers,
+            energy_buffers,
             free_dofs,
             free_range,
             inverse_slot,

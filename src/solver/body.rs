@@ -229,13 +229,15 @@ pub struct Body {
     contraction: Option<Real>,
 }
 
-/// The inputs of a CPU evaluation whose results `Body::dof_out` still holds.
+/// The inputs of a CPU evaluation whose results `Body::dof_out` still holds, and the strain
+/// energy at its `u` when a device Newton call computed it.
 #[derive(Debug, Default)]
 struct EvaluatedAt {
     valid: bool,
     u: Vec<Real>,
     inputs: Vec<DofStep<Real>>,
     coefficients: Coefficients<Real>,
+    strain: Option<Real>,
 }
 
 impl EvaluatedAt {
@@ -251,6 +253,7 @@ impl EvaluatedAt {
         self.inputs.extend_from_slice(inputs);
         self.coefficients = coefficients;
         self.valid = true;
+        self.strain = None;
     }
 }
 
@@ -984,6 +987,7 @@ impl Body {
             u_start: &self.state.u,
             contact_force: Some(&self.contact_force),
             outcome: NewtonState::default(),
+            strain_energy: None,
             failure: None,
         }
     }
@@ -993,7 +997,7 @@ impl Body {
     /// test ([`Body::converged`], the host's word) sees the last increment and the residual
     /// before the last. A call that evaluated the body first and stopped there took no increment:
     /// the test then sees a first evaluation.
-    pub fn finish_device_newton(&mut self, p: &StepParams, outcome: &NewtonState<Real>, failure: Option<ElementFailure>) -> Result<(), StepFailure> {
+    pub fn finish_device_newton(&mut self, p: &StepParams, outcome: &NewtonState<Real>, strain_energy: Option<Real>, failure: Option<ElementFailure>) -> Result<(), StepFailure> {
         if let Some(failure) = failure {
             return Err(self.element_failure(&self.trial.u, failure));
         }
@@ -1004,8 +1008,15 @@ impl Body {
             self.previous_residual = Some(outcome.previous_residual);
         }
         self.evaluated.record(&self.trial.u, &self.step_inputs, coefficients(p));
+        self.evaluated.strain = strain_energy;
         self.absorb_residual(p);
         Ok(())
+    }
+
+    /// The strain energy at the trial displacement when a device Newton call left it there
+    /// ([`Body::finish_device_newton`]) and the displacement has not changed since, bit for bit.
+    pub fn evaluated_strain_energy(&self) -> Option<Real> {
+        self.evaluated.strain.filter(|_| self.evaluated.valid && same_bits(&self.trial.u, &self.evaluated.u))
     }
 
     /// Solves `K̄ x = rhs` in place (free dofs) with the last factorisation, for one or more

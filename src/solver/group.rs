@@ -773,7 +773,7 @@ fn device_pass(
         world.newton(&mut calls, &mut problems, &mut contacts, &mut list, coefficients(p), (dim, p.theta * p.dt), c.interrupt, times)
     };
     let failures: Vec<Option<ElementFailure>> = list.iter().map(|e| e.failure).collect();
-    let ends: Vec<_> = calls.iter().map(|call| (call.outcome, call.failure)).collect();
+    let ends: Vec<_> = calls.iter().map(|call| (call.outcome, call.strain_energy, call.failure)).collect();
     let contact_outcomes: Vec<ContactState<Real>> = contacts.iter().map(|g| g.outcome).collect();
     drop(list);
     drop(calls);
@@ -796,8 +796,8 @@ fn device_pass(
             state.report.iterations += iterations;
             state.report.device_iterations += iterations;
             state.report.bodies_iterated += if unevaluated { iterations } else { iterations.saturating_sub(1) } * g.bodies.len();
-            for (body, (end, failure)) in g.bodies.iter_mut().zip(&ends[range]) {
-                if let (Ok(()), Err(e)) = (&*result, body.finish_device_newton(p, end, *failure)) {
+            for (body, (end, strain, failure)) in g.bodies.iter_mut().zip(&ends[range]) {
+                if let (Ok(()), Err(e)) = (&*result, body.finish_device_newton(p, end, *strain, *failure)) {
                     *result = Err(e);
                 }
             }

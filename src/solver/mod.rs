@@ -622,8 +622,9 @@ impl Simulation {
         let strains: Vec<Real> = match self.world.as_mut().filter(|w| w.precision() == Precision::F64) {
             None => self.bodies.par_iter().map(Body::trial_strain_energy).collect(),
             Some(world) => {
-                // A body that has not moved keeps its state's energy, as on the CPU.
-                let mut strains: Vec<Option<Real>> = self.bodies.iter().map(Body::unmoved_strain_energy).collect();
+                // A body that has not moved keeps its state's energy, as on the CPU; one whose
+                // device Newton call left its energy at the trial displacement takes that.
+                let mut strains: Vec<Option<Real>> = self.bodies.par_iter().map(|b| b.unmoved_strain_energy().or_else(|| b.evaluated_strain_energy())).collect();
                 let list: Vec<(usize, &[Real])> = self.bodies.iter().enumerate().filter(|(b, _)| strains[*b].is_none()).map(|(b, body)| (b, &body.trial.u[..])).collect();
                 if !list.is_empty() {
                     let energies = world.element_energies(&list, times).map_err(|e| self.bodies[0].device_failure(&e))?;

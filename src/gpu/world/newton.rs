@@ -6,11 +6,12 @@
 //! `forces`, `assemble_residual`), the convergence test (`newton_judge`) and drops the members
 //! that are done from the next iteration's list and dispatch counts (`newton_compact`), several
 //! iterations per submission. The host reads back the members' states, displacements and
-//! residuals once per submission. In the first round of a step the members come unevaluated,
-//! and the device evaluates and judges them first, in the same submission.
+//! residuals, and their strain energies, once per submission. In the first round of a step the
+//! members come unevaluated, and the device evaluates and judges them first, in the same
+//! submission.
 
 use super::contact::{ContactLayout, ContactPasses, ContactPipelines, GroupContact};
-use super::{buffer, to_device, Batch, Evaluation, GpuWorld, Pass, ReadBack, Source, FORCES_JOBS, RESIDUAL_JOBS, WORKGROUP};
+use super::{buffer, to_device, Batch, Evaluation, GpuWorld, Pass, ReadBack, Source, ENERGY_JOBS, FORCES_JOBS, RESIDUAL_JOBS, WORKGROUP};
 use crate::contact::uzawa::Problem;
 use crate::gpu::uzawa_sweep::UzawaSweeps;
 use crate::gpu::types::{Active, Coefficients, ContactState, DofOut, NewtonMember, NewtonState, MODE_FORCES, NEWTON_FAILED, NEWTON_ITERATING, NEWTON_MAX_FREE, NO_FAILURE};
@@ -59,6 +60,9 @@ pub struct NewtonCall<'a> {
     pub contact_force: Option<&'a [Real]>,
     /// Out: where the iterations ended.
     pub outcome: NewtonState<Real>,
+    /// Out: the strain energy at the `u` returned (`element_energy` after the iterations, in
+    /// the same submission: the step's energy balance then needs no pass of its own).
+    pub strain_energy: Option<Real>,
     pub failure: Option<ElementFailure>,
 }
 
@@ -83,6 +87,8 @@ pub(super) struct NewtonBuffers {
     dispatch: Buffer,
     forces: Pass,
     residual: Pass,
+    /// `element_energy` over the call's list.
+    energy: Pass,
     update: Pass,
     judge: Pass,
     compact: Pass,
@@ -152,6 +158,9 @@ impl NewtonBuffers {
         let (forces_buffers, residual_buffers) = (with_jobs(&b.forces_buffers, FORCES_JOBS), with_jobs(&b.residual_buffers, RESIDUAL_JOBS));
         let forces = b.forces.rebound(gpu, &forces_buffers.iter().collect::<Vec<_>>());
         let residual = b.residual.rebound(gpu, &residual_buffers.iter().collect::<Vec<_>>());
+        let mut energy_buffers = b.energy_buffers.clone();
+        energy_buffers[ENERGY_JOBS] = call.clone();
+        let energy = b.element_energy.rebound(gpu, &energy_buffers.iter().collect::<Vec<_>>());
         let update = Pass::bound(gpu, pipelines.update.clone(), &[&inverse, &free, &newton, &state, &b.dof_out, &b.u, &b.member_buffer, &jobs, &contact]);
         let judge = Pass::bound(gpu, pipelines.judge.clone(), &[&free, &newton, &state, &b.dof_out, &b.u, &u_start, &b.step, coefficients, &b.failure, &b.member_buffer, &jobs, &contact]);
         let compact = Pass::bound(gpu, pipelines.compact.clone(), &[&call, &state, &jobs, &dispatch]);
@@ -169,6 +178,7 @@ impl NewtonBuffers {
             dispatch,
             forces,
             residual,
+            energy,
             update,
             judge,
             compact,
@@ -229,8 +239,8 @@ impl GpuWorld {
         let coefficient_buffer = self.coefficients.clone();
         self.upload(&coefficient_buffer, 0, &to_device(precision, &[coefficients.factor, coefficients.c1]));
         let by_batch = self.stage_displacements(&calls.iter().map(|c| (c.body, &*c.u)).collect::<Vec<_>>());
-        // (batch, [(call, member)] in member order).
-        let mut work: Vec<(usize, Vec<(usize, usize)>)> = Vec::with_capacity(by_batch.len());
+        // (batch, [(call, member)] in member order, the energy pass's workgroups).
+        let mut work: Vec<(usize, Vec<(usize, usize)>, [u32; 3])> = Vec::with_capacity(by_batch.len());
         for (batch, mine) in by_batch {
             if self.batches[batch].newton.is_none() {
                 if self.newton_pipelines.is_none() {
@@ -241,17 +251,19 @@ impl GpuWorld {
                 self.batches[batch].newton = Some(made);
             }
             let mine: Vec<(usize, usize)> = mine.into_iter().map(|i| (i, self.place[calls[i].body].1)).collect();
-            self.stage_newton(batch, &mine, calls);
-            work.push((batch, mine));
+            let energy = self.stage_newton(batch, &mine, calls);
+            work.push((batch, mine, energy));
         }
         let contact = if contacts.is_empty() { None } else { Some(self.stage_contact(calls, problems, contacts, dim, theta_dt)?) };
-        let total_dofs: usize = work.iter().map(|(b, mine)| mine.iter().map(|&(_, m)| self.batches[*b].members[m].dofs as usize).sum::<usize>()).sum();
-        let total_members: usize = work.iter().map(|(_, mine)| mine.len()).sum();
-        // Per member its failure flags and state, per dof its displacement and residual (every
-        // span a multiple of 8 bytes), after an evaluation pass's read-back when one shares it.
+        let total = |f: fn(&crate::gpu::types::MemberRange) -> u32| -> usize { work.iter().map(|(b, mine, _)| mine.iter().map(|&(_, m)| f(&self.batches[*b].members[m]) as usize).sum::<usize>()).sum() };
+        let (total_dofs, total_elements) = (total(|r| r.dofs), total(|r| r.elements));
+        let total_members: usize = work.iter().map(|(_, mine, _)| mine.len()).sum();
+        // Per member its failure flags and state, per dof its displacement and residual, per
+        // element its energy (every span a multiple of 8 bytes), after an evaluation pass's
+        // read-back when one shares it.
         let points = problems.iter().map(|p| p.local.len()).sum::<usize>();
         let contact_bytes = if contact.is_some() { (points * 3 * real + contacts.len() * std::mem::size_of::<ContactState<Real>>() + 16) as u64 } else { 0 };
-        let bytes = (total_members * (8 + std::mem::size_of::<NewtonState<Real>>()) + total_dofs * 3 * real) as u64 + if list.is_empty() { 0 } else { self.readback.size() } + contact_bytes;
+        let bytes = (total_members * (8 + std::mem::size_of::<NewtonState<Real>>()) + total_dofs * 3 * real + total_elements * real) as u64 + if list.is_empty() { 0 } else { self.readback.size() } + contact_bytes;
         if self.newton_readback.as_ref().is_none_or(|(_, size)| *size < bytes) {
             self.newton_readback = Some((buffer(&self.gpu, "newton readback", bytes as usize, BufferUsages::MAP_READ | BufferUsages::COPY_DST), bytes));
         }
@@ -272,7 +284,7 @@ impl GpuWorld {
                 // state without a residual before (`Real::MAX`) and without an increment tests
                 // it as `Body::converged` tests a step's first evaluation.
                 if first && evaluate_first {
-                    for (batch, _) in &work {
+                    for (batch, _, _) in &work {
                         let n = self.batches[*batch].newton.as_ref().expect("staged");
                         n.forces.dispatch_indirect(&mut pass, &n.dispatch, 12);
                         n.residual.dispatch_indirect(&mut pass, &n.dispatch, 24);
@@ -281,7 +293,7 @@ impl GpuWorld {
                     }
                 }
                 for _ in 0..iterations {
-                    for (batch, _) in &work {
+                    for (batch, _, _) in &work {
                         let b = &self.batches[*batch];
                         let n = b.newton.as_ref().expect("staged");
                         let mine = contact.as_ref().filter(|(at, _)| at == batch).map(|(_, passes)| passes);
@@ -301,10 +313,14 @@ impl GpuWorld {
                         n.compact.dispatch(&mut pass, 1);
                     }
                 }
+                for (batch, _, energy) in &work {
+                    self.batches[*batch].newton.as_ref().expect("staged").energy.dispatch_xyz(&mut pass, *energy);
+                }
             }
-            // Per call: where its state, failure flags, displacements and residuals land.
-            let mut landing = vec![[0usize; 4]; calls.len()];
-            for (batch, mine) in &work {
+            // Per call: where its state, failure flags, displacements, residuals and element
+            // energies land, and how many elements it has.
+            let mut landing = vec![[0usize; 6]; calls.len()];
+            for (batch, mine, _) in &work {
                 let b = &self.batches[*batch];
                 let members: Vec<usize> = mine.iter().map(|&(_, m)| m).collect();
                 let state_size = std::mem::size_of::<NewtonState<Real>>() as u64;
@@ -320,8 +336,10 @@ impl GpuWorld {
                 let states = readback.queue_runs(*batch, Source::NewtonState, &members, &state_span);
                 let us = readback.queue_runs(*batch, Source::Displacement, &members, &u_span);
                 let outs = readback.queue_runs(*batch, Source::DofOut, &members, &dof_span);
-                for (k, &(i, _)) in mine.iter().enumerate() {
-                    landing[i] = [states[k], flags[k], us[k], outs[k]];
+                let element_span = |m: usize| b.members[m].element_start as u64 * real as u64..(b.members[m].element_start + b.members[m].elements) as u64 * real as u64;
+                let energies = readback.queue_runs(*batch, Source::Energy, &members, &element_span);
+                for (k, &(i, m)) in mine.iter().enumerate() {
+                    landing[i] = [states[k], flags[k], us[k], outs[k], energies[k], b.members[m].elements as usize];
                 }
             }
             let contact_landing = contact.as_ref().map(|(_, passes)| {
@@ -335,13 +353,15 @@ impl GpuWorld {
                 }
                 // Every member's state, displacements and residuals, in parallel (100 000 grains
                 // a call).
-                calls.par_iter_mut().zip(&landing).for_each(|(call, [state_at, flags_at, u_at, out_at])| {
+                calls.par_iter_mut().zip(&landing).for_each(|(call, [state_at, flags_at, u_at, out_at, energy_at, elements])| {
                     call.outcome = bytemuck::pod_read_unaligned(&bytes[*state_at..state_at + std::mem::size_of::<NewtonState<Real>>()]);
                     let flags: [u32; 2] = bytemuck::pod_read_unaligned(&bytes[*flags_at..flags_at + 8]);
                     call.failure = (call.outcome.status == NEWTON_FAILED).then(|| super::failure_of(flags)).flatten();
                     let n = call.u.len();
                     super::copy_from_device(precision, &bytes[*u_at..u_at + n * real], call.u);
                     super::copy_from_device(precision, &bytes[*out_at..out_at + n * 2 * real], bytemuck::cast_slice_mut(call.dof_out));
+                    // Summed in element order, as the energy pass's results are.
+                    call.strain_energy = Some(bytes[*energy_at..energy_at + elements * real].chunks_exact(real).map(|b| Real::from_ne_bytes(b.try_into().expect("f64 bytes"))).sum());
                 });
                 iterating = calls.iter().any(|call| call.outcome.status == NEWTON_ITERATING);
                 if let Some((r_at, states_at)) = contact_landing {
@@ -418,7 +438,8 @@ impl GpuWorld {
     /// Uploads what the listed calls (`(call, member)`, member order) of one batch need: stale
     /// inverses, parameters, initial states, start displacements, evaluated residuals, the
     /// call's list and the first iteration's dispatch arguments; clears their failure flags.
-    fn stage_newton(&mut self, batch: usize, mine: &[(usize, usize)], calls: &mut [NewtonCall]) {
+    /// Returns the workgroups of `element_energy` over the call's list.
+    fn stage_newton(&mut self, batch: usize, mine: &[(usize, usize)], calls: &mut [NewtonCall]) -> [u32; 3] {
         let precision = self.gpu.precision;
         let real = precision.size() as u64;
         let mut uploads: Vec<(Buffer, u64, Vec<u8>)> = Vec::new();
@@ -509,5 +530,6 @@ impl GpuWorld {
         // device computes first.
         let evaluated: Vec<(usize, &[u8])> = mine.iter().filter(|&&(i, _)| calls[i].residual.is_some()).map(|&(i, m)| (m, bytemuck::cast_slice::<DofOut<Real>, u8>(calls[i].dof_out))).collect();
         self.upload_member_runs(batch, &residuals, 2 * real, &evaluated);
+        [fx, fy, count]
     }
 }
