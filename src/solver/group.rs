@@ -507,7 +507,7 @@ fn evaluate_on_device_first(groups: &[Group], world: &GpuWorld, c: &Context) -> 
         .par_iter()
         .map(|g| {
             let fits = |b: &Body, id: usize| world.newton_capable(id) && b.iterates_on_device(p) && world.newton_inverse_current(id, b.factor_version()) && !b.evaluation_holds(p);
-            g.contact.is_none() && g.bodies.len() == 1 && p.max_iterations > 0 && fits(&g.bodies[0], g.ids[0])
+            g.contact.is_none() && g.bodies.len() == 1 && p.max_iterations > 0 && fits(g.bodies[0], g.ids[0])
         })
         .collect();
     if !chosen.contains(&true) || !crate::backend::round_on_device(world, false, &element_work(groups, &chosen, &|_| true)) {

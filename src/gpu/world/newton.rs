@@ -37,6 +37,10 @@ const ITERATIONS_PER_SUBMIT: u32 = 8;
 const DISPATCH_WORDS: usize = 13;
 const DISPATCHES: usize = 4;
 
+/// A batch's share of a [`GpuWorld::newton`] call: the batch, its `(call, member)` pairs in
+/// member order, and the workgroups of the energy pass over them.
+type BatchCalls = (usize, Vec<(usize, usize)>, [u32; 3]);
+
 /// One body's share of [`GpuWorld::newton`].
 pub struct NewtonCall<'a> {
     pub body: usize,
@@ -239,8 +243,7 @@ impl GpuWorld {
         let coefficient_buffer = self.coefficients.clone();
         self.upload(&coefficient_buffer, 0, &to_device(precision, &[coefficients.factor, coefficients.c1]));
         let by_batch = self.stage_displacements(&calls.iter().map(|c| (c.body, &*c.u)).collect::<Vec<_>>());
-        // (batch, [(call, member)] in member order, the energy pass's workgroups).
-        let mut work: Vec<(usize, Vec<(usize, usize)>, [u32; 3])> = Vec::with_capacity(by_batch.len());
+        let mut work: Vec<BatchCalls> = Vec::with_capacity(by_batch.len());
         for (batch, mine) in by_batch {
             if self.batches[batch].newton.is_none() {
                 if self.newton_pipelines.is_none() {
