@@ -390,10 +390,10 @@ impl GpuWorld {
         // The device's displacements are the host's now: the mirror follows, so that the next
         // pass does not send them back. The contact forces the device computed for the groups
         // in contact are not the host's: theirs go up again next time.
-        for call in calls.iter() {
-            let (batch, m) = self.place[call.body];
-            let dofs = super::dof_span(&self.batches[batch].members, &[m]);
-            self.batches[batch].u_host[dofs].copy_from_slice(call.u);
+        for (batch, mine, _) in &work {
+            let b = &mut self.batches[*batch];
+            let spans = mine.iter().map(|&(i, m)| (b.members[m].dof_start as usize, &*calls[i].u)).collect();
+            super::update_mirrors(&mut b.u_host, spans);
         }
         for &c in contacts.iter().flat_map(|g| &g.calls) {
             let (batch, m) = self.place[calls[c].body];
@@ -448,8 +448,6 @@ impl GpuWorld {
         let mut uploads: Vec<(Buffer, u64, Vec<u8>)> = Vec::new();
         let b = &mut self.batches[batch];
         let n = b.newton.as_mut().expect("made before staging");
-        let mut start_changed = Vec::new();
-        let mut contact_changed = Vec::new();
         let mut states = Vec::with_capacity(mine.len());
         // New inverses of members whose slots follow each other go up in one write (after a
         // step that refactorised every grain, one inverse per grain): (offset, end, inverses).
@@ -473,21 +471,16 @@ impl GpuWorld {
             n.newton_host[m] = NewtonMember { inverse_start: slot, free_start, free_count, ..call.member };
             let residual = call.residual.unwrap_or(Real::MAX);
             states.push(NewtonState { status: NEWTON_ITERATING, residual, previous_residual: residual, ..NewtonState::default() });
-            if super::update_mirror(&mut n.start_host[super::dof_span(&b.members, &[m])], call.u_start) {
-                start_changed.push(m);
-            }
-            let zeros;
-            let contact = match call.contact_force {
-                Some(f) => f,
-                None => {
-                    zeros = vec![0.0; call.u.len()];
-                    &zeros
-                }
-            };
-            if super::update_mirror(&mut n.contact_host[super::dof_span(&b.members, &[m])], contact) {
-                contact_changed.push(m);
-            }
         }
+        // The start displacements and contact forces (zero for a call without them) into the
+        // mirrors, member by member on every thread; those that changed go up.
+        let zeros = vec![0.0; mine.iter().filter(|&&(i, _)| calls[i].contact_force.is_none()).map(|&(i, _)| calls[i].u.len()).max().unwrap_or(0)];
+        let start = |m: usize| b.members[m].dof_start as usize;
+        let starts = mine.iter().map(|&(i, m)| (start(m), calls[i].u_start)).collect();
+        let contacts = mine.iter().map(|&(i, m)| (start(m), calls[i].contact_force.unwrap_or_else(|| &zeros[..calls[i].u.len()]))).collect();
+        let changed = |flags: Vec<bool>| -> Vec<usize> { mine.iter().zip(flags).filter(|(_, c)| *c).map(|(&(_, m), _)| m).collect() };
+        let start_changed = changed(super::update_mirrors(&mut n.start_host, starts));
+        let contact_changed = changed(super::update_mirrors(&mut n.contact_host, contacts));
         let members: Vec<usize> = mine.iter().map(|&(_, m)| m).collect();
         let member_size = std::mem::size_of::<NewtonMember<Real>>() as u64;
         let state_size = std::mem::size_of::<NewtonState<Real>>() as u64;
@@ -498,14 +491,8 @@ impl GpuWorld {
             uploads.push((n.state.clone(), first * state_size, bytemuck::cast_slice(&states[k..k + run.len()]).to_vec()));
             k += run.len();
         }
-        for run in super::runs(&start_changed) {
-            let dofs = super::dof_span(&b.members, &run);
-            uploads.push((n.u_start.clone(), dofs.start as u64 * real, to_device(precision, &n.start_host[dofs])));
-        }
-        for run in super::runs(&contact_changed) {
-            let dofs = super::dof_span(&b.members, &run);
-            uploads.push((n.contact.clone(), dofs.start as u64 * real, to_device(precision, &n.contact_host[dofs])));
-        }
+        let mirror_runs = |changed: &[usize]| -> Vec<std::ops::Range<usize>> { super::runs(changed).iter().map(|run| super::dof_span(&b.members, run)).collect() };
+        let (start_runs, contact_runs) = (mirror_runs(&start_changed), mirror_runs(&contact_changed));
         let list: Vec<Active> = members.iter().map(|&m| Active { member: m as u32, mode: MODE_FORCES }).collect();
         uploads.push((n.call.clone(), 0, bytemuck::cast_slice(&list).to_vec()));
         uploads.push((n.jobs.clone(), 0, bytemuck::cast_slice(&list).to_vec()));
@@ -520,9 +507,19 @@ impl GpuWorld {
         debug_assert_eq!(DISPATCHES * 3 + 1, DISPATCH_WORDS);
         uploads.push((n.dispatch.clone(), 0, bytemuck::cast_slice(&dispatch).to_vec()));
         let (inverse, residuals) = (n.inverse.clone(), b.dof_out.clone());
+        let (u_start, contact) = (n.u_start.clone(), n.contact.clone());
+        let mirrors = (std::mem::take(&mut n.start_host), std::mem::take(&mut n.contact_host));
         for (buffer, offset, bytes) in uploads {
             self.upload(&buffer, offset, &bytes);
         }
+        for dofs in start_runs {
+            self.upload_reals(&u_start, dofs.start, &mirrors.0[dofs]);
+        }
+        for dofs in contact_runs {
+            self.upload_reals(&contact, dofs.start, &mirrors.1[dofs]);
+        }
+        let n = self.batches[batch].newton.as_mut().expect("made before staging");
+        (n.start_host, n.contact_host) = mirrors;
         // Device Newton iterations run in f64 only (asserted by `newton`): the host's reals are
         // the device's bytes.
         debug_assert_eq!(precision, Precision::F64);
