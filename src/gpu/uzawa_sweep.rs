@@ -67,11 +67,12 @@ pub fn solve_loops_per_sweep(w: &Delassus, colours: &Colours, nodal: &NodalMap) 
 }
 
 /// Whether problems whose widest colour has `widest` points and whose sweep runs at most
-/// `loops_per_sweep` loop iterations ([`solve_loops_per_sweep`]) are solved whole, one
-/// workgroup for all their sweeps: colours within [`SOLVE_WIDEST`], and on a software adapter
-/// a sweep within its loop guard ([`SOFTWARE_LOOP_BUDGET`]); else colour by colour.
-pub fn solved_whole(widest: usize, loops_per_sweep: usize, software: bool) -> bool {
-    widest <= SOLVE_WIDEST && (!software || loops_per_sweep <= SOFTWARE_LOOP_BUDGET)
+/// `loops_per_sweep()` loop iterations ([`solve_loops_per_sweep`], counted only where it
+/// matters) are solved whole, one workgroup for all their sweeps: colours within
+/// [`SOLVE_WIDEST`], and on a software adapter a sweep within its loop guard
+/// ([`SOFTWARE_LOOP_BUDGET`]); else colour by colour.
+pub fn solved_whole(widest: usize, loops_per_sweep: impl FnOnce() -> usize, software: bool) -> bool {
+    widest <= SOLVE_WIDEST && (!software || loops_per_sweep() <= SOFTWARE_LOOP_BUDGET)
 }
 
 /// A contact point's data for the kernel (`struct UzawaLocal` in the shader).
@@ -563,7 +564,7 @@ impl UzawaSweeps {
         let software = self.gpu.adapter.software();
         let budget = software.then_some(SOFTWARE_LOOP_BUDGET);
         let loops = problems.iter().map(|p| solve_loops_per_sweep(p.w, p.colours, p.nodal)).max().unwrap_or(0).max(1);
-        let whole = solved_whole(layout.widest, loops, software);
+        let whole = solved_whole(layout.widest, || loops, software);
         let most = problems.iter().map(|p| p.max_iterations).max().unwrap_or(0);
         let sweeps = budget.map_or(sweeps, |b| sweeps.min(b / loops));
         let sweeps = if whole { most.min(sweeps).min(u32::MAX as usize) as u32 } else { 0 };

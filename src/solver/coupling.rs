@@ -185,7 +185,7 @@ impl ContactStep {
     /// Whether a device solves this problem whole, one workgroup for all its sweeps
     /// ([`uzawa_sweep::solved_whole`], the rule its staging follows).
     pub fn solved_whole(&self, software: bool) -> bool {
-        uzawa_sweep::solved_whole(self.widest_colour(), solve_loops_per_sweep(&self.delassus, &self.colours, &self.nodal), software)
+        uzawa_sweep::solved_whole(self.widest_colour(), || solve_loops_per_sweep(&self.delassus, &self.colours, &self.nodal), software)
     }
 
     /// Each point's obstacle velocity at the end of the step, for a device that takes the
