@@ -224,11 +224,15 @@ pub enum WorldKernel {
     Assembly,
 }
 
-/// The per-dof inputs a batch keeps a host copy of, uploaded by runs of members.
+/// The per-dof inputs a batch keeps a host copy of, uploaded by runs of members: its
+/// displacements and step inputs, and its device Newton calls' start displacements and contact
+/// forces.
 #[derive(Clone, Copy)]
 enum Mirror {
     Displacement,
     Step,
+    NewtonStart,
+    NewtonContact,
 }
 
 /// A copy from a batch's buffer into the read-back buffer.
@@ -479,11 +483,7 @@ impl GpuWorld {
         for batch in 0..self.batches.len() {
             let mut mine: Vec<(usize, &[Real])> = steps.iter().filter(|(body, _)| self.place[*body].0 == batch).map(|&(body, step)| (self.place[body].1, bytemuck::cast_slice(step))).collect();
             mine.sort_unstable_by_key(|&(m, _)| m);
-            let b = &mut self.batches[batch];
-            let spans = mine.iter().map(|&(m, step)| (4 * b.members[m].dof_start as usize, step)).collect();
-            let changed = update_mirrors(&mut b.step_host, spans);
-            let members: Vec<usize> = mine.iter().zip(changed).filter(|(_, c)| *c).map(|(&(m, _), _)| m).collect();
-            self.upload_runs(batch, &members, Mirror::Step);
+            self.stage_mirror(batch, Mirror::Step, &mine);
         }
     }
 
@@ -501,28 +501,21 @@ impl GpuWorld {
         self.upload(&buffer, start as u64 * self.gpu.precision.size() as u64, &bytes);
     }
 
-    /// Writes a host mirror's values of the listed members (sorted) to the device, one write
-    /// per run of consecutive members.
-    fn upload_runs(&mut self, batch: usize, members: &[usize], mirror: Mirror) {
-        let per_dof = match mirror {
-            Mirror::Displacement => 1,
-            Mirror::Step => 4,
-        };
+    /// Takes the listed members' values (`(member, values)`, in member order) into a mirror,
+    /// member by member on every thread, and uploads those that changed since they last went
+    /// up, one write per run of consecutive members.
+    fn stage_mirror(&mut self, batch: usize, mirror: Mirror, mine: &[(usize, &[Real])]) {
         let b = &mut self.batches[batch];
-        let (host, buffer) = match mirror {
-            Mirror::Displacement => (std::mem::take(&mut b.u_host), b.u.clone()),
-            Mirror::Step => (std::mem::take(&mut b.step_host), b.step.clone()),
-        };
-        for run in runs(members) {
+        let starts: Vec<usize> = mine.iter().map(|&(m, _)| b.members[m].dof_start as usize).collect();
+        let (host, buffer, per_dof) = b.mirror(mirror);
+        let changed = update_mirrors(host, starts.iter().zip(mine).map(|(&start, &(_, values))| (per_dof * start, values)).collect());
+        let host = std::mem::take(host);
+        let members: Vec<usize> = mine.iter().zip(changed).filter(|(_, c)| *c).map(|(&(m, _), _)| m).collect();
+        for run in runs(&members) {
             let dofs = dof_span(&self.batches[batch].members, &run);
-            let (start, end) = (dofs.start * per_dof, dofs.end * per_dof);
-            self.upload_reals(&buffer, start, &host[start..end]);
+            self.upload_reals(&buffer, per_dof * dofs.start, &host[per_dof * dofs.start..per_dof * dofs.end]);
         }
-        let b = &mut self.batches[batch];
-        match mirror {
-            Mirror::Displacement => b.u_host = host,
-            Mirror::Step => b.step_host = host,
-        }
+        *self.batches[batch].mirror(mirror).0 = host;
     }
 
     /// Copies the displacements of the listed bodies (`(body, u)`) into their batches' mirrors
@@ -538,18 +531,9 @@ impl GpuWorld {
                 _ => by_batch.push((batch, vec![i])),
             }
         }
-        // Only the members whose displacement changed since it last went up.
-        let mut changed = vec![false; list.len()];
         for (batch, mine) in &by_batch {
-            let b = &mut self.batches[*batch];
-            let spans = mine.iter().map(|&i| (b.members[self.place[list[i].0].1].dof_start as usize, list[i].1)).collect();
-            for (&i, c) in mine.iter().zip(update_mirrors(&mut b.u_host, spans)) {
-                changed[i] = c;
-            }
-        }
-        for (batch, mine) in &by_batch {
-            let members: Vec<usize> = mine.iter().filter(|&&i| changed[i]).map(|&i| self.place[list[i].0].1).collect();
-            self.upload_runs(*batch, &members, Mirror::Displacement);
+            let members: Vec<(usize, &[Real])> = mine.iter().map(|&i| (self.place[list[i].0].1, list[i].1)).collect();
+            self.stage_mirror(*batch, Mirror::Displacement, &members);
         }
         by_batch
     }
@@ -972,6 +956,21 @@ impl Batch {
             residual,
             element_energy,
         })
+    }
+
+    /// A mirror's host copy, its device buffer, and its reals per dof.
+    fn mirror(&mut self, mirror: Mirror) -> (&mut Vec<Real>, Buffer, usize) {
+        match mirror {
+            Mirror::Displacement => (&mut self.u_host, self.u.clone(), 1),
+            Mirror::Step => (&mut self.step_host, self.step.clone(), 4),
+            Mirror::NewtonStart | Mirror::NewtonContact => {
+                let n = self.newton.as_mut().expect("a batch whose Newton mirrors are staged has them");
+                match mirror {
+                    Mirror::NewtonStart => (&mut n.start_host, n.u_start.clone(), 1),
+                    _ => (&mut n.contact_host, n.contact.clone(), 1),
+                }
+            }
+        }
     }
 
     /// Elements, dofs and stiffness non-zeros of the batch.

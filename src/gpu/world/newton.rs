@@ -82,7 +82,7 @@ pub(super) struct NewtonBuffers {
     pub(super) contact: Buffer,
     pub(super) x0: Buffer,
     pub(super) u_base: Buffer,
-    u_start: Buffer,
+    pub(super) u_start: Buffer,
     call: Buffer,
     /// The members still iterating, which every kernel of an iteration runs over: a list of
     /// its own, so that an evaluation pass of other bodies (over the batch's `active`) can share
@@ -99,8 +99,8 @@ pub(super) struct NewtonBuffers {
     /// Host copies: each member's parameters and start displacements as last uploaded, and the
     /// factorisation whose inverse its slot holds.
     newton_host: Vec<NewtonMember<Real>>,
-    start_host: Vec<Real>,
-    contact_host: Vec<Real>,
+    pub(super) start_host: Vec<Real>,
+    pub(super) contact_host: Vec<Real>,
     inverse_version: Vec<Option<u64>>,
 }
 
@@ -472,15 +472,6 @@ impl GpuWorld {
             let residual = call.residual.unwrap_or(Real::MAX);
             states.push(NewtonState { status: NEWTON_ITERATING, residual, previous_residual: residual, ..NewtonState::default() });
         }
-        // The start displacements and contact forces (zero for a call without them) into the
-        // mirrors, member by member on every thread; those that changed go up.
-        let zeros = vec![0.0; mine.iter().filter(|&&(i, _)| calls[i].contact_force.is_none()).map(|&(i, _)| calls[i].u.len()).max().unwrap_or(0)];
-        let start = |m: usize| b.members[m].dof_start as usize;
-        let starts = mine.iter().map(|&(i, m)| (start(m), calls[i].u_start)).collect();
-        let contacts = mine.iter().map(|&(i, m)| (start(m), calls[i].contact_force.unwrap_or_else(|| &zeros[..calls[i].u.len()]))).collect();
-        let changed = |flags: Vec<bool>| -> Vec<usize> { mine.iter().zip(flags).filter(|(_, c)| *c).map(|(&(_, m), _)| m).collect() };
-        let start_changed = changed(super::update_mirrors(&mut n.start_host, starts));
-        let contact_changed = changed(super::update_mirrors(&mut n.contact_host, contacts));
         let members: Vec<usize> = mine.iter().map(|&(_, m)| m).collect();
         let member_size = std::mem::size_of::<NewtonMember<Real>>() as u64;
         let state_size = std::mem::size_of::<NewtonState<Real>>() as u64;
@@ -491,8 +482,6 @@ impl GpuWorld {
             uploads.push((n.state.clone(), first * state_size, bytemuck::cast_slice(&states[k..k + run.len()]).to_vec()));
             k += run.len();
         }
-        let mirror_runs = |changed: &[usize]| -> Vec<std::ops::Range<usize>> { super::runs(changed).iter().map(|run| super::dof_span(&b.members, run)).collect() };
-        let (start_runs, contact_runs) = (mirror_runs(&start_changed), mirror_runs(&contact_changed));
         let list: Vec<Active> = members.iter().map(|&m| Active { member: m as u32, mode: MODE_FORCES }).collect();
         uploads.push((n.call.clone(), 0, bytemuck::cast_slice(&list).to_vec()));
         uploads.push((n.jobs.clone(), 0, bytemuck::cast_slice(&list).to_vec()));
@@ -507,19 +496,16 @@ impl GpuWorld {
         debug_assert_eq!(DISPATCHES * 3 + 1, DISPATCH_WORDS);
         uploads.push((n.dispatch.clone(), 0, bytemuck::cast_slice(&dispatch).to_vec()));
         let (inverse, residuals) = (n.inverse.clone(), b.dof_out.clone());
-        let (u_start, contact) = (n.u_start.clone(), n.contact.clone());
-        let mirrors = (std::mem::take(&mut n.start_host), std::mem::take(&mut n.contact_host));
         for (buffer, offset, bytes) in uploads {
             self.upload(&buffer, offset, &bytes);
         }
-        for dofs in start_runs {
-            self.upload_reals(&u_start, dofs.start, &mirrors.0[dofs]);
-        }
-        for dofs in contact_runs {
-            self.upload_reals(&contact, dofs.start, &mirrors.1[dofs]);
-        }
-        let n = self.batches[batch].newton.as_mut().expect("made before staging");
-        (n.start_host, n.contact_host) = mirrors;
+        // The start displacements and contact forces (zero for a call without them); those
+        // that changed go up.
+        let zeros = vec![0.0; mine.iter().filter(|&&(i, _)| calls[i].contact_force.is_none()).map(|&(i, _)| calls[i].u.len()).max().unwrap_or(0)];
+        let starts: Vec<(usize, &[Real])> = mine.iter().map(|&(i, m)| (m, calls[i].u_start)).collect();
+        let contacts: Vec<(usize, &[Real])> = mine.iter().map(|&(i, m)| (m, calls[i].contact_force.unwrap_or_else(|| &zeros[..calls[i].u.len()]))).collect();
+        self.stage_mirror(batch, super::Mirror::NewtonStart, &starts);
+        self.stage_mirror(batch, super::Mirror::NewtonContact, &contacts);
         // Device Newton iterations run in f64 only (asserted by `newton`): the host's reals are
         // the device's bytes.
         debug_assert_eq!(precision, Precision::F64);
