@@ -61,6 +61,14 @@ fn options(choice: BackendChoice, precision: Option<Precision>) -> RunOptions {
     RunOptions { backend: BackendRequest { choice, adapter: None, precision, ..Default::default() }, ..Default::default() }
 }
 
+/// The GPU backend in f64 with every Newton round on the device (`--rounds gpu`), as `auto`
+/// sends them on hardware and never on a software adapter.
+fn every_round_on_the_gpu() -> RunOptions {
+    let mut o = options(BackendChoice::Gpu, Some(Precision::F64));
+    o.backend.rounds = RoundPlacement::Gpu;
+    o
+}
+
 /// Runs `path` on the CPU and on the GPU in both precisions; checks every step's energies.
 fn compare_backends(test: &str, path: &Path, sets: &[&str]) {
     if !gpu_available(test) {
@@ -228,9 +236,7 @@ fn grains_on_the_gpu_take_at_most_three_submits_a_step_however_many_iterations_o
         evaluations.push((field(&gpu, "bodies_iterated"), newton));
         if tolerance == "1e-12" {
             assert!(newton > evaluations[1].1 && newton > steps, "the tighter tolerance iterates more: {newton} against {}", evaluations[1].1);
-            let mut every = options(BackendChoice::Gpu, Some(Precision::F64));
-            every.backend.rounds = RoundPlacement::Gpu;
-            let every = run_with(&path, &sets, &format!("{tag}_every_round"), &every);
+            let every = run_with(&path, &sets, &format!("{tag}_every_round"), &every_round_on_the_gpu());
             assert_eq!(field(&every, "newton_iterations"), newton);
             assert!(field(&every, "device_submits") > newton, "--rounds gpu: a pass per round, {} submits", field(&every, "device_submits"));
             assert!(energy_difference(&cpu, &every) <= 1e-9, "--rounds gpu: energies differ by {:.3e}", energy_difference(&cpu, &every));
@@ -369,9 +375,7 @@ fn a_free_body_takes_its_newton_iterations_on_the_device_in_at_most_two_submits(
         let sets: Vec<&str> = sets.iter().map(String::as_str).collect();
         let tag = format!("{test}_{tolerance}");
         let cpu = run_with(&path, &sets, &format!("{tag}_cpu"), &options(BackendChoice::Cpu, None));
-        let mut every = options(BackendChoice::Gpu, Some(Precision::F64));
-        every.backend.rounds = RoundPlacement::Gpu;
-        let gpu = run_with(&path, &sets, &format!("{tag}_gpu"), &every);
+        let gpu = run_with(&path, &sets, &format!("{tag}_gpu"), &every_round_on_the_gpu());
         let (submits, newton, steps) = (field(&gpu, "device_submits"), field(&gpu, "newton_iterations"), field(&gpu, "steps"));
         let per_step = gpu.series("/solver", "device_submits");
         let worst = energy_difference(&cpu, &gpu);
@@ -403,9 +407,7 @@ fn falling_grains_iterate_on_the_device_in_the_passes_of_the_grains_in_contact()
     let sets = ["packing.count=30", "time.end=0.08", "gravity=[0.0,-9.81]", "output.every=1", "output.scene_every=0"];
     let field = |log: &Log, name: &str| log.topics["/summary"][0][name].as_u64().unwrap_or_else(|| panic!("{name}"));
     let cpu = run_with(&path, &sets, &format!("{test}_cpu"), &options(BackendChoice::Cpu, None));
-    let mut every = options(BackendChoice::Gpu, Some(Precision::F64));
-    every.backend.rounds = RoundPlacement::Gpu;
-    let gpu = run_with(&path, &sets, &format!("{test}_gpu"), &every);
+    let gpu = run_with(&path, &sets, &format!("{test}_gpu"), &every_round_on_the_gpu());
     let worst = energy_difference(&cpu, &gpu);
     let (submits, newton, device) = (gpu.series("/solver", "device_submits"), gpu.series("/solver", "newton_iterations"), gpu.series("/solver", "device_iterations"));
     let (factorizations, touching) = (gpu.series("/solver", "factorizations"), gpu.series("/contact", "active"));
@@ -438,9 +440,7 @@ fn a_falling_grain_is_evaluated_judged_and_iterated_in_one_submission_a_step() {
     let sets = ["packing.count=12", "time.end=0.05", "gravity=[0.0,-9.81]", "output.every=1", "output.scene_every=0"];
     let field = |log: &Log, name: &str| log.topics["/summary"][0][name].as_u64().unwrap_or_else(|| panic!("{name}"));
     let cpu = run_with(&path, &sets, &format!("{test}_cpu"), &options(BackendChoice::Cpu, None));
-    let mut every = options(BackendChoice::Gpu, Some(Precision::F64));
-    every.backend.rounds = RoundPlacement::Gpu;
-    let gpu = run_with(&path, &sets, &format!("{test}_gpu"), &every);
+    let gpu = run_with(&path, &sets, &format!("{test}_gpu"), &every_round_on_the_gpu());
     for name in ["newton_iterations", "bodies_iterated", "factorizations"] {
         assert_eq!(field(&gpu, name), field(&cpu, name), "{name}");
     }
@@ -476,9 +476,8 @@ fn groups_in_contact_take_their_newton_increments_on_the_device() {
         let path = scene_path(scene);
         let cpu = run_with(&path, &sets, &format!("{test}_{scene}_cpu"), &options(BackendChoice::Cpu, None));
         let with = |uzawa: UzawaPlacement| {
-            let mut o = options(BackendChoice::Gpu, Some(Precision::F64));
+            let mut o = every_round_on_the_gpu();
             o.backend.uzawa = uzawa;
-            o.backend.rounds = RoundPlacement::Gpu;
             run_with(&path, &sets, &format!("{test}_{scene}_{}", uzawa.name()), &o)
         };
         let (host, device) = (with(UzawaPlacement::Cpu), with(UzawaPlacement::Gpu));
