@@ -2,7 +2,7 @@
 //! (`gpu::context::SHADER_CHECKS`): every loop counts up to a bound (or is listed with why it
 //! ends), and every integer division or remainder is by a non-zero constant. No GPU needed.
 
-use bifirst::gpu::shaders::{is_element_kernel, source, tangent_workgroup, ElementVariant, INCLUDES, LEAST_WORKGROUP_BYTES, SHADERS};
+use bifirst::gpu::shaders::{is_element_kernel, source, tangent_workgroup, validated, ElementVariant, INCLUDES, LEAST_WORKGROUP_BYTES, SHADERS};
 use bifirst::precision::Precision;
 
 /// The source with its `//` comments blanked out.
@@ -80,10 +80,8 @@ fn the_loop_check_rejects_loops_without_a_bound() {
 }
 
 /// The integer divisions and remainders of a module whose divisor is not a non-zero constant.
-fn unchecked_divisions(text: &str) -> Vec<String> {
-    let module = naga::front::wgsl::parse_str(text).expect("the kernel parses");
-    let capabilities = naga::valid::Capabilities::FLOAT64;
-    let info = naga::valid::Validator::new(naga::valid::ValidationFlags::all(), capabilities).validate(&module).expect("the kernel validates");
+fn unchecked_divisions(text: &str, precision: Precision) -> Vec<String> {
+    let (module, info) = validated(text, precision).expect("the kernel validates");
     let non_zero = |e: &naga::Expression| match e {
         naga::Expression::Literal(l) => !matches!(l, naga::Literal::U32(0) | naga::Literal::I32(0)),
         _ => false,
@@ -112,7 +110,7 @@ fn every_integer_division_is_by_a_non_zero_constant() {
         let variants: Vec<Option<ElementVariant>> = if is_element_kernel(name) { ElementVariant::all().into_iter().map(Some).collect() } else { vec![None] };
         for precision in [Precision::F32, Precision::F64] {
             for variant in &variants {
-                let faults = unchecked_divisions(&source(name, precision, *variant, LEAST_WORKGROUP_BYTES).unwrap());
+                let faults = unchecked_divisions(&source(name, precision, *variant, LEAST_WORKGROUP_BYTES).unwrap(), precision);
                 assert!(faults.is_empty(), "{name} {variant:?} ({}):\n{}", precision.name(), faults.join("\n"));
             }
         }
@@ -122,9 +120,10 @@ fn every_integer_division_is_by_a_non_zero_constant() {
 #[test]
 fn the_division_check_rejects_a_divisor_that_may_be_zero() {
     let kernel = |body: &str| format!("@group(0) @binding(0) var<storage, read_write> v: array<u32>;\nconst TWO = 2u;\n@compute @workgroup_size(1) fn main() {{ {body} }}");
-    assert!(unchecked_divisions(&kernel("v[0] = v[1] / 2u + v[2] % TWO; v[3] = u32(f32(v[4]) / f32(v[5]));")).is_empty());
-    assert_eq!(unchecked_divisions(&kernel("v[0] = v[1] / v[2];")).len(), 1);
-    assert_eq!(unchecked_divisions(&kernel("var x = 7u; x %= v[2]; v[0] = x;")).len(), 1);
+    let faults = |body: &str| unchecked_divisions(&kernel(body), Precision::F32);
+    assert!(faults("v[0] = v[1] / 2u + v[2] % TWO; v[3] = u32(f32(v[4]) / f32(v[5]));").is_empty());
+    assert_eq!(faults("v[0] = v[1] / v[2];").len(), 1);
+    assert_eq!(faults("var x = 7u; x %= v[2]; v[0] = x;").len(), 1);
 }
 
 #[test]

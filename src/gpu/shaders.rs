@@ -190,14 +190,17 @@ pub fn source(kernel: &str, precision: Precision, variant: Option<ElementVariant
 /// Parses and validates a kernel with naga, as the device would (no GPU needed), as composed
 /// for an adapter with the least workgroup memory.
 pub fn validate(kernel: &str, precision: Precision, variant: Option<ElementVariant>) -> Result<naga::Module, String> {
-    let text = source(kernel, precision, variant, LEAST_WORKGROUP_BYTES)?;
-    let module = naga::front::wgsl::parse_str(&text).map_err(|e| e.emit_to_string(&text))?;
+    validated(&source(kernel, precision, variant, LEAST_WORKGROUP_BYTES)?, precision).map(|(module, _)| module)
+}
+
+/// A module's text parsed and validated with naga at `precision`, with the types and uses
+/// naga worked out for each expression.
+pub fn validated(text: &str, precision: Precision) -> Result<(naga::Module, naga::valid::ModuleInfo), String> {
+    let module = naga::front::wgsl::parse_str(text).map_err(|e| e.emit_to_string(text))?;
     let capabilities = match precision {
         Precision::F64 => naga::valid::Capabilities::FLOAT64,
         Precision::F32 => naga::valid::Capabilities::empty(),
     };
-    naga::valid::Validator::new(naga::valid::ValidationFlags::all(), capabilities)
-        .validate(&module)
-        .map_err(|e| e.emit_to_string(&text))?;
-    Ok(module)
+    let info = naga::valid::Validator::new(naga::valid::ValidationFlags::all(), capabilities).validate(&module).map_err(|e| e.emit_to_string(text))?;
+    Ok((module, info))
 }
