@@ -85,12 +85,6 @@ fn store_point_matrix(slot: u32, at: u32, m: Mat3) {
     }
 }
 
-// The Voigt index of the pair (k, l), either order: the inverse of `voigt_i`, `voigt_j`.
-fn voigt_of(k: u32, l: u32) -> u32 {
-    let sum = k + l;
-    return select(select(select(5u, 4u, sum == 3u), 3u, sum == 1u), k, k == l);
-}
-
 // Index of entry (row, col), row <= col, of the packed triangle of a DIM² x DIM² matrix.
 fn packed_pair(row: u32, col: u32) -> u32 {
     return row * DIM * DIM - row * (row + 1u) / 2u + col;

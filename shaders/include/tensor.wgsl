@@ -33,6 +33,12 @@ fn voigt_j(r: u32) -> u32 {
     return select(select(2u, 1u, r == 3u), r, r < 3u);
 }
 
+// The Voigt entry of the index pair (k, l), either order: the inverse of `voigt_i`, `voigt_j`.
+fn voigt_of(k: u32, l: u32) -> u32 {
+    let sum = k + l;
+    return select(select(select(5u, 4u, sum == 3u), 3u, sum == 1u), k, k == l);
+}
+
 fn at(m: Mat3, i: u32, k: u32) -> real {
     return m[k][i];
 }
