@@ -364,7 +364,7 @@ impl GpuWorld {
                     super::copy_from_device(precision, &bytes[*u_at..u_at + n * real], call.u);
                     super::copy_from_device(precision, &bytes[*out_at..out_at + n * 2 * real], bytemuck::cast_slice_mut(call.dof_out));
                     // Summed in element order, as the energy pass's results are.
-                    call.strain_energy = Some(bytes[*energy_at..energy_at + elements * real].chunks_exact(real).map(|b| Real::from_ne_bytes(b.try_into().expect("f64 bytes"))).sum());
+                    call.strain_energy = Some(super::from_device(precision, &bytes[*energy_at..energy_at + elements * real]).iter().sum());
                 });
                 iterating = calls.iter().any(|call| call.outcome.status == NEWTON_ITERATING);
                 if let Some((r_at, states_at)) = contact_landing {
