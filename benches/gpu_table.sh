@@ -10,6 +10,9 @@
 #           packings-at-scale convention of benches/packings.sh), stack_3d, and the 54 243-dof
 #           Hex8 block of free_flight_3d;
 #   bench   the kernels' throughput and roofline (`bench --elements 1000000`);
+#   kernels the device's time by kernel (`--kernel-times`) of the largest falling packings of
+#           "scale" (2D and 3D), once each, plain `gpu` and the whole step on the device: where
+#           a device pass spends its time;
 #   sweeps  the contact sweeps' device/CPU ratio by size (uzawa_sweep: one large problem colour by
 #           colour; uzawa_solve: a packing's small problems, each solved whole), from which `--uzawa auto`'s
 #           thresholds (backend::AUTO_UZAWA_*) are read.
@@ -84,6 +87,22 @@ for r in $(seq "$runs_reps"); do
   run "grains_many" gpu grains_many "${grains[@]}" --set output.scene_every=10 --rounds gpu
   run "stack_3d" gpu stack_3d "${stack[@]}" --rounds gpu
 done
+
+if [[ $sections == *" kernels "* ]]; then
+  echo "kernels: the device's time by kernel" >&2
+  read -r n2 end2 <<<"${scale_2d[-1]}"
+  read -r n3 end3 <<<"${scale_3d[-1]}"
+  for flags in "" "--rounds gpu --uzawa gpu"; do
+    UZAWA_LABEL=" --kernel-times${flags:+ $flags}"
+    # shellcheck disable=SC2086 # the flags are words
+    run "grains_many, N = $n2, falling, t <= $end2" gpu grains_many --set packing.count="$n2" --set time.end="$end2" \
+      --set 'gravity=[0.0,-9.81]' --set output.scene_every=0 --kernel-times $flags
+    # shellcheck disable=SC2086
+    run "grains_3d, N = $n3, falling, t <= $end3" gpu grains_3d --set packing.count="$n3" --set time.end="$end3" \
+      --set 'gravity=[0.0,-9.81,0.0]' --set output.scene_every=0 --kernel-times $flags
+  done
+  UZAWA_LABEL=""
+fi
 
 scale_reps=$reps
 [[ $sections == *" scale "* ]] || scale_reps=0
@@ -165,6 +184,18 @@ for label in labels:
               f"| {med(gpu, lambda r: r.get('device_iterations', 0)):.0f} "
               f"| {cpu[0]['energy']['total']:.10g} / {gpu[0]['energy']['total']:.10g} |")
 print()
+for r in runs:
+    if not r.get("kernel_times"):
+        continue
+    kernels = r["kernel_times"]["kernels"]
+    total = sum(k["seconds"] for k in kernels)
+    print(f"{r['label']} ({r['mode']}): {r['wall_s']:.2f} s wall, {r['wall_by_phase']['elements']:.2f} s in device passes, "
+          f"{total:.3f} s of kernels, {r['device_submits']} submits\n")
+    print("| kernel | device time | share | dispatches | per dispatch |\n| --- | --- | --- | --- | --- |")
+    for k in kernels:
+        print(f"| {k['kernel']} | {k['seconds']:.4f} s | {100 * k['seconds'] / max(total, 1e-300):.1f} % | {k['dispatches']} "
+              f"| {1e3 * k['seconds'] / max(k['dispatches'], 1):.3f} ms |")
+    print()
 
 def rows(path):
     for line in open(path):

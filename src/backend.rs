@@ -110,6 +110,8 @@ pub struct BackendRequest {
     pub precision: Option<Precision>,
     pub uzawa: UzawaPlacement,
     pub rounds: RoundPlacement,
+    /// Time every dispatch on the device (`--kernel-times`), reported by kernel.
+    pub kernel_times: bool,
 }
 
 impl BackendRequest {
@@ -134,6 +136,9 @@ impl BackendRequest {
         if self.rounds != RoundPlacement::Auto {
             args.extend(["--rounds".to_string(), self.rounds.name().to_string()]);
         }
+        if self.kernel_times {
+            args.push("--kernel-times".to_string());
+        }
         args
     }
 }
@@ -146,6 +151,8 @@ pub enum BackendError {
     CpuPrecision,
     #[error("--adapter needs a GPU backend (auto or gpu)")]
     CpuAdapter,
+    #[error("--kernel-times needs a GPU backend")]
+    CpuKernelTimes,
     #[error("--uzawa gpu needs a GPU backend")]
     CpuUzawa,
     #[error("--rounds gpu needs a GPU backend")]
@@ -190,11 +197,14 @@ impl Backend {
     /// Resolves a request. A named adapter that is missing, or `gpu` without any adapter, is an
     /// error.
     pub fn resolve(request: &BackendRequest) -> Result<Resolved, BackendError> {
-        let on_gpu = |gpu: Gpu| {
+        let on_gpu = |mut gpu: Gpu| -> Result<Resolved, BackendError> {
+            if request.kernel_times {
+                gpu.start_clock()?;
+            }
             let notice = gpu.adapter.software().then(|| {
                 format!("no hardware GPU: the GPU kernels run on the software adapter {} (slow; use --backend cpu for speed)", gpu.adapter.name)
             });
-            Resolved { backend: Backend::Gpu(Arc::new(gpu), request.uzawa, request.rounds), notice, reason: None }
+            Ok(Resolved { backend: Backend::Gpu(Arc::new(gpu), request.uzawa, request.rounds), notice, reason: None })
         };
         let cpu = |reason: String| Ok(Resolved { backend: Backend::Cpu, notice: None, reason: Some(format!("backend auto: {reason}; running on the CPU")) });
         match request.choice {
@@ -202,10 +212,11 @@ impl Backend {
             BackendChoice::Cpu if request.adapter.is_some() => Err(BackendError::CpuAdapter),
             BackendChoice::Cpu if request.uzawa == UzawaPlacement::Gpu => Err(BackendError::CpuUzawa),
             BackendChoice::Cpu if request.rounds == RoundPlacement::Gpu => Err(BackendError::CpuRounds),
+            BackendChoice::Cpu if request.kernel_times => Err(BackendError::CpuKernelTimes),
             BackendChoice::Cpu => Ok(Resolved { backend: Backend::Cpu, notice: None, reason: None }),
-            BackendChoice::Gpu => Ok(on_gpu(gpu::open(request.adapter.as_deref(), request.precision)?)),
+            BackendChoice::Gpu => on_gpu(gpu::open(request.adapter.as_deref(), request.precision)?),
             // An adapter named by the user is taken whatever it is.
-            BackendChoice::Auto if request.adapter.is_some() => Ok(on_gpu(gpu::open(request.adapter.as_deref(), request.precision)?)),
+            BackendChoice::Auto if request.adapter.is_some() => on_gpu(gpu::open(request.adapter.as_deref(), request.precision)?),
             BackendChoice::Auto => match gpu::hardware_adapter() {
                 None => cpu("no hardware GPU".into()),
                 Some(report) => cpu(format!("the GPU {} {AUTO_REASON_GPU}", report.name)),
@@ -234,6 +245,14 @@ impl Backend {
         match self {
             Backend::Cpu => None,
             Backend::Gpu(gpu, ..) => Some(gpu.adapter.line()),
+        }
+    }
+
+    /// The device's time by kernel so far, when `--kernel-times` asked for it.
+    pub fn kernel_times(&self) -> Option<crate::gpu::clock::KernelTimes> {
+        match self {
+            Backend::Cpu => None,
+            Backend::Gpu(gpu, ..) => gpu.kernel_times(),
         }
     }
 

@@ -269,11 +269,15 @@ struct BackendArgs {
     /// every round.
     #[arg(long, default_value = "auto", value_parser = parse_rounds)]
     rounds: RoundPlacement,
+    /// With the kernels on a GPU, time every dispatch on the device and report the time by
+    /// kernel (`kernel_times` of the summary); the timestamps cost a little device time.
+    #[arg(long)]
+    kernel_times: bool,
 }
 
 impl From<BackendArgs> for BackendRequest {
     fn from(a: BackendArgs) -> Self {
-        BackendRequest { choice: a.backend, adapter: a.adapter, precision: a.precision, uzawa: a.uzawa, rounds: a.rounds }
+        BackendRequest { choice: a.backend, adapter: a.adapter, precision: a.precision, uzawa: a.uzawa, rounds: a.rounds, kernel_times: a.kernel_times }
     }
 }
 
@@ -347,6 +351,16 @@ fn print_summary(s: &RunSummary) {
     );
     if s.energy_gain_steps > 0 {
         eprintln!("warning: {} steps created energy (largest {:.3e} of the energy scale); see /log", s.energy_gain_steps, s.max_energy_gain);
+    }
+    if let Some(times) = &s.kernel_times {
+        let total: f64 = times.kernels.iter().map(|k| k.seconds).sum();
+        eprintln!("device time by kernel ({total:.4} s in all):");
+        for k in &times.kernels {
+            eprintln!("  {:<34} {:>10.4} s {:>5.1} % {:>9} dispatches", k.kernel, k.seconds, 100.0 * k.seconds / total.max(f64::MIN_POSITIVE), k.dispatches);
+        }
+        if times.untimed_dispatches > 0 {
+            eprintln!("  and {} dispatches untimed (submissions longer than the clock's timestamps)", times.untimed_dispatches);
+        }
     }
     if s.max_overlap_ratio > 0.01 {
         eprintln!("warning: a node ended {:.3e} inside another body or an obstacle ({:.1} % of its element); see /contact.max_overlap", s.max_overlap, 100.0 * s.max_overlap_ratio);

@@ -127,6 +127,8 @@ pub struct RunSummary {
     pub bytes_moved: u64,
     /// GPU queue submits over the run (one per device pass over all bodies).
     pub device_submits: u64,
+    /// The device's time by kernel over the run, with `--kernel-times` (else null).
+    pub kernel_times: Option<crate::gpu::clock::KernelTimes>,
     /// Energies at the end, with the dissipation and the energy balance error.
     pub energy: crate::solver::Energies,
     pub output: PathBuf,
@@ -544,6 +546,7 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
         wall_by_phase: totals.wall,
         bytes_moved: totals.bytes_moved,
         device_submits: totals.device_submits,
+        kernel_times: backend.kernel_times(),
         energy: sim.energies(),
         output: out.to_path_buf(),
     }

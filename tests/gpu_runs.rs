@@ -505,3 +505,45 @@ fn groups_in_contact_take_their_newton_increments_on_the_device() {
         assert!((f_device - f_cpu).abs() <= 0.02 * f_cpu + 1.0, "{scene}: {f_device} factorisations against {f_cpu}");
     }
 }
+
+#[test]
+fn kernel_times_name_every_kernel_a_run_dispatches_and_change_nothing_else() {
+    // `--kernel-times` on grains pressed by the wall with every round and the sweeps on the
+    // device: each kernel the run dispatches has its time, the same run untimed takes the same
+    // submits, iterations and energies to the bit, and the CPU backend refuses the option.
+    let test = "kernel_times_name_every_kernel_a_run_dispatches_and_change_nothing_else";
+    if !gpu_available(test) {
+        return;
+    }
+    let path = scene_path("grains_many");
+    let sets = ["packing.count=30", "time.end=0.1", "output.scene_every=0", "contact.acceleration=\"none\""];
+    let with = |kernel_times: bool| {
+        let mut o = every_round_on_the_gpu();
+        o.backend.uzawa = UzawaPlacement::Gpu;
+        o.backend.kernel_times = kernel_times;
+        run_with(&path, &sets, &format!("{test}_{kernel_times}"), &o)
+    };
+    let (timed, untimed) = (with(true), with(false));
+    let summary = |log: &Log| log.topics["/summary"][0].clone();
+    let (t, u) = (summary(&timed), summary(&untimed));
+    for field in ["device_submits", "newton_iterations", "device_iterations", "uzawa_iterations", "bytes_moved"] {
+        assert_eq!(t[field], u[field], "{field}");
+    }
+    assert_eq!(t["energy"], u["energy"]);
+    assert!(u["kernel_times"].is_null(), "an untimed run reports no kernel times");
+    let kernels = t["kernel_times"]["kernels"].as_array().expect("kernel times");
+    let names: Vec<&str> = kernels.iter().map(|k| k["kernel"].as_str().unwrap()).collect();
+    eprintln!("{test}: {names:?}");
+    for expected in ["element_force_tangent", "element_force_tangent/forces", "assemble_residual", "assemble_csr", "newton_update", "newton_judge", "newton_compact", "newton_contact/prepare", "uzawa_solve"] {
+        assert!(names.contains(&expected), "{expected} timed: {names:?}");
+    }
+    let seconds: Vec<f64> = kernels.iter().map(|k| k["seconds"].as_f64().unwrap()).collect();
+    assert!(seconds.iter().all(|s| s.is_finite() && *s >= 0.0) && seconds.iter().sum::<f64>() > 0.0, "{seconds:?}");
+    assert!(seconds.windows(2).all(|w| w[0] >= w[1]), "the longest first: {seconds:?}");
+    assert!(kernels.iter().all(|k| k["dispatches"].as_u64().unwrap() > 0));
+    assert_eq!(t["kernel_times"]["untimed_dispatches"], 0);
+    let mut cpu = options(BackendChoice::Cpu, None);
+    cpu.backend.kernel_times = true;
+    let refused = bifirst::backend::Backend::resolve(&cpu.backend).err().expect("the CPU backend has no kernels to time");
+    assert!(refused.to_string().contains("--kernel-times"), "{refused}");
+}

@@ -46,7 +46,7 @@ fn run_log_has_every_channel_of_the_contract() {
             "bifirst.Summary",
             &[
                 "scene", "status", "message", "backend", "precision", "adapter", "steps", "last_step", "t_end", "cutbacks", "newton_iterations", "uzawa_iterations",
-                "bodies_iterated", "device_iterations", "factorizations", "max_penetration", "max_overlap", "max_overlap_ratio", "energy_gain_steps", "max_energy_gain", "overlap_retries", "energy_retries", "kept_beyond_bounds", "energy_created", "wall_s", "wall_by_phase", "bytes_moved", "device_submits", "energy", "output",
+                "bodies_iterated", "device_iterations", "factorizations", "max_penetration", "max_overlap", "max_overlap_ratio", "energy_gain_steps", "max_energy_gain", "overlap_retries", "energy_retries", "kept_beyond_bounds", "energy_created", "wall_s", "wall_by_phase", "bytes_moved", "device_submits", "kernel_times", "energy", "output",
             ],
             1,
         ),

@@ -13,6 +13,8 @@ pub enum GpuError {
     NoF64 { adapter: String },
     #[error("cannot open a device on `{adapter}`: {message}")]
     Device { adapter: String, message: String },
+    #[error("adapter `{adapter}` cannot time kernels (no timestamp queries inside compute passes); leave out --kernel-times")]
+    NoClock { adapter: String },
     #[error("kernel `{kernel}`: {message}")]
     Kernel { kernel: String, message: String },
 }
@@ -56,6 +58,10 @@ pub struct Gpu {
     pub queue: wgpu::Queue,
     pub adapter: AdapterReport,
     pub precision: Precision,
+    /// Timestamps around every dispatch, when the run asked for kernel times.
+    pub clock: Option<super::clock::KernelClock>,
+    /// Whether the device was opened with what the clock needs.
+    clock_features: bool,
 }
 
 fn adapters_of(backends: Backends) -> Vec<Adapter> {
@@ -122,11 +128,15 @@ fn open_adapter(adapter: Adapter, precision: Option<Precision>) -> Result<Gpu, G
         None if report.f64 => Precision::F64,
         None => Precision::F32,
     };
-    let required_features = if precision == Precision::F64 { wgpu::Features::SHADER_F64 } else { wgpu::Features::empty() };
+    let clock_features = adapter.features().contains(super::clock::FEATURES);
+    let mut required_features = if precision == Precision::F64 { wgpu::Features::SHADER_F64 } else { wgpu::Features::empty() };
+    if clock_features {
+        required_features |= super::clock::FEATURES;
+    }
     let descriptor = wgpu::DeviceDescriptor { label: Some("bifirst"), required_features, required_limits: adapter.limits(), ..Default::default() };
     let (device, queue) =
         pollster::block_on(adapter.request_device(&descriptor)).map_err(|e| GpuError::Device { adapter: report.name.clone(), message: e.to_string() })?;
-    Ok(Gpu { device, queue, adapter: report, precision })
+    Ok(Gpu { device, queue, adapter: report, precision, clock: None, clock_features })
 }
 
 /// The checks wgpu would add to our kernels, all left out: every loop counts up to a bound and
@@ -138,6 +148,45 @@ fn open_adapter(adapter: Adapter, precision: Option<Precision>) -> Result<Gpu, G
 const SHADER_CHECKS: wgpu::ShaderRuntimeChecks = wgpu::ShaderRuntimeChecks::unchecked();
 
 impl Gpu {
+    /// Starts timing every dispatch ([`super::clock::KernelClock`]).
+    pub fn start_clock(&mut self) -> Result<(), GpuError> {
+        if !self.clock_features {
+            return Err(GpuError::NoClock { adapter: self.adapter.name.clone() });
+        }
+        self.clock = Some(super::clock::KernelClock::new(&self.device, &self.queue));
+        Ok(())
+    }
+
+    /// Records `dispatch`, of `kernel`'s entry point `entry`, into `pass`, between timestamps
+    /// when the clock runs.
+    pub fn dispatch(&self, pass: &mut wgpu::ComputePass, (kernel, entry): (&'static str, &'static str), dispatch: impl FnOnce(&mut wgpu::ComputePass)) {
+        match &self.clock {
+            Some(clock) => clock.time(pass, (kernel, entry), dispatch),
+            None => dispatch(pass),
+        }
+    }
+
+    /// Submits `encoder`'s commands; when the clock runs, with its timestamps, which it takes
+    /// once the submission has finished.
+    pub fn submit(&self, mut encoder: wgpu::CommandEncoder) -> Result<(), GpuError> {
+        match &self.clock {
+            Some(clock) => {
+                clock.resolve(&mut encoder);
+                self.queue.submit([encoder.finish()]);
+                clock.collect(&self.device)
+            }
+            None => {
+                self.queue.submit([encoder.finish()]);
+                Ok(())
+            }
+        }
+    }
+
+    /// The device's time by kernel so far, when the clock runs.
+    pub fn kernel_times(&self) -> Option<super::clock::KernelTimes> {
+        self.clock.as_ref().map(super::clock::KernelClock::times)
+    }
+
     /// A bind group of `pipeline`'s group 0: each `(binding, buffer)` bound whole.
     pub fn bind(&self, label: Option<&str>, pipeline: &wgpu::ComputePipeline, bound: &[(u32, &wgpu::Buffer)]) -> wgpu::BindGroup {
         let entries: Vec<wgpu::BindGroupEntry> = bound.iter().map(|&(binding, b)| wgpu::BindGroupEntry { binding, resource: b.as_entire_binding() }).collect();

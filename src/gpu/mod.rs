@@ -4,6 +4,7 @@
 //! (`uzawa_sweep`). Every kernel has a CPU twin of the same name
 //! in [`crate::cpu`], which is the test oracle.
 
+pub mod clock;
 pub mod context;
 pub mod peak;
 pub mod shaders;

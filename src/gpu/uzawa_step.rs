@@ -88,12 +88,14 @@ impl UzawaStepKernel {
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(KERNEL) });
         {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(KERNEL), timestamp_writes: None });
-            pass.set_pipeline(&self.pipeline);
-            pass.set_bind_group(0, &bind_group, &[]);
-            pass.dispatch_workgroups(x, y, 1);
+            gpu.dispatch(&mut pass, (KERNEL, "main"), |pass| {
+                pass.set_pipeline(&self.pipeline);
+                pass.set_bind_group(0, &bind_group, &[]);
+                pass.dispatch_workgroups(x, y, 1);
+            });
         }
         encoder.copy_buffer_to_buffer(&storage, 0, &staging, 0, bytes.len() as u64);
-        gpu.queue.submit([encoder.finish()]);
+        gpu.submit(encoder)?;
         let out = gpu.read(KERNEL, &staging)?;
         match gpu.precision {
             // Copied into typed vectors: the mapped bytes need not be aligned for f64.

@@ -593,9 +593,11 @@ impl UzawaSweeps {
     /// Records one dispatch of `uzawa_solve` over `problems` staged problems.
     pub(crate) fn record_solve(&self, pass: &mut wgpu::ComputePass, problems: usize) {
         let (x, y) = super::dispatch_rows(problems);
-        pass.set_pipeline(&self.solve);
-        pass.set_bind_group(0, &self.buffers().solve_group, &[]);
-        pass.dispatch_workgroups(x, y, 1);
+        self.gpu.dispatch(pass, (SOLVE, "main"), |pass| {
+            pass.set_pipeline(&self.solve);
+            pass.set_bind_group(0, &self.buffers().solve_group, &[]);
+            pass.dispatch_workgroups(x, y, 1);
+        });
     }
 
     /// Bytes moved since the last call.
@@ -620,28 +622,35 @@ impl UzawaSweeps {
             let sweeps = if whole { self.whole_sweeps } else { chunk.min(most - swept) };
             {
                 let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(KERNEL), timestamp_writes: None });
+                let gpu = &self.gpu;
                 if whole {
-                    pass.set_pipeline(&self.solve);
-                    pass.set_bind_group(0, &b.solve_group, &[]);
-                    pass.dispatch_workgroups(judge_x, judge_y, 1);
+                    gpu.dispatch(&mut pass, (SOLVE, "main"), |pass| {
+                        pass.set_pipeline(&self.solve);
+                        pass.set_bind_group(0, &b.solve_group, &[]);
+                        pass.dispatch_workgroups(judge_x, judge_y, 1);
+                    });
                 } else {
                     // Colour by colour: each sweep's dispatches, then its judgement.
                     for _ in 0..sweeps {
-                        pass.set_pipeline(&self.pipeline);
                         for (range, group) in m.ranges.iter().zip(&b.bind_groups) {
                             let (x, y) = super::dispatch_rows(range.count.div_ceil(WORKGROUP) as usize);
-                            pass.set_bind_group(0, group, &[]);
-                            pass.dispatch_workgroups(x, y, 1);
+                            gpu.dispatch(&mut pass, (KERNEL, "main"), |pass| {
+                                pass.set_pipeline(&self.pipeline);
+                                pass.set_bind_group(0, group, &[]);
+                                pass.dispatch_workgroups(x, y, 1);
+                            });
                         }
-                        pass.set_pipeline(&self.judge);
-                        pass.set_bind_group(0, &b.judge_group, &[]);
-                        pass.dispatch_workgroups(judge_x, judge_y, 1);
+                        gpu.dispatch(&mut pass, (JUDGE, "main"), |pass| {
+                            pass.set_pipeline(&self.judge);
+                            pass.set_bind_group(0, &b.judge_group, &[]);
+                            pass.dispatch_workgroups(judge_x, judge_y, 1);
+                        });
                     }
                 }
             }
             encoder.copy_buffer_to_buffer(&b.r, 0, &b.staging, 0, r_bytes);
             encoder.copy_buffer_to_buffer(&b.states, 0, &b.staging, r_bytes, state_bytes);
-            self.gpu.queue.submit([encoder.finish()]);
+            self.gpu.submit(encoder)?;
             self.submits += 1;
             let bytes = self.gpu.read_range(KERNEL, &b.staging, r_bytes + state_bytes)?;
             self.traffic.down += bytes.len() as u64;

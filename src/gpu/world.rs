@@ -91,57 +91,61 @@ pub struct Evaluation<'a> {
     pub failure: Option<ElementFailure>,
 }
 
-/// A pipeline with its bind group.
+/// A pipeline with its bind group, and the kernel and entry point it runs (the clock's name
+/// for its dispatches).
 struct Pass {
     pipeline: ComputePipeline,
     bind_group: BindGroup,
+    entry: (&'static str, &'static str),
 }
 
 impl Pass {
-    fn new(gpu: &Gpu, kernel: &str, entry: &str, variant: Option<ElementVariant>, buffers: &[&Buffer]) -> Result<Self, GpuError> {
-        Ok(Self::bound(gpu, gpu.pipeline_at(kernel, entry, variant)?, buffers))
+    fn new(gpu: &Gpu, kernel: &'static str, entry: &'static str, variant: Option<ElementVariant>, buffers: &[&Buffer]) -> Result<Self, GpuError> {
+        Ok(Self::bound(gpu, gpu.pipeline_at(kernel, entry, variant)?, (kernel, entry), buffers))
     }
 
-    fn bound(gpu: &Gpu, pipeline: ComputePipeline, buffers: &[&Buffer]) -> Self {
+    fn bound(gpu: &Gpu, pipeline: ComputePipeline, entry: (&'static str, &'static str), buffers: &[&Buffer]) -> Self {
         let bind_group = gpu.bind(None, &pipeline, &buffers.iter().enumerate().map(|(i, &b)| (i as u32, b)).collect::<Vec<_>>());
-        Self { pipeline, bind_group }
+        Self { pipeline, bind_group, entry }
     }
 
     /// The same pipeline bound to other buffers.
     fn rebound(&self, gpu: &Gpu, buffers: &[&Buffer]) -> Self {
-        Self::bound(gpu, self.pipeline.clone(), buffers)
+        Self::bound(gpu, self.pipeline.clone(), self.entry, buffers)
     }
 
     /// One z-slice per active member, enough workgroups of `per_group` items for `max_items`.
-    fn record(&self, encoder: &mut wgpu::CommandEncoder, per_group: usize, max_items: usize, active: usize) {
+    fn record(&self, gpu: &Gpu, encoder: &mut wgpu::CommandEncoder, per_group: usize, max_items: usize, active: usize) {
         let chunks = max_items.div_ceil(per_group);
         if chunks == 0 || active == 0 {
             return;
         }
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes: None });
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &self.bind_group, &[]);
         let (x, y) = super::dispatch_rows(chunks);
-        pass.dispatch_workgroups(x, y, active as u32);
+        self.dispatch_xyz(gpu, &mut pass, [x, y, active as u32]);
     }
 
     /// A dispatch whose workgroup counts the device wrote (`offset` into `arguments`).
-    fn dispatch_indirect(&self, pass: &mut wgpu::ComputePass, arguments: &Buffer, offset: u64) {
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &self.bind_group, &[]);
-        pass.dispatch_workgroups_indirect(arguments, offset);
+    fn dispatch_indirect(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass, arguments: &Buffer, offset: u64) {
+        gpu.dispatch(pass, self.entry, |pass| {
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &self.bind_group, &[]);
+            pass.dispatch_workgroups_indirect(arguments, offset);
+        });
     }
 
     /// `groups` workgroups in a pass being recorded.
-    fn dispatch(&self, pass: &mut wgpu::ComputePass, groups: u32) {
-        self.dispatch_xyz(pass, [groups, 1, 1]);
+    fn dispatch(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass, groups: u32) {
+        self.dispatch_xyz(gpu, pass, [groups, 1, 1]);
     }
 
     /// `x * y * z` workgroups in a pass being recorded.
-    fn dispatch_xyz(&self, pass: &mut wgpu::ComputePass, [x, y, z]: [u32; 3]) {
-        pass.set_pipeline(&self.pipeline);
-        pass.set_bind_group(0, &self.bind_group, &[]);
-        pass.dispatch_workgroups(x, y, z);
+    fn dispatch_xyz(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass, [x, y, z]: [u32; 3]) {
+        gpu.dispatch(pass, self.entry, |pass| {
+            pass.set_pipeline(&self.pipeline);
+            pass.set_bind_group(0, &self.bind_group, &[]);
+            pass.dispatch_workgroups(x, y, z);
+        });
     }
 }
 
@@ -574,12 +578,12 @@ impl GpuWorld {
             }
             let b = &self.batches[batch];
             let extent = |mode: u32, f: fn(&MemberRange) -> u32| active.iter().filter(|a| a.mode == mode || mode == 0).map(|a| f(&b.members[a.member as usize]) as usize).max().unwrap_or(0);
-            b.forces.record(encoder, WORKGROUP, extent(MODE_FORCES, |m| m.elements), active.len());
+            b.forces.record(&self.gpu, encoder, WORKGROUP, extent(MODE_FORCES, |m| m.elements), active.len());
             if let Deferred::Ready(tangent) = &b.tangent {
-                tangent.record(encoder, b.tangent_elements_per_group, extent(MODE_TANGENT, |m| m.elements), active.len());
+                tangent.record(&self.gpu, encoder, b.tangent_elements_per_group, extent(MODE_TANGENT, |m| m.elements), active.len());
             }
-            b.residual.record(encoder, WORKGROUP, extent(0, |m| m.dofs), active.len());
-            b.csr.record(encoder, WORKGROUP, extent(MODE_TANGENT, |m| m.nonzeros), active.len());
+            b.residual.record(&self.gpu, encoder, WORKGROUP, extent(0, |m| m.dofs), active.len());
+            b.csr.record(&self.gpu, encoder, WORKGROUP, extent(MODE_TANGENT, |m| m.nonzeros), active.len());
             let flags = readback.queue(batch, Source::Failure, 0..(8 * b.members.len()) as u64);
             for &(i, m) in &mine {
                 landing[i][0] = flags as usize + 8 * m;
@@ -617,7 +621,7 @@ impl GpuWorld {
             self.upload(&active_buffer, 0, bytemuck::cast_slice(&active));
             let b = &self.batches[batch];
             let most = members.iter().map(|&m| b.members[m].elements as usize).max().unwrap_or(0);
-            b.element_energy.record(&mut encoder, WORKGROUP, most, active.len());
+            b.element_energy.record(&self.gpu, &mut encoder, WORKGROUP, most, active.len());
             let span = |m: usize| b.members[m].element_start as u64 * real..(b.members[m].element_start + b.members[m].elements) as u64 * real;
             for ((i, m), at) in mine.into_iter().zip(&members).zip(readback.queue_runs(batch, Source::Energy, &members, &span)) {
                 landing[i] = (at, b.members[*m].elements as usize);
@@ -647,16 +651,16 @@ impl GpuWorld {
             match kernel {
                 WorldKernel::ForceTangent => {
                     if let Deferred::Ready(tangent) = &b.tangent {
-                        tangent.record(&mut encoder, b.tangent_elements_per_group, most(|m| m.elements), all);
+                        tangent.record(&self.gpu, &mut encoder, b.tangent_elements_per_group, most(|m| m.elements), all);
                     }
                 }
                 WorldKernel::Assembly => {
-                    b.residual.record(&mut encoder, WORKGROUP, most(|m| m.dofs), all);
-                    b.csr.record(&mut encoder, WORKGROUP, most(|m| m.nonzeros), all);
+                    b.residual.record(&self.gpu, &mut encoder, WORKGROUP, most(|m| m.dofs), all);
+                    b.csr.record(&self.gpu, &mut encoder, WORKGROUP, most(|m| m.nonzeros), all);
                 }
             }
         }
-        self.gpu.queue.submit([encoder.finish()]);
+        self.gpu.submit(encoder)?;
         self.submits += 1;
         self.gpu.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Kernel { kernel: "replay".into(), message: e.to_string() })?;
         Ok(())
@@ -673,7 +677,7 @@ impl GpuWorld {
         let staging = self.gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some("element results"), size: size.max(8), usage: BufferUsages::MAP_READ | BufferUsages::COPY_DST, mapped_at_creation: false });
         let mut encoder = self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("element results") });
         encoder.copy_buffer_to_buffer(&self.batches[b].element_out, start, &staging, 0, size);
-        self.gpu.queue.submit([encoder.finish()]);
+        self.gpu.submit(encoder)?;
         self.submits += 1;
         self.traffic.down += size;
         Ok(from_device(self.gpu.precision, &self.gpu.read_range("element_force_tangent", &staging, size)?))
@@ -715,7 +719,7 @@ impl GpuWorld {
             encoder.copy_buffer_to_buffer(source, *offset, target, *at, *bytes);
         }
         let submitted = Instant::now();
-        self.gpu.queue.submit([encoder.finish()]);
+        self.gpu.submit(encoder)?;
         self.submits += 1;
         let end = readback.end;
         let mut mapped = submitted;

@@ -169,25 +169,27 @@ impl ContactPasses {
         Self { prepare, forces, judge, states, problems: l.groups.len() as u32 }
     }
 
-    fn dispatch(&self, pass: &mut wgpu::ComputePass, pipeline: &ComputePipeline, group: &BindGroup, workgroups: usize) {
+    fn dispatch(gpu: &Gpu, pass: &mut wgpu::ComputePass, entry: &'static str, pipeline: &ComputePipeline, group: &BindGroup, workgroups: usize) {
         let (x, y) = crate::gpu::dispatch_rows(workgroups);
-        pass.set_pipeline(pipeline);
-        pass.set_bind_group(0, group, &[]);
-        pass.dispatch_workgroups(x, y, 1);
+        gpu.dispatch(pass, ("newton_contact", entry), |pass| {
+            pass.set_pipeline(pipeline);
+            pass.set_bind_group(0, group, &[]);
+            pass.dispatch_workgroups(x, y, 1);
+        });
     }
 
     /// `prepare`, one workgroup per group.
-    pub(super) fn record_prepare(&self, pass: &mut wgpu::ComputePass, p: &ContactPipelines) {
-        self.dispatch(pass, &p.prepare, &self.prepare, self.problems as usize);
+    pub(super) fn record_prepare(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass, p: &ContactPipelines) {
+        Self::dispatch(gpu, pass, "prepare", &p.prepare, &self.prepare, self.problems as usize);
     }
 
     /// `forces`, one workgroup per group.
-    pub(super) fn record_forces(&self, pass: &mut wgpu::ComputePass, p: &ContactPipelines) {
-        self.dispatch(pass, &p.forces, &self.forces, self.problems as usize);
+    pub(super) fn record_forces(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass, p: &ContactPipelines) {
+        Self::dispatch(gpu, pass, "forces", &p.forces, &self.forces, self.problems as usize);
     }
 
     /// `judge`, one invocation per group.
-    pub(super) fn record_judge(&self, pass: &mut wgpu::ComputePass, p: &ContactPipelines) {
-        self.dispatch(pass, &p.judge, &self.judge, (self.problems as usize).div_ceil(crate::gpu::types::NEWTON_WORKGROUP));
+    pub(super) fn record_judge(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass, p: &ContactPipelines) {
+        Self::dispatch(gpu, pass, "judge", &p.judge, &self.judge, (self.problems as usize).div_ceil(crate::gpu::types::NEWTON_WORKGROUP));
     }
 }

@@ -165,9 +165,9 @@ impl NewtonBuffers {
         let mut energy_buffers = b.energy_buffers.clone();
         energy_buffers[ENERGY_JOBS] = call.clone();
         let energy = b.element_energy.rebound(gpu, &energy_buffers.iter().collect::<Vec<_>>());
-        let update = Pass::bound(gpu, pipelines.update.clone(), &[&inverse, &free, &newton, &state, &b.dof_out, &b.u, &b.member_buffer, &jobs, &contact]);
-        let judge = Pass::bound(gpu, pipelines.judge.clone(), &[&free, &newton, &state, &b.dof_out, &b.u, &u_start, &b.step, coefficients, &b.failure, &b.member_buffer, &jobs, &contact]);
-        let compact = Pass::bound(gpu, pipelines.compact.clone(), &[&call, &state, &jobs, &dispatch]);
+        let update = Pass::bound(gpu, pipelines.update.clone(), ("newton_update", "main"), &[&inverse, &free, &newton, &state, &b.dof_out, &b.u, &b.member_buffer, &jobs, &contact]);
+        let judge = Pass::bound(gpu, pipelines.judge.clone(), ("newton_judge", "main"), &[&free, &newton, &state, &b.dof_out, &b.u, &u_start, &b.step, coefficients, &b.failure, &b.member_buffer, &jobs, &contact]);
+        let compact = Pass::bound(gpu, pipelines.compact.clone(), ("newton_compact", "main"), &[&call, &state, &jobs, &dispatch]);
         Ok(Self {
             inverse,
             free,
@@ -289,10 +289,10 @@ impl GpuWorld {
                 if first && evaluate_first {
                     for (batch, _, _) in &work {
                         let n = self.batches[*batch].newton.as_ref().expect("staged");
-                        n.forces.dispatch_indirect(&mut pass, &n.dispatch, 12);
-                        n.residual.dispatch_indirect(&mut pass, &n.dispatch, 24);
-                        n.judge.dispatch_indirect(&mut pass, &n.dispatch, 36);
-                        n.compact.dispatch(&mut pass, 1);
+                        n.forces.dispatch_indirect(&self.gpu, &mut pass, &n.dispatch, 12);
+                        n.residual.dispatch_indirect(&self.gpu, &mut pass, &n.dispatch, 24);
+                        n.judge.dispatch_indirect(&self.gpu, &mut pass, &n.dispatch, 36);
+                        n.compact.dispatch(&self.gpu, &mut pass, 1);
                     }
                 }
                 for _ in 0..iterations {
@@ -302,22 +302,22 @@ impl GpuWorld {
                         let mine = contact.as_ref().filter(|(at, _)| at == batch).map(|(_, passes)| passes);
                         let pipelines = self.contact_pipelines.as_ref();
                         if let (Some(c), Some(p)) = (mine, pipelines) {
-                            c.record_prepare(&mut pass, p);
+                            c.record_prepare(&self.gpu, &mut pass, p);
                             self.contact.as_ref().expect("staged").record_solve(&mut pass, contacts.len());
-                            c.record_forces(&mut pass, p);
+                            c.record_forces(&self.gpu, &mut pass, p);
                         }
-                        n.update.dispatch_indirect(&mut pass, &n.dispatch, 0);
-                        n.forces.dispatch_indirect(&mut pass, &n.dispatch, 12);
-                        n.residual.dispatch_indirect(&mut pass, &n.dispatch, 24);
-                        n.judge.dispatch_indirect(&mut pass, &n.dispatch, 36);
+                        n.update.dispatch_indirect(&self.gpu, &mut pass, &n.dispatch, 0);
+                        n.forces.dispatch_indirect(&self.gpu, &mut pass, &n.dispatch, 12);
+                        n.residual.dispatch_indirect(&self.gpu, &mut pass, &n.dispatch, 24);
+                        n.judge.dispatch_indirect(&self.gpu, &mut pass, &n.dispatch, 36);
                         if let (Some(c), Some(p)) = (mine, pipelines) {
-                            c.record_judge(&mut pass, p);
+                            c.record_judge(&self.gpu, &mut pass, p);
                         }
-                        n.compact.dispatch(&mut pass, 1);
+                        n.compact.dispatch(&self.gpu, &mut pass, 1);
                     }
                 }
                 for (batch, _, energy) in &work {
-                    self.batches[*batch].newton.as_ref().expect("staged").energy.dispatch_xyz(&mut pass, *energy);
+                    self.batches[*batch].newton.as_ref().expect("staged").energy.dispatch_xyz(&self.gpu, &mut pass, *energy);
                 }
             }
             // Per call: where its state, failure flags, displacements, residuals and element
