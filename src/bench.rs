@@ -107,6 +107,11 @@ impl BenchCase {
         cpu::dispatch_element_force_tangent(&self.model, &self.mesh, &self.geometry, self.formulation, None, &self.u, true, results).expect("valid deformation");
     }
 
+    /// The CPU twin of the `forces` entry point: each element's forces, no tangent.
+    pub fn cpu_forces(&self, results: &mut [Real]) {
+        cpu::dispatch_element_force_tangent(&self.model, &self.mesh, &self.geometry, self.formulation, None, &self.u, false, results).expect("valid deformation");
+    }
+
     pub fn results_len(&self) -> usize {
         self.elements() * element_out_stride(self.pattern.element_dofs)
     }
@@ -219,6 +224,9 @@ fn blockwise_error(a: &[Real], b: &[Real], stride: usize) -> f64 {
 
 // The element rows' kernel names: `--kernel` matches a part of these, the whole name included.
 const FORCE_TANGENT: &str = "element_force_tangent";
+/// The kernel's `forces` entry point alone: what a Newton iteration that keeps its
+/// factorisation evaluates.
+const FORCES: &str = "element_force_tangent/forces";
 const ASSEMBLY: &str = "assemble_csr+assemble_residual";
 const EVALUATE: &str = "evaluate (all kernels, transfers)";
 const ENERGY: &str = "element_energy";
@@ -260,7 +268,7 @@ fn element_energies(case: &BenchCase) -> Vec<Real> {
 /// Runs the benchmark; `gpus` are the devices to compare with the CPU (f64 and/or f32).
 pub fn run_bench(options: &BenchOptions, gpus: &[Arc<Gpu>], mut row: impl FnMut(BenchRow)) -> Result<(), GpuError> {
     let peaks = peak_rows(options, gpus, &mut row)?;
-    let element_kernels = [FORCE_TANGENT, ASSEMBLY, EVALUATE, ENERGY].iter().any(|k| wanted(options, k));
+    let element_kernels = [FORCE_TANGENT, FORCES, ASSEMBLY, EVALUATE, ENERGY].iter().any(|k| wanted(options, k));
     let matches = |filter: &Option<String>, name: &str| filter.as_ref().is_none_or(|f| name.contains(f.as_str()));
     for (kind, formulation) in bench_elements().into_iter().filter(|_| element_kernels) {
         let label = element_label(kind, formulation);
@@ -290,6 +298,11 @@ pub fn run_bench(options: &BenchOptions, gpus: &[Arc<Gpu>], mut row: impl FnMut(
             let t = time_calls(options.min_time, || reference.energy = element_energies(&case).iter().sum());
             if wanted(options, ENERGY) {
                 row(make(ENERGY, "cpu f64".into(), t, 0, 0.0));
+            }
+            if wanted(options, FORCES) {
+                let mut forces = vec![0.0; case.results_len()];
+                let t = time_calls(options.min_time, || case.cpu_forces(&mut forces));
+                row(make(FORCES, "cpu f64".into(), t, 0, 0.0));
             }
             for (gpu, peaks) in gpus.iter().zip(&peaks) {
                 let backend = format!("gpu {}", gpu.precision.name());
@@ -358,6 +371,19 @@ pub fn run_bench(options: &BenchOptions, gpus: &[Arc<Gpu>], mut row: impl FnMut(
                     let error = (energy - reference.energy).abs() / reference.energy.abs();
                     row(make(ENERGY, backend.clone(), t, traffic, error).with_roofline(kernel_cost(Costed::Energy, &case, real), peaks));
                 }
+                if wanted(options, FORCES) {
+                    // Last: its pass leaves the members in the forces-only mode, which the
+                    // rows above would not replay.
+                    case.evaluate_on(&mut world, &case.u, false, &mut values, &mut dof_out)?;
+                    let (results, ndof) = (world.element_results(0)?, case.pattern.element_dofs);
+                    world.take_traffic();
+                    let only_forces = |r: &[Real]| r.chunks(stride).flat_map(|e| e[..ndof].to_vec()).collect::<Vec<Real>>();
+                    let error = blockwise_error(&only_forces(&results), &only_forces(&reference.results), ndof);
+                    let mut result = Ok(());
+                    let t = time_calls(options.min_time, || result = world.replay(WorldKernel::Forces));
+                    result?;
+                    row(make(FORCES, backend.clone(), t, 0, error).with_roofline(kernel_cost(Costed::Forces, &case, real), peaks));
+                }
             }
         }
     }
@@ -380,23 +406,25 @@ pub fn run_bench(options: &BenchOptions, gpus: &[Arc<Gpu>], mut row: impl FnMut(
 #[derive(Debug, Clone, Copy)]
 enum Costed {
     ForceTangent,
+    Forces,
     Assembly,
     Energy,
 }
 
 /// Floating-point operations of a material call at one point, counted from the WGSL source
-/// (stress and tangent; energy), to about 20 %.
-fn material_flops(model: &Model) -> (f64, f64) {
+/// (stress and tangent; stress alone; energy), to about 20 %.
+fn material_flops(model: &Model) -> (f64, f64, f64) {
     match model {
-        Model::BlatzKo(_) => (600.0, 80.0),
-        Model::Lvf(_) => (700.0, 90.0),
-        Model::NeoHookean(_) => (350.0, 110.0),
+        // Stress alone: C, C⁻¹ by cofactors, √det C, C⁻², their combination.
+        Model::BlatzKo(_) => (600.0, 150.0, 80.0),
+        Model::Lvf(_) => (700.0, 120.0, 90.0),
+        Model::NeoHookean(_) => (350.0, 140.0, 110.0),
         // The decoupled models share their kinematics (C, C², C⁻¹, a cube root, a logarithm and
         // nine 6x6 outer products); their isochoric laws add a few dozen.
-        Model::MooneyRivlin(_) | Model::Yeoh(_) | Model::Gent(_) | Model::ArrudaBoyce(_) => (950.0, 160.0),
+        Model::MooneyRivlin(_) | Model::Yeoh(_) | Model::Gent(_) | Model::ArrudaBoyce(_) => (950.0, 250.0, 160.0),
         // Jacobi rotations (about 6 sweeps of 3), an exponential per stretch and term, and the
         // spectral tangent's 36 entries of 9 eigenvector products each.
-        Model::Ogden(_) => (4500.0, 1400.0),
+        Model::Ogden(_) => (4500.0, 2000.0, 1400.0),
     }
 }
 
@@ -408,7 +436,7 @@ fn kernel_cost(kernel: Costed, case: &BenchCase, real: usize) -> (f64, f64) {
     let (n, nen, dim) = (case.elements() as f64, kind.nodes() as f64, kind.dim() as f64);
     let nqp = crate::element::shape::quadrature(kind).len() as f64;
     let stride = element_out_stride(case.pattern.element_dofs) as f64;
-    let (tangent_flops, energy_flops) = material_flops(&case.model);
+    let (tangent_flops, stress_flops, energy_flops) = material_flops(&case.model);
     let real = real as f64;
     let element_inputs = real * (nqp * (3.0 * nen + 1.0) + nen * dim) + 4.0 * nen;
     match kernel {
@@ -430,6 +458,12 @@ fn kernel_cost(kernel: Costed, case: &BenchCase, real: usize) -> (f64, f64) {
                 Formulation::Fbar => (per_point + 20.0 * nqp + 30.0, 36.0 * dim + 236.0 + 12.0 * dim * dim + dim + 300.0 + 12.0 * dim + 10.0 * dim * dim),
             };
             (n * (element_inputs + real * stride), n * nqp * (per_point + pairs * per_pair + nen * 36.0))
+        }
+        // Per point F, det F, E, the stress, dV F S and its product with each node's gradient;
+        // F-bar adds θ, α and the β terms (about 60 per node).
+        Costed::Forces => {
+            let fbar = if case.formulation == Formulation::Fbar { 20.0 * nqp + 60.0 * nen } else { 0.0 };
+            (n * (element_inputs + real * nen * dim), n * nqp * (18.0 * nen + 116.0 + stress_flops + 63.0 + 2.0 * dim * 3.0 * nen + fbar))
         }
         Costed::Assembly => {
             let g = &case.gather;

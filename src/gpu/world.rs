@@ -224,6 +224,8 @@ impl Deferred {
 pub enum WorldKernel {
     /// `element_force_tangent`, entry point `main`.
     ForceTangent,
+    /// `element_force_tangent`, entry point `forces`.
+    Forces,
     /// `assemble_residual` and `assemble_csr`.
     Assembly,
 }
@@ -654,6 +656,7 @@ impl GpuWorld {
                         tangent.record(&self.gpu, &mut encoder, b.tangent_elements_per_group, most(|m| m.elements), all);
                     }
                 }
+                WorldKernel::Forces => b.forces.record(&self.gpu, &mut encoder, WORKGROUP, most(|m| m.elements), all),
                 WorldKernel::Assembly => {
                     b.residual.record(&self.gpu, &mut encoder, WORKGROUP, most(|m| m.dofs), all);
                     b.csr.record(&self.gpu, &mut encoder, WORKGROUP, most(|m| m.nonzeros), all);
