@@ -2,7 +2,10 @@
 //! composed: the precision prelude, the batch layout (`include/batch.wgsl`) for the kernels that
 //! run over a batch of bodies, the contact law (`include/contact_law.wgsl`) and the CPU's
 //! `LOCAL_STEPS` for the Uzawa kernels, then for element kernels the element constants and the shared
-//! includes of `shaders/include/`, then the kernel.
+//! includes of `shaders/include/`, then the kernel; last, the loops marked `// unroll` are
+//! unrolled (`unroll.rs`).
+
+mod unroll;
 
 use crate::element::Formulation;
 use crate::mesh::ElementKind;
@@ -184,7 +187,7 @@ pub fn source(kernel: &str, precision: Precision, variant: Option<ElementVariant
             }
         }
     }
-    Ok(module + text)
+    unroll::unroll(&(module + text))
 }
 
 /// Parses and validates a kernel with naga, as the device would (no GPU needed), as composed
