@@ -445,12 +445,12 @@ fn kernel_cost(kernel: Costed, case: &BenchCase, real: usize) -> (f64, f64) {
             // Phase 1 per point: F, det F, E, the material, the weighting.
             let per_point = 18.0 * nen + 116.0 + tangent_flops;
             let (per_point, per_pair) = match case.formulation {
-                // Then the pair tensor's packed triangle (w = DIM² rows, DIM² terms of three
-                // flops per entry) and dV F S; per point and node pair the DIM² entries
-                // g_a · A_ij g_b.
+                // Then the pair tensor, one (L, N) block F C Fᵀ of two 3 x 3 products (90 flops)
+                // for each of the w = DIM² blocks, and dV F S; per point and node pair the DIM²
+                // entries g_a · A_ij g_b.
                 Formulation::Displacement => {
                     let w = dim * dim;
-                    (per_point + w * (w + 1.0) / 2.0 * (3.0 * w + 1.0) + 63.0, w * dim * (2.0 * dim + 2.0))
+                    (per_point + w * 90.0 + 63.0, w * dim * (2.0 * dim + 2.0))
                 }
                 // F-bar: every point's J for θ and α in phase 1; per point and pair D B_b, the
                 // geometric term and B_aᵀ (D B_b), then F⁻¹ twice, h_a, h_b, θ's sums and second

@@ -59,7 +59,7 @@ pub struct Gpu {
     pub adapter: AdapterReport,
     pub precision: Precision,
     /// Timestamps around every dispatch, when the run asked for kernel times.
-    pub clock: Option<super::clock::KernelClock>,
+    clock: Option<super::clock::KernelClock>,
     /// Whether the device was opened with what the clock needs.
     clock_features: bool,
 }
