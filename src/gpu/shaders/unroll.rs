@@ -5,7 +5,9 @@
 //! from it are then constants, and an array indexed by them stays in registers: drivers do not
 //! always unroll a loop themselves, and an array they must index at run time goes to memory
 //! (on lavapipe, the Tri3 tangent kernel took twice as long with its pair tensor's loops left
-//! to the driver; doc/benchmarks.md, "Constant indices in the pair tensor").
+//! to the driver, and the Hex8 F-bar kernel three times as long with its pair blocks' loops;
+//! doc/benchmarks.md, "Constant indices in
+//! the pair tensor and the F-bar pair blocks").
 
 use std::collections::HashMap;
 
