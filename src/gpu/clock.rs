@@ -4,7 +4,7 @@
 //! included). Timing serialises the dispatches a little and adds a read-back per submission, so
 //! a timed run's wall time is not the untimed run's.
 
-use super::GpuError;
+use super::{Gpu, GpuError};
 use std::collections::BTreeMap;
 use std::sync::Mutex;
 use wgpu::{Buffer, BufferUsages, ComputePass, QuerySet};
@@ -99,23 +99,15 @@ impl KernelClock {
     }
 
     /// After the submission whose commands [`KernelClock::resolve`] ended has been submitted:
-    /// waits for it and adds its dispatches' times to their kernels'.
-    pub fn collect(&self, device: &wgpu::Device) -> Result<(), GpuError> {
+    /// waits for it (on `gpu`, the clock's device) and adds its dispatches' times to their
+    /// kernels'.
+    pub fn collect(&self, gpu: &Gpu) -> Result<(), GpuError> {
         let mut state = self.state.lock().expect("clock state");
         let pending = std::mem::take(&mut state.pending);
         if pending.is_empty() {
             return Ok(());
         }
-        let err = |message: String| GpuError::Kernel { kernel: "kernel clock".into(), message };
-        let bytes = pending.len() as u64 * 16;
-        let (sender, receiver) = std::sync::mpsc::channel();
-        self.read.map_async(wgpu::MapMode::Read, ..bytes, move |result| {
-            let _ = sender.send(result);
-        });
-        device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| err(e.to_string()))?;
-        receiver.recv().map_err(|e| err(e.to_string()))?.map_err(|e| err(e.to_string()))?;
-        let ticks: Vec<u64> = bytemuck::pod_collect_to_vec(&self.read.get_mapped_range(..bytes).map_err(|e| err(e.to_string()))?);
-        self.read.unmap();
+        let ticks: Vec<u64> = gpu.read_range_with("kernel clock", &self.read, pending.len() as u64 * 16, bytemuck::pod_collect_to_vec)?;
         for (&entry, pair) in pending.iter().zip(ticks.chunks_exact(2)) {
             let total = state.totals.entry(entry).or_default();
             total.0 += pair[1].saturating_sub(pair[0]) as f64 * self.period * 1e-9;

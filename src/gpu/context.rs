@@ -173,7 +173,7 @@ impl Gpu {
             Some(clock) => {
                 clock.resolve(&mut encoder);
                 self.queue.submit([encoder.finish()]);
-                clock.collect(&self.device)
+                clock.collect(self)
             }
             None => {
                 self.queue.submit([encoder.finish()]);

@@ -663,9 +663,15 @@ impl GpuWorld {
                 }
             }
         }
+        self.submit(encoder)?;
+        self.gpu.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Kernel { kernel: "replay".into(), message: e.to_string() })?;
+        Ok(())
+    }
+
+    /// Submits `encoder`'s commands, counted in [`GpuWorld::submits`].
+    fn submit(&mut self, encoder: wgpu::CommandEncoder) -> Result<(), GpuError> {
         self.gpu.submit(encoder)?;
         self.submits += 1;
-        self.gpu.device.poll(wgpu::PollType::wait_indefinitely()).map_err(|e| GpuError::Kernel { kernel: "replay".into(), message: e.to_string() })?;
         Ok(())
     }
 
@@ -680,8 +686,7 @@ impl GpuWorld {
         let staging = self.gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some("element results"), size: size.max(8), usage: BufferUsages::MAP_READ | BufferUsages::COPY_DST, mapped_at_creation: false });
         let mut encoder = self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("element results") });
         encoder.copy_buffer_to_buffer(&self.batches[b].element_out, start, &staging, 0, size);
-        self.gpu.submit(encoder)?;
-        self.submits += 1;
+        self.submit(encoder)?;
         self.traffic.down += size;
         Ok(from_device(self.gpu.precision, &self.gpu.read_range("element_force_tangent", &staging, size)?))
     }
@@ -722,8 +727,7 @@ impl GpuWorld {
             encoder.copy_buffer_to_buffer(source, *offset, target, *at, *bytes);
         }
         let submitted = Instant::now();
-        self.gpu.submit(encoder)?;
-        self.submits += 1;
+        self.submit(encoder)?;
         let end = readback.end;
         let mut mapped = submitted;
         if end == 0 {
