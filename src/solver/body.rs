@@ -868,6 +868,13 @@ impl Body {
         self.reuse_factorization && self.factor_c1 == Some(coefficients(p).c1)
     }
 
+    /// Whether the body has free dofs and no factorisation for this step's `c1` (the first step,
+    /// a cut-back, a grain that never iterated, or no reuse of factorisations): if it iterates,
+    /// it factorises first, at the iterate about to be evaluated.
+    pub fn lacks_factor(&self, p: &StepParams) -> bool {
+        self.dofs.free_count > 0 && !self.factor_kept_for(p)
+    }
+
     /// Whether [`Body::refresh_factor`] needs a tangent it does not have: a GPU world computes
     /// those of all such bodies in one pass first.
     pub fn needs_tangent(&self, p: &StepParams) -> bool {

@@ -669,17 +669,23 @@ fn device_pass(
 ) -> Vec<Result<(), StepFailure>> {
     let p = c.p;
     let mut results: Vec<Result<(), StepFailure>> = groups.iter().map(|_| Ok(())).collect();
+    // A body in contact without a factorisation for the step will most likely iterate, and
+    // factorise at this iterate first: its tangent comes with its forces, not in a pass of its
+    // own after the convergence test.
+    let with_tangent = |body: &Body, in_contact: bool| tangent || (in_contact && body.lacks_factor(p));
     // A forces pass leaves out the bodies whose inputs are those of their last evaluation (a
-    // grain at rest): their results are still there, as on the CPU.
+    // grain at rest): their results are still there, as on the CPU; not a body that wants its
+    // tangent too (a grain at rest just touched).
     let chosen: Vec<Vec<bool>> = groups
         .par_iter_mut()
         .zip(live)
         .map(|(g, &l)| {
+            let in_contact = g.contact.is_some();
             g.bodies
                 .iter_mut()
                 .map(|b| {
                     let chosen = l && wanted(b);
-                    let unchanged = chosen && !tangent && b.evaluation_holds(p);
+                    let unchanged = chosen && !with_tangent(b, in_contact) && b.evaluation_holds(p);
                     if unchanged {
                         b.reuse_evaluation(p);
                     }
@@ -717,7 +723,8 @@ fn device_pass(
         .zip(iterating)
         .map(|(((g, chosen), inverses), &on_device)| {
             if !on_device {
-                let evaluations = g.bodies.iter_mut().zip(g.ids).zip(chosen).filter(|(_, &yes)| yes).map(|((body, &id), _)| body.device_evaluation(id, tangent, !tangent)).collect();
+                let in_contact = g.contact.is_some();
+                let evaluations = g.bodies.iter_mut().zip(g.ids).zip(chosen).filter(|(_, &yes)| yes).map(|((body, &id), _)| body.device_evaluation(id, with_tangent(body, in_contact), !tangent)).collect();
                 return (Vec::new(), None, evaluations);
             }
             let budget = p.max_iterations - g.newton.report.iterations;
@@ -812,6 +819,7 @@ fn device_pass(
             return;
         }
         let mut failures = failures[evaluations_start[k]..].iter();
+        let in_contact = g.contact.is_some();
         for (body, &yes) in g.bodies.iter_mut().zip(chosen) {
             if !yes {
                 continue;
@@ -819,7 +827,7 @@ fn device_pass(
             let failure = *failures.next().expect("one result per evaluation");
             let finished = match passed {
                 Err(e) => Err(body.device_failure(e)),
-                Ok(()) => body.finish_device_evaluation(p, failure, tangent, !tangent),
+                Ok(()) => body.finish_device_evaluation(p, failure, with_tangent(body, in_contact), !tangent),
             };
             if let (Ok(()), Err(e)) = (&*result, finished) {
                 *result = Err(e);
