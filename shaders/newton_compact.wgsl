@@ -5,6 +5,11 @@
 // When the last compaction left no member (no status goes back to ITERATING), the list and the
 // counts stay as they are: the empty iterations recorded after a call's members converged
 // then cost no scan of the call's list. CPU twin: `cpu::newton_compact`.
+//
+// `host`: the members of a list (the members of groups in contact, in mode TANGENT) that the
+// device hands back to the host (HOST), into the list of the tangent and `assemble_csr`
+// passes that follow, their count into the z of those dispatches: the host then renews their
+// factorisations without a tangent pass of its own. CPU twin: `cpu::newton_compact_host`.
 
 @group(0) @binding(0) var<storage, read> call: array<Active>;
 @group(0) @binding(1) var<storage, read> state: array<NewtonState>;
@@ -22,13 +27,24 @@ fn main(@builtin(local_invocation_index) lane: u32) {
     if workgroupUniformLoad(&left) == 0u {
         return;
     }
+    compact(lane, ITERATING);
+}
+
+@compute @workgroup_size(NEWTON_WORKGROUP)
+fn host(@builtin(local_invocation_index) lane: u32) {
+    compact(lane, HOST);
+}
+
+// The members of `call` whose status is `wanted`, in order, into `jobs`; their count into
+// every dispatch's z.
+fn compact(lane: u32, wanted: u32) {
     let total = dispatch[CALL_COUNT];
     let share = (total + NEWTON_WORKGROUP - 1u) / NEWTON_WORKGROUP;
     let first = min(lane * share, total);
     let end = min(first + share, total);
     var mine = 0u;
     for (var i = first; i < end; i++) {
-        mine += u32(state[call[i].member].status == ITERATING);
+        mine += u32(state[call[i].member].status == wanted);
     }
     counts[lane] = mine;
     workgroupBarrier();
@@ -46,7 +62,7 @@ fn main(@builtin(local_invocation_index) lane: u32) {
     workgroupBarrier();
     var at = counts[lane];
     for (var i = first; i < end; i++) {
-        if state[call[i].member].status == ITERATING {
+        if state[call[i].member].status == wanted {
             jobs[at] = call[i];
             at++;
         }

@@ -28,7 +28,9 @@ struct ContactState {
     uzawa: u32,
     // Times `judge` solved the group's problem tighter (`ContactStep::tighten`).
     tightened: u32,
-    pad: u32,
+    // Increments in a row whose solve did not converge, counted on from the host's
+    // (`NewtonState::uzawa_stalls`).
+    stalls: u32,
     // The change of the contact forces over the last increment, over their scale
     // max(largest contact force, floor) (`ContactStep::apply`).
     change: real,
@@ -178,6 +180,7 @@ fn forces(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) wor
         let solved = uzawa_states[k];
         s.sweeps += solved.iterations;
         s.uzawa = solved.status;
+        s.stalls = select(s.stalls + 1u, 0u, solved.status == UZAWA_CONVERGED);
         s.change = change / max(max(size, p.floor), REAL_MIN_POSITIVE);
         contact_states[k] = s;
     }
@@ -187,8 +190,9 @@ fn forces(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) wor
 // it. Converged when every member passed its own test and the contact forces settled with a
 // converged solve; the host takes the group (every member HOST) when a member needs it or
 // failed, a member's residual contracted less than tenfold (the host refactorises it, as it
-// would one that passed its own test), the solve spent its sweeps, or the budget is spent;
-// else every member iterates on, and when only the increments are left after TIGHTEN_AFTER
+// would one that passed its own test), UZAWA_STALLS solves in a row spent their sweeps (the
+// host then gives the step up), or the budget is spent; else every member iterates on (after a
+// solve that spent its sweeps too, as the host's Newton loop goes on), and when only the increments are left after TIGHTEN_AFTER
 // iterations the problem is solved ten times tighter from then on (down to TIGHTEST_INNER of
 // the contact tolerance). A group that stopped earlier keeps its verdict. One invocation per
 // group.
@@ -221,7 +225,7 @@ fn judge(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) 
         verdict = HOST;
     } else if all_converged && settled {
         verdict = CONVERGED;
-    } else if c.uzawa != UZAWA_CONVERGED || iterations >= newton[lead].budget || slow {
+    } else if c.uzawa == UZAWA_LIVE || c.stalls >= UZAWA_STALLS || iterations >= newton[lead].budget || slow {
         verdict = HOST;
     } else if grp.iterations_before + iterations >= TIGHTEN_AFTER && settled && all_balanced {
         problems[k].tolerance = max(real(0.1) * problems[k].tolerance, real(TIGHTEST_INNER) * grp.tolerance);

@@ -9,7 +9,7 @@ use bifirst::contact::Status;
 use bifirst::cpu;
 use bifirst::element::{ElementOutput, Formulation, Patches, ReferenceGeometry};
 use bifirst::gpu::shaders::{is_element_kernel, validate, ElementVariant, DECOUPLED, SHADERS};
-use bifirst::gpu::types::{Active, Coefficients, ContactCall, ContactGroup, ContactState, DofOut, DofStep, MaterialParams, MemberRange, NewtonMember, NewtonState, NEWTON_CONVERGED, NEWTON_HOST, NEWTON_ITERATING};
+use bifirst::gpu::types::{Active, Coefficients, ContactCall, ContactGroup, ContactState, DofOut, DofStep, MaterialParams, MemberRange, NewtonMember, NewtonState, MODE_TANGENT, NEWTON_CONVERGED, NEWTON_HOST, NEWTON_ITERATING};
 use bifirst::gpu::uzawa_step::{UzawaPoint, UzawaStepKernel};
 use bifirst::gpu::{ElementFailure, Evaluation, GpuWorld, NewtonCall, WorldBody};
 use bifirst::material::{ArrudaBoyce, BlatzKo, Decoupled, Gent, Lvf, Model, MooneyRivlin, NeoHookean, Ogden, Relaxation, Yeoh};
@@ -187,7 +187,7 @@ fn newton_structs_match_the_shader_layout() {
         let (members, span) = naga_layout(&module, "ContactGroup");
         assert_eq!((members, span as usize), (expect(&["member_start", "member_count", "iterations_before", "pad"], &["tolerance"]), sizes[0]), "{}", precision.name());
         let (members, span) = naga_layout(&module, "ContactState");
-        assert_eq!((members, span as usize), (expect(&["sweeps", "uzawa", "tightened", "pad"], &["change"]), sizes[1]), "{}", precision.name());
+        assert_eq!((members, span as usize), (expect(&["sweeps", "uzawa", "tightened", "stalls"], &["change"]), sizes[1]), "{}", precision.name());
         let (members, span) = naga_layout(&module, "ContactCall");
         assert_eq!((members, span as usize), (expect(&["problems", "dim", "pad0", "pad1"], &["theta_dt"]), sizes[2]), "{}", precision.name());
     }
@@ -889,12 +889,18 @@ fn peak_kernels_match_their_cpu_twins() {
 /// `K̄ = ξ K + c1 M` of a case's free dofs at its displacement (the CPU twins' tangent, a unit
 /// mass per dof), inverted densely: what `Body::effective_inverse` gives from faer's factors.
 fn effective_inverse(c: &Case, coefficients: Coefficients<f64>) -> Vec<f64> {
+    let values = stiffness_values(c, &c.u, coefficients);
+    bifirst::bench::dense_inverse(&c.pattern, &values, &vec![coefficients.c1; c.pattern.n])
+}
+
+/// The stiffness values `ξ K` of a case at `u` on the CPU twins.
+fn stiffness_values(c: &Case, u: &[f64], coefficients: Coefficients<f64>) -> Vec<f64> {
     let stride = element_out_stride(c.pattern.element_dofs);
     let mut results = vec![0.0; c.mesh.element_count() * stride];
-    cpu::dispatch_element_force_tangent(&c.model, &c.mesh, &c.geometry, c.formulation, None, &c.u, true, &mut results).unwrap();
+    cpu::dispatch_element_force_tangent(&c.model, &c.mesh, &c.geometry, c.formulation, None, u, true, &mut results).unwrap();
     let mut values = vec![0.0; c.pattern.nnz()];
     cpu::assemble_csr(&results, &c.gather.csr_start, &c.gather.csr, coefficients, &mut values);
-    bifirst::bench::dense_inverse(&c.pattern, &values, &vec![coefficients.c1; c.pattern.n])
+    values
 }
 
 /// The forces and residuals of a case at `u` on the CPU twins.
@@ -989,6 +995,7 @@ fn newton_kernels_match_their_cpu_twins() {
                     outcome: NewtonState::default(),
                     strain_energy: None,
                     failure: None,
+                    tangent: None,
                 })
                 .collect();
             assert!(calls.iter().all(|c| world.newton_capable(c.body)));
@@ -1041,7 +1048,7 @@ fn a_device_newton_call_for_one_body_of_a_large_batch_reads_back_only_its_own() 
     let residual0 = free.iter().map(|&d| first[d as usize].g.powi(2)).sum::<f64>().sqrt();
     let start = vec![0.0; c.u.len()];
     let (mut u, mut out) = (c.u.clone(), first.clone());
-    let call = NewtonCall { body: 399, factor: 1, inverse: Some(inverse.clone()), member, residual: Some(residual0), u: &mut u, dof_out: &mut out, u_start: &start, contact_force: None, outcome: NewtonState::default(), strain_energy: None, failure: None };
+    let call = NewtonCall { body: 399, factor: 1, inverse: Some(inverse.clone()), member, residual: Some(residual0), u: &mut u, dof_out: &mut out, u_start: &start, contact_force: None, outcome: NewtonState::default(), strain_energy: None, failure: None, tangent: None };
     let mut calls = [call];
     world.newton(&mut calls, &mut [], &mut [], &mut [], coefficients, (2, 1.0), None, &mut Default::default()).expect("device Newton");
     let (state, failure) = (calls[0].outcome, calls[0].failure);
@@ -1077,7 +1084,7 @@ fn a_device_newton_increment_that_inverts_an_element_fails_the_body() {
     let start = vec![0.0; c.u.len()];
     let (mut u, mut out) = (c.u.clone(), first.clone());
     let member = NewtonMember { free_count: free as u32, budget: 5, ..NewtonMember::default() };
-    let mut calls = [NewtonCall { body: 0, factor: 1, inverse: Some(inverse), member, residual: Some(1.0), u: &mut u, dof_out: &mut out, u_start: &start, contact_force: None, outcome: NewtonState::default(), strain_energy: None, failure: None }];
+    let mut calls = [NewtonCall { body: 0, factor: 1, inverse: Some(inverse), member, residual: Some(1.0), u: &mut u, dof_out: &mut out, u_start: &start, contact_force: None, outcome: NewtonState::default(), strain_energy: None, failure: None, tangent: None }];
     world.newton(&mut calls, &mut [], &mut [], &mut [], coefficients, (2, 1.0), None, &mut Default::default()).expect("device Newton");
     let (state, failure) = (calls[0].outcome, calls[0].failure);
     assert_eq!((state.status, state.iterations), (bifirst::gpu::types::NEWTON_FAILED, 1), "{state:?}");
@@ -1226,6 +1233,12 @@ fn newton_contact_kernels_match_their_cpu_twins() {
                 }
                 cpu::newton_contact_judge(&newton, &mut state, &layout, &mut staged, &mut cstates, 0);
             }
+            // `newton_compact`'s `host`: the members the call hands back, whose stiffness values
+            // at the last iterate come back with their states.
+            let in_contact = [Active { member: 0, mode: MODE_TANGENT }, Active { member: 1, mode: MODE_TANGENT }];
+            let mut handed = [Active::default(); 2];
+            let handed_back = cpu::newton_compact_host(&in_contact, &state, &mut handed);
+            let twin_handed: Vec<bool> = (0..2).map(|b| handed[..handed_back].iter().any(|a| a.member as usize == b)).collect();
             // The device: both bodies' calls and their group in one call.
             let mut world = world_of(&gpu, &cases);
             world.begin_step(&steps.iter().enumerate().map(|(b, s)| (b, &s[..])).collect::<Vec<_>>());
@@ -1236,7 +1249,7 @@ fn newton_contact_kernels_match_their_cpu_twins() {
                 .iter_mut()
                 .zip(outs.iter_mut())
                 .enumerate()
-                .map(|(b, (u, dof_out))| NewtonCall { body: b, factor: 1, inverse: Some(inverses[b].clone()), member: member(b, 0, 0), residual: Some(residual0(b)), u, dof_out, u_start: &starts[b], contact_force: Some(&zeros[b]), outcome: NewtonState::default(), strain_energy: None, failure: None })
+                .map(|(b, (u, dof_out))| NewtonCall { body: b, factor: 1, inverse: Some(inverses[b].clone()), member: member(b, 0, 0), residual: Some(residual0(b)), u, dof_out, u_start: &starts[b], contact_force: Some(&zeros[b]), outcome: NewtonState::default(), strain_energy: None, failure: None, tangent: None })
                 .collect();
             for l in local.iter_mut() {
                 l.v_free = [0.0; 3];
@@ -1247,7 +1260,17 @@ fn newton_contact_kernels_match_their_cpu_twins() {
             world.newton(&mut calls, &mut problems, &mut contacts, &mut [], coefficients, (dim, theta_dt), None, &mut Default::default()).expect("device Newton with contact");
             let got: Vec<NewtonState<f64>> = calls.iter().map(|c| c.outcome).collect();
             assert!(calls.iter().all(|c| c.failure.is_none()));
+            let device_tangents: Vec<Option<Vec<f64>>> = calls.iter().map(|c| c.tangent.clone()).collect();
             drop(calls);
+            assert_eq!(handed_back, if budget == 1 { 2 } else { 0 }, "{}: the twins hand both members back after one increment, none when they converge", kind.name());
+            for (m, device) in device_tangents.iter().enumerate() {
+                assert_eq!(device.is_some(), twin_handed[m], "{} member {m}: a tangent comes back for a member handed back, and only then", kind.name());
+                if let Some(device) = device {
+                    // The twins' tangent at the device's iterate (within 1e-12 of theirs).
+                    let error = relative_error(device, &stiffness_values(&cases[m], &us[m], coefficients));
+                    assert!(error <= 1e-12, "{} member {m}: the tangent handed back differs from its twins' by {error:.1e}", kind.name());
+                }
+            }
             let device_u = [us[0].clone(), us[1].clone()].concat();
             let device_r: Vec<f64> = device_r.iter().flatten().copied().collect();
             let (u_error, r_error) = (relative_error(&device_u, &u), relative_error(&device_r, &r));

@@ -507,6 +507,46 @@ fn groups_in_contact_take_their_newton_increments_on_the_device() {
 }
 
 #[test]
+fn groups_in_contact_on_the_device_cost_a_submit_per_refactorisation_round_not_per_increment() {
+    // Issue 31, every round and the sweeps on the device: grains pressed by the wall (2D, 200
+    // and 800 grains, into the phase where contact problems spend their sweeps) and grains
+    // falling into a box (3D). A step takes the first round's evaluation pass, the device call
+    // of the groups in contact, and one call more for each round in which the device hands
+    // groups back to renew factorisations; with their tangents, computed in that call. These
+    // runs took 5 to 13 submits in their hardest steps (166 for 800 grains to t = 0.15, 207
+    // Newton iterations): a grain touched for the first time had a tangent pass after its
+    // first evaluation, a group handed back another before its refactorisation, and a group
+    // whose solve spent its sweeps stayed on the host, an evaluation pass and a Uzawa submit
+    // per increment. The Newton iterations and energies are the CPU backend's.
+    let test = "groups_in_contact_on_the_device_cost_a_submit_per_refactorisation_round_not_per_increment";
+    if !gpu_available(test) {
+        return;
+    }
+    let field = |log: &Log, name: &str| log.topics["/summary"][0][name].as_u64().unwrap_or_else(|| panic!("{name}"));
+    for (scene, sets) in [
+        ("grains_many", vec!["packing.count=200", "time.end=0.15", "output.every=1", "output.scene_every=0"]),
+        ("grains_many", vec!["packing.count=800", "time.end=0.15", "output.every=1", "output.scene_every=0"]),
+        ("grains_3d", vec!["time.end=0.2", "output.every=1", "output.scene_every=0"]),
+    ] {
+        let path = scene_path(scene);
+        let tag = format!("{test}_{scene}_{}", sets[0].replace(['.', '='], "_"));
+        let cpu = run_with(&path, &sets, &format!("{tag}_cpu"), &options(BackendChoice::Cpu, None));
+        let mut o = every_round_on_the_gpu();
+        o.backend.uzawa = UzawaPlacement::Gpu;
+        let device = run_with(&path, &sets, &format!("{tag}_device"), &o);
+        let (submits, newton) = (device.series("/solver", "device_submits"), field(&device, "newton_iterations"));
+        let worst = energy_difference(&cpu, &device);
+        eprintln!("{scene} {}: {} submits for {newton} Newton iterations, {} on the device; per step {submits:?}; energies differ by {worst:.2e}", sets[0], field(&device, "device_submits"), field(&device, "device_iterations"));
+        assert!(cpu.series("/contact", "active").iter().any(|&a| a > 2.0), "{scene}: the grains touch");
+        assert_eq!(newton, field(&cpu, "newton_iterations"), "{scene}: the CPU's Newton iterations");
+        assert!(worst <= 1e-9, "{scene}: energies differ by {worst:.3e}");
+        assert!(field(&device, "device_iterations") > newton, "{scene}: the groups in contact iterate on the device");
+        assert!(submits.iter().all(|&s| s <= 4.0), "{scene}: at most two refactorisation rounds a step here: {submits:?}");
+        assert!(2 * field(&device, "device_submits") < newton, "{scene}: {} submits for {newton} Newton iterations", field(&device, "device_submits"));
+    }
+}
+
+#[test]
 fn kernel_times_name_every_kernel_a_run_dispatches_and_change_nothing_else() {
     // `--kernel-times` on grains pressed by the wall with every round and the sweeps on the
     // device: each kernel the run dispatches has its time, the same run untimed takes the same

@@ -10,7 +10,7 @@ use crate::gpu::ContactLayout;
 use crate::precision::Real;
 use crate::contact::uzawa::SETTLE;
 use crate::solver::coupling::TIGHTEST_INNER;
-use crate::solver::{REFACTOR_CONTRACTION, TIGHTEN_AFTER};
+use crate::solver::{REFACTOR_CONTRACTION, TIGHTEN_AFTER, UZAWA_STALLS};
 
 /// The sum of one value per invocation by halves, as `reduce_sum` of `newton.wgsl`.
 fn reduce_sum(mut partial: [Real; NEWTON_WORKGROUP]) -> Real {
@@ -138,8 +138,19 @@ pub fn newton_compact(call: &[Active], state: &[NewtonState<Real>], jobs: &mut [
     if left == 0 {
         return 0;
     }
+    compact(call, state, jobs, NEWTON_ITERATING)
+}
+
+/// `newton_compact`'s `host`: the members of the list the device hands back to the host, in
+/// its order, into `jobs` (the list of the tangent passes that follow); returns their count.
+pub fn newton_compact_host(call: &[Active], state: &[NewtonState<Real>], jobs: &mut [Active]) -> usize {
+    compact(call, state, jobs, NEWTON_HOST)
+}
+
+/// The members of `call` whose status is `wanted`, in order, into `jobs`; returns their count.
+fn compact(call: &[Active], state: &[NewtonState<Real>], jobs: &mut [Active], wanted: u32) -> usize {
     let mut at = 0;
-    for c in call.iter().filter(|c| state[c.member as usize].status == NEWTON_ITERATING) {
+    for c in call.iter().filter(|c| state[c.member as usize].status == wanted) {
         jobs[at] = *c;
         at += 1;
     }
@@ -244,6 +255,7 @@ pub fn newton_contact_forces(
     let solved = uzawa_states[k];
     s.sweeps += solved.iterations;
     s.uzawa = solved.status;
+    s.stalls = if solved.status == JUDGE_CONVERGED { 0 } else { s.stalls + 1 };
     s.change = change / size.max(p.floor).max(Real::MIN_POSITIVE);
 }
 
@@ -268,7 +280,7 @@ pub fn newton_contact_judge(newton: &[NewtonMember<Real>], state: &mut [NewtonSt
         NEWTON_HOST
     } else if all_converged && settled {
         NEWTON_CONVERGED
-    } else if cs.uzawa != JUDGE_CONVERGED || iterations >= newton[lead].budget || slow {
+    } else if cs.uzawa == JUDGE_LIVE || cs.stalls as usize >= UZAWA_STALLS || iterations >= newton[lead].budget || slow {
         NEWTON_HOST
     } else {
         if (grp.iterations_before + iterations) as usize >= TIGHTEN_AFTER && settled && all_balanced {

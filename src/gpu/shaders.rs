@@ -141,8 +141,9 @@ pub fn source(kernel: &str, precision: Precision, variant: Option<ElementVariant
         if kernel == "newton_contact" {
             // The Uzawa points, problems and states it prepares and reads (`uzawa_solve`'s).
             module += &format!(
-                "const TIGHTEN_AFTER = {}u;\nconst TIGHTEST_INNER = {:?};\nconst SETTLE = {:?};\n",
+                "const TIGHTEN_AFTER = {}u;\nconst UZAWA_STALLS = {}u;\nconst TIGHTEST_INNER = {:?};\nconst SETTLE = {:?};\n",
                 crate::solver::TIGHTEN_AFTER,
+                crate::solver::UZAWA_STALLS,
                 crate::solver::coupling::TIGHTEST_INNER,
                 crate::contact::uzawa::SETTLE
             );

@@ -170,7 +170,9 @@ pub struct ContactState<R> {
     /// Times the device solved the group's problem tighter
     /// ([`crate::solver::coupling::ContactStep::tighten`]).
     pub tightened: u32,
-    pub pad: u32,
+    /// Increments in a row whose solve did not converge (its sweeps spent), counted on from the
+    /// host's ([`crate::solver::UZAWA_STALLS`] of them hand the group back).
+    pub stalls: u32,
     /// The change of the contact forces over the last increment, relative
     /// ([`crate::solver::coupling::ContactStep::apply`]).
     pub change: R,

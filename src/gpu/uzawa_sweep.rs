@@ -590,6 +590,12 @@ impl UzawaSweeps {
         self.buffers.as_ref().expect("staged")
     }
 
+    /// Dispatches of the staged whole solve that let a problem of `max_iterations` run all its
+    /// sweeps: more than one where a dispatch takes fewer (a software adapter's loop guard).
+    pub(crate) fn whole_dispatches(&self, max_iterations: usize) -> usize {
+        max_iterations.div_ceil(self.whole_sweeps.max(1)).max(1)
+    }
+
     /// Records one dispatch of `uzawa_solve` over `problems` staged problems.
     pub(crate) fn record_solve(&self, pass: &mut wgpu::ComputePass, problems: usize) {
         let (x, y) = super::dispatch_rows(problems);

@@ -36,10 +36,12 @@ use wgpu::{BindGroup, Buffer, BufferUsages, ComputePipeline};
 
 /// Invocations per workgroup of the kernels that take one item per invocation.
 const WORKGROUP: usize = 64;
-/// The binding of the job list (`jobs`) in `element_force_tangent` and `assemble_residual`.
+/// The binding of the job list (`jobs`) in `element_force_tangent` (both entry points),
+/// `assemble_residual`, `element_energy` and `assemble_csr`.
 const FORCES_JOBS: usize = 7;
 const RESIDUAL_JOBS: usize = 8;
 const ENERGY_JOBS: usize = 6;
+const CSR_JOBS: usize = 6;
 
 /// The bytes one thread copies at a time into the staging memory of a large upload.
 const COPY_STRETCH: usize = 1 << 20;
@@ -171,11 +173,13 @@ struct Batch {
     /// The viscoelastic members' step relaxation and point histories (`MemberRange.history`).
     history: Buffer,
     member_buffer: Buffer,
-    /// What the `forces`, `assemble_residual` and `element_energy` passes are bound to (their
-    /// job lists at [`FORCES_JOBS`], [`RESIDUAL_JOBS`] and [`ENERGY_JOBS`]), so that device
-    /// Newton iterations can bind them to lists of their own.
+    /// What the element (`forces` and tangent), `assemble_residual`, `element_energy` and
+    /// `assemble_csr` passes are bound to (their job lists at [`FORCES_JOBS`],
+    /// [`RESIDUAL_JOBS`], [`ENERGY_JOBS`] and [`CSR_JOBS`]), so that device Newton iterations
+    /// can bind them to lists of their own.
     forces_buffers: Vec<Buffer>,
     residual_buffers: Vec<Buffer>,
+    csr_buffers: Vec<Buffer>,
     energy_buffers: Vec<Buffer>,
     /// Each member's free dofs (indices into its dofs, ascending), `(start, count)` in `free_dofs`.
     free_dofs: Vec<u32>,
@@ -920,6 +924,7 @@ impl Batch {
         let element_buffers = [&geometry, &connectivity, &u, &element_out, &failure, &member_buffer, &material_buffer, &active, &history];
         let residual_bindings = [&element_out, &dof_start, &dof, coefficients, &u, &step, &dof_out, &member_buffer, &active];
         let energy_bindings = [&geometry, &connectivity, &u, &energy, &member_buffer, &material_buffer, &active];
+        let csr_bindings = [&element_out, &csr_start, &csr, coefficients, &values, &member_buffer, &active];
         // The pipelines compile in parallel: a software adapter compiles each on the CPU.
         let tangent = {
             let (gpu, buffers) = (gpu.clone(), element_buffers.map(Buffer::clone));
@@ -927,7 +932,7 @@ impl Batch {
         };
         let (forces, csr_pass, residual, element_energy) = std::thread::scope(|scope| {
             let forces = scope.spawn(|| Pass::new(gpu, "element_force_tangent", "forces", v, &element_buffers));
-            let csr = scope.spawn(|| Pass::new(gpu, "assemble_csr", "main", None, &[&element_out, &csr_start, &csr, coefficients, &values, &member_buffer, &active]));
+            let csr = scope.spawn(|| Pass::new(gpu, "assemble_csr", "main", None, &csr_bindings));
             let residual = scope.spawn(|| Pass::new(gpu, "assemble_residual", "main", None, &residual_bindings));
             let energy = Pass::new(gpu, "element_energy", "main", v, &energy_bindings);
             let join = |h: std::thread::ScopedJoinHandle<'_, Result<Pass, GpuError>>| h.join().expect("a pipeline compiles without panicking");
@@ -935,6 +940,7 @@ impl Batch {
         })?;
         let forces_buffers = element_buffers.iter().map(|&b| b.clone()).collect();
         let residual_buffers = residual_bindings.iter().map(|&b| b.clone()).collect();
+        let csr_buffers = csr_bindings.iter().map(|&b| b.clone()).collect();
         let energy_buffers = energy_bindings.iter().map(|&b| b.clone()).collect();
         let (inverse_slot, inverse_entries) = newton::inverse_slots(&free_range.iter().map(|&(_, n)| n as usize).collect::<Vec<_>>(), real, max_bytes);
         Ok(Self {
@@ -955,6 +961,7 @@ impl Batch {
             member_buffer,
             forces_buffers,
             residual_buffers,
+            csr_buffers,
             energy_buffers,
             free_dofs,
             free_range,

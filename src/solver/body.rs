@@ -224,6 +224,11 @@ pub struct Body {
     factor_version: u64,
     /// Whether `values` hold `ξ K` at the current trial displacement.
     tangent_current: bool,
+    /// `ξ K` that a device Newton call computed when it handed the body back, and the
+    /// displacement it is the tangent at: the next refactorisation there takes it
+    /// ([`Body::refresh_factor`]) instead of assembling its own (`values` keep the factorised
+    /// `K̄` meanwhile).
+    device_tangent: Option<(Vec<Real>, Vec<Real>)>,
     /// Residual norm of the previous evaluation in this step, and the ratio of the last one to it.
     previous_residual: Option<Real>,
     contraction: Option<Real>,
@@ -347,6 +352,7 @@ impl Body {
             factor_c1: None,
             factor_version: 0,
             tangent_current: false,
+            device_tangent: None,
             previous_residual: None,
             contraction: None,
         }
@@ -848,7 +854,9 @@ impl Body {
         if !self.needs_factorization(p) {
             return Ok(false);
         }
-        if !self.tangent_current {
+        if let Some(values) = self.device_tangent_here() {
+            self.values = values;
+        } else if !self.tangent_current {
             let u = std::mem::take(&mut self.trial.u);
             let result = self.assemble_with(&u, coefficients(p), true, times);
             self.trial.u = u;
@@ -878,7 +886,14 @@ impl Body {
     /// Whether [`Body::refresh_factor`] needs a tangent it does not have: a GPU world computes
     /// those of all such bodies in one pass first.
     pub fn needs_tangent(&self, p: &StepParams) -> bool {
-        self.needs_factorization(p) && !self.tangent_current
+        self.needs_factorization(p) && !self.tangent_current && !self.device_tangent.as_ref().is_some_and(|(u, _)| same_bits(u, &self.trial.u))
+    }
+
+    /// The tangent a device Newton call left ([`Body::finish_device_newton`]) if it is one at
+    /// the trial displacement, bit for bit; taken.
+    fn device_tangent_here(&mut self) -> Option<Vec<Real>> {
+        let (u, values) = self.device_tangent.take()?;
+        same_bits(&u, &self.trial.u).then_some(values)
     }
 
     /// Adds `c1 M` to the assembled `ξ K` and factorises `K̄ = ξ K + c1 M` (eq. 17).
@@ -996,6 +1011,7 @@ impl Body {
             outcome: NewtonState::default(),
             strain_energy: None,
             failure: None,
+            tangent: None,
         }
     }
 
@@ -1004,7 +1020,10 @@ impl Body {
     /// test ([`Body::converged`], the host's word) sees the last increment and the residual
     /// before the last. A call that evaluated the body first and stopped there took no increment:
     /// the test then sees a first evaluation.
-    pub fn finish_device_newton(&mut self, p: &StepParams, outcome: &NewtonState<Real>, strain_energy: Option<Real>, failure: Option<ElementFailure>) -> Result<(), StepFailure> {
+    /// A `tangent` that came back ([`NewtonCall::tangent`]) is kept for a refactorisation at
+    /// this iterate.
+    pub fn finish_device_newton(&mut self, p: &StepParams, outcome: &NewtonState<Real>, strain_energy: Option<Real>, failure: Option<ElementFailure>, tangent: Option<&[Real]>) -> Result<(), StepFailure> {
+        self.device_tangent = tangent.map(|values| (self.trial.u.clone(), values.to_vec()));
         if let Some(failure) = failure {
             return Err(self.element_failure(&self.trial.u, failure));
         }

@@ -225,7 +225,7 @@ impl NewtonState {
 /// Newton iterations in a row with stalled Uzawa sweeps after which a step is given up (to be
 /// retried thinned or cut back) rather than iterated to `max_iterations`: each costs up to
 /// `contact.max_iterations` sweeps, and a stall that lasts this long did not clear in any run.
-const UZAWA_STALLS: usize = 3;
+pub const UZAWA_STALLS: usize = 3;
 
 /// Newton iterations after which a group whose only unmet criterion is the increment solves its
 /// contact problems tighter ([`ContactStep::tighten`]).
@@ -520,7 +520,8 @@ fn evaluate_on_device_first(groups: &[Group], world: &GpuWorld, c: &Context) -> 
 /// ([`GpuWorld::newton`], with the next round's pass): bodies that keep their factorisation and
 /// have a slot for `K̄⁻¹` there, and element work worth device passes
 /// ([`crate::backend::round_on_device`]); either one body without contact points, or a group in
-/// contact whose last Uzawa solve (if any) converged, with problems solved whole on the device
+/// contact (also one whose last solve spent its sweeps: the device counts the stalls on, as
+/// [`Group::converged`] does) with problems solved whole on the device
 /// ([`crate::backend::uzawa_on_device`], colours of at most [`SOLVE_WIDEST`] points) and its
 /// bodies in the step's `contact_batch` (that of the first such group); such a group's W is
 /// built by [`build_for_device`] when no increment of the step built it yet. `refreshed`: the
@@ -531,7 +532,7 @@ fn iterate_on_device(groups: &[Group], continuing: &mut [bool], world: &GpuWorld
     let fit = |b: &Body| if refreshed { b.factor_fit(p) } else { b.iterates_on_device(p) };
     let capable = |g: &Group| g.newton.report.iterations < p.max_iterations && g.bodies.iter().zip(g.ids).all(|(b, &id)| world.newton_capable(id) && fit(b));
     let software = world.software();
-    let settled = |g: &Group| (!g.newton.uzawa_ran || g.newton.uzawa_converged) && g.contact.as_ref().is_some_and(|k| k.solved_whole(software));
+    let solved_whole = |g: &Group| g.contact.as_ref().is_some_and(|k| k.solved_whole(software));
     let mut chosen = vec![false; groups.len()];
     let mut in_contact = vec![false; groups.len()];
     let mut batch_taken = *contact_batch;
@@ -541,7 +542,7 @@ fn iterate_on_device(groups: &[Group], continuing: &mut [bool], world: &GpuWorld
         }
         if g.contact.is_none() {
             chosen[k] = g.bodies.len() == 1;
-        } else if settled(g) {
+        } else if solved_whole(g) {
             let batch = world.batch_of(g.ids[0]);
             in_contact[k] = g.ids.iter().all(|&id| world.batch_of(id) == batch) && *batch_taken.get_or_insert(batch) == batch;
         }
@@ -742,7 +743,7 @@ fn device_pass(
                     u_base,
                     iterations_before: newton.report.iterations as u32,
                     tolerance: settings.tolerance,
-                    outcome: ContactState::default(),
+                    outcome: ContactState { stalls: newton.uzawa_stalls as u32, ..ContactState::default() },
                 };
                 (problem, group)
             });
@@ -780,7 +781,7 @@ fn device_pass(
         world.newton(&mut calls, &mut problems, &mut contacts, &mut list, coefficients(p), (dim, p.theta * p.dt), c.interrupt, times)
     };
     let failures: Vec<Option<ElementFailure>> = list.iter().map(|e| e.failure).collect();
-    let ends: Vec<_> = calls.iter().map(|call| (call.outcome, call.strain_energy, call.failure)).collect();
+    let ends: Vec<_> = calls.iter_mut().map(|call| (call.outcome, call.strain_energy, call.failure, call.tangent.take())).collect();
     let contact_outcomes: Vec<ContactState<Real>> = contacts.iter().map(|g| g.outcome).collect();
     drop(list);
     drop(calls);
@@ -803,14 +804,15 @@ fn device_pass(
             state.report.iterations += iterations;
             state.report.device_iterations += iterations;
             state.report.bodies_iterated += if unevaluated { iterations } else { iterations.saturating_sub(1) } * g.bodies.len();
-            for (body, (end, strain, failure)) in g.bodies.iter_mut().zip(&ends[range]) {
-                if let (Ok(()), Err(e)) = (&*result, body.finish_device_newton(p, end, *strain, *failure)) {
+            for (body, (end, strain, failure, tangent)) in g.bodies.iter_mut().zip(&ends[range]) {
+                if let (Ok(()), Err(e)) = (&*result, body.finish_device_newton(p, end, *strain, *failure, tangent.as_deref())) {
                     *result = Err(e);
                 }
             }
             if let (Some(j), true) = (index, iterations > 0) {
                 let o = contact_outcomes[j];
                 state.record_solve(o.sweeps as usize, o.uzawa == JUDGE_CONVERGED, o.change);
+                state.uzawa_stalls = o.stalls as usize;
                 let contact = g.contact.as_mut().expect("a group with a contact outcome has contact");
                 for _ in 0..o.tightened {
                     contact.tighten();

@@ -11,7 +11,7 @@ mod setup;
 pub mod topology;
 
 pub use body::{Body, NodalLoad, StepFailure, REFACTOR_CONTRACTION};
-pub use group::TIGHTEN_AFTER;
+pub use group::{TIGHTEN_AFTER, UZAWA_STALLS};
 pub use restart::{RestoreError, SavedBody, SavedFactor, SavedReaction, SavedState};
 pub use setup::{build_mesh, build_simulation};
 

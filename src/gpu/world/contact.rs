@@ -29,7 +29,8 @@ pub struct GroupContact<'a> {
     pub iterations_before: u32,
     /// `contact.tolerance`.
     pub tolerance: Real,
-    /// Out: where its contact stood after the last increment.
+    /// In: its Uzawa stalls so far in the step (`stalls`, the rest zero); out: where its
+    /// contact stood after the last increment.
     pub outcome: ContactState<Real>,
 }
 
@@ -50,6 +51,8 @@ pub struct ContactLayout {
     /// Per node slot, the batch dof of its first component.
     pub node_dof: Vec<u32>,
     pub call: ContactCall<Real>,
+    /// Each group's contact state before the call: its stalls so far.
+    pub states: Vec<ContactState<Real>>,
 }
 
 impl ContactLayout {
@@ -62,6 +65,7 @@ impl ContactLayout {
         for (k, g) in contacts.iter().enumerate() {
             l.groups.push(ContactGroup { member_start: l.group_members.len() as u32, member_count: g.calls.len() as u32, iterations_before: g.iterations_before, pad: 0, tolerance: g.tolerance });
             l.group_members.extend(g.calls.iter().map(|&c| member_of(c)));
+            l.states.push(ContactState { stalls: g.outcome.stalls, ..ContactState::default() });
             let slot0 = nodes.node_offsets[k];
             for terms in &staged[k].nodal.terms {
                 l.term_slots.extend(terms.iter().map(|&(slot, _)| slot0 + slot));
@@ -115,7 +119,7 @@ impl ContactPasses {
         let term_coefs = made("contact term coefficients", bytemuck::cast_slice(&l.term_coefs), storage);
         let obstacle = made("contact obstacle velocities", bytemuck::cast_slice(&l.obstacle), storage);
         let node_dof = made("contact node dofs", bytemuck::cast_slice(&l.node_dof), storage);
-        let states = made("contact states", bytemuck::cast_slice(&vec![ContactState::<Real>::default(); l.groups.len()]), storage | BufferUsages::COPY_SRC);
+        let states = made("contact states", bytemuck::cast_slice(&l.states), storage | BufferUsages::COPY_SRC);
         let call = made("contact call", bytemuck::bytes_of(&l.call), BufferUsages::UNIFORM);
         let n = newton;
         let prepare = gpu.bind(

@@ -11,10 +11,10 @@
 //! submission.
 
 use super::contact::{ContactLayout, ContactPasses, ContactPipelines, GroupContact};
-use super::{buffer, to_device, Batch, Evaluation, GpuWorld, Pass, ReadBack, Source, ENERGY_JOBS, FORCES_JOBS, RESIDUAL_JOBS, WORKGROUP};
+use super::{buffer, to_device, Batch, Evaluation, GpuWorld, Pass, ReadBack, Source, CSR_JOBS, ENERGY_JOBS, FORCES_JOBS, RESIDUAL_JOBS, WORKGROUP};
 use crate::contact::uzawa::Problem;
 use crate::gpu::uzawa_sweep::UzawaSweeps;
-use crate::gpu::types::{Active, Coefficients, ContactState, DofOut, NewtonMember, NewtonState, MODE_FORCES, NEWTON_FAILED, NEWTON_ITERATING, NEWTON_MAX_FREE, NO_FAILURE};
+use crate::gpu::types::{Active, Coefficients, ContactState, DofOut, NewtonMember, NewtonState, MODE_FORCES, MODE_TANGENT, NEWTON_FAILED, NEWTON_HOST, NEWTON_ITERATING, NEWTON_MAX_FREE, NO_FAILURE};
 use crate::gpu::{ElementFailure, Gpu, GpuError};
 use crate::precision::{Precision, Real};
 use crate::solver::PhaseTimes;
@@ -25,12 +25,13 @@ use std::time::Instant;
 use wgpu::{Buffer, BufferUsages, ComputePipeline};
 
 /// Device iterations recorded in the first submission of a call: a body that converges on the
-/// device mostly does so in one to three, a group in contact in four to eight, and an iteration
-/// recorded for members that have stopped costs empty dispatches (grains_many N = 800 with the
-/// groups in contact on the device: 107 submits with 4, 96 with 8, no slower on lavapipe). The
-/// second records what is left of the largest budget, so that a call takes at most two
-/// submissions however many iterations it needs.
-const ITERATIONS_PER_SUBMIT: u32 = 8;
+/// device mostly does so in one to three, a group in contact in four to eleven, and an iteration
+/// recorded for members that have stopped costs empty dispatches (grains_many N = 800 to
+/// t = 0.15 with the groups in contact on the device: 91 submits with 8, 82 with 12, as fast on
+/// lavapipe; 20 000 falling grains: the same 85 submits). The second records what is left of
+/// the largest budget, so that a call takes at most two submissions however many iterations it
+/// needs.
+const ITERATIONS_PER_SUBMIT: u32 = 12;
 
 /// The indirect dispatches (x, y, z) of update, forces, residual and judge, then the length of
 /// the call's list (`DISPATCHES` and `CALL_COUNT` of `newton.wgsl`).
@@ -68,6 +69,47 @@ pub struct NewtonCall<'a> {
     /// the same submission: the step's energy balance then needs no pass of its own).
     pub strain_energy: Option<Real>,
     pub failure: Option<ElementFailure>,
+    /// Out, for a member of a group in contact that the device hands back to the host
+    /// ([`NEWTON_HOST`]): the stiffness values `ξ K` at the `u` returned (the tangent the host
+    /// would assemble to renew its factorisation there).
+    pub tangent: Option<Vec<Real>>,
+}
+
+/// The tangents of the members of groups in contact that a call hands back to the host
+/// (mostly a factorisation that contracts too slowly, which the host renews at that iterate):
+/// `newton_compact`'s `host` entry lists them, the tangent kernel and `assemble_csr` run over
+/// that list after the iterations, and their stiffness values come back with the states, so
+/// that the host factorises without a tangent pass and a submission of its own.
+struct HostTangents {
+    /// The members of the call's groups in contact (mode TANGENT); those handed back go into
+    /// a list the passes are bound to.
+    call: Buffer,
+    /// The indirect dispatches of the tangent and `assemble_csr`, then the list's length
+    /// (the layout of [`DISPATCH_WORDS`]).
+    dispatch: Buffer,
+    compact: Pass,
+    tangent: Pass,
+    csr: Pass,
+}
+
+impl HostTangents {
+    fn new(gpu: &Gpu, pipelines: &NewtonPipelines, b: &Batch, tangent: &Pass, state: &Buffer) -> Self {
+        let write = BufferUsages::STORAGE | BufferUsages::COPY_DST;
+        let members = b.members.len();
+        let call = buffer(gpu, "host tangents call", members * 8, write);
+        let jobs = buffer(gpu, "host tangents jobs", members * 8, write);
+        let dispatch = buffer(gpu, "host tangents dispatch", DISPATCH_WORDS * 4, write | BufferUsages::INDIRECT);
+        let with_jobs = |buffers: &[Buffer], at: usize| -> Vec<Buffer> {
+            let mut buffers = buffers.to_vec();
+            buffers[at] = jobs.clone();
+            buffers
+        };
+        let (element, csr) = (with_jobs(&b.forces_buffers, FORCES_JOBS), with_jobs(&b.csr_buffers, CSR_JOBS));
+        let tangent = tangent.rebound(gpu, &element.iter().collect::<Vec<_>>());
+        let csr = b.csr.rebound(gpu, &csr.iter().collect::<Vec<_>>());
+        let compact = Pass::bound(gpu, pipelines.compact_host.clone(), ("newton_compact", "host"), &[&call, state, &jobs, &dispatch]);
+        Self { call, dispatch, compact, tangent, csr }
+    }
 }
 
 /// A batch's buffers and pipelines for device Newton iterations, made when a call first needs
@@ -96,6 +138,8 @@ pub(super) struct NewtonBuffers {
     update: Pass,
     judge: Pass,
     compact: Pass,
+    /// Made by the first call with groups in contact.
+    host_tangents: Option<HostTangents>,
     /// Host copies: each member's parameters and start displacements as last uploaded, and the
     /// factorisation whose inverse its slot holds.
     newton_host: Vec<NewtonMember<Real>>,
@@ -128,11 +172,17 @@ pub(super) struct NewtonPipelines {
     update: ComputePipeline,
     judge: ComputePipeline,
     compact: ComputePipeline,
+    compact_host: ComputePipeline,
 }
 
 impl NewtonPipelines {
     fn new(gpu: &Gpu) -> Result<Self, GpuError> {
-        Ok(Self { update: gpu.pipeline_at("newton_update", "main", None)?, judge: gpu.pipeline_at("newton_judge", "main", None)?, compact: gpu.pipeline_at("newton_compact", "main", None)? })
+        Ok(Self {
+            update: gpu.pipeline_at("newton_update", "main", None)?,
+            judge: gpu.pipeline_at("newton_judge", "main", None)?,
+            compact: gpu.pipeline_at("newton_compact", "main", None)?,
+            compact_host: gpu.pipeline_at("newton_compact", "host", None)?,
+        })
     }
 }
 
@@ -186,6 +236,7 @@ impl NewtonBuffers {
             update,
             judge,
             compact,
+            host_tangents: None,
             newton_host: vec![NewtonMember::default(); members],
             start_host: vec![Real::NAN; dofs],
             contact_host: vec![Real::NAN; dofs],
@@ -258,6 +309,20 @@ impl GpuWorld {
             work.push((batch, mine, energy));
         }
         let contact = if contacts.is_empty() { None } else { Some(self.stage_contact(calls, problems, contacts, dim, theta_dt)?) };
+        // An increment's solve runs every sweep its problem may take, as the host's does: a
+        // solve cut short (a software adapter's dispatch takes fewer) would change the
+        // iterations.
+        let solves = match &self.contact {
+            Some(sweeps) if contact.is_some() => sweeps.whole_dispatches(problems.iter().map(|p| p.max_iterations).max().unwrap_or(0)),
+            _ => 0,
+        };
+        // The members of the groups in contact, `(call, member)`, whose tangents the device
+        // computes when it hands them back.
+        let in_contact = match &contact {
+            Some((batch, _)) => self.stage_host_tangents(*batch, calls, contacts)?,
+            None => Vec::new(),
+        };
+        let tangent_bytes = in_contact.iter().map(|&(i, _)| self.batches[self.place[calls[i].body].0].members[self.place[calls[i].body].1].nonzeros as u64).sum::<u64>() * real as u64;
         let total = |f: fn(&crate::gpu::types::MemberRange) -> u32| -> usize { work.iter().map(|(b, mine, _)| mine.iter().map(|&(_, m)| f(&self.batches[*b].members[m]) as usize).sum::<usize>()).sum() };
         let (total_dofs, total_elements) = (total(|r| r.dofs), total(|r| r.elements));
         let total_members: usize = work.iter().map(|(_, mine, _)| mine.len()).sum();
@@ -266,7 +331,7 @@ impl GpuWorld {
         // read-back when one shares it.
         let points = problems.iter().map(|p| p.local.len()).sum::<usize>();
         let contact_bytes = if contact.is_some() { (points * 3 * real + contacts.len() * std::mem::size_of::<ContactState<Real>>() + 16) as u64 } else { 0 };
-        let bytes = (total_members * (8 + std::mem::size_of::<NewtonState<Real>>()) + total_dofs * 3 * real + total_elements * real) as u64 + if list.is_empty() { 0 } else { self.readback.size() } + contact_bytes;
+        let bytes = (total_members * (8 + std::mem::size_of::<NewtonState<Real>>()) + total_dofs * 3 * real + total_elements * real) as u64 + if list.is_empty() { 0 } else { self.readback.size() } + contact_bytes + tangent_bytes;
         if self.newton_readback.as_ref().is_none_or(|(_, size)| *size < bytes) {
             self.newton_readback = Some((buffer(&self.gpu, "newton readback", bytes as usize, BufferUsages::MAP_READ | BufferUsages::COPY_DST), bytes));
         }
@@ -303,7 +368,9 @@ impl GpuWorld {
                         let pipelines = self.contact_pipelines.as_ref();
                         if let (Some(c), Some(p)) = (mine, pipelines) {
                             c.record_prepare(&self.gpu, &mut pass, p);
-                            self.contact.as_ref().expect("staged").record_solve(&mut pass, contacts.len());
+                            for _ in 0..solves {
+                                self.contact.as_ref().expect("staged").record_solve(&mut pass, contacts.len());
+                            }
                             c.record_forces(&self.gpu, &mut pass, p);
                         }
                         n.update.dispatch_indirect(&self.gpu, &mut pass, &n.dispatch, 0);
@@ -315,6 +382,12 @@ impl GpuWorld {
                         }
                         n.compact.dispatch(&self.gpu, &mut pass, 1);
                     }
+                }
+                if let Some((batch, _)) = &contact {
+                    let h = self.batches[*batch].newton.as_ref().and_then(|n| n.host_tangents.as_ref()).expect("staged");
+                    h.compact.dispatch(&self.gpu, &mut pass, 1);
+                    h.tangent.dispatch_indirect(&self.gpu, &mut pass, &h.dispatch, 0);
+                    h.csr.dispatch_indirect(&self.gpu, &mut pass, &h.dispatch, 12);
                 }
                 for (batch, _, energy) in &work {
                     self.batches[*batch].newton.as_ref().expect("staged").energy.dispatch_xyz(&self.gpu, &mut pass, *energy);
@@ -345,6 +418,18 @@ impl GpuWorld {
                     landing[i] = [states[k], flags[k], us[k], outs[k], energies[k], b.members[m].elements as usize];
                 }
             }
+            // The stiffness values of the members in contact, `(call, where, entries)`: taken
+            // for those handed back.
+            let tangent_landing: Vec<(usize, usize, usize)> = match &contact {
+                Some((batch, _)) => {
+                    let b = &self.batches[*batch];
+                    let members: Vec<usize> = in_contact.iter().map(|&(_, m)| m).collect();
+                    let value_span = |m: usize| b.members[m].nonzero_start as u64 * real as u64..(b.members[m].nonzero_start + b.members[m].nonzeros) as u64 * real as u64;
+                    let at = readback.queue_runs(*batch, Source::Values, &members, &value_span);
+                    in_contact.iter().zip(at).map(|(&(i, m), at)| (i, at, b.members[m].nonzeros as usize)).collect()
+                }
+                None => Vec::new(),
+            };
             let contact_landing = contact.as_ref().map(|(_, passes)| {
                 let r = readback.queue_buffer(&self.contact.as_ref().expect("staged").buffers().r, (points * 3 * real) as u64);
                 (r, readback.queue_buffer(&passes.states, (contacts.len() * std::mem::size_of::<ContactState<Real>>()) as u64))
@@ -366,6 +451,10 @@ impl GpuWorld {
                     // Summed in element order, as the energy pass's results are.
                     call.strain_energy = Some(super::from_device(precision, &bytes[*energy_at..energy_at + elements * real]).iter().sum());
                 });
+                for &(i, at, entries) in &tangent_landing {
+                    let call = &mut calls[i];
+                    call.tangent = (call.outcome.status == NEWTON_HOST).then(|| super::from_device(precision, &bytes[at..at + entries * real]));
+                }
                 iterating = calls.iter().any(|call| call.outcome.status == NEWTON_ITERATING);
                 if let Some((r_at, states_at)) = contact_landing {
                     let mut at = r_at;
@@ -436,6 +525,33 @@ impl GpuWorld {
         self.upload_member_runs(batch, &u_base, real, &bases);
         self.traffic.up += up;
         Ok((batch, passes))
+    }
+
+    /// Stages the tangents of the members of a call's groups in contact (all in `batch`) that
+    /// the device hands back ([`HostTangents`]): their list, in mode TANGENT, and the
+    /// dispatches' extent. Returns those members, `(call, member)` in member order.
+    fn stage_host_tangents(&mut self, batch: usize, calls: &[NewtonCall], contacts: &[GroupContact]) -> Result<Vec<(usize, usize)>, GpuError> {
+        self.batches[batch].tangent.ready()?;
+        let b = &self.batches[batch];
+        let n = b.newton.as_ref().expect("made before staging");
+        if n.host_tangents.is_none() {
+            let super::Deferred::Ready(tangent) = &b.tangent else { unreachable!("made ready above") };
+            let made = HostTangents::new(&self.gpu, self.newton_pipelines.as_ref().expect("made with the batch's buffers"), b, tangent, &n.state);
+            self.batches[batch].newton.as_mut().expect("made before staging").host_tangents = Some(made);
+        }
+        let mut mine: Vec<(usize, usize)> = contacts.iter().flat_map(|g| &g.calls).map(|&c| (c, self.place[calls[c].body].1)).collect();
+        mine.sort_unstable_by_key(|&(_, m)| m);
+        let b = &self.batches[batch];
+        let list: Vec<Active> = mine.iter().map(|&(_, m)| Active { member: m as u32, mode: MODE_TANGENT }).collect();
+        let most = |f: fn(&crate::gpu::types::MemberRange) -> u32| mine.iter().map(|&(_, m)| f(&b.members[m]) as usize).max().unwrap_or(0);
+        let (tx, ty) = crate::gpu::dispatch_rows(most(|r| r.elements).div_ceil(b.tangent_elements_per_group));
+        let (cx, cy) = crate::gpu::dispatch_rows(most(|r| r.nonzeros).div_ceil(WORKGROUP));
+        let dispatch: [u32; DISPATCH_WORDS] = [tx, ty, 0, cx, cy, 0, 1, 1, 0, 1, 1, 0, list.len() as u32];
+        let h = b.newton.as_ref().and_then(|n| n.host_tangents.as_ref()).expect("made above");
+        let (call, arguments) = (h.call.clone(), h.dispatch.clone());
+        self.upload(&call, 0, bytemuck::cast_slice(&list));
+        self.upload(&arguments, 0, bytemuck::cast_slice(&dispatch));
+        Ok(mine)
     }
 
     /// Uploads what the listed calls (`(call, member)`, member order) of one batch need: stale
