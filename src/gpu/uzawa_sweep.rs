@@ -50,6 +50,13 @@ pub const SOLVE_SWEEPS: usize = 512;
 /// live, or judged converged on reactions the cut loops had left wrong.
 pub const SOFTWARE_LOOP_BUDGET: usize = 60_000;
 
+/// Dispatches of `uzawa_solve` a device Newton increment records on a software adapter, whose
+/// dispatches take fewer sweeps ([`SOFTWARE_LOOP_BUDGET`]) and cost lavapipe about 0.1 ms each
+/// even when every problem has stopped: up to four, so that a solve of a grain cluster runs to
+/// its end (grains_many N = 800 with `contact.max_iterations = 500`: at most five); one cut
+/// short hands its group back. A hardware GPU takes every sweep in one dispatch.
+pub const SOFTWARE_SOLVE_DISPATCHES: usize = 4;
+
 /// An upper bound on the loop iterations of one `uzawa_solve` invocation per sweep of a
 /// problem: its share of each colour's visits (the row of W and the local steps of each), the
 /// colour and sweep loops, and its share of the nodal sums and their reduction.
@@ -591,9 +598,15 @@ impl UzawaSweeps {
     }
 
     /// Dispatches of the staged whole solve that let a problem of `max_iterations` run all its
-    /// sweeps: more than one where a dispatch takes fewer (a software adapter's loop guard).
+    /// sweeps: more than one where a dispatch takes fewer (a software adapter's loop guard), at
+    /// most [`SOFTWARE_SOLVE_DISPATCHES`] there.
     pub(crate) fn whole_dispatches(&self, max_iterations: usize) -> usize {
-        max_iterations.div_ceil(self.whole_sweeps.max(1)).max(1)
+        let needed = max_iterations.div_ceil(self.whole_sweeps.max(1)).max(1);
+        if self.gpu.adapter.software() {
+            needed.min(SOFTWARE_SOLVE_DISPATCHES)
+        } else {
+            needed
+        }
     }
 
     /// Records one dispatch of `uzawa_solve` over `problems` staged problems.

@@ -482,6 +482,8 @@ impl Body {
         self.last_increment = None;
         self.previous_residual = None;
         self.contraction = None;
+        // A tangent of another step (its coefficients, its relaxation) is not this one's.
+        self.device_tangent = None;
     }
 
     /// Assembles force (and, without factorisation reuse, `ξ K`) at the trial displacement and

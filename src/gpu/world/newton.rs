@@ -309,9 +309,9 @@ impl GpuWorld {
             work.push((batch, mine, energy));
         }
         let contact = if contacts.is_empty() { None } else { Some(self.stage_contact(calls, problems, contacts, dim, theta_dt)?) };
-        // An increment's solve runs every sweep its problem may take, as the host's does: a
-        // solve cut short (a software adapter's dispatch takes fewer) would change the
-        // iterations.
+        // An increment's solve runs every sweep its problem may take, as the host's does, where
+        // a software adapter's dispatches allow: a solve cut short hands its group back
+        // (`judge`: its problem still live).
         let solves = match &self.contact {
             Some(sweeps) if contact.is_some() => sweeps.whole_dispatches(problems.iter().map(|p| p.max_iterations).max().unwrap_or(0)),
             _ => 0,
