@@ -318,11 +318,14 @@ impl GpuWorld {
         };
         // The members of the groups in contact, `(call, member)`, whose tangents the device
         // computes when it hands them back.
-        let in_contact = match &contact {
-            Some((batch, _)) => self.stage_host_tangents(*batch, calls, contacts)?,
-            None => Vec::new(),
+        let (in_contact, tangent_bytes) = match &contact {
+            Some((batch, _)) => {
+                let mine = self.stage_host_tangents(*batch, calls, contacts)?;
+                let entries: u64 = mine.iter().map(|&(_, m)| self.batches[*batch].members[m].nonzeros as u64).sum();
+                (mine, entries * real as u64)
+            }
+            None => (Vec::new(), 0),
         };
-        let tangent_bytes = in_contact.iter().map(|&(i, _)| self.batches[self.place[calls[i].body].0].members[self.place[calls[i].body].1].nonzeros as u64).sum::<u64>() * real as u64;
         let total = |f: fn(&crate::gpu::types::MemberRange) -> u32| -> usize { work.iter().map(|(b, mine, _)| mine.iter().map(|&(_, m)| f(&self.batches[*b].members[m]) as usize).sum::<usize>()).sum() };
         let (total_dofs, total_elements) = (total(|r| r.dofs), total(|r| r.elements));
         let total_members: usize = work.iter().map(|(_, mine, _)| mine.len()).sum();
