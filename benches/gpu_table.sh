@@ -3,7 +3,7 @@
 # build back to back, repeated, medians:
 #   runs    issue 14's table (doc/benchmarks.md, "GPU pipeline"): four scenes; the grains again
 #           with the contact sweeps on the device, and the grains and stack_3d with every
-#           Newton round on the device (`--rounds gpu`);
+#           Newton round on the device (`--rounds gpu`), then with the sweeps too;
 #   scale   issue 31's table (doc/benchmarks.md, "The GPU at scale"): grains_many N = 1 000,
 #           10 000 and 100 000 (2D) and grains_3d N = 1 000 and 10 000, the grains falling
 #           under gravity in their box (every grain moves, so every one is evaluated: the
@@ -86,6 +86,11 @@ for r in $(seq "$runs_reps"); do
   UZAWA_LABEL=" --rounds gpu"
   run "grains_many" gpu grains_many "${grains[@]}" --set output.scene_every=10 --rounds gpu
   run "stack_3d" gpu stack_3d "${stack[@]}" --rounds gpu
+  # The whole step on the device, groups in contact included: a submit per refactorisation
+  # round, not per increment.
+  UZAWA_LABEL=" --rounds gpu --uzawa gpu"
+  run "grains_many" gpu grains_many "${grains[@]}" --set output.scene_every=10 --rounds gpu --uzawa gpu
+  run "stack_3d" gpu stack_3d "${stack[@]}" --rounds gpu --uzawa gpu
 done
 
 if [[ $sections == *" kernels "* ]]; then
