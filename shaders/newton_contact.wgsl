@@ -190,12 +190,13 @@ fn forces(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) wor
 // it. Converged when every member passed its own test and the contact forces settled with a
 // converged solve; the host takes the group (every member HOST) when a member needs it or
 // failed, a member's residual contracted less than tenfold (the host refactorises it, as it
-// would one that passed its own test), UZAWA_STALLS solves in a row spent their sweeps (the
-// host then gives the step up), or the budget is spent; else every member iterates on (after a
-// solve that spent its sweeps too, as the host's Newton loop goes on), and when only the increments are left after TIGHTEN_AFTER
-// iterations the problem is solved ten times tighter from then on (down to TIGHTEST_INNER of
-// the contact tolerance). A group that stopped earlier keeps its verdict. One invocation per
-// group.
+// would one that passed its own test), a solve was cut short (still live: a software adapter's
+// dispatches), UZAWA_STALLS solves in a row spent their sweeps (the host then gives the step
+// up), or the budget is spent; else every member iterates on (after a solve that spent its
+// sweeps too, as the host's Newton loop goes on), and when only the increments are left after
+// TIGHTEN_AFTER iterations the problem is solved ten times tighter from then on (down to
+// TIGHTEST_INNER of the contact tolerance). A group that stopped earlier keeps its verdict. One
+// invocation per group.
 @compute @workgroup_size(NEWTON_WORKGROUP)
 fn judge(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) count: vec3<u32>) {
     let k = id.x + id.y * count.x * NEWTON_WORKGROUP;
