@@ -2,12 +2,15 @@
 // own kernels: per iteration `prepare` (the contact-free increment and the free velocities),
 // `uzawa_solve` (the reactions), `forces` (the contact forces `Hᵀ r` and how much they changed),
 // then `newton_update` with those forces, the evaluation, `newton_judge`, and `judge`, which
-// holds a group's members to one verdict. One workgroup per group (each group has one contact
+// holds a group's members to one verdict. A group that comes to the call unevaluated (the first
+// round of a step) is evaluated first, with `first_forces` before `newton_judge` and
+// `first_judge` after it. One workgroup per group (each group has one contact
 // problem, numbered as `uzawa_solve` numbers them); a group no longer iterating does nothing.
 // The Delassus operator stays the one the host built: no member refactorises here.
 // The host's increment this repeats: `ContactStep::prepare` and `ContactStep::apply`; its test:
 // `Group::converged`. CPU twins: `cpu::newton_contact_prepare`, `cpu::newton_contact_forces`,
-// `cpu::newton_contact_judge`, which follow this file line by line.
+// `cpu::newton_contact_judge`, `cpu::newton_contact_first_forces`,
+// `cpu::newton_contact_first_judge`, which follow this file line by line.
 
 // A group: its members (batch member indices, the first its leader) and what its test needs.
 struct ContactGroup {
@@ -231,6 +234,123 @@ fn judge(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) 
     } else if grp.iterations_before + iterations >= TIGHTEN_AFTER && settled && all_balanced {
         problems[k].tolerance = max(real(0.1) * problems[k].tolerance, real(TIGHTEST_INNER) * grp.tolerance);
         contact_states[k].tightened += 1u;
+    }
+    for (var a = 0u; a < grp.member_count; a++) {
+        let m = group_members[grp.member_start + a];
+        if state[m].status != FAILED {
+            state[m].status = verdict;
+        }
+    }
+}
+
+// A group's first evaluation of a step, before `newton_judge`: the contact forces of the
+// reactions the step starts from (last step's, where a point had one), each node's sum in
+// point order, as `ContactStep::apply_forces` gives them to the host's test.
+@compute @workgroup_size(NEWTON_WORKGROUP)
+fn first_forces(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workgroup: vec3<u32>, @builtin(num_workgroups) count: vec3<u32>) {
+    let k = problem_index(workgroup, count);
+    if !iterating(lane, k) {
+        return;
+    }
+    let p = problems[k];
+    for (var n = p.node_start + lane; n < p.node_end; n += NEWTON_WORKGROUP) {
+        var f = vec3<real>(real(0.0));
+        for (var e = node_start[n]; e < node_start[n + 1u]; e++) {
+            let i = node_points[e];
+            f += node_coefs[e] * global(i, vec3<real>(r[3u * i], r[3u * i + 1u], r[3u * i + 2u]));
+        }
+        let d0 = node_dof[n];
+        for (var c = 0u; c < call.dim; c++) {
+            contact[d0 + c] = f[c];
+        }
+    }
+}
+
+// After `newton_judge` of a first evaluation: the group's verdict as `Group::converged` gives
+// it before any Uzawa sweep of the step. Converged when every member passed its own test, every
+// point had a reaction to start from (rho > 0) and the law holds at the trial velocities
+// (`ContactStep::complementarity`: one Uzawa step from the reactions changes the nodal forces
+// by at most the contact tolerance of their size); the host takes the group when a member needs
+// it or failed; else every member iterates. Each point's step goes into its free velocity,
+// which `prepare` sets anew before a solve reads it.
+@compute @workgroup_size(NEWTON_WORKGROUP)
+fn first_judge(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workgroup: vec3<u32>, @builtin(num_workgroups) count: vec3<u32>) {
+    let k = problem_index(workgroup, count);
+    if lane == 0u {
+        go = u32(k < call.problems);
+    }
+    if workgroupUniformLoad(&go) == 0u {
+        return;
+    }
+    let p = problems[k];
+    let tdt = call.theta_dt;
+    var cold = 0u;
+    for (var i = p.point_start + lane; i < p.point_end; i += NEWTON_WORKGROUP) {
+        let l = locals[i];
+        let ri = vec3<real>(r[3u * i], r[3u * i + 1u], r[3u * i + 2u]);
+        var step = vec3<real>(real(0.0));
+        if l.rho == real(0.0) {
+            cold = 1u;
+        } else {
+            var g = -vec3<real>(obstacle[3u * i], obstacle[3u * i + 1u], obstacle[3u * i + 2u]);
+            for (var e = term_start[i]; e < term_start[i + 1u]; e++) {
+                let d0 = node_dof[term_slots[e]];
+                let coef = term_coefs[e];
+                for (var c = 0u; c < call.dim; c++) {
+                    let d = d0 + c;
+                    g[c] += coef * ((u[d] - u_base[d]) / tdt);
+                }
+            }
+            let f = 9u * i;
+            var v = vec3<real>(
+                frames[f] * g.x + frames[f + 1u] * g.y + frames[f + 2u] * g.z,
+                frames[f + 3u] * g.x + frames[f + 4u] * g.y + frames[f + 5u] * g.z,
+                frames[f + 6u] * g.x + frames[f + 7u] * g.y + frames[f + 8u] * g.z,
+            );
+            v.x += l.shift;
+            step = uzawa_step(ri, v, l.mu, l.rho).r - ri;
+        }
+        locals[i].v_free_n = step.x;
+        locals[i].v_free_t1 = step.y;
+        locals[i].v_free_t2 = step.z;
+    }
+    // The nodes read the steps of every lane.
+    storageBarrier();
+    workgroupBarrier();
+    var worst = real(0.0);
+    var size = real(0.0);
+    for (var n = p.node_start + lane; n < p.node_end; n += NEWTON_WORKGROUP) {
+        var d = vec3<real>(real(0.0));
+        var a = vec3<real>(real(0.0));
+        for (var e = node_start[n]; e < node_start[n + 1u]; e++) {
+            let i = node_points[e];
+            let coef = node_coefs[e];
+            d += coef * global(i, vec3<real>(locals[i].v_free_n, locals[i].v_free_t1, locals[i].v_free_t2));
+            a += coef * global(i, vec3<real>(r[3u * i], r[3u * i + 1u], r[3u * i + 2u]));
+        }
+        worst = max(worst, norm(d));
+        size = max(size, norm(a));
+    }
+    worst = reduce_max(lane, worst);
+    size = reduce_max(lane, size);
+    let any_cold = reduce_max(lane, real(cold));
+    if lane != 0u {
+        return;
+    }
+    let complementarity = worst / max(max(size, p.floor), REAL_MIN_POSITIVE);
+    let grp = groups[k];
+    var all_converged = true;
+    var to_host = false;
+    for (var a = 0u; a < grp.member_count; a++) {
+        let s = state[group_members[grp.member_start + a]];
+        all_converged = all_converged && s.status == CONVERGED;
+        to_host = to_host || s.status == HOST || s.status == FAILED;
+    }
+    var verdict = ITERATING;
+    if to_host {
+        verdict = HOST;
+    } else if all_converged && any_cold == real(0.0) && complementarity <= grp.tolerance {
+        verdict = CONVERGED;
     }
     for (var a = 0u; a < grp.member_count; a++) {
         let m = group_members[grp.member_start + a];

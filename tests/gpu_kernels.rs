@@ -1165,8 +1165,9 @@ fn newton_contact_kernels_match_their_cpu_twins() {
         let slot_nodes: Vec<(u32, u32)> = nodes.iter().flat_map(|&n| [(0, n), (1, n)]).collect();
         let (tolerance, floor) = (1e-8, 1e-12);
         // One increment then the host; increments to convergence; solves of two sweeps, which
-        // spend them every time: the group iterates on until UZAWA_STALLS in a row.
-        for (budget, contact_tolerance, max_sweeps) in [(1u32, 1e-6, 400u32), (12, 1e-6, 400), (12, 1e-6, 2)] {
+        // spend them every time: the group iterates on until UZAWA_STALLS in a row; the group
+        // unevaluated, as in the first round of a step (`first_forces` and `first_judge`).
+        for (budget, contact_tolerance, max_sweeps, evaluated) in [(1u32, 1e-6, 400u32, true), (12, 1e-6, 400, true), (12, 1e-6, 2, true), (12, 1e-6, 400, false)] {
             let member = |b: usize, inverse_start: u32, free_start: u32| NewtonMember {
                 inverse_start,
                 free_start,
@@ -1193,7 +1194,8 @@ fn newton_contact_kernels_match_their_cpu_twins() {
             let mut out: Vec<DofOut<f64>> = first.concat();
             let mut contact = vec![0.0; u.len()];
             let mut x0 = vec![0.0; u.len()];
-            let mut state = [0, 1].map(|b| NewtonState { status: NEWTON_ITERATING, residual: residual0(b), previous_residual: residual0(b), ..Default::default() });
+            let start_residual = |b: usize| if evaluated { residual0(b) } else { f64::MAX };
+            let mut state = [0, 1].map(|b| NewtonState { status: NEWTON_ITERATING, residual: start_residual(b), previous_residual: start_residual(b), ..Default::default() });
             let mut staged = [UzawaProblem { point_start: 0, point_end: n_points as u32, node_start: 0, node_end: 2 * n_points as u32, max_iterations: max_sweeps, colour_first: 0, colours: colours.count() as u32, pad: 0, tolerance, floor }];
             let mut r0 = vec![[0.0; 3]; n_points];
             let problem_of = |local: &[Local], r: &mut Vec<[f64; 3]>| -> NodeGather {
@@ -1213,6 +1215,16 @@ fn newton_contact_kernels_match_their_cpu_twins() {
             let (mut r, mut dr) = (vec![0.0; 3 * n_points], vec![0.0; 3 * n_points]);
             let call = [Active { member: 0, mode: 1 }, Active { member: 1, mode: 1 }];
             let (mut jobs, mut left) = (call, call.len());
+            if !evaluated {
+                // The evaluation at u is `first`; its test with the contact forces of the
+                // reactions the step starts from, then the group's verdict.
+                cpu::newton_contact_first_forces(&state, &mut contact, &layout, &staged, &gather, &r, 0);
+                for m in 0..2 {
+                    cpu::newton_judge(&free_all, &newton, &mut state, &out, &u, &u_start, &step_all, coefficients, &[u32::MAX; 4], &members, &contact, m);
+                }
+                cpu::newton_contact_first_judge(&mut state, &u, &u_base, &layout, &staged, &gather, &mut locals, &r, 0);
+                assert!(state.iter().all(|s| s.status == NEWTON_ITERATING), "{}: the law does not hold at the reactions the group starts from", kind.name());
+            }
             while {
                 left = cpu::newton_compact(&call, &state, &mut jobs, left);
                 left > 0
@@ -1252,7 +1264,7 @@ fn newton_contact_kernels_match_their_cpu_twins() {
                 .iter_mut()
                 .zip(outs.iter_mut())
                 .enumerate()
-                .map(|(b, (u, dof_out))| NewtonCall { body: b, factor: 1, inverse: Some(inverses[b].clone()), member: member(b, 0, 0), residual: Some(residual0(b)), u, dof_out, u_start: &starts[b], contact_force: Some(&zeros[b]), outcome: NewtonState::default(), strain_energy: None, failure: None, tangent: None })
+                .map(|(b, (u, dof_out))| NewtonCall { body: b, factor: 1, inverse: Some(inverses[b].clone()), member: member(b, 0, 0), residual: evaluated.then(|| residual0(b)), u, dof_out, u_start: &starts[b], contact_force: Some(&zeros[b]), outcome: NewtonState::default(), strain_energy: None, failure: None, tangent: None })
                 .collect();
             for l in local.iter_mut() {
                 l.v_free = [0.0; 3];

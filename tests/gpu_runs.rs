@@ -510,14 +510,16 @@ fn groups_in_contact_take_their_newton_increments_on_the_device() {
 fn groups_in_contact_on_the_device_cost_a_submit_per_refactorisation_round_not_per_increment() {
     // Issue 31, every round and the sweeps on the device: grains pressed by the wall (2D, 200
     // and 800 grains, into the phase where contact problems spend their sweeps) and grains
-    // falling into a box (3D). A step takes the first round's evaluation pass, the device call
-    // of the groups in contact, and one call more for each round in which the device hands
-    // groups back to renew factorisations; with their tangents, computed in that call. These
-    // runs took up to 17 submits a step (224 for 800 grains to t = 0.15, 207 Newton
-    // iterations): a grain touched for the first time had a tangent pass after its first
-    // evaluation, a group handed back another before its refactorisation, and a group whose
-    // solve spent its sweeps stayed on the host, an evaluation pass and a Uzawa submit per
-    // increment. The Newton iterations and energies are the CPU backend's. 400 sweeps a solve,
+    // falling into a box (3D). A step takes one submission for the first round's evaluation
+    // pass and the groups in contact, which the device evaluates, judges and iterates, and one
+    // call more for each round in which the device hands groups back to renew factorisations,
+    // with their tangents, computed in that call. These runs took up to 17 submits a step (224
+    // for 800 grains to t = 0.15, 207 Newton iterations): the host judged a group's first
+    // evaluation before its first device call, a grain touched for the first time had a
+    // tangent pass after its first evaluation, a group handed back another before its
+    // refactorisation, and a group whose solve spent its sweeps stayed on the host, an
+    // evaluation pass and a Uzawa submit per increment. The Newton iterations and energies are
+    // the CPU backend's (200 grains: one group converges at its first evaluation). 400 sweeps a solve,
     // so that on lavapipe a solve that spends them runs whole in the dispatches an increment
     // records there (`SOFTWARE_SOLVE_DISPATCHES`).
     let test = "groups_in_contact_on_the_device_cost_a_submit_per_refactorisation_round_not_per_increment";
@@ -543,8 +545,8 @@ fn groups_in_contact_on_the_device_cost_a_submit_per_refactorisation_round_not_p
         assert_eq!(newton, field(&cpu, "newton_iterations"), "{scene}: the CPU's Newton iterations");
         assert!(worst <= 1e-9, "{scene}: energies differ by {worst:.3e}");
         assert!(field(&device, "device_iterations") > newton, "{scene}: the groups in contact iterate on the device");
-        assert!(submits.iter().all(|&s| s <= 4.0), "{scene}: at most two refactorisation rounds a step here: {submits:?}");
-        assert!(2 * field(&device, "device_submits") < newton, "{scene}: {} submits for {newton} Newton iterations", field(&device, "device_submits"));
+        assert!(submits.iter().all(|&s| s <= 3.0), "{scene}: at most two refactorisation rounds a step here: {submits:?}");
+        assert!(3 * field(&device, "device_submits") < newton, "{scene}: {} submits for {newton} Newton iterations", field(&device, "device_submits"));
     }
 }
 

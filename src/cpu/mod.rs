@@ -12,7 +12,7 @@
 //! | `uzawa_sweep` | [`uzawa_sweep`] |
 //! | `uzawa_judge`, `uzawa_solve` | [`uzawa_judge`], [`uzawa_solve`] |
 //! | `newton_update`, `newton_judge`, `newton_compact` (`main`, `host`) | [`newton_update`], [`newton_judge`], [`newton_compact`], [`newton_compact_host`] |
-//! | `newton_contact` (`prepare`, `forces`, `judge`) | [`newton_contact_prepare`], [`newton_contact_forces`], [`newton_contact_judge`] |
+//! | `newton_contact` (`prepare`, `forces`, `judge`, `first_forces`, `first_judge`) | [`newton_contact_prepare`], [`newton_contact_forces`], [`newton_contact_judge`], [`newton_contact_first_forces`], [`newton_contact_first_judge`] |
 //! | `peak_copy` | [`peak_copy`] |
 //! | `peak_fma` | [`peak_fma`] |
 
@@ -20,7 +20,7 @@ mod newton;
 mod uzawa;
 
 pub use crate::contact::law::uzawa_step;
-pub use newton::{newton_compact, newton_compact_host, newton_contact_forces, newton_contact_judge, newton_contact_prepare, newton_judge, newton_update};
+pub use newton::{newton_compact, newton_compact_host, newton_contact_first_forces, newton_contact_first_judge, newton_contact_forces, newton_contact_judge, newton_contact_prepare, newton_judge, newton_update};
 pub use crate::contact::uzawa::uzawa_sweep;
 pub use uzawa::{uzawa_judge, uzawa_solve};
 pub use crate::element::{element_energy, element_force_tangent};

@@ -259,6 +259,99 @@ pub fn newton_contact_forces(
     s.change = change / size.max(p.floor).max(Real::MIN_POSITIVE);
 }
 
+/// `newton_contact`'s `first_forces` for group `k`: the contact forces of the reactions `r` the
+/// step starts from, per dof, before the test of a first evaluation.
+pub fn newton_contact_first_forces(state: &[NewtonState<Real>], contact: &mut [Real], c: &ContactLayout, problems: &[UzawaProblem<Real>], nodes: &NodeGather, r: &[Real], k: usize) {
+    if !group_iterating(state, c, k) {
+        return;
+    }
+    let p = problems[k];
+    for n in p.node_start as usize..p.node_end as usize {
+        let mut f = [0.0; 3];
+        for e in nodes.start[n] as usize..nodes.start[n + 1] as usize {
+            let i = nodes.points[e] as usize;
+            let global = global(&nodes.frames, i, triple(r, i));
+            for a in 0..3 {
+                f[a] += nodes.coefs[e] * global[a];
+            }
+        }
+        let d0 = c.node_dof[n] as usize;
+        for (comp, &fc) in f.iter().enumerate().take(c.call.dim as usize) {
+            contact[d0 + comp] = fc;
+        }
+    }
+}
+
+/// `newton_contact`'s `first_judge` for group `k`, after `newton_judge` of a first evaluation:
+/// converged when every member passed, every point is warm and the law holds at the trial
+/// velocities (`ContactStep::complementarity`), the host's when a member needs it or failed,
+/// else every member iterates; each point's Uzawa step from `r` is left in its `v_free`.
+#[allow(clippy::too_many_arguments)]
+pub fn newton_contact_first_judge(state: &mut [NewtonState<Real>], u: &[Real], u_base: &[Real], c: &ContactLayout, problems: &[UzawaProblem<Real>], nodes: &NodeGather, locals: &mut [UzawaLocal<Real>], r: &[Real], k: usize) {
+    if k >= c.groups.len() {
+        return;
+    }
+    let p = problems[k];
+    let tdt = c.call.theta_dt;
+    let mut cold = false;
+    for (i, local) in locals.iter_mut().enumerate().take(p.point_end as usize).skip(p.point_start as usize) {
+        let ri = triple(r, i);
+        let mut step = [0.0; 3];
+        if local.rho == 0.0 {
+            cold = true;
+        } else {
+            let mut g = [-c.obstacle[3 * i], -c.obstacle[3 * i + 1], -c.obstacle[3 * i + 2]];
+            for e in c.term_start[i] as usize..c.term_start[i + 1] as usize {
+                let d0 = c.node_dof[c.term_slots[e] as usize] as usize;
+                let coef = c.term_coefs[e];
+                for (comp, g) in g.iter_mut().enumerate().take(c.call.dim as usize) {
+                    let d = d0 + comp;
+                    *g += coef * ((u[d] - u_base[d]) / tdt);
+                }
+            }
+            let f = &nodes.frames[9 * i..9 * i + 9];
+            let mut v = [0, 1, 2].map(|a| f[3 * a] * g[0] + f[3 * a + 1] * g[1] + f[3 * a + 2] * g[2]);
+            v[0] += local.shift;
+            let (next, _) = crate::contact::law::uzawa_step(ri, v, local.mu, local.rho);
+            step = [0, 1, 2].map(|a| next[a] - ri[a]);
+        }
+        local.v_free = step;
+    }
+    let norm = |x: [Real; 3]| (x[0] * x[0] + x[1] * x[1] + x[2] * x[2]).sqrt();
+    let (mut worst, mut size): (Real, Real) = (0.0, 0.0);
+    for n in p.node_start as usize..p.node_end as usize {
+        let (mut d, mut a) = ([0.0; 3], [0.0; 3]);
+        for e in nodes.start[n] as usize..nodes.start[n + 1] as usize {
+            let i = nodes.points[e] as usize;
+            let coef = nodes.coefs[e];
+            let (step, reaction) = (global(&nodes.frames, i, locals[i].v_free), global(&nodes.frames, i, triple(r, i)));
+            for comp in 0..3 {
+                d[comp] += coef * step[comp];
+                a[comp] += coef * reaction[comp];
+            }
+        }
+        worst = worst.max(norm(d));
+        size = size.max(norm(a));
+    }
+    let complementarity = worst / size.max(p.floor).max(Real::MIN_POSITIVE);
+    let grp = c.groups[k];
+    let list = &c.group_members[grp.member_start as usize..][..grp.member_count as usize];
+    let all_converged = list.iter().all(|&m| state[m as usize].status == NEWTON_CONVERGED);
+    let to_host = list.iter().any(|&m| matches!(state[m as usize].status, NEWTON_HOST | NEWTON_FAILED));
+    let verdict = if to_host {
+        NEWTON_HOST
+    } else if all_converged && !cold && complementarity <= grp.tolerance {
+        NEWTON_CONVERGED
+    } else {
+        NEWTON_ITERATING
+    };
+    for &m in list {
+        if state[m as usize].status != NEWTON_FAILED {
+            state[m as usize].status = verdict;
+        }
+    }
+}
+
 /// `newton_contact`'s `judge` for group `k`: one verdict for all its members, and its problem
 /// solved tighter when only the increments are left.
 pub fn newton_contact_judge(newton: &[NewtonMember<Real>], state: &mut [NewtonState<Real>], c: &ContactLayout, problems: &mut [UzawaProblem<Real>], contact_states: &mut [crate::gpu::types::ContactState<Real>], k: usize) {

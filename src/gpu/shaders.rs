@@ -149,6 +149,8 @@ pub fn source(kernel: &str, precision: Precision, variant: Option<ElementVariant
             );
             module += include("uzawa")?;
             module += include("contact_frame")?;
+            // `first_judge`'s test of the law at the reactions a step starts from.
+            module += include("contact_law")?;
         }
     }
     if is_contact_kernel(kernel) {

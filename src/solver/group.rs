@@ -397,8 +397,9 @@ fn newton_in_lockstep(groups: &mut [Group], world: &mut GpuWorld, c: &Context, t
     let none = vec![false; groups.len()];
     // The groups whose Newton iterations go to the device with this round's pass (in the first
     // round, unevaluated), and the batch of those in contact.
-    let mut iterating = if device_residual { evaluate_on_device_first(groups, world, c) } else { none.clone() };
     let mut contact_batch = None;
+    let mut iterating = if device_residual { evaluate_on_device_first(groups, world, c, &mut contact_batch) } else { none.clone() };
+    build_for_device(groups, &iterating, c);
     loop {
         let live: Vec<bool> = outcome.iter().map(Option::is_none).collect();
         if !live.iter().any(|&l| l) {
@@ -495,23 +496,48 @@ fn newton_in_lockstep(groups: &mut [Group], world: &mut GpuWorld, c: &Context, t
 }
 
 /// The groups whose first evaluation of a step goes to the device with their Newton iterations
-/// ([`GpuWorld::newton`] evaluates and judges them before the first increment): one body
-/// without contact points that keeps its factorisation, whose `K̄⁻¹` the device holds, and
-/// whose trial displacement is not that of its last evaluation (a grain at rest takes that one
-/// again), with element work worth device passes. A falling grain then costs one submission a
-/// step, not an evaluation pass, its read-back and the Newton call's upload of the same
-/// residuals.
-fn evaluate_on_device_first(groups: &[Group], world: &GpuWorld, c: &Context) -> Vec<bool> {
+/// ([`GpuWorld::newton`] evaluates and judges them before the first increment), with element
+/// work worth device passes: bodies that keep their factorisation, whose `K̄⁻¹` the device
+/// holds; either one body without contact points whose trial displacement is not that of its
+/// last evaluation (a grain at rest takes that one again), or a group in contact as
+/// [`iterate_on_device`] takes them (problems solved whole on the device, the step's
+/// `contact_batch`), whose W [`build_for_device`] builds first. A falling grain then costs one
+/// submission a step, not an evaluation pass, its read-back and the Newton call's upload of
+/// the same residuals; a cluster of grains in contact, one submission less.
+fn evaluate_on_device_first(groups: &[Group], world: &GpuWorld, c: &Context, contact_batch: &mut Option<usize>) -> Vec<bool> {
     let p = c.p;
-    let chosen: Vec<bool> = groups
+    let software = world.software();
+    let fits = |b: &Body, id: usize| world.newton_capable(id) && b.iterates_on_device(p) && world.newton_inverse_current(id, b.factor_version());
+    let mut chosen: Vec<bool> = groups
         .par_iter()
         .map(|g| {
-            let fits = |b: &Body, id: usize| world.newton_capable(id) && b.iterates_on_device(p) && world.newton_inverse_current(id, b.factor_version()) && !b.evaluation_holds(p);
-            g.contact.is_none() && g.bodies.len() == 1 && p.max_iterations > 0 && fits(g.bodies[0], g.ids[0])
+            p.max_iterations > 0
+                && match &g.contact {
+                    None => g.bodies.len() == 1 && fits(g.bodies[0], g.ids[0]) && !g.bodies[0].evaluation_holds(p),
+                    Some(contact) => contact.solved_whole(software) && g.bodies.iter().zip(g.ids).all(|(b, &id)| fits(b, id)),
+                }
         })
         .collect();
+    let mut in_contact = vec![false; groups.len()];
+    let mut batch_taken = *contact_batch;
+    for (k, g) in groups.iter().enumerate().filter(|(_, g)| g.contact.is_some()) {
+        if chosen[k] {
+            let batch = world.batch_of(g.ids[0]);
+            in_contact[k] = g.ids.iter().all(|&id| world.batch_of(id) == batch) && *batch_taken.get_or_insert(batch) == batch;
+            chosen[k] = in_contact[k];
+        }
+    }
+    if in_contact.contains(&true) && !c.settings.is_some_and(|settings| sweeps_on_device(groups, &in_contact, world, settings)) {
+        for (chosen, &yes) in chosen.iter_mut().zip(&in_contact) {
+            *chosen &= !yes;
+        }
+        in_contact.fill(false);
+    }
     if !chosen.contains(&true) || !crate::backend::round_on_device(world, false, &element_work(groups, &chosen, &|_| true)) {
         return vec![false; groups.len()];
+    }
+    if in_contact.contains(&true) {
+        *contact_batch = batch_taken;
     }
     chosen
 }

@@ -86,11 +86,14 @@ pub(super) struct ContactPipelines {
     prepare: ComputePipeline,
     forces: ComputePipeline,
     judge: ComputePipeline,
+    first_forces: ComputePipeline,
+    first_judge: ComputePipeline,
 }
 
 impl ContactPipelines {
     pub(super) fn new(gpu: &Gpu) -> Result<Self, crate::gpu::GpuError> {
-        Ok(Self { prepare: gpu.pipeline_at("newton_contact", "prepare", None)?, forces: gpu.pipeline_at("newton_contact", "forces", None)?, judge: gpu.pipeline_at("newton_contact", "judge", None)? })
+        let at = |entry: &str| gpu.pipeline_at("newton_contact", entry, None);
+        Ok(Self { prepare: at("prepare")?, forces: at("forces")?, judge: at("judge")?, first_forces: at("first_forces")?, first_judge: at("first_judge")? })
     }
 }
 
@@ -99,6 +102,8 @@ pub(super) struct ContactPasses {
     prepare: BindGroup,
     forces: BindGroup,
     judge: BindGroup,
+    first_forces: BindGroup,
+    first_judge: BindGroup,
     pub(super) states: Buffer,
     problems: u32,
 }
@@ -170,7 +175,30 @@ impl ContactPasses {
             ],
         );
         let judge = gpu.bind(Some("newton_contact"), &pipelines.judge, &[(2, &n.newton), (3, &n.state), (10, &groups), (11, &group_members), (14, &uzawa.judged), (25, &states), (26, &call)]);
-        Self { prepare, forces, judge, states, problems: l.groups.len() as u32 }
+        let node_gather = [(21, &uzawa.node_start), (22, &uzawa.node_points), (23, &uzawa.node_coefs)];
+        let mut first_forces_entries = vec![(3, &n.state), (9, &n.contact), (10, &groups), (11, &group_members), (14, &uzawa.judged), (19, &uzawa.frames), (20, &node_dof), (24, &uzawa.r), (26, &call)];
+        first_forces_entries.extend(node_gather);
+        let first_forces = gpu.bind(Some("newton_contact"), &pipelines.first_forces, &first_forces_entries);
+        let mut first_judge_entries = vec![
+            (3, &n.state),
+            (5, &b.u),
+            (8, &n.u_base),
+            (10, &groups),
+            (11, &group_members),
+            (12, &uzawa.locals),
+            (14, &uzawa.judged),
+            (15, &term_start),
+            (16, &term_slots),
+            (17, &term_coefs),
+            (18, &obstacle),
+            (19, &uzawa.frames),
+            (20, &node_dof),
+            (24, &uzawa.r),
+            (26, &call),
+        ];
+        first_judge_entries.extend(node_gather);
+        let first_judge = gpu.bind(Some("newton_contact"), &pipelines.first_judge, &first_judge_entries);
+        Self { prepare, forces, judge, first_forces, first_judge, states, problems: l.groups.len() as u32 }
     }
 
     fn dispatch(gpu: &Gpu, pass: &mut wgpu::ComputePass, entry: &'static str, pipeline: &ComputePipeline, group: &BindGroup, workgroups: usize) {
@@ -190,6 +218,16 @@ impl ContactPasses {
     /// `forces`, one workgroup per group.
     pub(super) fn record_forces(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass, p: &ContactPipelines) {
         Self::dispatch(gpu, pass, "forces", &p.forces, &self.forces, self.problems as usize);
+    }
+
+    /// `first_forces`, one workgroup per group.
+    pub(super) fn record_first_forces(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass, p: &ContactPipelines) {
+        Self::dispatch(gpu, pass, "first_forces", &p.first_forces, &self.first_forces, self.problems as usize);
+    }
+
+    /// `first_judge`, one workgroup per group.
+    pub(super) fn record_first_judge(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass, p: &ContactPipelines) {
+        Self::dispatch(gpu, pass, "first_judge", &p.first_judge, &self.first_judge, self.problems as usize);
     }
 
     /// `judge`, one invocation per group.

@@ -343,7 +343,6 @@ impl GpuWorld {
         let mut iterations = calls.iter().map(|c| c.member.budget).max().unwrap_or(0).min(ITERATIONS_PER_SUBMIT);
         let evaluate_first = calls.first().is_some_and(|c| c.residual.is_none());
         assert!(calls.iter().all(|c| c.residual.is_none() == evaluate_first), "a call's members are all evaluated, or none");
-        assert!(!evaluate_first || contacts.is_empty(), "groups in contact come to the device evaluated");
         let mut first = true;
         loop {
             let mut encoder = self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("newton") });
@@ -354,12 +353,23 @@ impl GpuWorld {
                 // The members' first evaluation and its convergence test: `newton_judge` from a
                 // state without a residual before (`Real::MAX`) and without an increment tests
                 // it as `Body::converged` tests a step's first evaluation.
+                // Groups in contact: `newton_contact`'s `first_forces` (the contact forces of the
+                // reactions the step starts from) before the test and `first_judge` (the group's
+                // verdict, the law at the reactions) after it.
                 if first && evaluate_first {
                     for (batch, _, _) in &work {
                         let n = self.batches[*batch].newton.as_ref().expect("staged");
+                        let mine = contact.as_ref().filter(|(at, _)| at == batch).map(|(_, passes)| passes);
+                        let pipelines = self.contact_pipelines.as_ref();
                         n.forces.dispatch_indirect(&self.gpu, &mut pass, &n.dispatch, 12);
                         n.residual.dispatch_indirect(&self.gpu, &mut pass, &n.dispatch, 24);
+                        if let (Some(c), Some(p)) = (mine, pipelines) {
+                            c.record_first_forces(&self.gpu, &mut pass, p);
+                        }
                         n.judge.dispatch_indirect(&self.gpu, &mut pass, &n.dispatch, 36);
+                        if let (Some(c), Some(p)) = (mine, pipelines) {
+                            c.record_first_judge(&self.gpu, &mut pass, p);
+                        }
                         n.compact.dispatch(&self.gpu, &mut pass, 1);
                     }
                 }
