@@ -10,7 +10,7 @@ use super::PhaseTimes;
 use crate::contact::uzawa::{Outcome, Problem};
 use crate::contact::{ContactPoint, Settings, WarmStart};
 use crate::gpu::types::ContactState;
-use crate::gpu::uzawa_sweep::JUDGE_CONVERGED;
+use crate::gpu::uzawa_sweep::{JUDGE_CONVERGED, JUDGE_LIVE};
 use crate::gpu::{ElementFailure, Evaluation, GpuWorld, GroupContact, NewtonCall};
 use crate::mesh::ElementKind;
 use crate::precision::{Precision, Real};
@@ -208,6 +208,10 @@ struct NewtonState {
     uzawa_converged: bool,
     /// Newton iterations in a row whose Uzawa sweeps did not converge.
     uzawa_stalls: usize,
+    /// The last solve ran on the device and was cut short, still live (a software adapter's
+    /// dispatches take fewer sweeps, `SOFTWARE_SOLVE_DISPATCHES`): the next increment's runs
+    /// whole on the host's path, or the same cut would count as stalls until the step fails.
+    cut_short: bool,
 }
 
 impl NewtonState {
@@ -219,6 +223,7 @@ impl NewtonState {
         self.uzawa_converged = converged;
         self.uzawa_stalls = if converged { 0 } else { self.uzawa_stalls + 1 };
         self.last_change = Some(change);
+        self.cut_short = false;
     }
 }
 
@@ -558,7 +563,7 @@ fn iterate_on_device(groups: &[Group], continuing: &mut [bool], world: &GpuWorld
     let fit = |b: &Body| if refreshed { b.factor_fit(p) } else { b.iterates_on_device(p) };
     let capable = |g: &Group| g.newton.report.iterations < p.max_iterations && g.bodies.iter().zip(g.ids).all(|(b, &id)| world.newton_capable(id) && fit(b));
     let software = world.software();
-    let solved_whole = |g: &Group| g.contact.as_ref().is_some_and(|k| k.solved_whole(software));
+    let solved_whole = |g: &Group| !g.newton.cut_short && g.contact.as_ref().is_some_and(|k| k.solved_whole(software));
     let mut chosen = vec![false; groups.len()];
     let mut in_contact = vec![false; groups.len()];
     let mut batch_taken = *contact_batch;
@@ -839,6 +844,7 @@ fn device_pass(
                 let o = contact_outcomes[j];
                 state.record_solve(o.sweeps as usize, o.uzawa == JUDGE_CONVERGED, o.change);
                 state.uzawa_stalls = o.stalls as usize;
+                state.cut_short = o.uzawa == JUDGE_LIVE;
                 let contact = g.contact.as_mut().expect("a group with a contact outcome has contact");
                 for _ in 0..o.tightened {
                     contact.tighten();
