@@ -85,6 +85,17 @@ struct ContactCall {
 var<workgroup> go: u32;
 var<workgroup> rhs: array<real, MAX_FREE>;
 
+// The contact force on node slot n: its points' reactions in global coordinates, each times its
+// coefficient, in point order.
+fn node_force(n: u32) -> vec3<real> {
+    var f = vec3<real>(real(0.0));
+    for (var e = node_start[n]; e < node_start[n + 1u]; e++) {
+        let i = node_points[e];
+        f += node_coefs[e] * global(i, vec3<real>(r[3u * i], r[3u * i + 1u], r[3u * i + 2u]));
+    }
+    return f;
+}
+
 // Whether group k (of the rows of workgroups) exists and is still iterating; the same for every
 // invocation of the workgroup.
 fn iterating(lane: u32, k: u32) -> bool {
@@ -163,11 +174,7 @@ fn forces(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) wor
     var change = real(0.0);
     var size = real(0.0);
     for (var n = p.node_start + lane; n < p.node_end; n += NEWTON_WORKGROUP) {
-        var f = vec3<real>(real(0.0));
-        for (var e = node_start[n]; e < node_start[n + 1u]; e++) {
-            let i = node_points[e];
-            f += node_coefs[e] * global(i, vec3<real>(r[3u * i], r[3u * i + 1u], r[3u * i + 2u]));
-        }
+        let f = node_force(n);
         let d0 = node_dof[n];
         for (var c = 0u; c < call.dim; c++) {
             let before = contact[d0 + c];
@@ -254,11 +261,7 @@ fn first_forces(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_i
     }
     let p = problems[k];
     for (var n = p.node_start + lane; n < p.node_end; n += NEWTON_WORKGROUP) {
-        var f = vec3<real>(real(0.0));
-        for (var e = node_start[n]; e < node_start[n + 1u]; e++) {
-            let i = node_points[e];
-            f += node_coefs[e] * global(i, vec3<real>(r[3u * i], r[3u * i + 1u], r[3u * i + 2u]));
-        }
+        let f = node_force(n);
         let d0 = node_dof[n];
         for (var c = 0u; c < call.dim; c++) {
             contact[d0 + c] = f[c];
@@ -321,15 +324,12 @@ fn first_judge(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id
     var size = real(0.0);
     for (var n = p.node_start + lane; n < p.node_end; n += NEWTON_WORKGROUP) {
         var d = vec3<real>(real(0.0));
-        var a = vec3<real>(real(0.0));
         for (var e = node_start[n]; e < node_start[n + 1u]; e++) {
             let i = node_points[e];
-            let coef = node_coefs[e];
-            d += coef * global(i, vec3<real>(locals[i].v_free_n, locals[i].v_free_t1, locals[i].v_free_t2));
-            a += coef * global(i, vec3<real>(r[3u * i], r[3u * i + 1u], r[3u * i + 2u]));
+            d += node_coefs[e] * global(i, vec3<real>(locals[i].v_free_n, locals[i].v_free_t1, locals[i].v_free_t2));
         }
         worst = max(worst, norm(d));
-        size = max(size, norm(a));
+        size = max(size, norm(node_force(n)));
     }
     worst = reduce_max(lane, worst);
     size = reduce_max(lane, size);

@@ -236,14 +236,7 @@ pub fn newton_contact_forces(
     let p = problems[k];
     let (mut change, mut size): (Real, Real) = (0.0, 0.0);
     for n in p.node_start as usize..p.node_end as usize {
-        let mut f = [0.0; 3];
-        for e in nodes.start[n] as usize..nodes.start[n + 1] as usize {
-            let i = nodes.points[e] as usize;
-            let global = global(&nodes.frames, i, triple(r, i));
-            for a in 0..3 {
-                f[a] += nodes.coefs[e] * global[a];
-            }
-        }
+        let f = node_force(nodes, r, n);
         let d0 = c.node_dof[n] as usize;
         for (comp, &fc) in f.iter().enumerate().take(c.call.dim as usize) {
             change = change.max((fc - contact[d0 + comp]).abs());
@@ -259,6 +252,20 @@ pub fn newton_contact_forces(
     s.change = change / size.max(p.floor).max(Real::MIN_POSITIVE);
 }
 
+/// `node_force` of `newton_contact.wgsl`: the contact force on node slot `n`, its points'
+/// reactions in global coordinates times their coefficients, in point order.
+fn node_force(nodes: &NodeGather, r: &[Real], n: usize) -> [Real; 3] {
+    let mut f = [0.0; 3];
+    for e in nodes.start[n] as usize..nodes.start[n + 1] as usize {
+        let i = nodes.points[e] as usize;
+        let global = global(&nodes.frames, i, triple(r, i));
+        for a in 0..3 {
+            f[a] += nodes.coefs[e] * global[a];
+        }
+    }
+    f
+}
+
 /// `newton_contact`'s `first_forces` for group `k`: the contact forces of the reactions `r` the
 /// step starts from, per dof, before the test of a first evaluation.
 pub fn newton_contact_first_forces(state: &[NewtonState<Real>], contact: &mut [Real], c: &ContactLayout, problems: &[UzawaProblem<Real>], nodes: &NodeGather, r: &[Real], k: usize) {
@@ -267,14 +274,7 @@ pub fn newton_contact_first_forces(state: &[NewtonState<Real>], contact: &mut [R
     }
     let p = problems[k];
     for n in p.node_start as usize..p.node_end as usize {
-        let mut f = [0.0; 3];
-        for e in nodes.start[n] as usize..nodes.start[n + 1] as usize {
-            let i = nodes.points[e] as usize;
-            let global = global(&nodes.frames, i, triple(r, i));
-            for a in 0..3 {
-                f[a] += nodes.coefs[e] * global[a];
-            }
-        }
+        let f = node_force(nodes, r, n);
         let d0 = c.node_dof[n] as usize;
         for (comp, &fc) in f.iter().enumerate().take(c.call.dim as usize) {
             contact[d0 + comp] = fc;
@@ -320,18 +320,16 @@ pub fn newton_contact_first_judge(state: &mut [NewtonState<Real>], u: &[Real], u
     let norm = |x: [Real; 3]| (x[0] * x[0] + x[1] * x[1] + x[2] * x[2]).sqrt();
     let (mut worst, mut size): (Real, Real) = (0.0, 0.0);
     for n in p.node_start as usize..p.node_end as usize {
-        let (mut d, mut a) = ([0.0; 3], [0.0; 3]);
+        let mut d = [0.0; 3];
         for e in nodes.start[n] as usize..nodes.start[n + 1] as usize {
             let i = nodes.points[e] as usize;
-            let coef = nodes.coefs[e];
-            let (step, reaction) = (global(&nodes.frames, i, locals[i].v_free), global(&nodes.frames, i, triple(r, i)));
+            let step = global(&nodes.frames, i, locals[i].v_free);
             for comp in 0..3 {
-                d[comp] += coef * step[comp];
-                a[comp] += coef * reaction[comp];
+                d[comp] += nodes.coefs[e] * step[comp];
             }
         }
         worst = worst.max(norm(d));
-        size = size.max(norm(a));
+        size = size.max(norm(node_force(nodes, r, n)));
     }
     let complementarity = worst / size.max(p.floor).max(Real::MIN_POSITIVE);
     let grp = c.groups[k];
