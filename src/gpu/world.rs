@@ -93,11 +93,12 @@ pub struct Evaluation<'a> {
     pub failure: Option<ElementFailure>,
 }
 
-/// A pipeline with its bind group, and the kernel and entry point it runs (the clock's name
-/// for its dispatches).
+/// A pipeline with its bind group and the buffers bound, and the kernel and entry point it runs
+/// (the clock's name for its dispatches).
 struct Pass {
     pipeline: ComputePipeline,
     bind_group: BindGroup,
+    buffers: Vec<Buffer>,
     entry: (&'static str, &'static str),
 }
 
@@ -108,12 +109,15 @@ impl Pass {
 
     fn bound(gpu: &Gpu, pipeline: ComputePipeline, entry: (&'static str, &'static str), buffers: &[&Buffer]) -> Self {
         let bind_group = gpu.bind(None, &pipeline, &buffers.iter().enumerate().map(|(i, &b)| (i as u32, b)).collect::<Vec<_>>());
-        Self { pipeline, bind_group, entry }
+        Self { pipeline, bind_group, buffers: buffers.iter().map(|&b| b.clone()).collect(), entry }
     }
 
-    /// The same pipeline bound to other buffers.
-    fn rebound(&self, gpu: &Gpu, buffers: &[&Buffer]) -> Self {
-        Self::bound(gpu, self.pipeline.clone(), self.entry, buffers)
+    /// The same pipeline and buffers with another job list at binding `at` ([`FORCES_JOBS`],
+    /// ...): device Newton iterations run the batch's passes over lists of their own.
+    fn with_jobs(&self, gpu: &Gpu, at: usize, jobs: &Buffer) -> Self {
+        let mut buffers: Vec<&Buffer> = self.buffers.iter().collect();
+        buffers[at] = jobs;
+        Self::bound(gpu, self.pipeline.clone(), self.entry, &buffers)
     }
 
     /// One z-slice per active member, enough workgroups of `per_group` items for `max_items`.
@@ -173,14 +177,6 @@ struct Batch {
     /// The viscoelastic members' step relaxation and point histories (`MemberRange.history`).
     history: Buffer,
     member_buffer: Buffer,
-    /// What the element (`forces` and tangent), `assemble_residual`, `element_energy` and
-    /// `assemble_csr` passes are bound to (their job lists at [`FORCES_JOBS`],
-    /// [`RESIDUAL_JOBS`], [`ENERGY_JOBS`] and [`CSR_JOBS`]), so that device Newton iterations
-    /// can bind them to lists of their own.
-    forces_buffers: Vec<Buffer>,
-    residual_buffers: Vec<Buffer>,
-    csr_buffers: Vec<Buffer>,
-    energy_buffers: Vec<Buffer>,
     /// Each member's free dofs (indices into its dofs, ascending), `(start, count)` in `free_dofs`.
     free_dofs: Vec<u32>,
     free_range: Vec<(u32, u32)>,
@@ -924,7 +920,6 @@ impl Batch {
         let element_buffers = [&geometry, &connectivity, &u, &element_out, &failure, &member_buffer, &material_buffer, &active, &history];
         let residual_bindings = [&element_out, &dof_start, &dof, coefficients, &u, &step, &dof_out, &member_buffer, &active];
         let energy_bindings = [&geometry, &connectivity, &u, &energy, &member_buffer, &material_buffer, &active];
-        let csr_bindings = [&element_out, &csr_start, &csr, coefficients, &values, &member_buffer, &active];
         // The pipelines compile in parallel: a software adapter compiles each on the CPU.
         let tangent = {
             let (gpu, buffers) = (gpu.clone(), element_buffers.map(Buffer::clone));
@@ -932,16 +927,12 @@ impl Batch {
         };
         let (forces, csr_pass, residual, element_energy) = std::thread::scope(|scope| {
             let forces = scope.spawn(|| Pass::new(gpu, "element_force_tangent", "forces", v, &element_buffers));
-            let csr = scope.spawn(|| Pass::new(gpu, "assemble_csr", "main", None, &csr_bindings));
+            let csr = scope.spawn(|| Pass::new(gpu, "assemble_csr", "main", None, &[&element_out, &csr_start, &csr, coefficients, &values, &member_buffer, &active]));
             let residual = scope.spawn(|| Pass::new(gpu, "assemble_residual", "main", None, &residual_bindings));
             let energy = Pass::new(gpu, "element_energy", "main", v, &energy_bindings);
             let join = |h: std::thread::ScopedJoinHandle<'_, Result<Pass, GpuError>>| h.join().expect("a pipeline compiles without panicking");
             Ok::<_, GpuError>((join(forces)?, join(csr)?, join(residual)?, energy?))
         })?;
-        let forces_buffers = element_buffers.iter().map(|&b| b.clone()).collect();
-        let residual_buffers = residual_bindings.iter().map(|&b| b.clone()).collect();
-        let csr_buffers = csr_bindings.iter().map(|&b| b.clone()).collect();
-        let energy_buffers = energy_bindings.iter().map(|&b| b.clone()).collect();
         let (inverse_slot, inverse_entries) = newton::inverse_slots(&free_range.iter().map(|&(_, n)| n as usize).collect::<Vec<_>>(), real, max_bytes);
         Ok(Self {
             members: ranges,
@@ -959,10 +950,6 @@ impl Batch {
             energy,
             history,
             member_buffer,
-            forces_buffers,
-            residual_buffers,
-            csr_buffers,
-            energy_buffers,
             free_dofs,
             free_range,
             inverse_slot,

@@ -99,14 +99,7 @@ impl HostTangents {
         let call = buffer(gpu, "host tangents call", members * 8, write);
         let jobs = buffer(gpu, "host tangents jobs", members * 8, write);
         let dispatch = buffer(gpu, "host tangents dispatch", DISPATCH_WORDS * 4, write | BufferUsages::INDIRECT);
-        let with_jobs = |buffers: &[Buffer], at: usize| -> Vec<Buffer> {
-            let mut buffers = buffers.to_vec();
-            buffers[at] = jobs.clone();
-            buffers
-        };
-        let (element, csr) = (with_jobs(&b.forces_buffers, FORCES_JOBS), with_jobs(&b.csr_buffers, CSR_JOBS));
-        let tangent = tangent.rebound(gpu, &element.iter().collect::<Vec<_>>());
-        let csr = b.csr.rebound(gpu, &csr.iter().collect::<Vec<_>>());
+        let (tangent, csr) = (tangent.with_jobs(gpu, FORCES_JOBS, &jobs), b.csr.with_jobs(gpu, CSR_JOBS, &jobs));
         let compact = Pass::bound(gpu, pipelines.compact_host.clone(), ("newton_compact", "host"), &[&call, state, &jobs, &dispatch]);
         Self { call, dispatch, compact, tangent, csr }
     }
@@ -204,17 +197,8 @@ impl NewtonBuffers {
         let call = buffer(gpu, "newton call", members * 8, write);
         let jobs = buffer(gpu, "newton jobs", members * 8, write);
         let dispatch = buffer(gpu, "newton dispatch", DISPATCH_WORDS * 4, write | BufferUsages::INDIRECT);
-        let with_jobs = |buffers: &[Buffer], at: usize| -> Vec<Buffer> {
-            let mut buffers = buffers.to_vec();
-            buffers[at] = jobs.clone();
-            buffers
-        };
-        let (forces_buffers, residual_buffers) = (with_jobs(&b.forces_buffers, FORCES_JOBS), with_jobs(&b.residual_buffers, RESIDUAL_JOBS));
-        let forces = b.forces.rebound(gpu, &forces_buffers.iter().collect::<Vec<_>>());
-        let residual = b.residual.rebound(gpu, &residual_buffers.iter().collect::<Vec<_>>());
-        let mut energy_buffers = b.energy_buffers.clone();
-        energy_buffers[ENERGY_JOBS] = call.clone();
-        let energy = b.element_energy.rebound(gpu, &energy_buffers.iter().collect::<Vec<_>>());
+        let (forces, residual) = (b.forces.with_jobs(gpu, FORCES_JOBS, &jobs), b.residual.with_jobs(gpu, RESIDUAL_JOBS, &jobs));
+        let energy = b.element_energy.with_jobs(gpu, ENERGY_JOBS, &call);
         let update = Pass::bound(gpu, pipelines.update.clone(), ("newton_update", "main"), &[&inverse, &free, &newton, &state, &b.dof_out, &b.u, &b.member_buffer, &jobs, &contact]);
         let judge = Pass::bound(gpu, pipelines.judge.clone(), ("newton_judge", "main"), &[&free, &newton, &state, &b.dof_out, &b.u, &u_start, &b.step, coefficients, &b.failure, &b.member_buffer, &jobs, &contact]);
         let compact = Pass::bound(gpu, pipelines.compact.clone(), ("newton_compact", "main"), &[&call, &state, &jobs, &dispatch]);
