@@ -85,6 +85,32 @@ struct ContactCall {
 var<workgroup> go: u32;
 var<workgroup> rhs: array<real, MAX_FREE>;
 
+// Point i's relative velocity at the end of the step, in its contact frame: its terms' trial
+// velocities (u - u_base) / θdt, with the contact-free increments x0 / θdt where `free` (the
+// free velocity of an increment), less the obstacle's.
+fn point_velocity(i: u32, free: bool) -> vec3<real> {
+    let tdt = call.theta_dt;
+    var g = -vec3<real>(obstacle[3u * i], obstacle[3u * i + 1u], obstacle[3u * i + 2u]);
+    for (var e = term_start[i]; e < term_start[i + 1u]; e++) {
+        let d0 = node_dof[term_slots[e]];
+        let coef = term_coefs[e];
+        for (var c = 0u; c < call.dim; c++) {
+            let d = d0 + c;
+            var v = (u[d] - u_base[d]) / tdt;
+            if free {
+                v += x0[d] / tdt;
+            }
+            g[c] += coef * v;
+        }
+    }
+    let f = 9u * i;
+    return vec3<real>(
+        frames[f] * g.x + frames[f + 1u] * g.y + frames[f + 2u] * g.z,
+        frames[f + 3u] * g.x + frames[f + 4u] * g.y + frames[f + 5u] * g.z,
+        frames[f + 6u] * g.x + frames[f + 7u] * g.y + frames[f + 8u] * g.z,
+    );
+}
+
 // The contact force on node slot n: its points' reactions in global coordinates, each times its
 // coefficient, in point order.
 fn node_force(n: u32) -> vec3<real> {
@@ -136,21 +162,11 @@ fn prepare(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) wo
     // The points read the increments of every lane.
     storageBarrier();
     let p = problems[k];
-    let tdt = call.theta_dt;
     for (var i = p.point_start + lane; i < p.point_end; i += NEWTON_WORKGROUP) {
-        var g = -vec3<real>(obstacle[3u * i], obstacle[3u * i + 1u], obstacle[3u * i + 2u]);
-        for (var e = term_start[i]; e < term_start[i + 1u]; e++) {
-            let d0 = node_dof[term_slots[e]];
-            let coef = term_coefs[e];
-            for (var c = 0u; c < call.dim; c++) {
-                let d = d0 + c;
-                g[c] += coef * ((u[d] - u_base[d]) / tdt + x0[d] / tdt);
-            }
-        }
-        let f = 9u * i;
-        locals[i].v_free_n = frames[f] * g.x + frames[f + 1u] * g.y + frames[f + 2u] * g.z;
-        locals[i].v_free_t1 = frames[f + 3u] * g.x + frames[f + 4u] * g.y + frames[f + 5u] * g.z;
-        locals[i].v_free_t2 = frames[f + 6u] * g.x + frames[f + 7u] * g.y + frames[f + 8u] * g.z;
+        let v = point_velocity(i, true);
+        locals[i].v_free_n = v.x;
+        locals[i].v_free_t1 = v.y;
+        locals[i].v_free_t2 = v.z;
         locals[i].settle = SETTLE * p.tolerance;
     }
     if lane == 0u {
@@ -286,7 +302,6 @@ fn first_judge(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id
         return;
     }
     let p = problems[k];
-    let tdt = call.theta_dt;
     var cold = 0u;
     for (var i = p.point_start + lane; i < p.point_end; i += NEWTON_WORKGROUP) {
         let l = locals[i];
@@ -295,21 +310,7 @@ fn first_judge(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id
         if l.rho == real(0.0) {
             cold = 1u;
         } else {
-            var g = -vec3<real>(obstacle[3u * i], obstacle[3u * i + 1u], obstacle[3u * i + 2u]);
-            for (var e = term_start[i]; e < term_start[i + 1u]; e++) {
-                let d0 = node_dof[term_slots[e]];
-                let coef = term_coefs[e];
-                for (var c = 0u; c < call.dim; c++) {
-                    let d = d0 + c;
-                    g[c] += coef * ((u[d] - u_base[d]) / tdt);
-                }
-            }
-            let f = 9u * i;
-            var v = vec3<real>(
-                frames[f] * g.x + frames[f + 1u] * g.y + frames[f + 2u] * g.z,
-                frames[f + 3u] * g.x + frames[f + 4u] * g.y + frames[f + 5u] * g.z,
-                frames[f + 6u] * g.x + frames[f + 7u] * g.y + frames[f + 8u] * g.z,
-            );
+            var v = point_velocity(i, false);
             v.x += l.shift;
             step = uzawa_step(ri, v, l.mu, l.rho).r - ri;
         }

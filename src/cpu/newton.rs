@@ -198,19 +198,8 @@ pub fn newton_contact_prepare(
         }
     }
     let p = problems[k];
-    let tdt = c.call.theta_dt;
     for (i, local) in locals.iter_mut().enumerate().take(p.point_end as usize).skip(p.point_start as usize) {
-        let mut g = [-c.obstacle[3 * i], -c.obstacle[3 * i + 1], -c.obstacle[3 * i + 2]];
-        for e in c.term_start[i] as usize..c.term_start[i + 1] as usize {
-            let d0 = c.node_dof[c.term_slots[e] as usize] as usize;
-            let coef = c.term_coefs[e];
-            for (comp, g) in g.iter_mut().enumerate().take(c.call.dim as usize) {
-                let d = d0 + comp;
-                *g += coef * ((u[d] - u_base[d]) / tdt + x0[d] / tdt);
-            }
-        }
-        let f = &nodes.frames[9 * i..9 * i + 9];
-        local.v_free = [0, 1, 2].map(|a| f[3 * a] * g[0] + f[3 * a + 1] * g[1] + f[3 * a + 2] * g[2]);
+        local.v_free = point_velocity(c, &nodes.frames, u, u_base, Some(x0), i);
         local.settle = SETTLE * p.tolerance;
     }
     uzawa_states[k] = UzawaJudgeState { status: JUDGE_LIVE, previous: -1.0, ..Default::default() };
@@ -250,6 +239,27 @@ pub fn newton_contact_forces(
     s.uzawa = solved.status;
     s.stalls = if solved.status == JUDGE_CONVERGED { 0 } else { s.stalls + 1 };
     s.change = change / size.max(p.floor).max(Real::MIN_POSITIVE);
+}
+
+/// `point_velocity` of `newton_contact.wgsl`: point `i`'s relative velocity at the end of the
+/// step in its contact frame, with the contact-free increments `x0` when given.
+fn point_velocity(c: &ContactLayout, frames: &[Real], u: &[Real], u_base: &[Real], x0: Option<&[Real]>, i: usize) -> [Real; 3] {
+    let tdt = c.call.theta_dt;
+    let mut g = [-c.obstacle[3 * i], -c.obstacle[3 * i + 1], -c.obstacle[3 * i + 2]];
+    for e in c.term_start[i] as usize..c.term_start[i + 1] as usize {
+        let d0 = c.node_dof[c.term_slots[e] as usize] as usize;
+        let coef = c.term_coefs[e];
+        for (comp, g) in g.iter_mut().enumerate().take(c.call.dim as usize) {
+            let d = d0 + comp;
+            let mut v = (u[d] - u_base[d]) / tdt;
+            if let Some(x0) = x0 {
+                v += x0[d] / tdt;
+            }
+            *g += coef * v;
+        }
+    }
+    let f = &frames[9 * i..9 * i + 9];
+    [0, 1, 2].map(|a| f[3 * a] * g[0] + f[3 * a + 1] * g[1] + f[3 * a + 2] * g[2])
 }
 
 /// `node_force` of `newton_contact.wgsl`: the contact force on node slot `n`, its points'
@@ -292,7 +302,6 @@ pub fn newton_contact_first_judge(state: &mut [NewtonState<Real>], u: &[Real], u
         return;
     }
     let p = problems[k];
-    let tdt = c.call.theta_dt;
     let mut cold = false;
     for (i, local) in locals.iter_mut().enumerate().take(p.point_end as usize).skip(p.point_start as usize) {
         let ri = triple(r, i);
@@ -300,17 +309,7 @@ pub fn newton_contact_first_judge(state: &mut [NewtonState<Real>], u: &[Real], u
         if local.rho == 0.0 {
             cold = true;
         } else {
-            let mut g = [-c.obstacle[3 * i], -c.obstacle[3 * i + 1], -c.obstacle[3 * i + 2]];
-            for e in c.term_start[i] as usize..c.term_start[i + 1] as usize {
-                let d0 = c.node_dof[c.term_slots[e] as usize] as usize;
-                let coef = c.term_coefs[e];
-                for (comp, g) in g.iter_mut().enumerate().take(c.call.dim as usize) {
-                    let d = d0 + comp;
-                    *g += coef * ((u[d] - u_base[d]) / tdt);
-                }
-            }
-            let f = &nodes.frames[9 * i..9 * i + 9];
-            let mut v = [0, 1, 2].map(|a| f[3 * a] * g[0] + f[3 * a + 1] * g[1] + f[3 * a + 2] * g[2]);
+            let mut v = point_velocity(c, &nodes.frames, u, u_base, None, i);
             v[0] += local.shift;
             let (next, _) = crate::contact::law::uzawa_step(ri, v, local.mu, local.rho);
             step = [0, 1, 2].map(|a| next[a] - ri[a]);

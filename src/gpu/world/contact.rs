@@ -182,6 +182,7 @@ impl ContactPasses {
         let mut first_judge_entries = vec![
             (3, &n.state),
             (5, &b.u),
+            (7, &n.x0),
             (8, &n.u_base),
             (10, &groups),
             (11, &group_members),
