@@ -225,6 +225,14 @@ impl NewtonState {
         self.last_change = Some(change);
         self.cut_short = false;
     }
+
+    /// What a device call's increments leave ([`ContactState`]): its last solve, the stalls
+    /// the device counted on from the group's, and whether that solve was cut short.
+    fn record_device_solve(&mut self, o: &ContactState<Real>) {
+        self.record_solve(o.sweeps as usize, o.uzawa == JUDGE_CONVERGED, o.change);
+        self.uzawa_stalls = o.stalls as usize;
+        self.cut_short = o.uzawa == JUDGE_LIVE;
+    }
 }
 
 /// Newton iterations in a row with stalled Uzawa sweeps after which a step is given up (to be
@@ -513,38 +521,37 @@ fn evaluate_on_device_first(groups: &[Group], world: &GpuWorld, c: &Context, con
     let p = c.p;
     let software = world.software();
     let fits = |b: &Body, id: usize| world.newton_capable(id) && b.iterates_on_device(p) && world.newton_inverse_current(id, b.factor_version());
-    let mut chosen: Vec<bool> = groups
-        .par_iter()
-        .map(|g| {
-            p.max_iterations > 0
-                && match &g.contact {
-                    None => g.bodies.len() == 1 && fits(g.bodies[0], g.ids[0]) && !g.bodies[0].evaluation_holds(p),
-                    Some(contact) => contact.solved_whole(software) && g.bodies.iter().zip(g.ids).all(|(b, &id)| fits(b, id)),
-                }
-        })
-        .collect();
-    let mut in_contact = vec![false; groups.len()];
-    let mut batch_taken = *contact_batch;
-    for (k, g) in groups.iter().enumerate().filter(|(_, g)| g.contact.is_some()) {
-        if chosen[k] {
-            let batch = world.batch_of(g.ids[0]);
-            in_contact[k] = g.ids.iter().all(|&id| world.batch_of(id) == batch) && *batch_taken.get_or_insert(batch) == batch;
-            chosen[k] = in_contact[k];
-        }
-    }
-    if in_contact.contains(&true) && !c.settings.is_some_and(|settings| sweeps_on_device(groups, &in_contact, world, settings)) {
-        for (chosen, &yes) in chosen.iter_mut().zip(&in_contact) {
-            *chosen &= !yes;
-        }
-        in_contact.fill(false);
+    let alone = |g: &Group| g.bodies.len() == 1 && fits(g.bodies[0], g.ids[0]) && !g.bodies[0].evaluation_holds(p);
+    let mut chosen: Vec<bool> = groups.par_iter().map(|g| p.max_iterations > 0 && g.contact.is_none() && alone(g)).collect();
+    let solvable = |_: usize, g: &Group| p.max_iterations > 0 && g.contact.as_ref().is_some_and(|k| k.solved_whole(software)) && g.bodies.iter().zip(g.ids).all(|(b, &id)| fits(b, id));
+    let (in_contact, batch) = contact_groups_on_device(groups, &solvable, world, c, *contact_batch);
+    for (chosen, &yes) in chosen.iter_mut().zip(&in_contact) {
+        *chosen |= yes;
     }
     if !chosen.contains(&true) || !crate::backend::round_on_device(world, false, &element_work(groups, &chosen, &|_| true)) {
         return vec![false; groups.len()];
     }
-    if in_contact.contains(&true) {
-        *contact_batch = batch_taken;
-    }
+    *contact_batch = batch;
     chosen
+}
+
+/// The groups in contact that `candidate` admits whose bodies lie in one batch, the step's
+/// `contact_batch` (or the first such group's while the step has none), and whose problems'
+/// sweeps go to the device ([`sweeps_on_device`]); none when they do not. Returns them and the
+/// batch the step then has.
+fn contact_groups_on_device(groups: &[Group], candidate: &dyn Fn(usize, &Group) -> bool, world: &GpuWorld, c: &Context, contact_batch: Option<usize>) -> (Vec<bool>, Option<usize>) {
+    let mut in_contact = vec![false; groups.len()];
+    let mut batch_taken = contact_batch;
+    for (k, g) in groups.iter().enumerate() {
+        if g.contact.is_some() && candidate(k, g) {
+            let batch = world.batch_of(g.ids[0]);
+            in_contact[k] = g.ids.iter().all(|&id| world.batch_of(id) == batch) && *batch_taken.get_or_insert(batch) == batch;
+        }
+    }
+    if !in_contact.contains(&true) || !c.settings.is_some_and(|settings| sweeps_on_device(groups, &in_contact, world, settings)) {
+        return (vec![false; groups.len()], contact_batch);
+    }
+    (in_contact, batch_taken)
 }
 
 /// The `continuing` groups whose next Newton iterations go to the device
@@ -563,39 +570,16 @@ fn iterate_on_device(groups: &[Group], continuing: &mut [bool], world: &GpuWorld
     let fit = |b: &Body| if refreshed { b.factor_fit(p) } else { b.iterates_on_device(p) };
     let capable = |g: &Group| g.newton.report.iterations < p.max_iterations && g.bodies.iter().zip(g.ids).all(|(b, &id)| world.newton_capable(id) && fit(b));
     let software = world.software();
-    let solved_whole = |g: &Group| !g.newton.cut_short && g.contact.as_ref().is_some_and(|k| k.solved_whole(software));
-    let mut chosen = vec![false; groups.len()];
-    let mut in_contact = vec![false; groups.len()];
-    let mut batch_taken = *contact_batch;
-    for (k, g) in groups.iter().enumerate() {
-        if !continuing[k] || !capable(g) {
-            continue;
-        }
-        if g.contact.is_none() {
-            chosen[k] = g.bodies.len() == 1;
-        } else if solved_whole(g) {
-            let batch = world.batch_of(g.ids[0]);
-            in_contact[k] = g.ids.iter().all(|&id| world.batch_of(id) == batch) && *batch_taken.get_or_insert(batch) == batch;
-        }
-    }
-    if let (Some(settings), true) = (c.settings, in_contact.contains(&true)) {
-        if sweeps_on_device(groups, &in_contact, world, settings) {
-            for (chosen, &yes) in chosen.iter_mut().zip(&in_contact) {
-                *chosen |= yes;
-            }
-        } else {
-            batch_taken = *contact_batch;
-        }
-    }
+    let solvable = |k: usize, g: &Group| continuing[k] && capable(g) && !g.newton.cut_short && g.contact.as_ref().is_some_and(|k| k.solved_whole(software));
+    let (in_contact, batch) = contact_groups_on_device(groups, &solvable, world, c, *contact_batch);
+    let chosen: Vec<bool> = groups.iter().enumerate().map(|(k, g)| in_contact[k] || (continuing[k] && g.contact.is_none() && g.bodies.len() == 1 && capable(g))).collect();
     if !chosen.contains(&true) || !crate::backend::round_on_device(world, false, &element_work(groups, &chosen, &|_| true)) {
         return vec![false; groups.len()];
     }
     for (go, &chosen) in continuing.iter_mut().zip(&chosen) {
         *go &= !chosen;
     }
-    if chosen.iter().zip(&in_contact).any(|(&c, &i)| c && i) {
-        *contact_batch = batch_taken;
-    }
+    *contact_batch = batch;
     chosen
 }
 
@@ -842,9 +826,7 @@ fn device_pass(
             }
             if let (Some(j), true) = (index, iterations > 0) {
                 let o = contact_outcomes[j];
-                state.record_solve(o.sweeps as usize, o.uzawa == JUDGE_CONVERGED, o.change);
-                state.uzawa_stalls = o.stalls as usize;
-                state.cut_short = o.uzawa == JUDGE_LIVE;
+                state.record_device_solve(&o);
                 let contact = g.contact.as_mut().expect("a group with a contact outcome has contact");
                 for _ in 0..o.tightened {
                     contact.tighten();
