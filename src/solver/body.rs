@@ -888,14 +888,19 @@ impl Body {
     /// Whether [`Body::refresh_factor`] needs a tangent it does not have: a GPU world computes
     /// those of all such bodies in one pass first.
     pub fn needs_tangent(&self, p: &StepParams) -> bool {
-        self.needs_factorization(p) && !self.tangent_current && !self.device_tangent.as_ref().is_some_and(|(u, _)| same_bits(u, &self.trial.u))
+        self.needs_factorization(p) && !self.tangent_current && !self.holds_device_tangent()
     }
 
-    /// The tangent a device Newton call left ([`Body::finish_device_newton`]) if it is one at
-    /// the trial displacement, bit for bit; taken.
+    /// Whether a device Newton call left a tangent ([`Body::finish_device_newton`]) at the
+    /// trial displacement, bit for bit.
+    fn holds_device_tangent(&self) -> bool {
+        self.device_tangent.as_ref().is_some_and(|(u, _)| same_bits(u, &self.trial.u))
+    }
+
+    /// The tangent a device Newton call left, if it is one at the trial displacement; taken.
     fn device_tangent_here(&mut self) -> Option<Vec<Real>> {
-        let (u, values) = self.device_tangent.take()?;
-        same_bits(&u, &self.trial.u).then_some(values)
+        let here = self.holds_device_tangent();
+        self.device_tangent.take().filter(|_| here).map(|(_, values)| values)
     }
 
     /// Adds `c1 M` to the assembled `ξ K` and factorises `K̄ = ξ K + c1 M` (eq. 17).
