@@ -17,7 +17,7 @@ pub use lvf::Lvf;
 pub use neo_hookean::NeoHookean;
 pub use ogden::Ogden;
 pub use rubber::{ArrudaBoyce, Gent, MooneyRivlin, Yeoh};
-pub use viscous::{Prony, Relaxation, Viscoelastic};
+pub use viscous::{BranchStep, Prony, Relaxation, Viscoelastic};
 
 use crate::precision::Real;
 use tensor::{Mat3, Tangent};

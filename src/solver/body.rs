@@ -12,7 +12,7 @@ use crate::gpu::types::{NewtonMember, NewtonState};
 use crate::gpu::{ElementFailure, Evaluation, GpuError, NewtonCall, WorldBody};
 use crate::material::tensor::green_lagrange;
 use crate::material::viscous::HISTORY;
-use crate::material::{Hyperelastic, Model, Relaxation, Viscoelastic};
+use crate::material::{BranchStep, Hyperelastic, Model, Relaxation, Viscoelastic};
 use rayon::prelude::*;
 use crate::mesh::Mesh;
 use crate::precision::{same_bits, Real};
@@ -32,7 +32,8 @@ pub struct State {
     /// What each quadrature point of a viscoelastic body keeps between steps
     /// ([`Viscoelastic::advance`]); empty without a Prony series.
     pub viscous: Vec<Real>,
-    /// What the Prony branches hold beyond `strain` ([`Viscoelastic::branch_energy`]).
+    /// What the Prony branches hold beyond `strain`: the work of their overstress less what they
+    /// dissipated, summed over the steps ([`Viscoelastic::advance`]).
     pub branch_energy: Real,
 }
 
@@ -121,14 +122,15 @@ pub enum StepFailure {
 pub struct StepEnergy {
     /// `(θ - 1/2) Σ m (v - v_t)²`: the theta scheme's own dissipation.
     pub theta_dissipation: Real,
-    /// `Δu · ((1-ξ) F_int,t + ξ F_int) - ΔW`: the xi weighting's deviation from the strain energy.
+    /// `Δu · ((1-ξ) F_int,t + ξ F_int) - ΔW - ΔW_branches - D_viscous`: the xi weighting's
+    /// deviation from the strain energy, the Prony branches' included.
     pub force_dissipation: Real,
     /// Work of the support reactions, `Σ R_c Δu_c`.
     pub support_work: Real,
     /// Work of the surface loads, `Σ f_load Δu`.
     pub load_work: Real,
-    /// What the Prony branches dissipated: the work of the viscoelastic overstress (the stress
-    /// less the model's, which `force_dissipation` leaves out) less the change of what they hold.
+    /// What the Prony branches dissipated along their exact path over the step
+    /// ([`Viscoelastic::advance`]); never below zero.
     pub viscous_dissipation: Real,
 }
 
@@ -787,28 +789,30 @@ impl Body {
         support_work += stopping;
         // The step's load is one value over the step, so its work is exact.
         let load_work = self.f_load.iter().enumerate().map(|(d, f)| f * (self.trial.u[d] - self.state.u[d])).sum();
-        let viscous_work = self.advance_viscous(p);
-        let viscous_dissipation = viscous_work - (self.trial.branch_energy - self.state.branch_energy);
+        // The work of the overstress, xi-weighted as the forces are, is in `force_work`: beyond
+        // its work along the branches' exact path (what they hold and dissipate), it is the
+        // scheme's.
+        let branches = self.advance_viscous(p);
         StepEnergy {
             theta_dissipation: (p.theta - 0.5) * (theta_term - prescribed_theta_term),
-            force_dissipation: force_work - (self.trial.strain - self.state.strain) - viscous_work,
+            force_dissipation: force_work - (self.trial.strain - self.state.strain) - branches.work,
             support_work,
             load_work,
-            viscous_dissipation,
+            viscous_dissipation: branches.dissipated,
         }
     }
 
     /// The Prony branches at the end of a converged step (`trial.viscous` from `state.viscous`,
-    /// at each point's strain of the trial displacement, and their energy), and the work of
-    /// their overstress over it.
-    fn advance_viscous(&mut self, p: &StepParams) -> Real {
-        let Some(viscoelastic) = &self.viscoelastic else { return 0.0 };
+    /// at each point's strain of the trial displacement), the work of their overstress and what
+    /// they dissipated over it; what they hold grows by the difference.
+    fn advance_viscous(&mut self, p: &StepParams) -> BranchStep {
+        let Some(viscoelastic) = &self.viscoelastic else { return BranchStep::default() };
         let shear = self.model.bulk_shear().1;
         self.trial.viscous.clone_from(&self.state.viscous);
         let elements = self.patches.as_ref().map_or(&self.mesh, |p| &p.cells);
         let per_element = self.geometry.points_per_element * viscoelastic.kept_per_point();
         let (geometry, model, u, dim, formulation) = (&self.geometry, &self.model, &self.trial.u, self.dim, self.formulation);
-        let [work, energy] = self
+        let [work, dissipated] = self
             .trial
             .viscous
             .par_chunks_mut(per_element)
@@ -820,19 +824,20 @@ impl Body {
                     .zip(points.iter().zip(gradients))
                     .map(|(k, (gp, f))| {
                         let strain = green_lagrange(&f);
-                        let work = viscoelastic.advance(p.dt, p.xi, k, &strain, &model.stress(&strain));
-                        [gp.dv * work, gp.dv * viscoelastic.branch_energy(k, shear)]
+                        let step = viscoelastic.advance(p.dt, k, &strain, &model.stress(&strain), shear);
+                        [gp.dv * step.work, gp.dv * step.dissipated]
                     })
                     .fold([0.0; 2], |a, b| [a[0] + b[0], a[1] + b[1]])
             })
             .collect::<Vec<[Real; 2]>>()
             .iter()
             .fold([0.0; 2], |a, b| [a[0] + b[0], a[1] + b[1]]);
-        self.trial.branch_energy = energy;
-        work
+        self.trial.branch_energy = self.state.branch_energy + work - dissipated;
+        BranchStep { work, dissipated }
     }
 
-    /// Recomputes what the Prony branches hold from what the points kept (after a restore).
+    /// Estimates what the Prony branches hold from what the points kept
+    /// ([`Viscoelastic::branch_energy`]), for a restore from a log that did not save it.
     pub fn refresh_branch_energy(&mut self) {
         let Some(viscoelastic) = &self.viscoelastic else { return };
         let (shear, kept) = (self.model.bulk_shear().1, viscoelastic.kept_per_point());

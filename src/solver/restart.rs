@@ -55,6 +55,10 @@ pub struct SavedBody {
     /// without a Prony series).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub viscous: Vec<Real>,
+    /// What the Prony branches hold beyond `strain` (absent without a Prony series, and in logs
+    /// written before it was saved, whose restarts estimate it from `viscous`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub branch_energy: Option<Real>,
 }
 
 /// Hashes (FNV-1a, 16 hex digits) of what a saved state is only valid for, over every body in
@@ -176,6 +180,7 @@ impl Simulation {
                     reactions: b.reactions.clone(),
                     factor: b.kept_factor().map(|(c1, values)| SavedFactor { c1, values: values.to_vec() }),
                     viscous: b.state.viscous.clone(),
+                    branch_energy: b.viscoelastic.is_some().then_some(b.state.branch_energy),
                 })
                 .collect(),
             contact: {
@@ -237,7 +242,10 @@ impl Simulation {
             b.state.strain = s.strain;
             b.state.strain_at_u = false;
             b.state.viscous.clone_from(&s.viscous);
-            b.refresh_branch_energy();
+            match s.branch_energy {
+                Some(e) => b.state.branch_energy = e,
+                None => b.refresh_branch_energy(),
+            }
             b.reactions.clone_from(&s.reactions);
         }
         self.committed = None;
