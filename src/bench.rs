@@ -231,6 +231,25 @@ const ASSEMBLY: &str = "assemble_csr+assemble_residual";
 const EVALUATE: &str = "evaluate (all kernels, transfers)";
 const ENERGY: &str = "element_energy";
 
+/// Every kernel row's name, in the order the bench measures them.
+const KERNELS: [&str; 11] = ["peak_copy", "peak_fma", FORCE_TANGENT, FORCES, ASSEMBLY, EVALUATE, ENERGY, newton::NEWTON_ITERATION, "uzawa_step", "uzawa_sweep", "uzawa_solve"];
+
+/// A filter that matches no kernel, element or material is a mistake, said before anything
+/// runs (an empty table with exit 0 read as a benchmark that measured nothing).
+pub fn check_filters(options: &BenchOptions) -> Result<(), String> {
+    let elements: Vec<String> = bench_elements().into_iter().map(|(k, f)| element_label(k, f)).collect();
+    let materials: Vec<&str> = bench_models().iter().map(|m| m.name()).collect();
+    let kernels: Vec<String> = KERNELS.iter().map(|k| k.to_string()).collect();
+    for (flag, filter, names) in [("--kernel", &options.kernel, kernels), ("--element", &options.element, elements), ("--material", &options.material, materials.iter().map(|m| m.to_string()).collect())] {
+        if let Some(f) = filter {
+            if !names.iter().any(|n| n.contains(f.as_str())) {
+                return Err(format!("{flag} `{f}` matches none of: {}", names.join(", ")));
+            }
+        }
+    }
+    Ok(())
+}
+
 fn wanted(options: &BenchOptions, kernel: &str) -> bool {
     options.kernel.as_ref().is_none_or(|k| kernel.contains(k.as_str()))
 }

@@ -26,11 +26,19 @@ use std::time::Instant;
 struct Cli {
     #[command(subcommand)]
     command: Command,
-    /// Worker threads for the kernels, factorisations and Newton solves (default: every core).
-    /// A sweep's jobs share one pool of this many threads.
-    #[arg(long, global = true, value_name = "N")]
-    threads: Option<usize>,
+    /// Worker threads for the kernels, factorisations and Newton solves (default: every core;
+    /// 1 to 1024). A sweep's jobs share one pool of this many threads.
+    #[arg(long, global = true, value_name = "N", value_parser = clap::value_parser!(u64).range(1..=MAX_THREADS))]
+    threads: Option<u64>,
 }
+
+/// The most worker threads `--threads` starts: past the cores of the largest machines, threads
+/// only wait on each other (2 000 made a 0.05 s run take 7 s; 100 000 took over a minute to
+/// start).
+const MAX_THREADS: u64 = 1024;
+
+/// The most runs per variant `accuracy --repeat` takes: a median needs a few, not millions.
+const MAX_REPEAT: u64 = 1000;
 
 #[derive(Subcommand)]
 enum Command {
@@ -128,8 +136,8 @@ enum Command {
         /// Directory for the logs, `accuracy.csv` and `accuracy.png` (default: `<scene name>_accuracy`).
         #[arg(long)]
         out: Option<PathBuf>,
-        /// Runs per variant; the median wall time is reported.
-        #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..))]
+        /// Runs per variant (1 to 1000); the median wall time is reported.
+        #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u64).range(1..=MAX_REPEAT))]
         repeat: u64,
         /// The error to reach: the cheapest variant within it is named.
         #[arg(long, default_value_t = 0.01, value_parser = parse_positive)]
@@ -151,10 +159,10 @@ enum Command {
         #[arg(long)]
         out: Option<PathBuf>,
         /// Uzawa sweeps per step above which a run is too slow.
-        #[arg(long, default_value_t = 2000.0)]
+        #[arg(long, default_value_t = 2000.0, value_parser = parse_positive)]
         max_sweeps: f64,
         /// Wall seconds after which a run still going is stopped as too slow.
-        #[arg(long, default_value_t = 300.0)]
+        #[arg(long, default_value_t = 300.0, value_parser = parse_positive)]
         max_wall: f64,
         #[command(flatten)]
         backend: BackendArgs,
@@ -383,6 +391,7 @@ fn interrupt_flags() -> Result<(Arc<AtomicBool>, Arc<AtomicBool>)> {
 }
 
 fn bench_command(options: BenchOptions, backend: BackendChoice, adapter: Option<String>, json: bool) -> Result<ExitCode> {
+    bifirst::bench::check_filters(&options).map_err(anyhow::Error::msg)?;
     let devices = match backend {
         BackendChoice::Cpu => Vec::new(),
         BackendChoice::Gpu => bench_devices(adapter.as_deref())?,
@@ -463,6 +472,40 @@ fn error_text(e: &anyhow::Error) -> String {
 
 /// Whether `a` and `b` name one file (through links, `..` or another spelling); false when
 /// either does not exist.
+/// Refuses, before any work, an output file that cannot be written (a directory, a path
+/// through a file, a place not writable): the run would otherwise fail after its set-up.
+fn check_output_file(path: &Path, what: &str) -> Result<()> {
+    if path.is_dir() {
+        anyhow::bail!("{what} `{}` is a directory; name a file", path.display());
+    }
+    check_output_dir_parent(path, what)?;
+    if let Some(parent) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
+        std::fs::create_dir_all(parent).map_err(|e| anyhow::anyhow!("cannot write {what} `{}`: cannot create `{}`: {e}", path.display(), parent.display()))?;
+    }
+    let existed = path.exists();
+    std::fs::OpenOptions::new().append(true).create(true).open(path).map_err(|e| anyhow::anyhow!("cannot write {what} `{}`: {e}", path.display()))?;
+    if !existed {
+        std::fs::remove_file(path).map_err(|e| anyhow::anyhow!("cannot write {what} `{}`: {e}", path.display()))?;
+    }
+    Ok(())
+}
+
+/// Refuses an output directory that is a file, or lies below one.
+fn check_output_dir(path: &Path, what: &str) -> Result<()> {
+    if path.exists() && !path.is_dir() {
+        anyhow::bail!("{what} `{}` is a file, not a directory; name a directory (it is created if missing)", path.display());
+    }
+    check_output_dir_parent(path, what)
+}
+
+/// The nearest existing folder above `path` must be a folder, not a file.
+fn check_output_dir_parent(path: &Path, what: &str) -> Result<()> {
+    if let Some(file) = path.ancestors().skip(1).find(|a| a.exists() && !a.is_dir()) {
+        anyhow::bail!("cannot write {what} `{}`: `{}` is a file, not a directory", path.display(), file.display());
+    }
+    Ok(())
+}
+
 fn same_file(a: &Path, b: &Path) -> bool {
     use std::os::unix::fs::MetadataExt;
     match (std::fs::metadata(a), std::fs::metadata(b)) {
@@ -494,15 +537,22 @@ fn run(args: RunArgs) -> Result<ExitCode> {
         }
         (None, None) => unreachable!("clap requires a scene or --restart"),
     };
+    // A restarted run's VTU frames go beside the first run's, not over them.
+    let vtu = match (&state, args.vtu) {
+        (Some(_), None) => loaded.scene.output.vtu.as_ref().map(|dir| PathBuf::from(format!("{}_restart", dir.display()))),
+        (_, vtu) => vtu.or_else(|| loaded.scene.output.vtu.clone()),
+    };
+    check_output_file(&out, "the log")?;
+    if let Some(dir) = &vtu {
+        check_output_dir(dir, "the VTU directory")?;
+    }
+    if let Some(png) = &args.contour {
+        check_output_file(png, "the contour picture")?;
+    }
     if !args.quiet {
         eprintln!("bifirst {}: scene `{}`", env!("CARGO_PKG_VERSION"), loaded.name);
     }
     let (interrupt, hangup) = interrupt_flags()?;
-    // A restarted run's VTU frames go beside the first run's, not over them.
-    let vtu = match (&state, args.vtu) {
-        (Some(_), None) => loaded.scene.output.vtu.as_ref().map(|dir| PathBuf::from(format!("{}_restart", dir.display()))),
-        (_, vtu) => vtu,
-    };
     let options = RunOptions { vtu, interrupt: Some(interrupt), backend: args.backend, contour: args.contour, restart: state };
     let mut progress = Progress { quiet: args.quiet, bar: None, last_line: Instant::now(), last_fraction: 0.0 };
     let result = run_scene(&loaded, &out, &options, &mut progress);
@@ -547,6 +597,15 @@ fn run(args: RunArgs) -> Result<ExitCode> {
     }
 }
 
+/// `--trace` probes must be the scene's, known before any variant runs.
+fn check_trace<V>(probes: &[String; 3], scene: &std::collections::BTreeMap<String, V>) -> Result<()> {
+    if let Some(missing) = probes.iter().find(|p| !scene.contains_key(p.as_str())) {
+        let known: Vec<&str> = scene.keys().map(String::as_str).collect();
+        anyhow::bail!("--trace names the probe `{missing}`, which the scene does not define (its probes: {})", if known.is_empty() { "none".into() } else { known.join(", ") });
+    }
+    Ok(())
+}
+
 fn parse_trace(s: &str) -> Result<[String; 3], String> {
     let names: Vec<String> = s.split(',').map(|n| n.trim().to_string()).collect();
     <[String; 3]>::try_from(names).map_err(|_| "expected three probe names, `B,C,D`".to_string())
@@ -587,6 +646,9 @@ fn sweep_command(args: SweepArgs) -> Result<ExitCode> {
         return Ok(ExitCode::SUCCESS);
     }
     let runs = sweep.load(&indices)?;
+    if let (Some(probes), Some((_, first))) = (&args.trace, runs.first()) {
+        check_trace(probes, &first.scene.probe)?;
+    }
     sweep.prepare(&out, whole)?;
     let jobs = args.jobs.unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get())).clamp(1, runs.len().max(1));
     let share = if whole { String::new() } else { format!(" ({} of them here)", runs.len()) };
@@ -660,7 +722,8 @@ fn accuracy_command(args: AccuracyArgs) -> Result<ExitCode> {
     let count = study.variant_count();
     eprintln!("bifirst {}: accuracy of `{}` against `{}`, {count} variants one at a time ({} runs each), into {}", env!("CARGO_PKG_VERSION"), study.name, study.measure, args.repeat, out.display());
     let interrupt = interrupt_flags()?.0;
-    let rows = study.run(&out, args.repeat as usize, Some(interrupt), |r| eprintln!("[{}/{count}] {}: {} in {:.3} s, error {:.3e}", r.index + 1, r.label, r.status, r.wall_s, r.error))?;
+    let repeated = |label: &str, k: usize, n: usize, wall: f64| eprintln!("  {label}: run {k}/{n} in {wall:.3} s");
+    let rows = study.run(&out, args.repeat as usize, Some(interrupt), repeated, |r| eprintln!("[{}/{count}] {}: {} in {:.3} s, error {:.3e}", r.index + 1, r.label, r.status, r.wall_s, r.error))?;
     let csv_path = out.join("accuracy.csv");
     std::fs::write(&csv_path, csv(&study.axes, &rows)).map_err(|e| anyhow::anyhow!("cannot write `{}`: {e}", csv_path.display()))?;
     let png = out.join("accuracy.png");
@@ -824,8 +887,12 @@ fn main() -> ExitCode {
         std::env::set_var("NODEVICE_SELECT", "1");
     }
     let cli = Cli::parse();
-    if let Some(threads) = cli.threads {
-        if let Err(e) = rayon::ThreadPoolBuilder::new().num_threads(threads.max(1)).build_global() {
+    if let Some(threads) = cli.threads.map(|n| n as usize) {
+        let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
+        if threads > cores {
+            eprintln!("warning: --threads {threads} is more than this machine's {cores} cores: the extra threads only wait on each other");
+        }
+        if let Err(e) = rayon::ThreadPoolBuilder::new().num_threads(threads).build_global() {
             eprintln!("error: cannot start {threads} threads: {e}");
             return ExitCode::from(2);
         }
@@ -833,7 +900,7 @@ fn main() -> ExitCode {
     let result = match cli.command {
         Command::Run { scene, restart, at, out, sets, vtu, contour, quiet, json, backend } => run(RunArgs { backend: backend.into(), scene, restart, at, out, sets, vtu, contour, quiet, json }),
         Command::Sweep { grid, out, jobs, trace, backend, json, shard, index, list, slurm, sbatch } => {
-            sweep_command(SweepArgs { grid, out, jobs, trace, backend: backend.into(), json, shard, index, list, slurm, sbatch, threads: cli.threads })
+            sweep_command(SweepArgs { grid, out, jobs, trace, backend: backend.into(), json, shard, index, list, slurm, sbatch, threads: cli.threads.map(|n| n as usize) })
         }
         Command::SweepReport { dir, json, trace } => report(&dir).map_err(anyhow::Error::from).and_then(|r| print_report(r, json, trace)),
         Command::Accuracy { grid, measure, out, repeat, target, backend, json } => {

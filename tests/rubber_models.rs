@@ -266,8 +266,8 @@ fn rubber_parameters_are_checked_naming_the_key() {
         ("model = \"ogden\"\nmu = [600.0]\nalpha = [2.0]\nK = 2000.0\nlambda_m = 2.0", "lambda_m", "not a parameter"),
         ("model = \"mooney_rivlin\"\nC10 = 400.0\nK = 2000.0\nviscoelastic = []", "viscoelastic", "at least one term"),
         ("model = \"mooney_rivlin\"\nC10 = 400.0\nK = 2000.0\nviscoelastic = [{ g = 0.6, tau = 1.0 }, { g = 0.4, tau = 2.0 }]", "viscoelastic", "sum to less than 1"),
-        ("model = \"mooney_rivlin\"\nC10 = 400.0\nK = 2000.0\nviscoelastic = [{ g = 0.3, tau = 0.0 }]", "viscoelastic[0].tau", "positive"),
-        ("model = \"mooney_rivlin\"\nC10 = 400.0\nK = 2000.0\nviscoelastic = [{ g = 0.3, tau = 1.0 }, { g = -0.1, tau = 1.0 }]", "viscoelastic[1].g", "positive"),
+        ("model = \"mooney_rivlin\"\nC10 = 400.0\nK = 2000.0\nviscoelastic = [{ g = 0.3, tau = 0.0 }]", "viscoelastic.0.tau", "positive"),
+        ("model = \"mooney_rivlin\"\nC10 = 400.0\nK = 2000.0\nviscoelastic = [{ g = 0.3, tau = 1.0 }, { g = -0.1, tau = 1.0 }]", "viscoelastic.1.g", "positive"),
     ];
     let text = std::fs::read_to_string(scene_path("uniaxial_blatz_ko")).unwrap();
     for (material, key, words) in bad {

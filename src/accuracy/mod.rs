@@ -110,9 +110,13 @@ impl Study {
         self.runs.len()
     }
 
-    /// Runs every variant `repeat` times into `out_dir/<stem>.mcap`, one at a time; `done` sees
-    /// each row as it is measured. The rows come back in grid order with the front marked.
-    pub fn run(&self, out_dir: &Path, repeat: usize, interrupt: Option<Arc<AtomicBool>>, mut done: impl FnMut(&Row)) -> Result<Vec<Row>, AccuracyError> {
+    /// Runs every variant `repeat` times into `out_dir/<stem>.mcap`, one at a time; `repeated`
+    /// sees each run of a variant repeated more than once (its label, the run's number from 1,
+    /// `repeat`, its wall time) and `done` each row as it is measured. The rows come back in
+    /// grid order with the front marked. When `interrupt` is set, the run in progress stops and
+    /// no other starts: the rows so far come back.
+    pub fn run(&self, out_dir: &Path, repeat: usize, interrupt: Option<Arc<AtomicBool>>, mut repeated: impl FnMut(&str, usize, usize, f64), mut done: impl FnMut(&Row)) -> Result<Vec<Row>, AccuracyError> {
+        let interrupted = || interrupt.as_ref().is_some_and(|f| f.load(std::sync::atomic::Ordering::SeqCst));
         std::fs::create_dir_all(out_dir).map_err(|source| StudyError::Write { path: out_dir.into(), source })?;
         let mut rows = Vec::new();
         for (variant, loaded, request) in &self.runs {
@@ -120,13 +124,20 @@ impl Study {
             let options = RunOptions { vtu: None, interrupt: interrupt.clone(), backend: request.clone(), contour: None, restart: None };
             let mut walls = Vec::new();
             let mut first = None;
-            for _ in 0..repeat.max(1) {
+            let repeat = repeat.max(1);
+            for k in 0..repeat {
                 let mut measure = known_answer(&self.measure, loaded)?;
                 let result = run_scene(loaded, &log, &options, &mut Observer(measure.as_mut()));
                 let (summary, stop) = StudyError::outcome(&variant.label, result)?;
                 let message = stop.map(|reason| reason.to_string());
                 walls.push(summary.wall_s);
+                if repeat > 1 {
+                    repeated(&variant.label, k + 1, repeat, summary.wall_s);
+                }
                 first.get_or_insert((summary, message, measure.errors()));
+                if interrupted() {
+                    break;
+                }
             }
             let (summary, message, errors) = first.expect("one run or more");
             let error = row_error(&errors);
@@ -148,9 +159,8 @@ impl Study {
                 log,
             };
             done(&row);
-            let stopped = row.status != "finished";
             rows.push(row);
-            if stopped && interrupt.as_ref().is_some_and(|f| f.load(std::sync::atomic::Ordering::SeqCst)) {
+            if interrupted() {
                 break;
             }
         }

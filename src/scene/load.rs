@@ -58,7 +58,7 @@ pub fn parse_scene(path: &Path, source: String, sets: &[String]) -> Result<Loade
             line,
             key: String::new(),
             from_set: None,
-            message: format!("not valid TOML: {}", e.message().trim_end()),
+            message: format!("not valid TOML: {}", toml_message(e.message().trim_end())),
         }
     })?;
     let mut overrides = Vec::new();
@@ -74,11 +74,19 @@ pub fn parse_scene(path: &Path, source: String, sets: &[String]) -> Result<Loade
         overrides.push((key, set.clone()));
     }
     let err = |kind, key: String, message: String| locate(path, &source, &overrides, kind, &key, message);
-    let mut scene: Scene = serde_path_to_error::deserialize(toml::Value::Table(table)).map_err(|e| {
+    let mut scene: Scene = serde_path_to_error::deserialize(toml::Value::Table(table.clone())).map_err(|e| {
         // For an unknown field the path already ends with that field's name.
         let key = dotted(e.path());
         let inner = e.into_inner().to_string();
-        let message = inner.lines().next().unwrap_or_default().trim().to_string();
+        let mut message = inner.lines().next().unwrap_or_default().trim().to_string();
+        // A name given as another type: serde says only "unit variant"; the names come from
+        // the error a string that is no name gets.
+        if message.contains("unit variant") {
+            message = match variant_names(&table, &key) {
+                Some(names) => format!("expected a name in quotes, {names}"),
+                None => "expected a name in quotes".into(),
+            };
+        }
         let kind = if message.starts_with("unknown field") { SceneErrorKind::UnknownKey } else { SceneErrorKind::Type };
         err(kind, key, format!("{message}."))
     })?;
@@ -91,6 +99,31 @@ pub fn parse_scene(path: &Path, source: String, sets: &[String]) -> Result<Loade
         .clone()
         .unwrap_or_else(|| path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "scene".into()));
     Ok(LoadedScene { scene, name, path: path.to_path_buf(), resolved_toml, source, overrides })
+}
+
+/// The names an enum-valued `key` takes ("one of `a`, `b`"), from the error of the scene with
+/// an empty string there.
+fn variant_names(table: &toml::Table, key: &str) -> Option<String> {
+    let mut probe = table.clone();
+    let parts: Vec<&str> = key.split('.').collect();
+    let (last, path) = parts.split_last()?;
+    let mut node = &mut probe;
+    for part in path {
+        node = node.get_mut(*part)?.as_table_mut()?;
+    }
+    node.insert(last.to_string(), toml::Value::String(String::new()));
+    let error = serde_path_to_error::deserialize::<_, Scene>(toml::Value::Table(probe)).err()?;
+    let message = error.into_inner().to_string();
+    message.lines().next()?.split_once("expected ").map(|(_, names)| names.trim().to_string()).filter(|n| n.starts_with("one of"))
+}
+
+/// The TOML parser's message, with integers beyond its range said so.
+fn toml_message(message: &str) -> String {
+    if message.contains("as i128") {
+        format!("{message} (TOML integers are 64-bit: at most {})", i64::MAX)
+    } else {
+        message.to_string()
+    }
 }
 
 fn dotted(path: &serde_path_to_error::Path) -> String {
@@ -115,7 +148,15 @@ fn apply_set(table: &mut toml::Table, set: &str) -> Result<String, (String, Stri
     let value: toml::Value = toml::from_str::<toml::Table>(&format!("v = {}", value.trim()))
         .ok()
         .and_then(|mut t| t.remove("v"))
-        .ok_or_else(|| (key.clone(), format!("`{}` is not a TOML literal (strings need quotes, e.g. \"lvf\").", value.trim())))?;
+        .ok_or_else(|| {
+            let value = value.trim();
+            let digits = value.strip_prefix(['+', '-']).unwrap_or(value);
+            if !digits.is_empty() && digits.bytes().all(|b| b.is_ascii_digit() || b == b'_') {
+                (key.clone(), format!("`{value}` is beyond TOML's integers (64-bit: at most {}).", i64::MAX))
+            } else {
+                (key.clone(), format!("`{value}` is not a TOML literal (strings need quotes, e.g. \"lvf\")."))
+            }
+        })?;
     let parts: Vec<&str> = key.split('.').collect();
     if parts.iter().any(|p| p.is_empty()) {
         return Err((key.clone(), "the key has an empty part.".into()));

@@ -12,7 +12,8 @@
 
 use super::error::SceneErrorKind::{Invalid, Reference};
 use super::types::{BodySpec, Generator, MeshSpec, ObstacleShape, ObstacleSpec, PackingSpec, Scene};
-use super::validate::{friction, names, Failure};
+use super::types::DEFAULT_SHARE;
+use super::validate::{friction, length, names, Failure};
 use crate::mesh::{generate, ElementKind};
 use crate::precision::Real;
 use std::f64::consts::TAU;
@@ -49,17 +50,25 @@ fn check(p: &PackingSpec, s: &Scene) -> Result<(), Failure> {
         return Err((Reference, "packing.material".into(), format!("unknown material `{}` (the scene defines: {}).", p.material, names(s.material.keys()))));
     }
     match p.radius[..] {
-        [lo, hi] if lo > 0.0 && lo <= hi && hi.is_finite() => {}
+        [lo, hi] if lo > 0.0 && lo <= hi && hi.is_finite() => {
+            length("packing.radius.0".into(), "the smallest radius", lo)?;
+            length("packing.radius.1".into(), "the largest radius", hi)?;
+        }
         _ => return bad("radius", format!("expected [min, max] with 0 < min <= max (got {:?}).", p.radius)),
     }
     if !matches!(p.dimension, 2 | 3) {
         return bad("dimension", format!("a packing is 2 (disks and polygons) or 3 (balls and boxes) dimensional (got {}).", p.dimension));
     }
-    if !(0.0..=1.0).contains(&p.polygons) {
-        return bad("polygons", format!("the share of polygons must lie in [0, 1] (got {}).", p.polygons));
+    for (field, share, what) in [("polygons", p.polygons, "polygons"), ("polyhedra", p.polyhedra, "boxes")] {
+        if share.is_some_and(|v| !(0.0..=1.0).contains(&v)) {
+            return bad(field, format!("the share of {what} must lie in [0, 1] (got {}).", share.unwrap_or_default()));
+        }
     }
-    if !(0.0..=1.0).contains(&p.polyhedra) {
-        return bad("polyhedra", format!("the share of boxes must lie in [0, 1] (got {}).", p.polyhedra));
+    // A share for the other dimension would be ignored. The default is let through: scenes
+    // resolved before the shares were optional (the logs restarts read) wrote both.
+    let (foreign, field, own) = if p.dimension == 2 { (p.polyhedra, "polyhedra", "polygons") } else { (p.polygons, "polygons", "polyhedra") };
+    if foreign.is_some_and(|v| v != DEFAULT_SHARE) {
+        return bad(field, format!("`{field}` is a share of {}D grains; this packing is {}D (its share is `{own}`).", 5 - p.dimension, p.dimension));
     }
     match (p.dimension, p.element) {
         (_, None) | (2, Some(ElementKind::Tri3)) | (3, Some(ElementKind::Tet4 | ElementKind::Hex8)) => {}
@@ -169,7 +178,7 @@ pub(super) fn expand(s: &mut Scene) -> Result<(), Failure> {
 
 /// A disk, or a convex polygon of 3 to 6 vertices on its circle.
 fn grain_2d(p: &PackingSpec, rng: &mut SplitMix64, center: [Real; 2], r: Real, finest_disk: Real) -> MeshSpec {
-    if rng.unit() < p.polygons {
+    if rng.unit() < p.polygons.unwrap_or(DEFAULT_SHARE) {
         let sides = 3 + (rng.unit() * 4.0) as usize;
         let turn = rng.unit() * TAU;
         // Vertices on the circle, so the outline is convex; each angle jittered by at most a
@@ -196,7 +205,7 @@ fn grain_2d(p: &PackingSpec, rng: &mut SplitMix64, center: [Real; 2], r: Real, f
 /// the others') turned by a uniformly random rotation.
 fn grain_3d(p: &PackingSpec, rng: &mut SplitMix64, center: [Real; 3], r: Real, r_min: Real) -> MeshSpec {
     let element = Some(p.element.unwrap_or(ElementKind::Tet4));
-    if rng.unit() >= p.polyhedra {
+    if rng.unit() >= p.polyhedra.unwrap_or(DEFAULT_SHARE) {
         return MeshSpec { generator: Some(Generator::Ball), element, center: Some(center.to_vec()), radius: Some(r), divisions: Some(vec![p.divisions]), ..Default::default() };
     }
     let ratios = [0; 3].map(|_| rng.between(0.5, 1.0));

@@ -132,11 +132,42 @@ pub enum ModelName {
 }
 
 /// A parameter given as one number or as a list (Ogden's terms).
-#[derive(Debug, Clone, PartialEq, Deserialize, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize)]
 #[serde(untagged)]
 pub enum Values {
     One(Real),
     Many(Vec<Real>),
+}
+
+/// By hand, not `untagged`: a wrong entry (`mu = ["630"]`) is named with its position and type,
+/// where the derived form said only that no variant matched.
+impl<'de> Deserialize<'de> for Values {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        struct NumberOrList;
+        impl<'de> serde::de::Visitor<'de> for NumberOrList {
+            type Value = Values;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a number or a list of numbers")
+            }
+            fn visit_f64<E>(self, v: f64) -> Result<Values, E> {
+                Ok(Values::One(v))
+            }
+            fn visit_i64<E>(self, v: i64) -> Result<Values, E> {
+                Ok(Values::One(v as Real))
+            }
+            fn visit_u64<E>(self, v: u64) -> Result<Values, E> {
+                Ok(Values::One(v as Real))
+            }
+            fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<Values, A::Error> {
+                let mut values = Vec::new();
+                while let Some(v) = seq.next_element::<Real>()? {
+                    values.push(v);
+                }
+                Ok(Values::Many(values))
+            }
+        }
+        deserializer.deserialize_any(NumberOrList)
+    }
 }
 
 impl Values {
@@ -268,6 +299,9 @@ pub struct MeshSpec {
     pub rotation: Option<Vec<Real>>,
 }
 
+/// The share of polygons (2D) or boxes (3D) of a packing that does not give it.
+pub const DEFAULT_SHARE: Real = 0.5;
+
 /// A random packing of `count` grains in a rigid box whose left wall moves right: disks and
 /// convex polygons (Tri3) in 2D, balls and boxes (Tet4 or Hex8) in 3D. Generated at load time
 /// into bodies `grain_0001`... and the obstacles `left`, `right`, `bottom`, `top` (and `back`,
@@ -283,11 +317,14 @@ pub struct PackingSpec {
     pub radius: Vec<Real>,
     /// 2 (disks and polygons) or 3 (balls and boxes).
     pub dimension: usize,
-    /// Share of the grains that are polygons (3 to 6 vertices), in 2D; the rest are disks.
-    pub polygons: Real,
+    /// Share of the grains that are polygons (3 to 6 vertices), in 2D; the rest are disks
+    /// (default [`DEFAULT_SHARE`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub polygons: Option<Real>,
     /// Share of the grains that are boxes (random edge ratios, random orientation), in 3D; the
-    /// rest are balls.
-    pub polyhedra: Real,
+    /// rest are balls (default [`DEFAULT_SHARE`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub polyhedra: Option<Real>,
     /// The 3D grains' element: `tet4` (default) or `hex8`. 2D grains are Tri3.
     pub element: Option<ElementKind>,
     /// Cells per radius of each grain's mesh.
@@ -311,8 +348,8 @@ impl Default for PackingSpec {
             material: String::new(),
             radius: vec![0.4, 0.5],
             dimension: 2,
-            polygons: 0.5,
-            polyhedra: 0.5,
+            polygons: None,
+            polyhedra: None,
             element: None,
             divisions: 2,
             columns: 0,

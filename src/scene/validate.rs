@@ -27,6 +27,31 @@ fn positive(key: String, what: &str, v: Real) -> Result<(), Failure> {
     }
 }
 
+/// The smallest length a generated mesh or grain may have: contact geometry takes products of
+/// up to four lengths (a facet normal's squared norm in 3D), which must stay normal f64 numbers
+/// (grains of radius 1e-90 panicked in the contact frame; 1e-50⁴ = 1e-200).
+pub const SMALLEST_LENGTH: Real = 1e-50;
+
+/// A length: positive, within [[`SMALLEST_LENGTH`], [`LARGEST_INPUT`]].
+pub(super) fn length(key: String, what: &str, v: Real) -> Result<(), Failure> {
+    positive(key.clone(), what, v)?;
+    if v < SMALLEST_LENGTH {
+        return fail(Invalid, key, format!("{what} is {v:e}, below {SMALLEST_LENGTH:e} (contact geometry multiplies up to four lengths, which must stay above f64's smallest numbers)."));
+    }
+    Ok(())
+}
+
+/// A coefficient of either sign: finite, and within ±[`LARGEST_INPUT`].
+fn bounded(key: String, what: &str, v: Real) -> Result<(), Failure> {
+    if !v.is_finite() {
+        fail(Invalid, key, format!("{what} is not a finite number (got {v})."))
+    } else if v.abs() > LARGEST_INPUT {
+        fail(Invalid, key, format!("{what} is {v:e}, beyond ±{LARGEST_INPUT:e} (energies multiply such numbers and must stay finite)."))
+    } else {
+        Ok(())
+    }
+}
+
 fn finite_vec(key: &str, v: &[Real], len: Option<usize>) -> Result<(), Failure> {
     if let Some(n) = len {
         if v.len() != n {
@@ -250,7 +275,7 @@ fn validate_material(key: &str, m: &MaterialSpec) -> Result<(), Failure> {
             Some(_) if !allowed.contains(&p) => fail(Invalid, format!("{key}.{p}"), format!("`{p}` is not a parameter of the {model} model (it takes {}).", allowed.join(", ")))?,
             None if required.contains(&p) => fail(Invalid, format!("{key}.{p}"), format!("the {model} model needs `{p}`."))?,
             Some(v) if required.contains(&p) => positive(format!("{key}.{p}"), &format!("the {} {p}", if matches!(p, "G" | "K") { "modulus" } else { "parameter" }), v)?,
-            Some(v) if !v.is_finite() => fail(Invalid, format!("{key}.{p}"), "not a finite number.")?,
+            Some(v) => bounded(format!("{key}.{p}"), &format!("the parameter {p}"), v)?,
             _ => {}
         }
     }
@@ -281,8 +306,8 @@ fn validate_prony(key: &str, terms: &[PronySpec]) -> Result<(), Failure> {
         return fail(Invalid, format!("{key}.viscoelastic"), "give at least one term `{ g = .., tau = .. }` (or leave `viscoelastic` out for an elastic material).");
     }
     for (i, t) in terms.iter().enumerate() {
-        positive(format!("{key}.viscoelastic[{i}].g"), "the relative modulus g", t.g)?;
-        positive(format!("{key}.viscoelastic[{i}].tau"), "the relaxation time tau", t.tau)?;
+        positive(format!("{key}.viscoelastic.{i}.g"), "the relative modulus g", t.g)?;
+        positive(format!("{key}.viscoelastic.{i}.tau"), "the relaxation time tau", t.tau)?;
     }
     let sum: Real = terms.iter().map(|t| t.g).sum();
     if !(sum < 1.0) {
@@ -300,8 +325,8 @@ fn validate_ogden(key: &str, m: &MaterialSpec) -> Result<(), Failure> {
         if v.is_empty() || v.len() > 3 {
             return Err((Invalid, format!("{key}.{name}"), format!("give one to three terms (got {}).", v.len())));
         }
-        if let Some(x) = v.iter().find(|x| !x.is_finite()) {
-            return Err((Invalid, format!("{key}.{name}"), format!("{x} is not a finite number.")));
+        for (i, &x) in v.iter().enumerate() {
+            bounded(format!("{key}.{name}.{i}"), &format!("term {} of `{name}`", i + 1), x)?;
         }
         Ok(v)
     };
@@ -369,7 +394,7 @@ fn validate_mesh(key: &str, m: &MeshSpec) -> Result<(), Failure> {
             let size = m.size.as_deref().unwrap_or_default();
             finite_vec(&format!("{key}.size"), size, Some(dim))?;
             for (i, &l) in size.iter().enumerate() {
-                positive(format!("{key}.size.{i}"), "an edge length", l)?;
+                length(format!("{key}.size.{i}"), "an edge length", l)?;
             }
             if let Some(o) = &m.origin {
                 finite_vec(&format!("{key}.origin"), o, Some(dim))?;
@@ -384,7 +409,7 @@ fn validate_mesh(key: &str, m: &MeshSpec) -> Result<(), Failure> {
         }
         Generator::Disk | Generator::Ball => {
             need("radius", m.radius.is_some())?;
-            positive(format!("{key}.radius"), "the radius", m.radius.unwrap_or_default())?;
+            length(format!("{key}.radius"), "the radius", m.radius.unwrap_or_default())?;
             if let Some(c) = &m.center {
                 finite_vec(&format!("{key}.center"), c, Some(dim))?;
             }

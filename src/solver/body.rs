@@ -917,11 +917,25 @@ impl Body {
         self.tangent_current = false;
         self.factor_c1 = None;
         let t0 = Instant::now();
-        let result = self.solver.factorize(&self.values).map_err(|e| StepFailure::Linear { body: self.name.clone(), error: e.to_string() });
+        let result = self.solver.factorize(&self.values).map_err(|e| StepFailure::Linear { body: self.name.clone(), error: self.factor_failure(e) });
         times.factorization += t0.elapsed().as_secs_f64();
         self.factor_version += 1;
         self.factor_c1 = result.is_ok().then_some(c1);
         result
+    }
+
+    /// What a failed factorisation of `K̄` says of this body's material: the likely reasons,
+    /// with its model and `K/G`.
+    fn factor_failure(&self, error: super::linear::LinearError) -> String {
+        let (k, g) = self.model.bulk_shear();
+        match error {
+            super::linear::LinearError::NotPositiveDefinite => format!(
+                "{error} (material model {}, K/G = {:.3e}): either the material's tangent stopped being positive at this deformation (parameters stable only near the reference state, such as a Yeoh or Ogden set that loses convexity, or an element close to inverting), or K/G is too large for f64 (the shear terms drown in the volumetric ones' round-off): check the parameters, or lower K/G",
+                self.model.name(),
+                k / g
+            ),
+            other => other.to_string(),
+        }
     }
 
     /// The coefficient `c1` and the values `K̄` of the factorisation kept for the next step, if

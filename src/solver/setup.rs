@@ -142,6 +142,29 @@ pub fn build_mesh(loaded: &LoadedScene, key: &str, spec: &MeshSpec) -> Result<Me
     Ok(mesh)
 }
 
+/// The most time steps a wave may cross a free body's smallest element in: the mass term
+/// `c1 M ~ ρ h^d / dt²` of `K̄` holds off the body's rigid modes, and past this it falls below
+/// the round-off of the stiffness (`~ G h^(d-2)`) by more than f64 resolves, and the
+/// factorisation fails (grains of radius 1e-30 under a step of 1e-3: "not positive definite").
+pub const MAX_FREE_BODY_COURANT: Real = 1e6;
+
+/// A body without supports must have its rigid modes held by the mass term of `K̄`: refused
+/// when `time.dt` is beyond [`MAX_FREE_BODY_COURANT`] times the time a pressure wave takes
+/// across its smallest element `h`.
+fn free_body_step(loaded: &LoadedScene, body: &str, model: &Model, density: Real, h: Real) -> Result<(), SceneError> {
+    let (k, g) = model.bulk_shear();
+    let wave_speed = ((k + 4.0 * g / 3.0) / density).sqrt();
+    let dt = loaded.scene.time.dt;
+    let courant = wave_speed * dt / h;
+    if courant > MAX_FREE_BODY_COURANT || !courant.is_finite() {
+        let message = format!(
+            "the step is {courant:.3e} times the time a wave takes across the smallest element of body `{body}` (h = {h:.3e}, wave speed {wave_speed:.3e}), beyond {MAX_FREE_BODY_COURANT:.0e}: the mass term that holds an unsupported body's rigid modes is below the round-off of its stiffness; lower time.dt or give the body larger elements (grains: packing.radius)."
+        );
+        return Err(loaded.error(Invalid, "time.dt", message));
+    }
+    Ok(())
+}
+
 const RANGE_WHY: &str = " (energies multiply such numbers and must stay finite)";
 
 fn within_range(v: &[Real]) -> bool {
@@ -350,6 +373,9 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
             let r = [x[0] - c[0], x[1] - c[1], x[2] - c[2]];
             [v[0] + omega[1] * r[2] - omega[2] * r[1], v[1] + omega[2] * r[0] - omega[0] * r[2], v[2] + omega[0] * r[1] - omega[1] * r[0]]
         };
+        if prescribed.is_empty() {
+            free_body_step(loaded, &name, &model_of(material), material.density, mesh.min_edge_length())?;
+        }
         let topology = topology.as_ref().map_err(|e| loaded.error(MeshError, &format!("{key}.mesh"), e.clone()))?;
         let mut body = Body::new(name.clone(), mesh, patches, geometry, model_of(material), formulation, material.density, prescribed, initial, topology);
         body.reuse_factorization = scene.solver.reuse_factorization;

@@ -147,7 +147,8 @@ impl Study {
 fn watch(wall_s: f64, interrupt: Option<Arc<AtomicBool>>) -> (Arc<AtomicBool>, Arc<AtomicBool>, std::thread::JoinHandle<()>) {
     let (flag, over_time) = (Arc::new(AtomicBool::new(false)), Arc::new(AtomicBool::new(false)));
     let (f, o) = (flag.clone(), over_time.clone());
-    let deadline = Instant::now() + Duration::from_secs_f64(wall_s.clamp(0.0, 1e9));
+    // A budget that is no number (NaN) is no budget.
+    let deadline = Instant::now() + Duration::from_secs_f64(if wall_s.is_nan() { 1e9 } else { wall_s.clamp(0.0, 1e9) });
     let handle = std::thread::spawn(move || {
         while !f.load(Ordering::SeqCst) {
             if Instant::now() >= deadline {
