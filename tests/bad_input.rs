@@ -334,3 +334,180 @@ fn a_bad_load_names_its_key() {
     let (code, stderr, _) = check("load_all", &nothing, &[]);
     assert_eq!(code, 0, "a load on every boundary facet is valid: {stderr}");
 }
+
+/// Runs the binary with `args` and returns (exit code, stderr).
+fn bifirst(args: &[&str]) -> (i32, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_bifirst")).args(args).output().expect("binary runs");
+    (out.status.code().unwrap_or(-1), String::from_utf8_lossy(&out.stderr).into_owned())
+}
+
+/// A refusal: exit 2, no panic, the words `expect`.
+fn assert_refused(args: &[&str], expect: &str) {
+    let (code, stderr) = bifirst(args);
+    assert_eq!(code, 2, "{args:?}: exit code: {stderr}");
+    assert!(!stderr.contains("panicked"), "{args:?}: panicked: {stderr}");
+    assert!(stderr.contains(expect), "{args:?}: says `{expect}`: {stderr}");
+}
+
+/// Caught by the issue: `packing.radius = [1e-90, 1e-90]` in 3D passed `check`, then panicked in
+/// the contact frame ("an axis not parallel to n"); radii of 1e-30 failed at step 1 as "not
+/// positive definite" (the mass term below the stiffness' round-off). Both are refused at
+/// `check`, naming the key, and `run` does not panic.
+#[test]
+fn tiny_grains_in_a_3d_packing_are_refused_before_the_run() {
+    let scene = common_scene_path("grains_3d");
+    let scene = scene.to_str().unwrap();
+    assert_refused(&["check", scene, "--set", "packing.count=8", "--set", "packing.radius=[1e-90, 1e-90]"], "key `packing.radius.0`");
+    let out = dir().join("tiny_grains.mcap");
+    assert_refused(&["run", scene, "--set", "packing.count=8", "--set", "packing.radius=[1e-90, 1e-90]", "--set", "time.end=0.01", "--quiet", "--out", out.to_str().unwrap()], "below 1e-50");
+    assert_refused(&["check", scene, "--set", "packing.count=8", "--set", "packing.radius=[1e-30, 1e-30]"], "key `time.dt`");
+    let box_scene = GOOD.replace(r#"{ generator = "rectangle", element = "quad4", size = [1.0, 1.0], divisions = [2, 2] }"#, r#"{ generator = "rectangle", element = "quad4", size = [1e-60, 1.0], divisions = [2, 2] }"#);
+    assert_error("tiny_edge", &box_scene, &[], "body.block.mesh.size.0", Some(13), "below 1e-50");
+}
+
+/// Caught by the issue: `stability --max-wall nan` panicked converting seconds to a duration
+/// (exit 101); `--max-wall=-1` and `--max-sweeps=-1` ran and classed every variant too slow.
+#[test]
+fn stability_budgets_that_are_no_positive_number_are_refused() {
+    let scene = common_scene_path("bar_impact");
+    let scene = scene.to_str().unwrap();
+    for budget in ["--max-wall=nan", "--max-wall=-1", "--max-sweeps=-1", "--max-sweeps=0"] {
+        let flag = budget.split('=').next().unwrap();
+        assert_refused(&["stability", scene, "--set", "time.end=5e-4", "--over", "time.dt=5e-5", budget], flag);
+    }
+}
+
+/// Caught by the issue: `--threads 100000` printed nothing for over a minute (even for `check`)
+/// and `--threads 2000` made a 0.05 s run take 7 s. Beyond 1024, or 0, it is refused at once.
+#[test]
+fn thread_counts_beyond_reason_are_refused_at_once() {
+    let scene = common_scene_path("bar_impact");
+    let scene = scene.to_str().unwrap();
+    for threads in ["100000", "1025", "0"] {
+        assert_refused(&["--threads", threads, "check", scene], "--threads");
+    }
+    let more = (std::thread::available_parallelism().map_or(1, |n| n.get()) + 1).to_string();
+    let (code, stderr) = bifirst(&["--threads", &more, "check", scene]);
+    assert_eq!(code, 0, "{stderr}");
+    assert!(stderr.contains("more than this machine's"), "oversubscription is warned of: {stderr}");
+}
+
+/// Caught by the issue: `accuracy --repeat 100000` kept running after SIGTERM (the repeats went
+/// on, each stopped at once), and printed nothing until a variant's repeats were done. Each
+/// repeat is reported, a signal ends the command with the run in progress, and `--repeat` is
+/// at most 1000.
+#[test]
+fn accuracy_stops_on_a_signal_and_reports_each_repeat() {
+    use std::io::{BufRead, BufReader};
+    let scene = common_scene_path("bar_impact");
+    let scene = scene.to_str().unwrap();
+    assert_refused(&["accuracy", scene, "--set", "time.end=5e-4", "--over", "time.dt=5e-5", "--repeat", "100000"], "--repeat");
+    let out = dir().join("accuracy_signal");
+    let mut child = Command::new(env!("CARGO_BIN_EXE_bifirst"))
+        .args(["accuracy", scene, "--set", "time.end=5e-4", "--over", "time.dt=5e-5,1e-4,2e-4", "--repeat", "1000", "--out", out.to_str().unwrap()])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut lines = BufReader::new(child.stderr.take().unwrap()).lines();
+    let first = lines.by_ref().map_while(Result::ok).find(|l| l.contains("run 1/1000"));
+    assert!(first.is_some(), "a progress line per repeat");
+    let sent = std::time::Instant::now();
+    assert!(Command::new("kill").args(["-TERM", &child.id().to_string()]).status().unwrap().success());
+    let rest: Vec<String> = lines.map_while(Result::ok).collect();
+    let status = child.wait().unwrap();
+    let waited = sent.elapsed().as_secs_f64();
+    println!("stopped {waited:.3} s after SIGTERM; last lines: {:?}", &rest[rest.len().saturating_sub(3)..]);
+    // Three variants of 1000 runs of ~0.03 s would take over a minute.
+    assert!(waited < 10.0, "stopped {waited} s after the signal");
+    assert!(!status.success(), "an interrupted study is not a success");
+    assert!(!rest.iter().any(|l| l.contains("run 1/1000") && l.contains("dt=2e-4")), "no variant starts after the signal: {rest:?}");
+}
+
+/// Caught by the issue: Mooney-Rivlin `C10`/`C01`, Yeoh `C20`/`C30`, Ogden `mu`/`alpha` of 1e300
+/// passed validation and the run failed at step 1 ("the residual is not finite") without naming
+/// the parameter.
+#[test]
+fn huge_rubber_coefficients_are_named_by_key() {
+    let with = |material: &str| GOOD.replace("model = \"blatz_ko\"\nG = 1000.0", material);
+    let cases = [
+        ("model = \"mooney_rivlin\"\nC10 = 1e300\nC01 = 1.0\nK = 3000.0", "material.rubber.C10"),
+        ("model = \"mooney_rivlin\"\nC10 = 400.0\nC01 = -1e300\nK = 3000.0", "material.rubber.C01"),
+        ("model = \"yeoh\"\nC10 = 400.0\nC20 = 1e300\nK = 3000.0", "material.rubber.C20"),
+        ("model = \"yeoh\"\nC10 = 400.0\nC30 = -1e300\nK = 3000.0", "material.rubber.C30"),
+        ("model = \"ogden\"\nmu = [1e300]\nalpha = [2.0]\nK = 3000.0", "material.rubber.mu.0"),
+        ("model = \"ogden\"\nmu = [600.0, 1.0]\nalpha = [2.0, 1e300]\nK = 3000.0", "material.rubber.alpha.1"),
+    ];
+    for (k, (material, key)) in cases.iter().enumerate() {
+        assert_error(&format!("huge_coefficient_{k}"), &with(material), &[], key, None, "beyond ±1e100");
+    }
+}
+
+/// Caught by the issue: an error in a Prony term's `g` or `tau` named the `[material.*]` header
+/// line, and the key was spelled `viscoelastic[0].tau` in one message and `viscoelastic.0` in
+/// another.
+#[test]
+fn a_prony_term_error_names_its_own_line_and_key() {
+    let scene = GOOD.replace("density = 1.0", "density = 1.0\nviscoelastic = [{ g = 0.3, tau = 0.1 },\n    { g = 0.2, tau = -1.0 }]");
+    let line = scene.lines().position(|l| l.contains("tau = -1.0")).unwrap() + 1;
+    assert_error("prony_tau", &scene, &[], "material.rubber.viscoelastic.1.tau", Some(line), "positive");
+    let scene = GOOD.replace("density = 1.0", "density = 1.0\nviscoelastic = [{ g = \"a\", tau = 0.1 }]");
+    let line = scene.lines().position(|l| l.contains("viscoelastic")).unwrap() + 1;
+    assert_error("prony_type", &scene, &[], "material.rubber.viscoelastic.0.g", Some(line), "invalid type");
+}
+
+/// Caught by the issue: `--vtu` naming an existing file ran the whole scene and then exited 1
+/// ("File exists"); an unwritable `--out` failed after the set-up, leaving a stub. Both are
+/// refused before the scene is set up, with exit 2 and nothing written.
+#[test]
+fn outputs_that_cannot_be_written_are_refused_before_the_run() {
+    let scene = common_scene_path("bar_impact");
+    let scene = scene.to_str().unwrap();
+    let file = dir().join("a_regular_file");
+    std::fs::write(&file, "x").unwrap();
+    let log = dir().join("vtu_refused.mcap");
+    let _ = std::fs::remove_file(&log);
+    assert_refused(&["run", scene, "--quiet", "--out", log.to_str().unwrap(), "--vtu", file.to_str().unwrap()], "is a file, not a directory");
+    assert!(!log.exists(), "nothing written");
+    let below_file = file.join("run.mcap");
+    assert_refused(&["run", scene, "--quiet", "--out", below_file.to_str().unwrap()], "is a file, not a directory");
+    assert_refused(&["run", scene, "--quiet", "--out", dir().to_str().unwrap()], "is a directory");
+    assert_eq!(std::fs::read_to_string(&file).unwrap(), "x", "the file is left as it was");
+}
+
+/// Caught by the issue: messages a user could not act on. Ogden `mu = ["630"]` said "did not
+/// match any variant of untagged enum Values", `formulation = 1` "unit variant", a seed beyond
+/// TOML's integers "strings need quotes"; `packing.polygons` in 3D and `packing.polyhedra` in 2D
+/// were ignored.
+#[test]
+fn unclear_messages_say_what_is_wrong() {
+    let ogden = GOOD.replace("model = \"blatz_ko\"\nG = 1000.0", "model = \"ogden\"\nmu = [\"630\"]\nalpha = [2.0]\nK = 3000.0");
+    let line = |scene: &str, text: &str| scene.lines().position(|l| l.contains(text)).map(|i| i + 1);
+    assert_error("ogden_string", &ogden, &[], "material.rubber.mu.0", line(&ogden, "mu = [\"630\"]"), "invalid type: string \"630\"");
+    let formulation = GOOD.replace("divisions = [2, 2] }", "divisions = [2, 2] }\nformulation = 1");
+    assert_error("formulation_number", &formulation, &[], "body.block.formulation", line(&formulation, "formulation = 1"), "one of `auto`, `displacement`, `fbar`");
+    assert_error("model_number", GOOD, &["material.rubber.model=1"], "material.rubber.model", None, "`blatz_ko`");
+    let grains = common_scene_path("grains_many");
+    let grains = grains.to_str().unwrap();
+    assert_refused(&["check", grains, "--set", "packing.seed=99999999999999999999"], "beyond TOML's integers");
+    let source = std::fs::read_to_string(grains).unwrap();
+    let seeded = dir().join("huge_seed.toml");
+    std::fs::write(&seeded, source.lines().map(|l| if l.starts_with("seed =") { "seed = 99999999999999999999" } else { l }).collect::<Vec<_>>().join("\n")).unwrap();
+    assert_refused(&["check", seeded.to_str().unwrap()], "TOML integers are 64-bit");
+    assert_refused(&["check", grains, "--set", "packing.polyhedra=0.3"], "key `packing.polyhedra`");
+    let grains_3d = common_scene_path("grains_3d");
+    assert_refused(&["check", grains_3d.to_str().unwrap(), "--set", "packing.polygons=0.3"], "key `packing.polygons`");
+}
+
+/// Caught by the issue: `bench --kernel nonexistent` exited 0 with an empty table, and `sweep
+/// --trace` with probes the scene lacks was found only after every variant ran.
+#[test]
+fn filters_and_probes_that_match_nothing_are_refused_before_any_work() {
+    assert_refused(&["bench", "--backend", "cpu", "--kernel", "nonexistent"], "--kernel `nonexistent` matches none of");
+    assert_refused(&["bench", "--backend", "cpu", "--material", "steel"], "--material `steel`");
+    let scene = common_scene_path("bar_impact");
+    let out = dir().join("trace_refused");
+    let _ = std::fs::remove_dir_all(&out);
+    assert_refused(&["sweep", scene.to_str().unwrap(), "--over", "time.dt=1e-4", "--trace", "a,b,c", "--out", out.to_str().unwrap()], "the probe `a`");
+    assert!(!out.exists(), "no variant ran");
+}

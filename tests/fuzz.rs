@@ -294,3 +294,82 @@ fn mutated_scenes_and_sets_end_with_exit_0_1_or_2_never_a_panic_or_a_hang() {
     let failures: Vec<&String> = outcomes.iter().filter_map(|o| o.problem.as_ref()).collect();
     assert!(failures.is_empty(), "{} of {count} cases failed:\n{}", failures.len(), failures.iter().map(|f| f.as_str()).collect::<Vec<_>>().join("\n"));
 }
+
+/// The material blocks of the rubber models whose coefficients the targeted cases vary.
+const RUBBERS: [&str; 4] = [
+    "model = \"mooney_rivlin\"\nC10 = 400.0\nC01 = 100.0\nK = 2000.0",
+    "model = \"yeoh\"\nC10 = 400.0\nC20 = -10.0\nC30 = 1.0\nK = 2000.0",
+    "model = \"ogden\"\nmu = [630.0, 1.2, -10.0]\nalpha = [1.3, 5.0, -2.0]\nK = 2000.0",
+    "model = \"arruda_boyce\"\nmu = 900.0\nlambda_m = 2.5\nK = 2000.0",
+];
+
+/// A number for a targeted key: the nasty values, and the edges the issues found.
+fn edge_number(rng: &mut SmallRng) -> String {
+    const EDGES: [&str; 10] = ["1e-90", "1e-60", "1e-50", "1e-30", "1e-300", "0.999999", "1e300", "-1e300", "nan", "-0.0"];
+    if rng.random_bool(0.5) {
+        EDGES[rng.random_range(0..EDGES.len())].to_string()
+    } else {
+        nasty_text(rng)
+    }
+}
+
+/// A case aimed at the keys whose edges broke runs (issue 57): packing radii, Prony terms and
+/// rubber coefficients.
+fn targeted(index: usize, texts: &[(String, String)], rng: &mut SmallRng) -> Case {
+    let text = |name: &str| texts.iter().find(|(n, _)| n == name).expect("a shipped scene").1.clone();
+    let (base, scene, sets) = match rng.random_range(0..3) {
+        0 => {
+            let base = ["grains_many.toml", "grains_3d.toml"][rng.random_range(0..2)];
+            let radius = format!("packing.radius=[{}, {}]", edge_number(rng), edge_number(rng));
+            (base, text(base), vec!["packing.count=8".to_string(), radius])
+        }
+        1 => {
+            let terms: Vec<String> = (0..rng.random_range(1..3)).map(|_| format!("{{ g = {}, tau = {} }}", edge_number(rng), edge_number(rng))).collect();
+            ("relaxation.toml", text("relaxation.toml"), vec![format!("material.rubber.viscoelastic=[{}]", terms.join(", "))])
+        }
+        _ => {
+            let rubber = RUBBERS[rng.random_range(0..RUBBERS.len())];
+            let scene = text("relaxation.toml").replace("model = \"mooney_rivlin\"\nC10 = 400.0\nC01 = 100.0\nK = 2000.0", rubber);
+            let keys: Vec<&str> = rubber.lines().skip(1).map(|l| l.split(" = ").next().unwrap()).collect();
+            let key = keys[rng.random_range(0..keys.len())];
+            let value = if rng.random_bool(0.3) && key != "K" { format!("[{}]", edge_number(rng)) } else { edge_number(rng) };
+            ("relaxation.toml", scene, vec![format!("material.rubber.{key}={value}")])
+        }
+    };
+    let short_end = scene.parse::<Table>().ok().and_then(|t| t.get("time")?.get("dt")?.as_float()).map(|dt| 2.0 * dt);
+    Case { index, base: base.to_string(), scene, sets, short_end }
+}
+
+#[test]
+fn edges_of_radii_prony_terms_rubber_coefficients_and_command_line_values_never_panic_or_hang() {
+    let scenes_dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes");
+    let texts: Vec<(String, String)> = ["grains_many.toml", "grains_3d.toml", "relaxation.toml"].iter().map(|n| (n.to_string(), std::fs::read_to_string(scenes_dir.join(n)).unwrap())).collect();
+    let mut rng = SmallRng::seed_from_u64(setting("BIFIRST_FUZZ_SEED", SEED) ^ 0x57);
+    let count = setting("BIFIRST_FUZZ_CASES", CASES as u64) as usize / 8;
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("fuzz_edges");
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut failures: Vec<String> = (0..count).map(|i| targeted(i, &texts, &mut rng)).filter_map(|case| check_case(&case, &dir).problem).collect();
+    // The command-line values: each ends with exit 0 (accepted), 1 (a variant did not finish)
+    // or 2 (refused), promptly.
+    let bar = scenes_dir.join("bar_impact.toml");
+    let bar = bar.to_str().unwrap();
+    let study = ["--set", "time.end=5e-4", "--over", "time.dt=5e-5"];
+    for flag in ["--threads", "--max-wall", "--max-sweeps", "--repeat"] {
+        let mut values: Vec<String> = ["nan", "-1", "0", "1e308", "inf", "100000", "3"].iter().map(|v| v.to_string()).collect();
+        values.extend((0..4).map(|_| nasty_text(&mut rng)));
+        for value in values {
+            let mut command = bifirst(&dir);
+            match flag {
+                "--threads" => command.args([flag, &value, "check", bar]),
+                "--repeat" => command.args(["accuracy", bar]).args(study).args([flag, &value]),
+                _ => command.args(["stability", bar]).args(study).args([flag, &value]),
+            };
+            let what = format!("{flag} {value:?}");
+            let (code, stderr) = outcome(command, &what);
+            if !(0..=2).contains(&code) || stderr.contains("panicked") {
+                failures.push(format!("{what}: exited {code}: {stderr}"));
+            }
+        }
+    }
+    assert!(failures.is_empty(), "{} cases failed:\n{}", failures.len(), failures.join("\n"));
+}
