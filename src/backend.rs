@@ -4,10 +4,10 @@
 
 use crate::contact::uzawa::{Acceleration, Sweep};
 use crate::contact::Settings;
-use crate::gpu::{self, Gpu, GpuError, GpuWorld};
+use crate::gpu::{self, Gpu, GpuError, GpuWorld, WorldBody};
+pub use crate::policy::{RoundPlacement, UzawaPlacement};
 use crate::mesh::ElementKind;
 use crate::precision::{Precision, PRECISION_NAME};
-use crate::solver::Simulation;
 use std::sync::Arc;
 
 /// What the user asked for (`bifirst run --backend`).
@@ -30,72 +30,6 @@ impl std::str::FromStr for BackendChoice {
             "gpu" => Ok(Self::Gpu),
             "cpu" => Ok(Self::Cpu),
             _ => Err(format!("unknown backend `{s}` (auto, gpu or cpu)")),
-        }
-    }
-}
-
-/// Where the Uzawa sweeps run when the bodies are on a GPU (`bifirst run --uzawa`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum UzawaPlacement {
-    /// On the device when a Newton round's contact set is large enough to gain
-    /// ([`uzawa_on_device`]).
-    #[default]
-    Auto,
-    /// On the device whenever it can run them (Gauss-Seidel sweeps in f64).
-    Gpu,
-    Cpu,
-}
-
-impl UzawaPlacement {
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Auto => "auto",
-            Self::Gpu => "gpu",
-            Self::Cpu => "cpu",
-        }
-    }
-}
-
-impl std::str::FromStr for UzawaPlacement {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "auto" => Ok(Self::Auto),
-            "gpu" => Ok(Self::Gpu),
-            "cpu" => Ok(Self::Cpu),
-            _ => Err(format!("unknown Uzawa placement `{s}` (auto, gpu or cpu)")),
-        }
-    }
-}
-
-/// Which Newton rounds evaluate their bodies on the device when the bodies are on a GPU
-/// (`bifirst run --rounds`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub enum RoundPlacement {
-    /// The first round of every step, and a later round when its element work is worth a
-    /// device pass ([`round_on_device`]); the other rounds on the CPU twins.
-    #[default]
-    Auto,
-    /// Every round.
-    Gpu,
-}
-
-impl RoundPlacement {
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Auto => "auto",
-            Self::Gpu => "gpu",
-        }
-    }
-}
-
-impl std::str::FromStr for RoundPlacement {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, String> {
-        match s {
-            "auto" => Ok(Self::Auto),
-            "gpu" => Ok(Self::Gpu),
-            _ => Err(format!("unknown round placement `{s}` (auto or gpu)")),
         }
     }
 }
@@ -277,17 +211,14 @@ impl Backend {
         Some(format!("--uzawa gpu: the device's Uzawa sweeps are Gauss-Seidel in f64 and {why}; they run on the CPU"))
     }
 
-    /// Places every body's element and assembly kernels (the CPU twins are the default): on a
-    /// GPU, all bodies go into one device world.
-    pub fn apply(&self, sim: &mut Simulation) -> Result<(), GpuError> {
-        if let Backend::Gpu(gpu, uzawa, rounds) = self {
-            let bodies: Vec<_> = sim.bodies.iter().map(|b| b.world_body()).collect();
-            let mut world = GpuWorld::new(gpu.clone(), &bodies)?;
-            world.uzawa = *uzawa;
-            world.rounds = *rounds;
-            sim.world = Some(world);
-        }
-        Ok(())
+    /// Where the bodies' element and assembly kernels run: on a GPU, every body in one device
+    /// world; `None` runs the CPU twins.
+    pub fn device_world(&self, bodies: &[WorldBody]) -> Result<Option<GpuWorld>, GpuError> {
+        let Backend::Gpu(gpu, uzawa, rounds) = self else { return Ok(None) };
+        let mut world = GpuWorld::new(gpu.clone(), bodies)?;
+        world.uzawa = *uzawa;
+        world.rounds = *rounds;
+        Ok(Some(world))
     }
 }
 

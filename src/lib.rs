@@ -13,6 +13,7 @@ pub mod element;
 pub mod gpu;
 pub mod material;
 pub mod mesh;
+pub mod policy;
 pub mod precision;
 pub mod scene;
 pub mod solver;

@@ -27,7 +27,7 @@ pub use crate::element::{element_energy, element_force_tangent};
 
 use crate::assembly::element_out_stride;
 use crate::element::{ElementError, ElementOutput, Formulation, ReferenceGeometry};
-use crate::gpu::types::{Coefficients, DofOut, DofStep};
+use crate::gpu::types::{Coefficients, DofOut, DofStep, PEAK_FMA_STEPS};
 use crate::material::{Hyperelastic, Relaxation};
 use crate::mesh::Mesh;
 use crate::precision::Real;
@@ -131,8 +131,6 @@ pub fn peak_copy(source: &[Real], destination: &mut [Real]) {
     destination.par_iter_mut().with_min_len(PER_TASK).zip(source).for_each(|(d, s)| *d = *s);
 }
 
-/// Fused multiply-adds per chain of `peak_fma`.
-pub const PEAK_FMA_STEPS: usize = 256;
 
 /// `peak_fma`: per value, eight independent chains of [`PEAK_FMA_STEPS`] multiply-adds from
 /// it, summed as the kernel sums them (separate multiply and add: the target need not have

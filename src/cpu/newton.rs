@@ -9,8 +9,7 @@ use crate::gpu::uzawa_sweep::{NodeGather, UzawaJudgeState, UzawaLocal, UzawaProb
 use crate::gpu::ContactLayout;
 use crate::precision::Real;
 use crate::contact::uzawa::SETTLE;
-use crate::solver::coupling::TIGHTEST_INNER;
-use crate::solver::{REFACTOR_CONTRACTION, TIGHTEN_AFTER, UZAWA_STALLS};
+use crate::policy::{REFACTOR_CONTRACTION, TIGHTEN_AFTER, TIGHTEST_INNER, UZAWA_STALLS};
 
 /// The sum of one value per invocation by halves, as `reduce_sum` of `newton.wgsl`.
 fn reduce_sum(mut partial: [Real; NEWTON_WORKGROUP]) -> Real {

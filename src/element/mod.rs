@@ -10,6 +10,7 @@ pub use patches::Patches;
 pub use kernel::{element_cell_fields, element_point_fields, element_energy, element_force_tangent, element_stresses, element_von_mises, point_gradients, CellFields, ElementError, ElementOutput};
 
 
+pub use crate::mesh::{CUBE_TETRAHEDRA, QUAD_TRIANGLES};
 use crate::mesh::{ElementKind, Mesh};
 use crate::precision::Real;
 use nalgebra::Matrix3;
@@ -48,12 +49,6 @@ impl Formulation {
     }
 }
 
-/// The two triangles a quadrilateral cell `[0, 1, 2, 3]` splits into (counter-clockwise).
-pub const QUAD_TRIANGLES: [[usize; 3]; 2] = [[0, 1, 2], [0, 2, 3]];
-
-/// The six tetrahedra of the Kuhn split of a hexahedral cell along its diagonal 0-6, each a path
-/// 0 -> a -> b -> 6 through the cube, ordered for a positive volume.
-pub const CUBE_TETRAHEDRA: [[usize; 4]; 6] = [[0, 1, 2, 6], [0, 2, 3, 6], [0, 3, 7, 6], [0, 7, 4, 6], [0, 4, 5, 6], [0, 5, 1, 6]];
 
 const CUBE_TETRAHEDRA_SLICES: [&[usize]; 6] = [&CUBE_TETRAHEDRA[0], &CUBE_TETRAHEDRA[1], &CUBE_TETRAHEDRA[2], &CUBE_TETRAHEDRA[3], &CUBE_TETRAHEDRA[4], &CUBE_TETRAHEDRA[5]];
 

@@ -3,8 +3,8 @@
 //! (`peak_fma`). CPU twins: [`crate::cpu::peak_copy`], [`crate::cpu::peak_fma`].
 
 use super::world::{from_device, to_device};
+use super::types::PEAK_FMA_STEPS;
 use super::{Gpu, GpuError};
-use crate::cpu::PEAK_FMA_STEPS;
 use crate::precision::Real;
 use std::time::Instant;
 use wgpu::util::DeviceExt;

@@ -135,16 +135,16 @@ pub fn source(kernel: &str, precision: Precision, variant: Option<ElementVariant
         use super::types::{NEWTON_MAX_FREE, NEWTON_WORKGROUP};
         module += &format!(
             "const MAX_FREE = {NEWTON_MAX_FREE}u;\nconst NEWTON_WORKGROUP = {NEWTON_WORKGROUP}u;\nconst REFACTOR_CONTRACTION = {:?};\n",
-            crate::solver::REFACTOR_CONTRACTION
+            crate::policy::REFACTOR_CONTRACTION
         );
         module += include("newton")?;
         if kernel == "newton_contact" {
             // The Uzawa points, problems and states it prepares and reads (`uzawa_solve`'s).
             module += &format!(
                 "const TIGHTEN_AFTER = {}u;\nconst UZAWA_STALLS = {}u;\nconst TIGHTEST_INNER = {:?};\nconst SETTLE = {:?};\n",
-                crate::solver::TIGHTEN_AFTER,
-                crate::solver::UZAWA_STALLS,
-                crate::solver::coupling::TIGHTEST_INNER,
+                crate::policy::TIGHTEN_AFTER,
+                crate::policy::UZAWA_STALLS,
+                crate::policy::TIGHTEST_INNER,
                 crate::contact::uzawa::SETTLE
             );
             module += include("uzawa")?;

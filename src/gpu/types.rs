@@ -168,10 +168,10 @@ pub struct ContactState<R> {
     pub sweeps: u32,
     pub uzawa: u32,
     /// Times the device solved the group's problem tighter
-    /// ([`crate::solver::coupling::ContactStep::tighten`]).
+    /// (`solver::coupling::ContactStep::tighten`).
     pub tightened: u32,
     /// Increments in a row whose solve did not converge (its sweeps spent), counted on from the
-    /// host's ([`crate::solver::UZAWA_STALLS`] of them hand the group back).
+    /// host's ([`crate::policy::UZAWA_STALLS`] of them hand the group back).
     pub stalls: u32,
     /// The change of the contact forces over the last increment, relative
     /// ([`crate::solver::coupling::ContactStep::apply`]).
@@ -200,3 +200,6 @@ unsafe impl<R: Pod> Zeroable for NewtonMember<R> {}
 unsafe impl<R: Pod> Pod for NewtonMember<R> {}
 unsafe impl<R: Pod> Zeroable for NewtonState<R> {}
 unsafe impl<R: Pod> Pod for NewtonState<R> {}
+
+/// Fused multiply-adds per chain of `peak_fma` (the kernel and its CPU twin).
+pub const PEAK_FMA_STEPS: usize = 256;

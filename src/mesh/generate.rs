@@ -6,7 +6,7 @@
 //! adds `inner`, `outer` and, for a sector, `start` and `end` (its straight edges).
 
 use super::{ElementKind, Mesh};
-use crate::element::{CUBE_TETRAHEDRA, QUAD_TRIANGLES};
+use super::{CUBE_TETRAHEDRA, QUAD_TRIANGLES};
 use crate::precision::Real;
 use std::collections::BTreeMap;
 

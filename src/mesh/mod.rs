@@ -6,6 +6,13 @@ pub mod gmsh;
 use crate::precision::Real;
 use std::collections::BTreeMap;
 
+/// The two triangles a quadrilateral cell `[0, 1, 2, 3]` splits into (counter-clockwise).
+pub const QUAD_TRIANGLES: [[usize; 3]; 2] = [[0, 1, 2], [0, 2, 3]];
+
+/// The six tetrahedra of the Kuhn split of a hexahedral cell along its diagonal 0-6, each a path
+/// 0 -> a -> b -> 6 through the cube, ordered for a positive volume.
+pub const CUBE_TETRAHEDRA: [[usize; 4]; 6] = [[0, 1, 2, 6], [0, 2, 3, 6], [0, 3, 7, 6], [0, 7, 4, 6], [0, 4, 5, 6], [0, 5, 1, 6]];
+
 /// Element kinds, all isoparametric with linear shape functions.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Deserialize, serde::Serialize)]
 #[serde(rename_all = "lowercase")]

@@ -6,6 +6,7 @@ pub mod mcap_log;
 pub mod messages;
 pub mod plot;
 pub mod read;
+pub mod run_summary;
 pub mod schemas;
 pub mod summary;
 pub mod vtu;

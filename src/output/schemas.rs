@@ -3,7 +3,7 @@
 //! types cannot say is added here: the number of components of a vector, which is the scene's.
 
 use super::messages::{BodiesMessage, BodyMessage, ContactMessage, EnergyMessage, ProbeMessage, ReactionMessage, RunMessage, SolverMessage};
-use crate::run::RunSummary;
+use super::run_summary::RunSummary;
 use crate::solver::SavedState;
 use schemars::generate::SchemaSettings;
 use schemars::JsonSchema;

@@ -1,7 +1,7 @@
 //! `bifirst summary`: the totals of one or more run logs as a table (or JSON).
 
 use super::read::{ReadError, RunRecord};
-use crate::run::energy_gain;
+use super::run_summary::energy_gain;
 use crate::solver::Energies;
 use serde_json::Value;
 

@@ -2,7 +2,7 @@
 //! Newton solve of one theta-method step (paper eqs. 16-19).
 
 use super::linear::CholeskySolver;
-use super::PhaseTimes;
+use crate::policy::{PhaseTimes, REFACTOR_CONTRACTION};
 use super::topology::Topology;
 use crate::assembly::{element_out_stride, DofMap, GatherMap, StiffnessPattern};
 use crate::cpu::{assemble_csr, assemble_residual, dispatch_element_force_tangent, element_energy, element_force_tangent};
@@ -264,10 +264,6 @@ impl EvaluatedAt {
     }
 }
 
-/// A reused factorisation is kept while each Newton iteration reduces the residual at least
-/// tenfold: at the default tolerances (1e-9) a slower contraction would need more iterations
-/// than `solver.max_iterations` allows, and refactorising costs less than a few extra ones.
-pub const REFACTOR_CONTRACTION: Real = 0.1;
 
 /// Round-off per dof of the internal force, in units of `(K + 4G/3) h^(dim-1)`: a few ε (the
 /// error of `J` times the few terms a node sums).

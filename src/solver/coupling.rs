@@ -7,7 +7,7 @@
 //! local law; a last solve applies the reactions, `Δu = K̄⁻¹(-g + Hᵀ r)`.
 
 use super::body::{Body, StepParams};
-use super::PhaseTimes;
+use crate::policy::{PhaseTimes, TIGHTEST_INNER};
 use crate::contact::uzawa::{self, Colours, Delassus, Local, NodalMap, Outcome, Problem};
 use crate::contact::{uzawa_step, ContactPoint, Settings, Status, WarmStart};
 use crate::gpu::uzawa_sweep::{self, solve_loops_per_sweep};
@@ -21,9 +21,6 @@ use std::sync::atomic::AtomicBool;
 /// with the same Newton iterations.
 const INNER_TOLERANCE: Real = 0.1;
 
-/// How far [`ContactStep::tighten`] takes the inner tolerance down, at most (relative to the
-/// contact tolerance).
-pub const TIGHTEST_INNER: Real = 1e-4;
 
 /// Columns solved together: bounds the dense right-hand-side block to `64 x free dofs`.
 const COLUMN_BATCH: usize = 64;

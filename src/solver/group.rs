@@ -6,7 +6,7 @@
 
 use super::body::{coefficients, Body, StepFailure, StepParams};
 use super::coupling::ContactStep;
-use super::PhaseTimes;
+use crate::policy::{PhaseTimes, TIGHTEN_AFTER, UZAWA_STALLS};
 use crate::contact::uzawa::{Outcome, Problem};
 use crate::contact::{ContactPoint, Settings, WarmStart};
 use crate::gpu::types::ContactState;
@@ -235,14 +235,6 @@ impl NewtonState {
     }
 }
 
-/// Newton iterations in a row with stalled Uzawa sweeps after which a step is given up (to be
-/// retried thinned or cut back) rather than iterated to `max_iterations`: each costs up to
-/// `contact.max_iterations` sweeps, and a stall that lasts this long did not clear in any run.
-pub const UZAWA_STALLS: usize = 3;
-
-/// Newton iterations after which a group whose only unmet criterion is the increment solves its
-/// contact problems tighter ([`ContactStep::tighten`]).
-pub const TIGHTEN_AFTER: usize = 4;
 
 /// A contact criterion a group's convergence test found unmet, worded only for a failure
 /// message (as the bodies' own, [`Body::unmet`]).

@@ -10,8 +10,8 @@ mod restart;
 mod setup;
 pub mod topology;
 
-pub use body::{Body, NodalLoad, StepFailure, REFACTOR_CONTRACTION};
-pub use group::{TIGHTEN_AFTER, UZAWA_STALLS};
+pub use body::{Body, NodalLoad, StepFailure};
+pub use crate::policy::{PhaseTimes, REFACTOR_CONTRACTION, TIGHTEN_AFTER, UZAWA_STALLS};
 pub use restart::{RestoreError, SavedBody, SavedFactor, SavedReaction, SavedState};
 pub use setup::{build_mesh, build_simulation};
 
@@ -27,34 +27,6 @@ use group::solve_groups;
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
-
-/// Wall-clock seconds spent per phase.
-#[derive(Debug, Clone, Copy, Default, serde::Serialize, schemars::JsonSchema)]
-pub struct PhaseTimes {
-    /// Element kernels (on a GPU: the device passes, all kernels, from submission to the mapped
-    /// read-back).
-    pub elements: f64,
-    /// Assembly kernels on the CPU (on a GPU they count in `elements`).
-    pub assembly: f64,
-    /// On a GPU, packing the uploads and unpacking the read-back (zero on the CPU backend).
-    pub transfer: f64,
-    pub factorization: f64,
-    pub solve: f64,
-    pub contact: f64,
-    pub total: f64,
-}
-
-impl std::ops::AddAssign for PhaseTimes {
-    fn add_assign(&mut self, o: Self) {
-        self.elements += o.elements;
-        self.assembly += o.assembly;
-        self.transfer += o.transfer;
-        self.factorization += o.factorization;
-        self.solve += o.solve;
-        self.contact += o.contact;
-        self.total += o.total;
-    }
-}
 
 /// A node set with a prescribed motion (its reaction goes to `/reaction/<name>`).
 #[derive(Debug, Clone)]

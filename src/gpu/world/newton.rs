@@ -17,7 +17,7 @@ use crate::gpu::uzawa_sweep::UzawaSweeps;
 use crate::gpu::types::{Active, Coefficients, ContactState, DofOut, NewtonMember, NewtonState, MODE_FORCES, MODE_TANGENT, NEWTON_FAILED, NEWTON_HOST, NEWTON_ITERATING, NEWTON_MAX_FREE, NO_FAILURE};
 use crate::gpu::{ElementFailure, Gpu, GpuError};
 use crate::precision::{Precision, Real};
-use crate::solver::PhaseTimes;
+use crate::policy::PhaseTimes;
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
