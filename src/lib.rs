@@ -21,4 +21,5 @@ pub mod output;
 pub mod run;
 pub mod sweep;
 pub mod accuracy;
+pub mod grains;
 pub mod stability;

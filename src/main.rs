@@ -236,6 +236,24 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Granular measures from a run's contact network (`/contacts`): solid fraction,
+    /// coordination (with and without rattlers), sliding contacts, fabric, Love-Weber stress
+    /// and the walls' pressures per logged step (`grains.csv`), the distribution of normal
+    /// forces and contact orientations at one step (`grains.json`), and pictures: force chains,
+    /// the time series, the force distribution, the orientation rose (doc/grains.md).
+    Grains {
+        run: PathBuf,
+        /// Directory for `grains.csv`, `grains.json` and the PNGs (default: `<RUN>_grains`).
+        #[arg(long)]
+        out: Option<PathBuf>,
+        /// The step of the distributions and the force-chain picture: the last logged at or
+        /// before this time (default: the last).
+        #[arg(long, value_name = "T")]
+        at: Option<f64>,
+        /// Print the report (the chosen step's measures and distributions) as JSON.
+        #[arg(long)]
+        json: bool,
+    },
     /// Print the version, build and compute backends.
     Info,
 }
@@ -864,6 +882,35 @@ fn plot_command(runs: Vec<PathBuf>, out: Option<PathBuf>, trace: Option<[String;
     Ok(read_status(failed))
 }
 
+fn grains_command(run: &Path, out: Option<PathBuf>, at: Option<f64>, json: bool) -> Result<ExitCode> {
+    use bifirst::grains::{analyze, read_networks};
+    let out = out.unwrap_or_else(|| run.with_file_name(format!("{}_grains", run.file_stem().map_or("run".into(), |s| s.to_string_lossy()))));
+    check_output_dir(&out, "the output directory")?;
+    eprintln!("reading the contact network of {}", run.display());
+    // A line per tenth of a long log's steps.
+    let every = |n: usize| (n / 10).max(1);
+    let networks = read_networks(run, |k, n| if n > 10 && (k % every(n) == 0 || k == n) { eprintln!("  parsed {k}/{n} steps") })?;
+    let started = Instant::now();
+    let report = analyze(&networks, at, &out, |k, n| if n > 10 && (k % every(n) == 0 || k == n) { eprintln!("  measured {k}/{n} steps") })?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        let m = &report.at;
+        println!("{} ({}D, {} grains, {} logged steps): at t = {:.6e}", report.scene, report.dim, m.grains, report.steps, m.t);
+        println!("  solid fraction {:.4}, container volume {:.4e}", m.solid_fraction, m.container_volume);
+        println!("  contacts {} ({} with walls), coordination Z = {:.3}, without {} rattlers Z = {:.3}, sliding {:.1} %", m.contacts, m.wall_contacts, m.coordination, m.rattlers, m.coordination_without_rattlers, 100.0 * m.sliding_fraction);
+        println!("  fabric {:?}, anisotropy {:.4}", m.fabric, m.fabric_anisotropy);
+        println!("  Love-Weber stress {:?}: p = {:.4e}, q = {:.4e}; mean wall pressure {:.4e}", m.stress, m.pressure, m.deviator, m.wall_pressure);
+        for w in &m.walls {
+            println!("    wall `{}`: {:.4e}", w.name, w.pressure);
+        }
+        let d = &report.force_distribution;
+        println!("  normal forces: mean {:.4e}, exponential tail decay {}", d.mean_normal_force, d.tail_decay.map_or("n/a (too few forces above the mean)".into(), |b| format!("{b:.3}")));
+    }
+    eprintln!("measured in {:.2} s; wrote {}", started.elapsed().as_secs_f64(), report.files.iter().map(|f| f.display().to_string()).collect::<Vec<_>>().join(", "));
+    Ok(ExitCode::SUCCESS)
+}
+
 fn summary_command(runs: Vec<PathBuf>, json: bool) -> Result<ExitCode> {
     let (summaries, failed) = read_runs(&runs, |p| read_run(p).and_then(|r| summary::summarize(&r)))?;
     if json {
@@ -944,6 +991,7 @@ fn main() -> ExitCode {
             Ok(ExitCode::SUCCESS)
         }),
         Command::Bench { elements, kernel, element, material, backend, adapter, time, json } => bench_command(BenchOptions { elements, kernel, element, material, min_time: time }, backend, adapter, json),
+        Command::Grains { run, out, at, json } => grains_command(&run, out, at, json),
         Command::Info => {
             println!("bifirst {} (git {})", env!("CARGO_PKG_VERSION"), bifirst::run::GIT_REVISION.unwrap_or("unknown"));
             println!("build: {} profile, rustc target {}-{}", if cfg!(debug_assertions) { "debug" } else { "release" }, std::env::consts::ARCH, std::env::consts::OS);

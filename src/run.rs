@@ -116,6 +116,9 @@ struct Logger {
     saved_step: Option<usize>,
     /// Per body: on `/bodies` rather than a `/body/<name>` channel of its own.
     batched: Vec<bool>,
+    /// `/contacts` every this many steps (0: never), and the step last written.
+    contacts_every: usize,
+    contacts_step: Option<usize>,
 }
 
 impl Logger {
@@ -171,6 +174,8 @@ impl Logger {
                 let (names, mass) = sim.bodies.iter().zip(&batched).filter(|(_, batched)| **batched).map(|(b, _)| (b.name.clone(), b.metrics().mass)).unzip();
                 BatchedBodies { names, mass }
             }),
+            body_names: sim.bodies.iter().map(|b| b.name.clone()).collect(),
+            obstacle_names: sim.contact.as_ref().map_or(Vec::new(), |c| c.obstacles.iter().map(|o| o.name.clone()).collect()),
         };
         log.write("/run", sim.t, &run)?;
         log.attach("scene.toml", "application/toml", loaded.resolved_toml.as_bytes())?;
@@ -194,7 +199,11 @@ impl Logger {
         let view = (scene_every > 0).then(|| View::new(sim));
         let vtu_every = OutputSpec::frame_interval(output.vtu_every, total);
         log.add_channel("/state", "bifirst.SavedState", &schemas::saved_state())?;
-        Ok(Self { log, dim, view, scene_every, vtu, vtu_every, state_step: None, frame_step: None, saved_every: output.state_every, saved_step: None, batched })
+        let contacts_every = if sim.contact.is_some() { output.contacts_every.unwrap_or(scene_every) } else { 0 };
+        if contacts_every > 0 {
+            log.add_channel("/contacts", "bifirst.Contacts", &schemas::contacts())?;
+        }
+        Ok(Self { log, dim, view, scene_every, vtu, vtu_every, state_step: None, frame_step: None, saved_every: output.state_every, saved_step: None, batched, contacts_every, contacts_step: None })
     }
 
     /// State channels: energy (`energies`, the simulation's at this time), bodies, probes,
@@ -286,6 +295,16 @@ impl Logger {
             series.write_frame(sim, &fields)?;
         }
         Ok(())
+    }
+
+    /// The contact network (`/contacts`) when its cadence says so, or when `last`.
+    fn contacts(&mut self, sim: &Simulation, last: bool) -> Result<(), OutputError> {
+        let due = self.contacts_every > 0 && (last || sim.step % self.contacts_every == 0);
+        if !due || self.contacts_step == Some(sim.step) {
+            return Ok(());
+        }
+        self.contacts_step = Some(sim.step);
+        self.log.write("/contacts", sim.t, &crate::output::contacts::network(sim))
     }
 
     /// The `/contact` channel of a step (only in scenes with contact).
@@ -434,6 +453,7 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
     monitor.state(&sim);
     logger.state(&sim, sim.energies())?;
     logger.frames(&sim, false)?;
+    logger.contacts(&sim, false)?;
     logger.saved(&sim, false)?;
     let mut totals = Totals::default();
     let max_energy_gain = loaded.scene.solver.max_energy_gain;
@@ -543,6 +563,7 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
             logger.state(&sim, energies)?;
         }
         logger.frames(&sim, sim.finished())?;
+        logger.contacts(&sim, sim.finished())?;
         logger.saved(&sim, sim.finished())?;
         monitor.state(&sim);
         monitor.step(&report, total);
@@ -568,6 +589,7 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
             // The last finished step goes into every output, then the reason for stopping.
             logger.state(&sim, sim.energies())?;
             logger.frames(&sim, true)?;
+            logger.contacts(&sim, true)?;
             logger.saved(&sim, true)?;
             let level = if matches!(stop, Stop::Interrupted) { Level::Warning } else { Level::Error };
             let message = stop.to_string();

@@ -29,7 +29,7 @@ fn run_log_has_every_channel_of_the_contract() {
     let log = run("uniaxial_blatz_ko", &["time.end=0.1"], "contract");
     let steps = 10;
     let expected: &[(&str, &str, &[&str], usize)] = &[
-        ("/run", "bifirst.Run", &["version", "git_revision", "scene_name", "scene", "scene_file", "backend", "precision", "adapter", "first_step", "batched_bodies"], 1),
+        ("/run", "bifirst.Run", &["version", "git_revision", "scene_name", "scene", "scene_file", "backend", "precision", "adapter", "first_step", "batched_bodies", "body_names", "obstacle_names"], 1),
         ("/energy", "bifirst.Energy", &["t", "kinetic", "strain", "potential", "external_work", "friction_dissipation", "viscous_dissipation", "numerical_dissipation", "contact_correction", "total", "energy_balance_error"], steps + 1),
         (
             "/solver",
@@ -212,7 +212,7 @@ fn every_message_validates_against_the_schema_derived_from_its_type() {
     let cases: [(&str, &[&str]); 3] = [
         ("sliding_block", &["time.end=0.02", "output.state_every=5"]),
         ("stack_3d", &["time.end=0.02", "output.state_every=1", "output.bodies=\"batched\""]),
-        ("grains_many", &["time.end=0.01", "packing.count=6", "output.scene_every=0"]),
+        ("grains_many", &["time.end=0.05", "packing.count=6", "output.scene_every=0", "output.contacts_every=2", "packing.wall_velocity=40.0"]),
     ];
     for (scene, sets) in cases {
         let log = run(scene, sets, &format!("derived_{scene}"));
@@ -231,5 +231,9 @@ fn every_message_validates_against_the_schema_derived_from_its_type() {
             }
         }
         assert!(log.topics.contains_key("/state") && checked > 10, "{scene}: {checked} messages checked");
+        if scene == "grains_many" {
+            let networks = &log.topics["/contacts"];
+            assert!(networks.iter().any(|m| !m["body"].as_array().unwrap().is_empty()), "a contact network with contacts is validated");
+        }
     }
 }

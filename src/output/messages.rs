@@ -31,6 +31,10 @@ pub struct RunMessage {
     /// The bodies logged together on `/bodies` (`output.bodies`), or null when every body has
     /// its own `/body/<name>` channel.
     pub batched_bodies: Option<BatchedBodies>,
+    /// Every body, in the scene's order: what `/contacts` indexes.
+    pub body_names: Vec<String>,
+    /// Every obstacle, in the scene's order: what `/contacts` indexes.
+    pub obstacle_names: Vec<String>,
 }
 
 /// The bodies of `/bodies`, in the order of its arrays: written once, in `/run`.
@@ -149,4 +153,41 @@ pub struct ContactMessage {
     pub t: Real,
     #[serde(flatten)]
     pub stats: ContactStats,
+}
+
+/// `/contacts`: the contact network of a logged step (`output.contacts_every`), as arrays, for
+/// the granular measures (`bifirst grains`). A contact is a pair of bodies, or a body and an
+/// obstacle, pressed together: the contact points of a pair (its slave nodes, of both passes)
+/// summed. Vectors are flat, `dim` numbers each.
+#[derive(Debug, Default, Serialize, serde::Deserialize, JsonSchema)]
+#[schemars(title = "bifirst.Contacts")]
+pub struct ContactsMessage {
+    pub t: Real,
+    /// Each body's centre of mass, in the order of `/run.body_names`.
+    pub body_center: Vec<Real>,
+    /// Each body's current volume (area in 2D), from its deformed boundary.
+    pub body_volume: Vec<Real>,
+    /// The plane obstacles where they are at `t`: index into `/run.obstacle_names`, a point of
+    /// the plane and its normal (towards the side the bodies are on).
+    pub wall: Vec<u32>,
+    pub wall_point: Vec<Real>,
+    pub wall_normal: Vec<Real>,
+    /// The contact's body (the lower index of a pair of bodies).
+    pub body: Vec<u32>,
+    /// The other side: a body's index, or `-1 - k` for obstacle `k`.
+    pub other: Vec<i64>,
+    /// Where the contact is: its points' positions weighted by their normal forces.
+    pub point: Vec<Real>,
+    /// Unit normal, from the other side towards `body`.
+    pub normal: Vec<Real>,
+    /// The force on `body` (the other side takes its opposite).
+    pub force: Vec<Real>,
+    /// `force · normal`: zero or positive (pressing).
+    pub normal_force: Vec<Real>,
+    /// The norm of the force's part across `normal`.
+    pub tangential_force: Vec<Real>,
+    /// Every point of the contact slides (on the Coulomb cone's surface).
+    pub sliding: Vec<bool>,
+    /// Contact points (slave nodes) the contact sums.
+    pub points: Vec<u32>,
 }

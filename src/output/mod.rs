@@ -1,6 +1,7 @@
 //! Outputs: the MCAP run log (see doc/mcap.md for the contract) with its Foxglove view, VTU
 //! files for ParaView, and what reads a run log back: plots and the summary table.
 
+pub mod contacts;
 pub mod foxglove;
 pub mod mcap_log;
 pub mod messages;

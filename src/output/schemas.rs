@@ -2,7 +2,7 @@
 //! the types the run writes ([`super::messages`], [`RunSummary`], [`SavedState`]). Only what the
 //! types cannot say is added here: the number of components of a vector, which is the scene's.
 
-use super::messages::{BodiesMessage, BodyMessage, ContactMessage, EnergyMessage, ProbeMessage, ReactionMessage, RunMessage, SolverMessage};
+use super::messages::{BodiesMessage, BodyMessage, ContactMessage, ContactsMessage, EnergyMessage, ProbeMessage, ReactionMessage, RunMessage, SolverMessage};
 use super::run_summary::RunSummary;
 use crate::solver::SavedState;
 use schemars::generate::SchemaSettings;
@@ -77,6 +77,10 @@ pub fn reaction(dim: usize) -> Value {
 
 pub fn contact() -> Value {
     schema_of::<ContactMessage>()
+}
+
+pub fn contacts() -> Value {
+    schema_of::<ContactsMessage>()
 }
 
 /// The full state of a finished step, what `bifirst run --restart` continues from.

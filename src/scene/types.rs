@@ -426,6 +426,10 @@ pub struct OutputSpec {
     /// Write the full state (`/state`, what `run --restart` continues from) every this many
     /// steps; 0: only at the last finished step, which is always written.
     pub state_every: usize,
+    /// Write the contact network (`/contacts`) every this many steps, and at the start and the
+    /// last step; 0: never. When absent, the `/scene` cadence.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub contacts_every: Option<usize>,
     /// Where the bodies' momenta are logged: a `/body/<name>` channel each, or one `/bodies`
     /// message per step for all of them.
     pub bodies: BodyLog,
@@ -433,7 +437,7 @@ pub struct OutputSpec {
 
 impl Default for OutputSpec {
     fn default() -> Self {
-        Self { mcap: None, every: 1, scene_every: None, vtu: None, vtu_every: None, state_every: 0, bodies: BodyLog::Auto }
+        Self { mcap: None, every: 1, scene_every: None, vtu: None, vtu_every: None, state_every: 0, contacts_every: None, bodies: BodyLog::Auto }
     }
 }
 

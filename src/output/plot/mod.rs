@@ -40,11 +40,11 @@ pub enum PlotError {
 }
 
 /// One panel: a quantity against time, one line per run.
-struct Panel {
-    title: String,
-    x_label: String,
-    y_label: String,
-    lines: Vec<Vec<(f64, f64)>>,
+pub(crate) struct Panel {
+    pub(crate) title: String,
+    pub(crate) x_label: String,
+    pub(crate) y_label: String,
+    pub(crate) lines: Vec<Vec<(f64, f64)>>,
 }
 
 impl Panel {
@@ -68,7 +68,7 @@ pub(crate) fn register_font() {
 
 /// A range that plotters can draw even for a constant or empty series (a spread below 1e-9 of
 /// the values, such as round-off in a constant time step, counts as constant).
-fn range(values: impl Iterator<Item = f64>) -> std::ops::Range<f64> {
+pub(crate) fn range(values: impl Iterator<Item = f64>) -> std::ops::Range<f64> {
     let (lo, hi) = values.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| (lo.min(v), hi.max(v)));
     if !lo.is_finite() {
         return 0.0..1.0;
@@ -84,7 +84,7 @@ fn range(values: impl Iterator<Item = f64>) -> std::ops::Range<f64> {
 
 /// Tick labels that tell the ticks of a range apart: fixed-point for moderate magnitudes,
 /// scientific otherwise.
-fn tick_format(r: &std::ops::Range<f64>) -> impl Fn(&f64) -> String {
+pub(crate) fn tick_format(r: &std::ops::Range<f64>) -> impl Fn(&f64) -> String {
     let magnitude = r.start.abs().max(r.end.abs());
     let significant = ((magnitude / (r.end - r.start)).log10().ceil().max(0.0) as i32 + 2).min(12);
     let exponent = magnitude.log10().floor() as i32;
@@ -104,7 +104,7 @@ const LEGEND_ROW: u32 = 24;
 
 /// Draws panels in a grid of `columns` into `path`; with several runs, a legend strip under the
 /// title names them once, outside the panels, so that no data is hidden behind it.
-fn figure(path: &Path, title: &str, names: &[String], panels: &[Panel], columns: usize) -> Result<(), PlotError> {
+pub(crate) fn figure(path: &Path, title: &str, names: &[String], panels: &[Panel], columns: usize) -> Result<(), PlotError> {
     register_font();
     let draw_err = |e: &dyn std::fmt::Display| PlotError::Draw { path: path.into(), message: e.to_string() };
     let rows = panels.len().div_ceil(columns);
