@@ -190,6 +190,10 @@ pub struct BenchOptions {
     pub material: Option<String>,
     /// Seconds of calls per measurement (at least three calls).
     pub min_time: f64,
+    /// Every element with every material; otherwise, unless `material` filters, each element
+    /// with the paper's Blatz-Ko foam only (the models differ in their stress, not in the
+    /// kernels' data flow: `--all` measures them).
+    pub all: bool,
 }
 
 /// Seconds per call, and the number of calls made (the warm-up included).
@@ -285,16 +289,22 @@ fn element_energies(case: &BenchCase) -> Vec<Real> {
 }
 
 /// Runs the benchmark; `gpus` are the devices to compare with the CPU (f64 and/or f32).
-pub fn run_bench(options: &BenchOptions, gpus: &[Arc<Gpu>], mut row: impl FnMut(BenchRow)) -> Result<(), GpuError> {
+/// `progress` hears of each case as it starts (the peaks, each element and material, the Newton
+/// and Uzawa kernels).
+pub fn run_bench(options: &BenchOptions, gpus: &[Arc<Gpu>], mut row: impl FnMut(BenchRow), mut progress: impl FnMut(&str)) -> Result<(), GpuError> {
+    progress("peaks");
     let peaks = peak_rows(options, gpus, &mut row)?;
     let element_kernels = [FORCE_TANGENT, FORCES, ASSEMBLY, EVALUATE, ENERGY].iter().any(|k| wanted(options, k));
     let matches = |filter: &Option<String>, name: &str| filter.as_ref().is_none_or(|f| name.contains(f.as_str()));
+    let models: Vec<Model> = bench_models().into_iter().filter(|m| matches(&options.material, m.name())).collect();
+    let models = if options.all || options.material.is_some() { models } else { models.into_iter().take(1).collect() };
     for (kind, formulation) in bench_elements().into_iter().filter(|_| element_kernels) {
         let label = element_label(kind, formulation);
         if !matches(&options.element, &label) {
             continue;
         }
-        for model in bench_models().into_iter().filter(|m| matches(&options.material, m.name())) {
+        for model in models.iter().cloned() {
+            progress(&format!("{label} {}", model.name()));
             let case = BenchCase::new(kind, formulation, model, options.elements);
             let n = case.elements();
             let make = |kernel: &str, backend: String, timing: Timing, traffic: u64, error: f64| {
@@ -407,15 +417,19 @@ pub fn run_bench(options: &BenchOptions, gpus: &[Arc<Gpu>], mut row: impl FnMut(
         }
     }
     if wanted(options, newton::NEWTON_ITERATION) {
+        progress(newton::NEWTON_ITERATION);
         newton::newton_rows(options, gpus, &peaks, &mut row)?;
     }
     if wanted(options, "uzawa_step") {
+        progress("uzawa_step");
         uzawa_rows(options, gpus, &mut row)?;
     }
     if wanted(options, "uzawa_sweep") {
+        progress("uzawa_sweep");
         uzawa_sweep_rows(options, gpus, &mut row)?;
     }
     if wanted(options, "uzawa_solve") {
+        progress("uzawa_solve");
         uzawa_solve_rows(options, gpus, &mut row)?;
     }
     Ok(())

@@ -232,6 +232,10 @@ enum Command {
         /// Seconds of calls per measurement (at least three calls).
         #[arg(long, default_value_t = 0.5)]
         time: f64,
+        /// Every element with every material (by default each element with the Blatz-Ko foam
+        /// only, unless `--material` picks).
+        #[arg(long)]
+        all: bool,
         /// One JSON object per row instead of the table.
         #[arg(long)]
         json: bool,
@@ -424,13 +428,20 @@ fn bench_command(options: BenchOptions, backend: BackendChoice, adapter: Option<
         }
         println!("{}", bifirst::bench::table_header());
     }
-    run_bench(&options, &devices, |row| {
-        if json {
-            println!("{}", serde_json::to_string(&row).expect("serializes"));
-        } else {
-            println!("{}", row.line());
-        }
-    })?;
+    let started = Instant::now();
+    let progress = |case: &str| eprintln!("[{:6.1} s] {case}", started.elapsed().as_secs_f64());
+    run_bench(
+        &options,
+        &devices,
+        |row| {
+            if json {
+                println!("{}", serde_json::to_string(&row).expect("serializes"));
+            } else {
+                println!("{}", row.line());
+            }
+        },
+        progress,
+    )?;
     Ok(ExitCode::SUCCESS)
 }
 
@@ -990,7 +1001,7 @@ fn main() -> ExitCode {
             }
             Ok(ExitCode::SUCCESS)
         }),
-        Command::Bench { elements, kernel, element, material, backend, adapter, time, json } => bench_command(BenchOptions { elements, kernel, element, material, min_time: time }, backend, adapter, json),
+        Command::Bench { elements, kernel, element, material, backend, adapter, time, all, json } => bench_command(BenchOptions { elements, kernel, element, material, min_time: time, all }, backend, adapter, json),
         Command::Grains { run, out, at, json } => grains_command(&run, out, at, json),
         Command::Info => {
             println!("bifirst {} (git {})", env!("CARGO_PKG_VERSION"), bifirst::run::GIT_REVISION.unwrap_or("unknown"));

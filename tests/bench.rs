@@ -11,7 +11,7 @@ fn rows(args: &[&str]) -> Vec<Value> {
 
 #[test]
 fn bench_reports_every_kernel_on_the_cpu() {
-    let rows = rows(&["--backend", "cpu"]);
+    let rows = rows(&["--backend", "cpu", "--all"]);
     // 6 elements (4 kinds, and F-bar on quad4 and hex8) x 8 materials x 4 kernel groups (the
     // force and tangent, the forces alone, the assembly, the energy), newton_iteration,
     // uzawa_step, uzawa_sweep, uzawa_solve, and the two peak kernels.
@@ -36,12 +36,12 @@ fn bench_reports_every_kernel_on_the_cpu() {
 #[test]
 fn bench_kernel_filter_takes_a_rows_full_name() {
     for (filter, rows_expected) in [("element_energy", 6 * 8), ("assemble_csr+assemble_residual", 6 * 8), ("element_force_tangent/forces", 6 * 8), ("peak_fma", 1), ("peak_copy", 1)] {
-        let rows = self::rows(&["--backend", "cpu", "--kernel", filter]);
+        let rows = self::rows(&["--backend", "cpu", "--all", "--kernel", filter]);
         assert_eq!(rows.len(), rows_expected, "--kernel {filter}");
         assert!(rows.iter().all(|r| r["kernel"] == filter), "--kernel {filter}: {rows:?}");
     }
     // A kernel's name selects its entry points' rows too.
-    let rows = self::rows(&["--backend", "cpu", "--kernel", "element_force_tangent"]);
+    let rows = self::rows(&["--backend", "cpu", "--all", "--kernel", "element_force_tangent"]);
     let kernels: std::collections::BTreeSet<&str> = rows.iter().map(|r| r["kernel"].as_str().unwrap()).collect();
     assert_eq!((rows.len(), kernels.into_iter().collect::<Vec<_>>()), (6 * 8 * 2, vec!["element_force_tangent", "element_force_tangent/forces"]));
 }
@@ -53,9 +53,25 @@ fn bench_element_and_material_filters_pick_the_cases() {
     let rows = self::rows(&["--backend", "cpu", "--kernel", "element_force_tangent", "--element", "hex8", "--material", "blatz_ko"]);
     let cases: Vec<(&str, &str)> = rows.iter().map(|r| (r["element"].as_str().unwrap(), r["material"].as_str().unwrap())).collect();
     assert_eq!(cases, [("hex8", "blatz_ko"), ("hex8", "blatz_ko"), ("hex8+fbar", "blatz_ko"), ("hex8+fbar", "blatz_ko")]);
-    let rows = self::rows(&["--backend", "cpu", "--kernel", "element_energy", "--element", "quad4+fbar"]);
+    let rows = self::rows(&["--backend", "cpu", "--all", "--kernel", "element_energy", "--element", "quad4+fbar"]);
     assert_eq!(rows.len(), 8);
     assert!(rows.iter().all(|r| r["element"] == "quad4+fbar"), "{rows:?}");
+}
+
+/// Caught by the issue: `bifirst bench` at its defaults ran for 14 minutes with no sign of
+/// progress. By default each element takes one material (`--all`: every one), and each case
+/// is announced on stderr as it starts.
+#[test]
+fn bench_defaults_measure_each_element_once_and_say_each_case() {
+    let out = Command::new(env!("CARGO_BIN_EXE_bifirst")).args(["bench", "--elements", "60", "--time", "0", "--json", "--backend", "cpu"]).output().unwrap();
+    assert!(out.status.success());
+    let rows: Vec<Value> = String::from_utf8(out.stdout).unwrap().lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+    assert_eq!(rows.len(), 6 * 4 + 1 + 3 + 2);
+    assert!(rows.iter().all(|r| r["material"] == "blatz_ko" || r["material"] == "-"), "{rows:?}");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    for case in ["peaks", "tri3 blatz_ko", "hex8+fbar blatz_ko", "newton_iteration", "uzawa_solve"] {
+        assert!(stderr.contains(case), "announces `{case}`: {stderr}");
+    }
 }
 
 #[test]
