@@ -289,7 +289,8 @@ pub fn measure(net: &Network, obstacle_names: &[String]) -> Measures {
 
 /// The distribution of the normal forces over their mean at one step: a histogram of bins
 /// `width` wide as a probability density, and the slope `-β` of `ln P` against `f/<f>` fitted
-/// over the bins above the mean (the exponential tail `P ~ exp(-β f/<f>)`).
+/// over the bins above the mean, each weighted by its count (the exponential tail
+/// `P ~ exp(-β f/<f>)`).
 #[derive(Debug, Clone, Serialize, Deserialize)]
 pub struct ForceDistribution {
     pub mean_normal_force: f64,
@@ -297,6 +298,8 @@ pub struct ForceDistribution {
     pub bins: Vec<[f64; 2]>,
     /// `β`, when at least two bins above the mean are filled.
     pub tail_decay: Option<f64>,
+    /// `P₀` of the fitted tail `P₀ exp(-β f/<f>)`.
+    pub tail_amplitude: Option<f64>,
 }
 
 /// Bins of the force distribution, in units of the mean force.
@@ -314,14 +317,15 @@ pub fn force_distribution(net: &Network) -> ForceDistribution {
     }
     let density = |n: usize| n as f64 / (forces.len() as f64 * FORCE_BIN);
     let bins: Vec<[f64; 2]> = histogram.iter().enumerate().map(|(k, &n)| [(k as f64 + 0.5) * FORCE_BIN, density(n)]).collect();
-    let tail: Vec<(f64, f64)> = bins.iter().filter(|[x, p]| *x > 1.0 && *p > 0.0).map(|[x, p]| (*x, p.ln())).collect();
-    let tail_decay = (tail.len() >= 2).then(|| {
-        let n = tail.len() as f64;
-        let (mx, my) = (tail.iter().map(|p| p.0).sum::<f64>() / n, tail.iter().map(|p| p.1).sum::<f64>() / n);
-        let slope = tail.iter().map(|(x, y)| (x - mx) * (y - my)).sum::<f64>() / tail.iter().map(|(x, _)| (x - mx).powi(2)).sum::<f64>();
-        -slope
+    // Each bin weighted by its count: a bin of one force is no measure of the density.
+    let tail: Vec<(f64, f64, f64)> = bins.iter().zip(&histogram).filter(|([x, _], n)| *x > 1.0 && **n > 0).map(|([x, p], n)| (*x, p.ln(), *n as f64)).collect();
+    let fit = (tail.len() >= 2).then(|| {
+        let w: f64 = tail.iter().map(|p| p.2).sum();
+        let (mx, my) = (tail.iter().map(|p| p.2 * p.0).sum::<f64>() / w, tail.iter().map(|p| p.2 * p.1).sum::<f64>() / w);
+        let slope = tail.iter().map(|(x, y, n)| n * (x - mx) * (y - my)).sum::<f64>() / tail.iter().map(|(x, _, n)| n * (x - mx).powi(2)).sum::<f64>();
+        (-slope, (my - slope * mx).exp())
     });
-    ForceDistribution { mean_normal_force: mean, bins, tail_decay }
+    ForceDistribution { mean_normal_force: mean, bins, tail_decay: fit.map(|f| f.0), tail_amplitude: fit.map(|f| f.1) }
 }
 
 /// Sectors of the rose of contact orientations over half a turn.

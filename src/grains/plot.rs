@@ -95,12 +95,8 @@ fn force_pdf(path: &Path, title: &str, d: &ForceDistribution) -> Result<(), Plot
     let mut chart = ChartBuilder::on(&root).caption(title, (FAMILY, 20)).margin(12).x_label_area_size(40).y_label_area_size(70).build_cartesian_2d(x.clone(), y.log_scale()).map_err(|e| err(&e))?;
     chart.configure_mesh().x_desc("f / <f>").y_desc("probability density").label_style((FAMILY, 13)).x_label_formatter(&x_format).draw().map_err(|e| err(&e))?;
     chart.draw_series(filled.iter().map(|&p| Circle::new(p, 4, RGBColor(31, 119, 180).filled()))).map_err(|e| err(&e))?;
-    if let Some(beta) = d.tail_decay {
-        // The fit through the tail's mean point, drawn over the tail.
-        let tail: Vec<(f64, f64)> = filled.iter().filter(|p| p.0 > 1.0).copied().collect();
-        let n = tail.len() as f64;
-        let (mx, my) = (tail.iter().map(|p| p.0).sum::<f64>() / n, tail.iter().map(|p| p.1.ln()).sum::<f64>() / n);
-        let line: Vec<(f64, f64)> = (0..=50).map(|k| 1.0 + (x.end - 1.0) * k as f64 / 50.0).map(|f| (f, (my - beta * (f - mx)).exp())).collect();
+    if let (Some(beta), Some(amplitude)) = (d.tail_decay, d.tail_amplitude) {
+        let line: Vec<(f64, f64)> = (0..=50).map(|k| 1.0 + (x.end - 1.0) * k as f64 / 50.0).map(|f| (f, amplitude * (-beta * f).exp())).filter(|p| p.1 >= 0.5 * lo).collect();
         chart
             .draw_series(LineSeries::new(line, RGBColor(214, 39, 40).stroke_width(2)))
             .map_err(|e| err(&e))?
