@@ -187,3 +187,21 @@ fn a_packing_run_logs_its_network_and_the_command_measures_it() {
     assert_eq!(none.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&none.stderr).contains("no contact network"));
 }
+
+/// `packing.wall_until` stops the pushing wall: a compression, then a hold in which a packing
+/// can come to rest and its Love-Weber stress be compared with the walls'.
+#[test]
+fn the_pushing_wall_stops_at_wall_until() {
+    let sets = ["packing.count=4", "packing.wall_velocity=10.0", "packing.wall_until=0.01", "time.end=0.03", "output.scene_every=0", "output.contacts_every=1"];
+    let log = run("grains_many", &sets, "grains_wall_until");
+    let left = log.topics["/run"][0]["obstacle_names"].as_array().unwrap().iter().position(|n| n == "left").expect("a left wall");
+    let x_of = |m: &serde_json::Value| {
+        let k = m["wall"].as_array().unwrap().iter().position(|w| w.as_u64() == Some(left as u64)).unwrap();
+        m["wall_point"][2 * k].as_f64().unwrap()
+    };
+    for m in &log.topics["/contacts"] {
+        let (t, x) = (m["t"].as_f64().unwrap(), x_of(m));
+        let expected = 10.0 * t.min(0.01);
+        assert!((x - expected).abs() < 1e-9, "t = {t}: the wall at {x}, not {expected}");
+    }
+}

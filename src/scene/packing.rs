@@ -11,7 +11,7 @@
 //! slave, and a polygon's corners must be slave nodes, or they would sink into the disks.
 
 use super::error::SceneErrorKind::{Invalid, Reference};
-use super::types::{BodySpec, Generator, MeshSpec, ObstacleShape, ObstacleSpec, PackingSpec, Scene};
+use super::types::{BodySpec, Generator, Interpolation, MeshSpec, ObstacleShape, ObstacleSpec, PackingSpec, Scene};
 use super::types::DEFAULT_SHARE;
 use super::validate::{friction, length, names, Failure};
 use crate::mesh::{generate, ElementKind};
@@ -95,6 +95,9 @@ fn check(p: &PackingSpec, s: &Scene) -> Result<(), Failure> {
     if !p.wall_velocity.is_finite() {
         return bad("wall_velocity", "not a finite number.".into());
     }
+    if p.wall_until.is_some_and(|t| !(t > 0.0 && t.is_finite())) {
+        return bad("wall_until", format!("the time the wall stops must be positive and finite (got {}).", p.wall_until.unwrap_or_default()));
+    }
     friction("packing.wall_friction".into(), p.wall_friction)?;
     if s.gravity.as_ref().is_some_and(|g| g.len() != p.dimension) {
         return Err((Invalid, "gravity".into(), format!("the packing is {}D: gravity needs {} components.", p.dimension, p.dimension)));
@@ -166,9 +169,9 @@ pub(super) fn expand(s: &mut Scene) -> Result<(), Failure> {
                 inside: None,
                 points: None,
                 friction: Some(friction),
-                velocity: (speed != 0.0).then_some(velocity),
-                motion: None,
-                interpolation: None,
+                velocity: (speed != 0.0 && p.wall_until.is_none()).then_some(velocity.clone()),
+                motion: p.wall_until.filter(|_| speed != 0.0).map(|until| vec![[vec![0.0], velocity.clone()].concat(), [vec![until], vec![0.0; dim]].concat()]),
+                interpolation: p.wall_until.filter(|_| speed != 0.0).map(|_| Interpolation::Step),
                 bodies: None,
             },
         );

@@ -336,6 +336,9 @@ pub struct PackingSpec {
     pub gap: Real,
     /// Speed of the left wall towards +x.
     pub wall_velocity: Real,
+    /// When the left wall stops (a compression, then a hold); it never stops when absent.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub wall_until: Option<Real>,
     /// Friction of the top and bottom walls (the side walls are frictionless).
     pub wall_friction: Real,
 }
@@ -355,6 +358,7 @@ impl Default for PackingSpec {
             columns: 0,
             gap: 0.05,
             wall_velocity: 0.0,
+            wall_until: None,
             wall_friction: 0.0,
         }
     }
