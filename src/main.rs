@@ -907,7 +907,8 @@ fn grains_command(run: &Path, out: Option<PathBuf>, at: Option<f64>, json: bool)
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
         let m = &report.at;
-        println!("{} ({}D, {} grains, {} logged steps): at t = {:.6e}", report.scene, report.dim, m.grains, report.steps, m.t);
+        let n = |count: usize, one: &str, many: &str| bifirst::output::counted(count, one, many);
+        println!("{} ({}D, {}, {}): at t = {:.6e}", report.scene, report.dim, n(m.grains, "grain", "grains"), n(report.steps, "logged step", "logged steps"), m.t);
         println!("  solid fraction {:.4}, container volume {:.4e}", m.solid_fraction, m.container_volume);
         println!("  contacts {} ({} with walls), coordination Z = {:.3}, without {} rattlers Z = {:.3}, sliding {:.1} %", m.contacts, m.wall_contacts, m.coordination, m.rattlers, m.coordination_without_rattlers, 100.0 * m.sliding_fraction);
         println!("  fabric {:?}, anisotropy {:.4}", m.fabric, m.fabric_anisotropy);
