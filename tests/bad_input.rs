@@ -511,3 +511,18 @@ fn filters_and_probes_that_match_nothing_are_refused_before_any_work() {
     assert_refused(&["sweep", scene.to_str().unwrap(), "--over", "time.dt=1e-4", "--trace", "a,b,c", "--out", out.to_str().unwrap()], "the probe `a`");
     assert!(!out.exists(), "no variant ran");
 }
+
+/// Caught by the issue: K/G = 1e12, or a Yeoh set that loses convexity, failed as "not positive
+/// definite" naming neither the material nor the reason. A factorisation that fails now names
+/// the body's material model, its K/G and the likely reasons (here a mass term made negative,
+/// which no scene reaches since the checks before the run).
+#[test]
+fn a_failed_factorisation_names_the_material_and_the_reasons() {
+    let loaded = bifirst::scene::load_scene(&common_scene_path("bar_impact"), &[]).unwrap();
+    let mut sim = bifirst::solver::build_simulation(&loaded).unwrap();
+    let body = &mut sim.bodies[0];
+    let error = body.factorize_effective(-1e9, &mut Default::default()).expect_err("a negative mass term is no positive definite K̄").to_string();
+    for words in ["body `bar`", "not positive definite", "material model neo_hookean", "K/G = 2.000e0", "lower K/G"] {
+        assert!(error.contains(words), "says `{words}`: {error}");
+    }
+}
