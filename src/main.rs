@@ -899,10 +899,16 @@ fn grains_command(run: &Path, out: Option<PathBuf>, at: Option<f64>, json: bool)
     check_output_dir(&out, "the output directory")?;
     eprintln!("reading the contact network of {}", run.display());
     // A line per tenth of a long log's steps.
-    let every = |n: usize| (n / 10).max(1);
-    let networks = read_networks(run, |k, n| if n > 10 && (k % every(n) == 0 || k == n) { eprintln!("  parsed {k}/{n} steps") })?;
+    let tenths = |what: &'static str| {
+        move |k: usize, n: usize| {
+            if n > 10 && (k % (n / 10) == 0 || k == n) {
+                eprintln!("  {what} {k}/{n} steps");
+            }
+        }
+    };
+    let networks = read_networks(run, tenths("parsed"))?;
     let started = Instant::now();
-    let report = analyze(&networks, at, &out, |k, n| if n > 10 && (k % every(n) == 0 || k == n) { eprintln!("  measured {k}/{n} steps") })?;
+    let report = analyze(&networks, at, &out, tenths("measured"))?;
     if json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {

@@ -158,6 +158,16 @@ fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     std::array::from_fn(|i| a[i] - b[i])
 }
 
+/// The radius of the disk (2D) or ball (3D) of a grain's volume: how its outline is drawn
+/// and how far it reaches along an axis no walls bound.
+pub fn equivalent_radius(volume: f64, dim: usize) -> f64 {
+    if dim == 2 {
+        (volume / std::f64::consts::PI).sqrt()
+    } else {
+        (3.0 * volume / (4.0 * std::f64::consts::PI)).cbrt()
+    }
+}
+
 /// The box the plane walls bound, axis by axis (`[lower, upper]`); an axis no pair of walls
 /// bounds takes the grains' extent (their centres plus the radius of their volume).
 pub fn container(net: &Network) -> Vec<[f64; 2]> {
@@ -167,8 +177,7 @@ pub fn container(net: &Network) -> Vec<[f64; 2]> {
             let along = |sign: f64| net.walls.iter().filter(move |w| w.normal[i] * sign > 0.999).map(move |w| w.point[i]);
             let lower = along(1.0).fold(f64::NEG_INFINITY, f64::max);
             let upper = along(-1.0).fold(f64::INFINITY, f64::min);
-            let radius = |v: f64| if d == 2 { (v / std::f64::consts::PI).sqrt() } else { (3.0 * v / (4.0 * std::f64::consts::PI)).cbrt() };
-            let extent = |sign: f64| net.centers.iter().zip(&net.volumes).map(move |(c, v)| c[i] + sign * radius(*v));
+            let extent = |sign: f64| net.centers.iter().zip(&net.volumes).map(move |(c, v)| c[i] + sign * equivalent_radius(*v, d));
             let lower = if lower.is_finite() { lower } else { extent(-1.0).fold(f64::INFINITY, f64::min) };
             let upper = if upper.is_finite() { upper } else { extent(1.0).fold(f64::NEG_INFINITY, f64::max) };
             [lower, upper]
@@ -240,7 +249,6 @@ pub fn measure(net: &Network, obstacle_names: &[String]) -> Measures {
     let (rattler, left) = rattlers(net);
     let kept = rattler.iter().filter(|r| !**r).count();
     let kept_contacts: usize = left.iter().zip(&rattler).filter(|(_, r)| !**r).map(|(c, _)| c).sum();
-    let all_counts: usize = net.bearing().map(|c| if matches!(c.other, Other::Body(_)) { 2 } else { 1 }).sum();
     let square = |m: &[[f64; 3]; 3], scale: f64| -> Vec<Vec<f64>> { (0..d).map(|i| (0..d).map(|j| 0.5 * (m[i][j] + m[j][i]) * scale).collect()).collect() };
     let fabric = square(&fabric, if between > 0 { 1.0 / between as f64 } else { 0.0 });
     let stress = square(&stress, 1.0 / container_volume);
@@ -273,7 +281,8 @@ pub fn measure(net: &Network, obstacle_names: &[String]) -> Measures {
         wall_contacts,
         container_volume,
         solid_fraction: net.volumes.iter().sum::<f64>() / container_volume,
-        coordination: per(all_counts, grains),
+        // A contact between grains counts for both.
+        coordination: per(contacts + between, grains),
         coordination_without_rattlers: per(kept_contacts, kept),
         rattlers: grains - kept,
         sliding_fraction: per(sliding, contacts),
@@ -383,12 +392,12 @@ pub fn read_networks(path: &Path, mut progress: impl FnMut(usize, usize)) -> Res
 }
 
 impl Networks {
-    /// The last step at or before `at` (the last step without it).
-    pub fn at(&self, at: Option<f64>) -> Result<&Network, GrainsError> {
+    /// The index of the last step at or before `at` (the last step without it).
+    pub fn index_at(&self, at: Option<f64>) -> Result<usize, GrainsError> {
         let first = self.steps.first().map_or(f64::NAN, |s| s.t);
         match at {
-            None => Ok(self.steps.last().expect("read_networks keeps at least one")),
-            Some(at) => self.steps.iter().rev().find(|s| s.t <= at + 1e-9 * at.abs().max(1.0)).ok_or(GrainsError::NoneAt { path: self.path.clone(), at, first }),
+            None => Ok(self.steps.len() - 1),
+            Some(at) => self.steps.iter().rposition(|s| s.t <= at + 1e-9 * at.abs().max(1.0)).ok_or(GrainsError::NoneAt { path: self.path.clone(), at, first }),
         }
     }
 }
@@ -447,8 +456,8 @@ pub fn analyze(networks: &Networks, at: Option<f64>, out: &Path, mut progress: i
         rows.extend(chunk.par_iter().map(|s| measure(s, &networks.obstacle_names)).collect::<Vec<_>>());
         progress(rows.len(), n);
     }
-    let chosen = networks.at(at)?;
-    let index = networks.steps.iter().position(|s| std::ptr::eq(s, chosen)).expect("a step of the run");
+    let index = networks.index_at(at)?;
+    let chosen = &networks.steps[index];
     let write = |name: &str, text: String| -> Result<PathBuf, GrainsError> {
         let path = out.join(name);
         std::fs::write(&path, text).map_err(|source| GrainsError::Write { path: path.clone(), source })?;

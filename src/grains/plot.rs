@@ -1,7 +1,7 @@
 //! The pictures of `bifirst grains`: the force chains at one step, the time series, the
 //! distribution of normal forces and the rose of contact orientations.
 
-use super::{container, ForceDistribution, Measures, Network, Networks, Other, ROSE_SECTORS};
+use super::{container, equivalent_radius, ForceDistribution, Measures, Network, Networks, Other, ROSE_SECTORS};
 use crate::output::plot::{figure, register_font, tick_format, Panel, PlotError, FAMILY};
 use plotters::prelude::*;
 use std::f64::consts::PI;
@@ -31,8 +31,7 @@ fn force_chains(path: &Path, title: &str, net: &Network) -> Result<(), PlotError
     register_font();
     let err = draw_error(path);
     let boxed = container(net);
-    let radius = |v: f64| if net.dim == 2 { (v / PI).sqrt() } else { (3.0 * v / (4.0 * PI)).cbrt() };
-    let radii: Vec<f64> = net.volumes.iter().map(|v| radius(*v)).collect();
+    let radii: Vec<f64> = net.volumes.iter().map(|v| equivalent_radius(*v, net.dim)).collect();
     let mean_radius = radii.iter().sum::<f64>() / radii.len().max(1) as f64;
     let (x, y) = ((boxed[0][0] - mean_radius)..(boxed[0][1] + mean_radius), (boxed[1][0] - mean_radius)..(boxed[1][1] + mean_radius));
     let aspect = (y.end - y.start) / (x.end - x.start);

@@ -151,8 +151,9 @@ pub const MAX_FREE_BODY_COURANT: Real = 1e6;
 /// A body without supports must have its rigid modes held by the mass term of `K̄`: refused
 /// when `time.dt` is beyond [`MAX_FREE_BODY_COURANT`] times the time a pressure wave takes
 /// across its smallest element `h`.
-fn free_body_step(loaded: &LoadedScene, body: &str, model: &Model, density: Real, h: Real) -> Result<(), SceneError> {
-    let (k, g) = model.bulk_shear();
+fn free_body_step(loaded: &LoadedScene, body: &Body, density: Real) -> Result<(), SceneError> {
+    let (k, g) = body.model.bulk_shear();
+    let (h, body) = (body.length_scale(), &body.name);
     let wave_speed = ((k + 4.0 * g / 3.0) / density).sqrt();
     let dt = loaded.scene.time.dt;
     let courant = wave_speed * dt / h;
@@ -373,11 +374,11 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
             let r = [x[0] - c[0], x[1] - c[1], x[2] - c[2]];
             [v[0] + omega[1] * r[2] - omega[2] * r[1], v[1] + omega[2] * r[0] - omega[0] * r[2], v[2] + omega[0] * r[1] - omega[1] * r[0]]
         };
-        if prescribed.is_empty() {
-            free_body_step(loaded, &name, &model_of(material), material.density, mesh.min_edge_length())?;
-        }
         let topology = topology.as_ref().map_err(|e| loaded.error(MeshError, &format!("{key}.mesh"), e.clone()))?;
         let mut body = Body::new(name.clone(), mesh, patches, geometry, model_of(material), formulation, material.density, prescribed, initial, topology);
+        if body.prescribed.is_empty() {
+            free_body_step(loaded, &body, material.density)?;
+        }
         body.reuse_factorization = scene.solver.reuse_factorization;
         if let Some(viscoelastic) = viscoelastic_of(material) {
             body.set_viscoelastic(viscoelastic);
