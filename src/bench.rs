@@ -6,7 +6,7 @@ use crate::assembly::{element_out_stride, DofMap, GatherMap, StiffnessPattern};
 use crate::cpu;
 use crate::element::{Formulation, ReferenceGeometry};
 use crate::gpu::types::{Coefficients, DofOut, DofStep};
-use crate::contact::uzawa::{self, Acceleration, Colours, Delassus, Local, NodalMap, Problem, Sweep};
+use crate::contact::uzawa::{self, Acceleration, Fallback, Colours, Delassus, Local, NodalMap, Problem, Sweep};
 use crate::gpu::uzawa_step::{UzawaPoint, UzawaStepKernel};
 use crate::gpu::uzawa_sweep::UzawaSweeps;
 use crate::gpu::peak::{measure as measure_peaks, Peaks, FMA_FLOPS_PER_VALUE};
@@ -622,7 +622,7 @@ pub struct ContactProblem {
 impl ContactProblem {
     /// The problem starting from the reactions `r` (a copy of `self.r`) with this stopping rule.
     pub fn with<'a>(&'a self, r: &'a mut [[Real; 3]], tolerance: Real, floor: Real, max_iterations: usize) -> Problem<'a> {
-        Problem { w: &self.w, colours: &self.colours, local: &self.local, nodal: &self.nodal, r, tolerance, floor, max_iterations, acceleration: Acceleration::None }
+        Problem { w: &self.w, colours: &self.colours, local: &self.local, nodal: &self.nodal, r, tolerance, floor, max_iterations, acceleration: Acceleration::None, fallback: Fallback::None, dim: 3 }
     }
 }
 

@@ -100,6 +100,8 @@ pub struct PhaseTimes {
     pub factorization: f64,
     pub solve: f64,
     pub contact: f64,
+    /// Of `contact`: the semi-smooth Newton solves of contact problems whose sweeps stalled.
+    pub contact_newton: f64,
     pub total: f64,
 }
 
@@ -111,6 +113,7 @@ impl std::ops::AddAssign for PhaseTimes {
         self.factorization += o.factorization;
         self.solve += o.solve;
         self.contact += o.contact;
+        self.contact_newton += o.contact_newton;
         self.total += o.total;
     }
 }

@@ -322,6 +322,7 @@ impl Logger {
             dt: r.dt,
             newton_iterations: r.newton_iterations,
             uzawa_iterations: r.uzawa_iterations,
+            contact_newton_iterations: r.contact_newton_iterations,
             bodies_iterated: r.bodies_iterated,
             device_iterations: r.device_iterations,
             factorizations: r.factorizations,
@@ -374,6 +375,7 @@ struct Totals {
     cutbacks: usize,
     newton: usize,
     uzawa: usize,
+    contact_newton: usize,
     bodies_iterated: usize,
     device_iterations: usize,
     factorizations: usize,
@@ -480,6 +482,7 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
         cutbacks: totals.cutbacks,
         newton_iterations: totals.newton,
         uzawa_iterations: totals.uzawa,
+        contact_newton_iterations: totals.contact_newton,
         bodies_iterated: totals.bodies_iterated,
         device_iterations: totals.device_iterations,
         factorizations: totals.factorizations,
@@ -534,6 +537,7 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
         totals.kept_beyond_bounds += report.kept_beyond_bounds;
         totals.newton += report.newton_iterations;
         totals.uzawa += report.uzawa_iterations;
+        totals.contact_newton += report.contact_newton_iterations;
         totals.bodies_iterated += report.bodies_iterated;
         totals.device_iterations += report.device_iterations;
         totals.factorizations += report.factorizations;

@@ -98,7 +98,7 @@ fn broad_phase_finds_what_brute_force_finds() {
         let meshes = [lower, upper];
         let surfaces: Vec<Surface> = meshes.iter().map(Surface::of).collect();
         let model = ContactModel {
-            settings: Settings { tolerance: 1e-8, max_iterations: 10, sweep: Sweep::GaussSeidel, acceleration: Default::default() },
+            settings: Settings { tolerance: 1e-8, max_iterations: 10, sweep: Sweep::GaussSeidel, acceleration: Default::default(), fallback: Default::default() },
             surfaces: surfaces.clone(),
             obstacles: Vec::new(),
             pairs: upper_on_lower(0.2),
@@ -190,7 +190,7 @@ fn a_node_in_a_concave_corner_is_held_by_both_facets() {
         }
         let meshes = [lower, upper];
         let model = ContactModel {
-            settings: Settings { tolerance: 1e-8, max_iterations: 10, sweep: Sweep::GaussSeidel, acceleration: Default::default() },
+            settings: Settings { tolerance: 1e-8, max_iterations: 10, sweep: Sweep::GaussSeidel, acceleration: Default::default(), fallback: Default::default() },
             surfaces: meshes.iter().map(Surface::of).collect(),
             obstacles: Vec::new(),
             pairs: upper_on_lower(0.2),

@@ -34,7 +34,7 @@ fn run_log_has_every_channel_of_the_contract() {
         (
             "/solver",
             "bifirst.Solver",
-            &["t", "step", "dt", "newton_iterations", "uzawa_iterations", "bodies_iterated", "device_iterations", "factorizations", "residual_norm", "cutbacks", "substeps", "overlap_retries", "energy_retries", "raised_theta", "kept_beyond_bounds", "wall_s", "bytes_moved", "device_submits", "status", "message"],
+            &["t", "step", "dt", "newton_iterations", "uzawa_iterations", "contact_newton_iterations", "bodies_iterated", "device_iterations", "factorizations", "residual_norm", "cutbacks", "substeps", "overlap_retries", "energy_retries", "raised_theta", "kept_beyond_bounds", "wall_s", "bytes_moved", "device_submits", "status", "message"],
             steps,
         ),
         ("/body/cube", "bifirst.Body", &["t", "mass", "center_of_mass", "linear_momentum", "angular_momentum", "kinetic"], steps + 1),
@@ -45,7 +45,7 @@ fn run_log_has_every_channel_of_the_contract() {
             "/summary",
             "bifirst.Summary",
             &[
-                "scene", "status", "message", "backend", "precision", "adapter", "steps", "last_step", "t_end", "cutbacks", "newton_iterations", "uzawa_iterations",
+                "scene", "status", "message", "backend", "precision", "adapter", "steps", "last_step", "t_end", "cutbacks", "newton_iterations", "uzawa_iterations", "contact_newton_iterations",
                 "bodies_iterated", "device_iterations", "factorizations", "max_penetration", "max_overlap", "max_overlap_ratio", "energy_gain_steps", "max_energy_gain", "overlap_retries", "energy_retries", "kept_beyond_bounds", "energy_created", "wall_s", "wall_by_phase", "bytes_moved", "device_submits", "kernel_times", "energy", "output",
             ],
             1,
@@ -90,7 +90,7 @@ fn run_log_has_every_channel_of_the_contract() {
     assert_eq!(summary["status"], "finished");
     assert_eq!(summary["steps"], steps);
     let wall = &log.topics["/solver"][0]["wall_s"];
-    assert_eq!(message_fields(wall), sorted(&["elements", "assembly", "transfer", "factorization", "solve", "contact", "total"]));
+    assert_eq!(message_fields(wall), sorted(&["elements", "assembly", "transfer", "factorization", "solve", "contact", "contact_newton", "total"]));
     // Vectors are arrays of 3 numbers in 3D; steps are numbered 1..=N with t increasing.
     assert_eq!(log.topics["/body/cube"][0]["center_of_mass"].as_array().unwrap().len(), 3);
     let step: Vec<u64> = log.topics["/solver"].iter().map(|m| m["step"].as_u64().unwrap()).collect();

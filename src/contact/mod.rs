@@ -16,6 +16,7 @@ pub mod law;
 pub mod obstacle;
 pub mod overlap;
 pub mod pairs;
+pub mod semismooth;
 pub mod surface;
 pub mod uzawa;
 
@@ -125,6 +126,7 @@ pub struct Settings {
     pub max_iterations: usize,
     pub sweep: uzawa::Sweep,
     pub acceleration: uzawa::Acceleration,
+    pub fallback: uzawa::Fallback,
 }
 
 /// Everything the engine knows about contact in a scene, built once.

@@ -157,7 +157,7 @@ impl UzawaJudgeState<Real> {
 
     /// The outcome the CPU's iterations would report.
     pub fn outcome(&self) -> Outcome {
-        Outcome { iterations: self.iterations as usize, converged: self.status == JUDGE_CONVERGED, change: self.change }
+        Outcome { iterations: self.iterations as usize, converged: self.status == JUDGE_CONVERGED, change: self.change, ..Outcome::default() }
     }
 }
 

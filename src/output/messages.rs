@@ -66,6 +66,9 @@ pub struct SolverMessage {
     pub newton_iterations: usize,
     /// Uzawa sweeps, summed over Newton iterations and groups.
     pub uzawa_iterations: usize,
+    /// Semi-smooth Newton iterations of the contact problems whose sweeps stalled, summed over
+    /// Newton iterations and groups.
+    pub contact_newton_iterations: usize,
     /// Body evaluations in the step, summed over Newton iterations (bodies that converged
     /// leave the loop).
     pub bodies_iterated: usize,

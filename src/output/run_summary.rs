@@ -29,6 +29,8 @@ pub struct RunSummary {
     pub cutbacks: usize,
     pub newton_iterations: usize,
     pub uzawa_iterations: usize,
+    /// Semi-smooth Newton iterations of stalled contact problems over the run.
+    pub contact_newton_iterations: usize,
     /// Body evaluations over the run (see [`StepReport::bodies_iterated`]).
     pub bodies_iterated: usize,
     /// Newton increments taken on the device over the run, summed over bodies.

@@ -5,7 +5,7 @@ use super::run_summary::energy_gain;
 use crate::solver::Energies;
 use serde_json::Value;
 
-const PHASES: [&str; 6] = ["elements", "assembly", "transfer", "factorization", "solve", "contact"];
+const PHASES: [&str; 7] = ["elements", "assembly", "transfer", "factorization", "solve", "contact", "contact_newton"];
 
 /// The totals of one run log.
 #[derive(Debug, Clone, serde::Serialize)]
@@ -27,6 +27,8 @@ pub struct LogSummary {
     pub cutbacks: u64,
     pub newton_iterations: u64,
     pub uzawa_iterations: u64,
+    /// Semi-smooth Newton iterations of stalled contact problems (0 in logs written before them).
+    pub contact_newton_iterations: u64,
     pub bodies_iterated: u64,
     /// Newton increments taken on the device (0 on the CPU, and in logs written before them).
     pub device_iterations: u64,
@@ -112,6 +114,7 @@ fn from_steps(record: &RunRecord) -> (Value, &'static str) {
         "cutbacks": sum("cutbacks"),
         "newton_iterations": sum("newton_iterations"),
         "uzawa_iterations": sum("uzawa_iterations"),
+        "contact_newton_iterations": sum("contact_newton_iterations"),
         "bodies_iterated": sum("bodies_iterated"),
         "device_iterations": sum("device_iterations"),
         "factorizations": sum("factorizations"),
@@ -151,6 +154,7 @@ pub fn summarize(record: &RunRecord) -> Result<LogSummary, ReadError> {
         cutbacks: count(&s["cutbacks"]),
         newton_iterations: count(&s["newton_iterations"]),
         uzawa_iterations: count(&s["uzawa_iterations"]),
+        contact_newton_iterations: count(&s["contact_newton_iterations"]),
         bodies_iterated: count(&s["bodies_iterated"]),
         device_iterations: count(&s["device_iterations"]),
         factorizations: count(&s["factorizations"]),
@@ -181,6 +185,7 @@ pub fn table(runs: &[LogSummary]) -> String {
         ("cut-backs".into(), runs.iter().map(|r| r.cutbacks.to_string()).collect()),
         ("Newton iterations".into(), runs.iter().map(|r| per_step(r, r.newton_iterations)).collect()),
         ("Uzawa sweeps".into(), runs.iter().map(|r| per_step(r, r.uzawa_iterations)).collect()),
+        ("contact Newton iterations".into(), runs.iter().map(|r| per_step(r, r.contact_newton_iterations)).collect()),
         ("bodies iterated".into(), runs.iter().map(|r| per_step(r, r.bodies_iterated)).collect()),
         ("device Newton increments".into(), runs.iter().map(|r| per_step(r, r.device_iterations)).collect()),
         ("factorisations".into(), runs.iter().map(|r| per_step(r, r.factorizations)).collect()),

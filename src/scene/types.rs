@@ -1,6 +1,6 @@
 //! The scene format. Unknown keys are rejected everywhere.
 
-pub use crate::contact::uzawa::{Acceleration, Sweep};
+pub use crate::contact::uzawa::{Acceleration, Fallback, Sweep};
 use crate::mesh::ElementKind;
 use crate::precision::Real;
 use serde::{Deserialize, Serialize};
@@ -505,6 +505,9 @@ pub struct ContactSpec {
     /// Between Gauss-Seidel sweeps: `anderson` (mixing of the last sweeps, safeguarded) or
     /// `none` (plain sweeps, as on the device).
     pub acceleration: Acceleration,
+    /// When the Gauss-Seidel sweeps stall: `newton` (a semi-smooth Newton solve of the whole
+    /// problem) or `none` (sweeps to `max_iterations`).
+    pub fallback: Fallback,
     /// Body pairs with their own friction coefficient or slave (or, with `all_pairs = false`,
     /// the only pairs in contact).
     pub pair: BTreeMap<String, PairSpec>,
@@ -515,7 +518,7 @@ pub struct ContactSpec {
 
 impl Default for ContactSpec {
     fn default() -> Self {
-        Self { friction: 0.0, two_pass: false, all_pairs: true, tolerance: 1e-8, max_iterations: 5000, sweep: Sweep::GaussSeidel, acceleration: Acceleration::Anderson, pair: BTreeMap::new(), resolve_initial_overlap: false }
+        Self { friction: 0.0, two_pass: false, all_pairs: true, tolerance: 1e-8, max_iterations: 5000, sweep: Sweep::GaussSeidel, acceleration: Acceleration::Anderson, fallback: Fallback::Newton, pair: BTreeMap::new(), resolve_initial_overlap: false }
     }
 }
 

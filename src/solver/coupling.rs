@@ -311,6 +311,8 @@ impl ContactStep {
             floor: self.floor,
             max_iterations: settings.max_iterations,
             acceleration: settings.acceleration,
+            fallback: settings.fallback,
+            dim: self.dim,
         };
         (problem, &self.slot_nodes)
     }

@@ -22,6 +22,8 @@ use std::sync::atomic::{AtomicBool, Ordering};
 pub struct GroupReport {
     pub iterations: usize,
     pub uzawa_iterations: usize,
+    /// Iterations of the semi-smooth Newton solves its stalled contact problems took.
+    pub contact_newton_iterations: usize,
     /// Body evaluations: the group's size times its evaluations.
     pub bodies_iterated: usize,
     /// Newton increments its bodies took on the device ([`GpuWorld::newton`]).
@@ -372,6 +374,8 @@ impl Group<'_, '_> {
         let state = &mut self.newton;
         let change = self.contact.as_mut().expect("a group with an outcome has contact").apply(self.bodies, &mut state.report.wall);
         state.record_solve(outcome.iterations, outcome.converged, change);
+        state.report.contact_newton_iterations += outcome.newton_iterations;
+        state.report.wall.contact_newton += outcome.newton_seconds;
         state.report.iterations += 1;
         Ok(())
     }

@@ -53,6 +53,8 @@ pub struct StepReport {
     pub newton_iterations: usize,
     /// Uzawa iterations, summed over the Newton iterations and sub-steps.
     pub uzawa_iterations: usize,
+    /// Semi-smooth Newton iterations of the contact problems whose sweeps stalled.
+    pub contact_newton_iterations: usize,
     pub residual_norm: Real,
     pub cutbacks: usize,
     /// Body evaluations, summed over the Newton iterations (a group of bodies coupled by
@@ -467,6 +469,7 @@ impl Simulation {
                 Ok(g) => {
                     iterations = iterations.max(g.iterations);
                     report.uzawa_iterations += g.uzawa_iterations;
+                    report.contact_newton_iterations += g.contact_newton_iterations;
                     report.bodies_iterated += g.bodies_iterated;
                     report.device_iterations += g.device_iterations;
                     report.factorizations += g.factorizations;

@@ -627,6 +627,6 @@ fn build_contact(loaded: &LoadedScene, bodies: &[Body], dim: usize) -> Result<Op
     if obstacles.is_empty() && !pairs.any() {
         return Ok(None);
     }
-    let settings = Settings { tolerance: spec.tolerance, max_iterations: spec.max_iterations, sweep: spec.sweep, acceleration: spec.acceleration };
+    let settings = Settings { tolerance: spec.tolerance, max_iterations: spec.max_iterations, sweep: spec.sweep, acceleration: spec.acceleration, fallback: spec.fallback };
     Ok(Some(ContactModel { settings, surfaces, obstacles, pairs }))
 }
