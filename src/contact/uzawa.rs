@@ -254,9 +254,10 @@ pub enum Fallback {
     /// A semi-smooth Newton solve of the whole problem ([`super::semismooth`]), from the
     /// sweeps' iterate, up to [`NEWTON_ATTEMPTS`] times; the sweeps go on from its last
     /// iterate when it does not converge.
-    #[default]
     Newton,
-    /// Sweeps to the end of the budget.
+    /// Sweeps to the end of the budget: the jammed packings measured stall mostly on degenerate
+    /// problems, where the Newton solve does not pay (doc/benchmarks.md, "Jammed packings").
+    #[default]
     None,
 }
 

@@ -505,8 +505,8 @@ pub struct ContactSpec {
     /// Between Gauss-Seidel sweeps: `anderson` (mixing of the last sweeps, safeguarded) or
     /// `none` (plain sweeps, as on the device).
     pub acceleration: Acceleration,
-    /// When the Gauss-Seidel sweeps stall: `newton` (a semi-smooth Newton solve of the whole
-    /// problem) or `none` (sweeps to `max_iterations`).
+    /// When the Gauss-Seidel sweeps stall: `none` (sweeps to `max_iterations`) or `newton` (a
+    /// semi-smooth Newton solve of the whole problem).
     pub fallback: Fallback,
     /// Body pairs with their own friction coefficient or slave (or, with `all_pairs = false`,
     /// the only pairs in contact).
@@ -518,7 +518,7 @@ pub struct ContactSpec {
 
 impl Default for ContactSpec {
     fn default() -> Self {
-        Self { friction: 0.0, two_pass: false, all_pairs: true, tolerance: 1e-8, max_iterations: 5000, sweep: Sweep::GaussSeidel, acceleration: Acceleration::Anderson, fallback: Fallback::Newton, pair: BTreeMap::new(), resolve_initial_overlap: false }
+        Self { friction: 0.0, two_pass: false, all_pairs: true, tolerance: 1e-8, max_iterations: 5000, sweep: Sweep::GaussSeidel, acceleration: Acceleration::Anderson, fallback: Fallback::None, pair: BTreeMap::new(), resolve_initial_overlap: false }
     }
 }
 
