@@ -22,7 +22,7 @@ use super::uzawa::{Delassus, Local, NodalMap};
 use crate::precision::Real;
 use faer::linalg::solvers::Solve;
 use faer::sparse::linalg::solvers::{Lu, SymbolicLu};
-use faer::sparse::{SparseColMat, Triplet};
+use faer::sparse::{Argsort, Pair, SparseColMat, SymbolicSparseColMat};
 use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Newton iterations a solve may take.
@@ -130,43 +130,61 @@ pub fn projection_jacobian(tau: [Real; 3], mu: Real, dim: usize) -> [Real; 9] {
     d
 }
 
-/// `J` of [`natural_map`] at the point it was evaluated (`jacobian` its per-point matrices),
-/// as triplets over the unknowns `dim i + a`, with the diagonal regularised by `shift`.
-fn jacobian_triplets(w: &Delassus, local: &[Local], jacobian: &[([Real; 9], [Real; 9])], dim: usize, shift: Real) -> Vec<Triplet<usize, usize, Real>> {
-    let mut triplets = Vec::with_capacity(w.blocks.len() * dim * dim + local.len() * dim);
+/// Every entry of `J + shift I` of [`natural_map`] at the point it was evaluated (`jacobian`
+/// its per-point matrices), over the unknowns `dim i + a`, as `emit(row, column, value)`:
+/// always the same entries in the same order, zero or not (the diagonal blocks, then each block
+/// of `W`; repeated positions are summed), so that one pattern serves a whole solve.
+fn jacobian_entries(w: &Delassus, local: &[Local], jacobian: &[([Real; 9], [Real; 9])], dim: usize, shift: Real, mut emit: impl FnMut(usize, usize, Real)) {
     for (i, row) in w.rows.iter().enumerate() {
         let (d, dm) = &jacobian[i];
         for a in 0..dim {
             for b in 0..dim {
                 let identity = if a == b { 1.0 } else { 0.0 };
-                // Every entry of the pattern, zero or not: the symbolic factorisation is kept.
-                triplets.push(Triplet::new(dim * i + a, dim * i + b, identity - d[3 * a + b] + shift * identity));
+                emit(dim * i + a, dim * i + b, identity - d[3 * a + b] + shift * identity);
             }
         }
         for &(j, block) in row {
-            let wb = &w.blocks[block as usize];
-            let dmw = times(dm, wb);
+            let dmw = times(dm, &w.blocks[block as usize]);
             for a in 0..dim {
                 for b in 0..dim {
-                    triplets.push(Triplet::new(dim * i + a, dim * j as usize + b, local[i].rho * dmw[3 * a + b]));
+                    emit(dim * i + a, dim * j as usize + b, local[i].rho * dmw[3 * a + b]);
                 }
             }
         }
     }
-    triplets
 }
 
-/// The Newton step `Δ` of `(J + λ I) Δ = -F`, or `None` when it cannot be factorised; the
-/// symbolic factorisation of `J`'s pattern is made by the first call of a solve and kept.
-#[allow(clippy::too_many_arguments)]
-fn newton_step(w: &Delassus, local: &[Local], jacobian: &[([Real; 9], [Real; 9])], f: &[[Real; 3]], dim: usize, damping: Real, symbolic: &mut Option<SymbolicLu<usize>>) -> Option<Vec<[Real; 3]>> {
-    let n = local.len() * dim;
-    let triplets = jacobian_triplets(w, local, jacobian, dim, damping);
-    let matrix = SparseColMat::<usize, Real>::try_new_from_triplets(n, n, &triplets).ok()?;
-    if symbolic.is_none() {
-        *symbolic = Some(SymbolicLu::try_new(matrix.symbolic()).ok()?);
+/// The pattern of `J` in the order of [`jacobian_entries`], and its symbolic LU: made by a
+/// solve's first step and kept for the others.
+struct Pattern {
+    symbolic: SymbolicSparseColMat<usize>,
+    argsort: Argsort<usize>,
+    lu: SymbolicLu<usize>,
+}
+
+impl Pattern {
+    fn of(w: &Delassus, local: &[Local], jacobian: &[([Real; 9], [Real; 9])], dim: usize) -> Option<Self> {
+        let n = local.len() * dim;
+        let mut positions = Vec::with_capacity((w.blocks.len() + local.len()) * dim * dim);
+        jacobian_entries(w, local, jacobian, dim, 0.0, |row, col, _| positions.push(Pair { row, col }));
+        let (symbolic, argsort) = SymbolicSparseColMat::try_new_from_indices(n, n, &positions).ok()?;
+        let lu = SymbolicLu::try_new(symbolic.as_ref()).ok()?;
+        Some(Self { symbolic, argsort, lu })
     }
-    let lu = Lu::try_new_with_symbolic(symbolic.clone()?, matrix.as_ref()).ok()?;
+}
+
+/// The Newton step `Δ` of `(J + λ I) Δ = -F`, or `None` when it cannot be factorised.
+#[allow(clippy::too_many_arguments)]
+fn newton_step(w: &Delassus, local: &[Local], jacobian: &[([Real; 9], [Real; 9])], f: &[[Real; 3]], dim: usize, damping: Real, pattern: &mut Option<Pattern>) -> Option<Vec<[Real; 3]>> {
+    if pattern.is_none() {
+        *pattern = Some(Pattern::of(w, local, jacobian, dim)?);
+    }
+    let pattern = pattern.as_ref()?;
+    let mut values = Vec::new();
+    jacobian_entries(w, local, jacobian, dim, damping, |_, _, value| values.push(value));
+    let matrix = SparseColMat::<usize, Real>::new_from_argsort(pattern.symbolic.clone(), &pattern.argsort, &values).ok()?;
+    let lu = Lu::try_new_with_symbolic(pattern.lu.clone(), matrix.as_ref()).ok()?;
+    let n = local.len() * dim;
     let mut rhs = faer::Mat::<Real>::from_fn(n, 1, |k, _| -f[k / dim][k % dim]);
     lu.solve_in_place(rhs.as_mut());
     let step: Vec<[Real; 3]> = (0..local.len()).map(|i| std::array::from_fn(|a| if a < dim { rhs[(dim * i + a, 0)] } else { 0.0 })).collect();
@@ -200,7 +218,8 @@ pub fn semismooth_solve(w: &Delassus, local: &[Local], nodal: &NodalMap, r: &mut
     // iterate). λ grows tenfold while a step does not decrease |F|², and falls a hundredfold
     // after one that does.
     let mut damping = MIN_DAMPING;
-    let (mut symbolic, mut slow) = (None, 0);
+    let (mut pattern, mut slow) = (None, 0);
+    let mut trial_jacobian = Vec::with_capacity(local.len());
     for it in 1..=MAX_ITERATIONS {
         if stop.is_some_and(|s| s.load(Ordering::Relaxed)) {
             break;
@@ -208,16 +227,18 @@ pub fn semismooth_solve(w: &Delassus, local: &[Local], nodal: &NodalMap, r: &mut
         let before = merit(&f);
         let mut accepted = None;
         while damping <= MAX_DAMPING {
-            if let Some(step) = newton_step(w, local, &jacobian, &f, dim, damping, &mut symbolic) {
+            if let Some(step) = newton_step(w, local, &jacobian, &f, dim, damping, &mut pattern) {
                 let trial: Vec<[Real; 3]> = r.iter().zip(&step).map(|(x, d)| [x[0] + d[0], x[1] + d[1], x[2] + d[2]]).collect();
-                if merit(&natural_map(w, local, &trial, dim, None)) <= (1.0 - ARMIJO) * before {
-                    accepted = Some((trial, step));
+                // With its Jacobian: an accepted trial is the next iterate, evaluated once.
+                let f_trial = natural_map(w, local, &trial, dim, Some(&mut trial_jacobian));
+                if merit(&f_trial) <= (1.0 - ARMIJO) * before {
+                    accepted = Some((trial, step, f_trial));
                     break;
                 }
             }
             damping *= 10.0;
         }
-        let Some((trial, moved)) = accepted else {
+        let Some((trial, moved, f_trial)) = accepted else {
             // No damping finds a descent: round-off at a solution, or a stationary point of
             // |F|² that is not one.
             outcome.converged = outcome.residual <= tolerance;
@@ -227,7 +248,8 @@ pub fn semismooth_solve(w: &Delassus, local: &[Local], nodal: &NodalMap, r: &mut
         damping = (damping / 100.0).max(MIN_DAMPING);
         r.copy_from_slice(&trial);
         outcome.iterations = it;
-        f = natural_map(w, local, r, dim, Some(&mut jacobian));
+        f = f_trial;
+        std::mem::swap(&mut jacobian, &mut trial_jacobian);
         let (residual, scale) = judged(&f, r, &mut scratch);
         let (change, _) = nodal.change(&moved, r, &mut scratch);
         outcome.residual = residual / scale;
@@ -291,14 +313,12 @@ mod tests {
         (w, local, r)
     }
 
-    /// `J d` of the Jacobian assembled by `jacobian_triplets` (without regularisation).
+    /// `J d` of the entries [`jacobian_entries`] gives (without damping).
     fn jacobian_times(w: &Delassus, local: &[Local], r: &[[Real; 3]], dim: usize, d: &[[Real; 3]]) -> Vec<Real> {
         let mut jacobian = Vec::new();
         natural_map(w, local, r, dim, Some(&mut jacobian));
         let mut out = vec![0.0; local.len() * dim];
-        for t in jacobian_triplets(w, local, &jacobian, dim, 0.0) {
-            out[t.row] += t.val * d[t.col / dim][t.col % dim];
-        }
+        jacobian_entries(w, local, &jacobian, dim, 0.0, |row, col, value| out[row] += value * d[col / dim][col % dim]);
         out
     }
 
