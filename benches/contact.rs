@@ -25,9 +25,7 @@ fn upper_on_lower(mu: f64) -> BodyPairs {
 fn law(c: &mut Criterion) {
     let mut rng = SmallRng::seed_from_u64(3);
     let n = 100_000;
-    let points: Vec<([f64; 3], [f64; 3])> = (0..n)
-        .map(|_| ([rng.random_range(0.0..2.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0)], [rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0)]))
-        .collect();
+    let points: Vec<([f64; 3], [f64; 3])> = (0..n).map(|_| ([rng.random_range(0.0..2.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0)], [rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0)])).collect();
     let mut group = c.benchmark_group("contact_law");
     group.throughput(Throughput::Elements(n as u64));
     for (name, mu) in [("frictionless", 0.0), ("coulomb", 0.3)] {
@@ -55,12 +53,7 @@ fn detection(c: &mut Criterion) {
         let upper = generate::cuboid([0.0, 0.0, t], [1.0, 1.0, t], [cells, cells, 1], ElementKind::Hex8);
         let surfaces = vec![Surface::of(&lower), Surface::of(&upper)];
         let facets: usize = surfaces.iter().map(Surface::facet_count).sum();
-        let model = ContactModel {
-            settings: Settings { tolerance: 1e-8, max_iterations: 1, sweep: Sweep::GaussSeidel, acceleration: Default::default() },
-            surfaces,
-            obstacles: Vec::new(),
-            pairs: upper_on_lower(0.3),
-        };
+        let model = ContactModel { settings: Settings { tolerance: 1e-8, max_iterations: 1, sweep: Sweep::GaussSeidel, acceleration: Default::default() }, surfaces, obstacles: Vec::new(), pairs: upper_on_lower(0.3) };
         let mut config = Configuration::new(&model, vec![lower.nodes.clone(), upper.nodes.clone()]);
         let placed = |_: usize, _: &mut Vec<[f64; 3]>| unreachable!("every body is placed");
         let margin = 0.01 / cells as f64;

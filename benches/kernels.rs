@@ -9,17 +9,17 @@
 
 use bifirst::bench::{bench_devices, bench_elements, bench_models, element_label, BenchCase, KINDS};
 use bifirst::element::{element_force_tangent, ElementOutput, Formulation, ReferenceGeometry};
-use bifirst::precision::Real;
 use bifirst::gpu::types::{Coefficients, DofOut};
 use bifirst::gpu::{Gpu, WorldKernel};
-use std::sync::Arc;
 use bifirst::material::{Model, NeoHookean};
 use bifirst::mesh::{generate, ElementKind, Mesh};
+use bifirst::precision::Real;
 use bifirst::solver::body::{Body, Prescribed};
 use bifirst::solver::topology::Topology;
 use bifirst::solver::PhaseTimes;
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use std::hint::black_box;
+use std::sync::Arc;
 
 /// About 1000 elements of a kind.
 fn mesh_of(kind: ElementKind) -> Mesh {
@@ -42,13 +42,18 @@ fn element_kernels(c: &mut Criterion) {
         let mesh = mesh_of(kind);
         let geometry = ReferenceGeometry::new(&mesh).unwrap();
         let u: Vec<Vec<[f64; 3]>> = (0..mesh.element_count())
-            .map(|e| mesh.element(e).iter().map(|&n| {
-                let mut d = deform(mesh.nodes[n as usize]);
-                if kind.dim() == 2 {
-                    d[2] = 0.0;
-                }
-                d
-            }).collect())
+            .map(|e| {
+                mesh.element(e)
+                    .iter()
+                    .map(|&n| {
+                        let mut d = deform(mesh.nodes[n as usize]);
+                        if kind.dim() == 2 {
+                            d[2] = 0.0;
+                        }
+                        d
+                    })
+                    .collect()
+            })
             .collect();
         group.throughput(Throughput::Elements(mesh.element_count() as u64));
         for model in bench_models() {

@@ -5,8 +5,8 @@
 use crate::contact::uzawa::{Acceleration, Sweep};
 use crate::contact::Settings;
 use crate::gpu::{self, Gpu, GpuError, GpuWorld, WorldBody};
-pub use crate::policy::{RoundPlacement, UzawaPlacement};
 use crate::mesh::ElementKind;
+pub use crate::policy::{RoundPlacement, UzawaPlacement};
 use crate::precision::{Precision, PRECISION_NAME};
 use std::sync::Arc;
 
@@ -135,9 +135,7 @@ impl Backend {
             if request.kernel_times {
                 gpu.start_clock()?;
             }
-            let notice = gpu.adapter.software().then(|| {
-                format!("no hardware GPU: the GPU kernels run on the software adapter {} (slow; use --backend cpu for speed)", gpu.adapter.name)
-            });
+            let notice = gpu.adapter.software().then(|| format!("no hardware GPU: the GPU kernels run on the software adapter {} (slow; use --backend cpu for speed)", gpu.adapter.name));
             Ok(Resolved { backend: Backend::Gpu(Arc::new(gpu), request.uzawa, request.rounds), notice, reason: None })
         };
         let cpu = |reason: String| Ok(Resolved { backend: Backend::Cpu, notice: None, reason: Some(format!("backend auto: {reason}; running on the CPU")) });

@@ -3,13 +3,13 @@
 //! relative error against the CPU in f64. The criterion benches use the same cases.
 
 use crate::assembly::{element_out_stride, DofMap, GatherMap, StiffnessPattern};
+use crate::contact::uzawa::{self, Acceleration, Colours, Delassus, Fallback, Local, NodalMap, Problem, Sweep};
 use crate::cpu;
 use crate::element::{Formulation, ReferenceGeometry};
+use crate::gpu::peak::{measure as measure_peaks, Peaks, FMA_FLOPS_PER_VALUE};
 use crate::gpu::types::{Coefficients, DofOut, DofStep};
-use crate::contact::uzawa::{self, Acceleration, Fallback, Colours, Delassus, Local, NodalMap, Problem, Sweep};
 use crate::gpu::uzawa_step::{UzawaPoint, UzawaStepKernel};
 use crate::gpu::uzawa_sweep::UzawaSweeps;
-use crate::gpu::peak::{measure as measure_peaks, Peaks, FMA_FLOPS_PER_VALUE};
 use crate::gpu::{Evaluation, Gpu, GpuError, GpuWorld, WorldKernel};
 use crate::material::{ArrudaBoyce, BlatzKo, Decoupled, Gent, Lvf, Model, MooneyRivlin, NeoHookean, Ogden, Yeoh};
 use crate::mesh::{generate, ElementKind, Mesh};
@@ -43,10 +43,7 @@ pub const KINDS: [ElementKind; 4] = [ElementKind::Tri3, ElementKind::Quad4, Elem
 /// The element kernels the bench measures: every kind as a displacement element, and the F-bar
 /// element of Quad4 and Hex8.
 pub fn bench_elements() -> Vec<(ElementKind, Formulation)> {
-    KINDS
-        .iter()
-        .flat_map(|&kind| std::iter::once((kind, Formulation::Displacement)).chain(Formulation::fbar_applies(kind).then_some((kind, Formulation::Fbar))))
-        .collect()
+    KINDS.iter().flat_map(|&kind| std::iter::once((kind, Formulation::Displacement)).chain(Formulation::fbar_applies(kind).then_some((kind, Formulation::Fbar)))).collect()
 }
 
 /// An element's name in the bench rows: the kind, with `+fbar` for the F-bar element.
@@ -307,9 +304,7 @@ pub fn run_bench(options: &BenchOptions, gpus: &[Arc<Gpu>], mut row: impl FnMut(
             progress(&format!("{label} {}", model.name()));
             let case = BenchCase::new(kind, formulation, model, options.elements);
             let n = case.elements();
-            let make = |kernel: &str, backend: String, timing: Timing, traffic: u64, error: f64| {
-                BenchRow::new(kernel, &label, case.model.name(), n, backend, timing, traffic, error)
-            };
+            let make = |kernel: &str, backend: String, timing: Timing, traffic: u64, error: f64| BenchRow::new(kernel, &label, case.model.name(), n, backend, timing, traffic, error);
             // The CPU twins, and the reference.
             let mut reference = Reference { results: vec![0.0; case.results_len()], values: vec![0.0; case.pattern.nnz()], dof_out: vec![DofOut::default(); case.u.len()], energy: 0.0 };
             let t = time_calls(options.min_time, || case.cpu_elements(&mut reference.results));
@@ -345,9 +340,7 @@ pub fn run_bench(options: &BenchOptions, gpus: &[Arc<Gpu>], mut row: impl FnMut(
                     (small, reference)
                 });
                 let (case, reference) = smaller.as_ref().map_or((&case, &reference), |(c, r)| (c, r));
-                let make = |kernel: &str, backend: String, timing: Timing, traffic: u64, error: f64| {
-                    BenchRow::new(kernel, &label, case.model.name(), case.elements(), backend, timing, traffic, error)
-                };
+                let make = |kernel: &str, backend: String, timing: Timing, traffic: u64, error: f64| BenchRow::new(kernel, &label, case.model.name(), case.elements(), backend, timing, traffic, error);
                 let mut world = case.on(gpu)?;
                 let stride = element_out_stride(case.pattern.element_dofs);
                 let mut values = vec![0.0; case.pattern.nnz()];
@@ -513,9 +506,7 @@ fn kernel_cost(kernel: Costed, case: &BenchCase, real: usize) -> (f64, f64) {
 /// each device's peaks for the roofline columns of the other rows.
 fn peak_rows(options: &BenchOptions, gpus: &[Arc<Gpu>], row: &mut impl FnMut(BenchRow)) -> Result<Vec<Peaks>, GpuError> {
     let (copy_shown, fma_shown) = (wanted(options, "peak_copy"), wanted(options, "peak_fma"));
-    let make = |kernel: &str, items: usize, backend: String, seconds: f64| {
-        BenchRow::new(kernel, "-", "-", items, backend, Timing { per_call: seconds, calls: 1 }, 0, 0.0)
-    };
+    let make = |kernel: &str, items: usize, backend: String, seconds: f64| BenchRow::new(kernel, "-", "-", items, backend, Timing { per_call: seconds, calls: 1 }, 0, 0.0);
     if copy_shown || fma_shown {
         // The CPU twins on every thread, on 2^24 values.
         let n = 1 << 24;
@@ -636,7 +627,11 @@ pub fn bench_contact_problem(seed: u64, bodies: usize, points: usize) -> Contact
     let touching: Vec<Vec<usize>> = (0..points)
         .map(|_| {
             let (a, b, pair) = (pick(bodies), pick(bodies), pick(10) < 6);
-            if b != a && pair { vec![a, b] } else { vec![a] }
+            if b != a && pair {
+                vec![a, b]
+            } else {
+                vec![a]
+            }
         })
         .collect();
     let mut next = sequence(seed + 1);
@@ -754,10 +749,14 @@ fn uzawa_solve_rows(options: &BenchOptions, gpus: &[Arc<Gpu>], row: &mut impl Fn
         let mut r: Vec<Vec<[Real; 3]>> = problems.iter().map(|p| p.r.clone()).collect();
         let mut result = Ok(());
         let t = time_calls(options.min_time, || {
-            let mut list: Vec<Problem> = problems.iter().zip(&mut r).map(|(p, r)| {
-                r.copy_from_slice(&p.r);
-                p.with(r, 0.0, 1e-3, BENCH_SWEEPS)
-            }).collect();
+            let mut list: Vec<Problem> = problems
+                .iter()
+                .zip(&mut r)
+                .map(|(p, r)| {
+                    r.copy_from_slice(&p.r);
+                    p.with(r, 0.0, 1e-3, BENCH_SWEEPS)
+                })
+                .collect();
             if let Err(e) = sweeps.solve(&mut list, None) {
                 result = Err(e);
             }
@@ -772,10 +771,7 @@ fn uzawa_solve_rows(options: &BenchOptions, gpus: &[Arc<Gpu>], row: &mut impl Fn
 
 /// The table `bifirst bench` prints.
 pub fn table_header() -> String {
-    format!(
-        "{:<32} {:<10} {:<12} {:>8} {:<8} {:>12} {:>12} {:>12} {:>10} {:>9} {:>9} {:>7} {:>7}",
-        "kernel", "elem", "material", "items", "backend", "time/call", "items/s", "bytes/call", "max rel err", "GB/s", "GFLOP/s", "%bw", "%flop"
-    )
+    format!("{:<32} {:<10} {:<12} {:>8} {:<8} {:>12} {:>12} {:>12} {:>10} {:>9} {:>9} {:>7} {:>7}", "kernel", "elem", "material", "items", "backend", "time/call", "items/s", "bytes/call", "max rel err", "GB/s", "GFLOP/s", "%bw", "%flop")
 }
 
 impl BenchRow {

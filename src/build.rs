@@ -5,9 +5,7 @@ use std::path::Path;
 use std::process::Command;
 
 fn main() {
-    let git = |args: &[&str]| {
-        Command::new("git").args(args).output().ok().filter(|o| o.status.success()).map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
-    };
+    let git = |args: &[&str]| Command::new("git").args(args).output().ok().filter(|o| o.status.success()).map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string());
     if let Some(rev) = git(&["rev-parse", "--short=12", "HEAD"]) {
         println!("cargo:rustc-env=BIFIRST_GIT_REVISION={rev}");
     }

@@ -4,6 +4,7 @@
 //! The pipeline follows the folders: [`scene`] -> [`mesh`] -> [`material`] -> [`element`] ->
 //! [`assembly`] -> [`solver`] -> [`output`].
 
+pub mod accuracy;
 pub mod assembly;
 pub mod backend;
 pub mod bench;
@@ -11,15 +12,14 @@ pub mod contact;
 pub mod cpu;
 pub mod element;
 pub mod gpu;
+pub mod grains;
 pub mod material;
 pub mod mesh;
+pub mod output;
 pub mod policy;
 pub mod precision;
+pub mod run;
 pub mod scene;
 pub mod solver;
-pub mod output;
-pub mod run;
-pub mod sweep;
-pub mod accuracy;
-pub mod grains;
 pub mod stability;
+pub mod sweep;

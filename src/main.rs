@@ -10,8 +10,8 @@ use bifirst::precision::Precision;
 use bifirst::run::{run_scene, Monitor, RunError, RunOptions, RunSummary, Stop};
 use bifirst::scene::load_scene;
 use bifirst::solver::StepReport;
-use bifirst::sweep::{report, Report, SbatchOption, Shard, SlurmJob, Sweep, SweepAxis};
 use bifirst::stability::Budget;
+use bifirst::sweep::{report, Report, SbatchOption, Shard, SlurmJob, Sweep, SweepAxis};
 use clap::{Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::io::IsTerminal;
@@ -688,15 +688,7 @@ fn sweep_command(args: SweepArgs) -> Result<ExitCode> {
         let n = finished.fetch_add(1, Ordering::Relaxed) + 1;
         let head = format!("[{n}/{}] variant {} ({})", runs.len(), o.variant.index, o.variant.label);
         match (o.summary(), &o.result) {
-            (Some(s), _) => eprintln!(
-                "{head}: {} ({} steps, {:.1} s, backend {}{}) -> {}",
-                s.status,
-                s.steps,
-                s.wall_s,
-                s.backend,
-                s.adapter.as_ref().map_or(String::new(), |a| format!(" on {a}")),
-                o.log.display()
-            ),
+            (Some(s), _) => eprintln!("{head}: {} ({} steps, {:.1} s, backend {}{}) -> {}", s.status, s.steps, s.wall_s, s.backend, s.adapter.as_ref().map_or(String::new(), |a| format!(" on {a}")), o.log.display()),
             (None, Err(e)) => eprintln!("{head}: error: {e}"),
             (None, Ok(_)) => unreachable!("a finished run has a summary"),
         }
@@ -718,14 +710,7 @@ fn sweep_command(args: SweepArgs) -> Result<ExitCode> {
 fn slurm_command(sweep: &Sweep, out: &std::path::Path, script: &std::path::Path, args: &SweepArgs) -> Result<ExitCode> {
     sweep.load(&(0..sweep.variants.len()).collect::<Vec<_>>())?;
     sweep.prepare(out, true)?;
-    let job = SlurmJob {
-        sweep,
-        out_dir: std::fs::canonicalize(out)?,
-        exe: std::env::current_exe().and_then(std::fs::canonicalize)?,
-        threads: args.threads.unwrap_or(1).max(1),
-        run_args: args.backend.args(),
-        sbatch: args.sbatch.clone(),
-    };
+    let job = SlurmJob { sweep, out_dir: std::fs::canonicalize(out)?, exe: std::env::current_exe().and_then(std::fs::canonicalize)?, threads: args.threads.unwrap_or(1).max(1), run_args: args.backend.args(), sbatch: args.sbatch.clone() };
     std::fs::write(script, job.script()).map_err(|e| anyhow::anyhow!("cannot write `{}`: {e}", script.display()))?;
     eprintln!("wrote {}: a Slurm job array of {} tasks (one variant each, {} CPUs each)", script.display(), sweep.variants.len(), job.threads);
     eprintln!("submit:      sbatch {}", script.display());
@@ -968,12 +953,8 @@ fn main() -> ExitCode {
             sweep_command(SweepArgs { grid, out, jobs, trace, backend: backend.into(), json, shard, index, list, slurm, sbatch, threads: cli.threads.map(|n| n as usize) })
         }
         Command::SweepReport { dir, json, trace } => report(&dir).map_err(anyhow::Error::from).and_then(|r| print_report(r, json, trace)),
-        Command::Accuracy { grid, measure, out, repeat, target, backend, json } => {
-            accuracy_command(AccuracyArgs { grid, measure, out, repeat, target, backend: backend.into(), json })
-        }
-        Command::Stability { grid, out, max_sweeps, max_wall, backend, json } => {
-            stability_command(&grid, out, Budget { sweeps_per_step: max_sweeps, wall_s: max_wall }, backend.into(), json)
-        }
+        Command::Accuracy { grid, measure, out, repeat, target, backend, json } => accuracy_command(AccuracyArgs { grid, measure, out, repeat, target, backend: backend.into(), json }),
+        Command::Stability { grid, out, max_sweeps, max_wall, backend, json } => stability_command(&grid, out, Budget { sweeps_per_step: max_sweeps, wall_s: max_wall }, backend.into(), json),
         Command::State { run, at, contour, vtu } => state_command(run, at, contour, vtu),
         Command::Plot { runs, out, trace } => plot_command(runs, out, trace),
         Command::Summary { runs, json } => summary_command(runs, json),
@@ -982,15 +963,7 @@ fn main() -> ExitCode {
             let elements: usize = sim.bodies.iter().map(|b| b.mesh.element_count()).sum();
             let dofs: usize = sim.bodies.iter().map(|b| b.dofs.free_count).sum();
             let n = |count: usize, one: &str, many: &str| bifirst::output::counted(count, one, many);
-            println!(
-                "{}: valid, {}D, {}, {}, {} free dofs, {}",
-                loaded.name,
-                sim.dim,
-                n(sim.bodies.len(), "body", "bodies"),
-                n(elements, "element", "elements"),
-                dofs,
-                n(sim.step_count(), "step", "steps")
-            );
+            println!("{}: valid, {}D, {}, {}, {} free dofs, {}", loaded.name, sim.dim, n(sim.bodies.len(), "body", "bodies"), n(elements, "element", "elements"), dofs, n(sim.step_count(), "step", "steps"));
             // The largest bodies' factorisations: the fill decides the cost of a Newton iteration.
             let mut bodies: Vec<_> = sim.bodies.iter().collect();
             bodies.sort_by_key(|b| std::cmp::Reverse(b.dofs.free_count));

@@ -2,13 +2,13 @@
 //! VTU frames, and a summary. However the run ends (finished, a step failure, a non-finite
 //! state, a panic, an interrupt), the log is closed with everything up to the last finished step.
 
+use crate::backend::{Backend, BackendError, BackendRequest};
 use crate::element::CellFields;
 use crate::output::foxglove::{self, Level, View};
-use crate::output::plot::{contour_png, PlotError};
 use crate::output::messages::{AngularMomentum, BatchedBodies, BodiesMessage, BodyMessage, ContactMessage, EnergyMessage, ProbeMessage, ReactionMessage, RunMessage, SolverMessage};
-use crate::output::{encode, schemas, OutputError, RunLog, VtuSeries};
+use crate::output::plot::{contour_png, PlotError};
 pub use crate::output::run_summary::{energy_gain, RunSummary, ENERGY_GAIN_TOLERANCE};
-use crate::backend::{Backend, BackendError, BackendRequest};
+use crate::output::{encode, schemas, OutputError, RunLog, VtuSeries};
 use crate::precision::Real;
 use crate::scene::{LoadedScene, OutputSpec, SceneError};
 use crate::solver::{build_simulation, Energies, PhaseTimes, RunFailure, SavedState, Simulation, StepFailure, StepReport};
@@ -242,13 +242,7 @@ impl Logger {
         for p in &sim.probes {
             let b = &sim.bodies[p.body];
             let n = p.node;
-            let msg = ProbeMessage {
-                t,
-                position: b.position(n)[..dim].to_vec(),
-                displacement: b.state.u[n * dim..(n + 1) * dim].to_vec(),
-                velocity: b.state.v[n * dim..(n + 1) * dim].to_vec(),
-                von_mises: b.von_mises(&p.elements),
-            };
+            let msg = ProbeMessage { t, position: b.position(n)[..dim].to_vec(), displacement: b.state.u[n * dim..(n + 1) * dim].to_vec(), velocity: b.state.v[n * dim..(n + 1) * dim].to_vec(), von_mises: b.von_mises(&p.elements) };
             self.log.write(&format!("/probe/{}", p.name), t, &msg)?;
         }
         for (s, r) in sim.sets.iter().zip(sim.reactions()) {
@@ -362,11 +356,7 @@ impl Logger {
 }
 
 fn panic_message(payload: &(dyn std::any::Any + Send)) -> String {
-    payload
-        .downcast_ref::<&str>()
-        .map(|s| s.to_string())
-        .or_else(|| payload.downcast_ref::<String>().cloned())
-        .unwrap_or_else(|| "a panic without a message".into())
+    payload.downcast_ref::<&str>().map(|s| s.to_string()).or_else(|| payload.downcast_ref::<String>().cloned()).unwrap_or_else(|| "a panic without a message".into())
 }
 
 /// Totals kept while stepping, for the summary.
@@ -463,46 +453,45 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
         let created = sim.energy_created();
         let (status, message) = match stop {
             Some(stop) => (stop.status().to_string(), Some(stop.to_string())),
-            None if created > max_energy_gain => (
-                ENERGY_CREATED.to_string(),
-                Some(format!("the run created {created:.3e} of the energy scale, more than solver.max_energy_gain = {max_energy_gain:.3e} (a time step too large for the impact speed? `bifirst stability` maps it)")),
-            ),
+            None if created > max_energy_gain => {
+                (ENERGY_CREATED.to_string(), Some(format!("the run created {created:.3e} of the energy scale, more than solver.max_energy_gain = {max_energy_gain:.3e} (a time step too large for the impact speed? `bifirst stability` maps it)")))
+            }
             None => ("finished".to_string(), None),
         };
         RunSummary {
-        scene: loaded.name.clone(),
-        status,
-        message,
-        backend: backend.name().to_string(),
-        precision: backend.precision().to_string(),
-        adapter: backend.adapter(),
-        steps: sim.step - sim.first_step.1,
-        last_step: sim.step,
-        t_end: sim.t,
-        cutbacks: totals.cutbacks,
-        newton_iterations: totals.newton,
-        uzawa_iterations: totals.uzawa,
-        contact_newton_iterations: totals.contact_newton,
-        bodies_iterated: totals.bodies_iterated,
-        device_iterations: totals.device_iterations,
-        factorizations: totals.factorizations,
-        max_penetration: totals.max_penetration,
-        max_overlap: totals.max_overlap,
-        max_overlap_ratio: totals.max_overlap_ratio,
-        energy_gain_steps: totals.energy_gain_steps,
-        max_energy_gain: totals.max_energy_gain,
-        overlap_retries: totals.overlap_retries,
-        energy_retries: totals.energy_retries,
-        kept_beyond_bounds: totals.kept_beyond_bounds,
-        energy_created: created,
-        wall_s: started.elapsed().as_secs_f64(),
-        wall_by_phase: totals.wall,
-        bytes_moved: totals.bytes_moved,
-        device_submits: totals.device_submits,
-        kernel_times: backend.kernel_times(),
-        energy: sim.energies(),
-        output: out.to_path_buf(),
-    }
+            scene: loaded.name.clone(),
+            status,
+            message,
+            backend: backend.name().to_string(),
+            precision: backend.precision().to_string(),
+            adapter: backend.adapter(),
+            steps: sim.step - sim.first_step.1,
+            last_step: sim.step,
+            t_end: sim.t,
+            cutbacks: totals.cutbacks,
+            newton_iterations: totals.newton,
+            uzawa_iterations: totals.uzawa,
+            contact_newton_iterations: totals.contact_newton,
+            bodies_iterated: totals.bodies_iterated,
+            device_iterations: totals.device_iterations,
+            factorizations: totals.factorizations,
+            max_penetration: totals.max_penetration,
+            max_overlap: totals.max_overlap,
+            max_overlap_ratio: totals.max_overlap_ratio,
+            energy_gain_steps: totals.energy_gain_steps,
+            max_energy_gain: totals.max_energy_gain,
+            overlap_retries: totals.overlap_retries,
+            energy_retries: totals.energy_retries,
+            kept_beyond_bounds: totals.kept_beyond_bounds,
+            energy_created: created,
+            wall_s: started.elapsed().as_secs_f64(),
+            wall_by_phase: totals.wall,
+            bytes_moved: totals.bytes_moved,
+            device_submits: totals.device_submits,
+            kernel_times: backend.kernel_times(),
+            energy: sim.energies(),
+            output: out.to_path_buf(),
+        }
     };
     let stop = loop {
         if sim.finished() {
@@ -651,11 +640,7 @@ pub fn restart_from(log: &Path, at: Option<Real>, sets: &[String]) -> Result<(Lo
     let chosen = match (chosen, states.first()) {
         (Some(s), _) => s,
         (None, None) => {
-            let why = if record.has_summary {
-                "it was written by a bifirst older than `run --restart`, or not by bifirst"
-            } else {
-                "the run was cut short before it logged one (`output.state_every = N` logs one every N steps)"
-            };
+            let why = if record.has_summary { "it was written by a bifirst older than `run --restart`, or not by bifirst" } else { "the run was cut short before it logged one (`output.state_every = N` logs one every N steps)" };
             return Err(RestartError::NoState { path: log.into(), why });
         }
         (None, Some(first)) => return Err(RestartError::NoStateAt { path: log.into(), at: at.unwrap_or_default(), first: first["t"].as_f64().unwrap_or(f64::NAN) }),

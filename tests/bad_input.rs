@@ -235,12 +235,7 @@ fn backend_requests_that_cannot_be_met() {
         (&["--uzawa", "fpga"][..], "unknown Uzawa placement `fpga`"),
         (&["--precision", "f16"][..], "unknown precision `f16`"),
     ] {
-        let out = Command::new(env!("CARGO_BIN_EXE_bifirst"))
-            .args(["run", scene.to_str().unwrap(), "--quiet", "--out"])
-            .arg(dir().join("backend_request.mcap"))
-            .args(args)
-            .output()
-            .unwrap();
+        let out = Command::new(env!("CARGO_BIN_EXE_bifirst")).args(["run", scene.to_str().unwrap(), "--quiet", "--out"]).arg(dir().join("backend_request.mcap")).args(args).output().unwrap();
         let stderr = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(2), "{args:?}: {stderr}");
         assert!(stderr.contains(expect), "{args:?}: {stderr}");

@@ -114,11 +114,7 @@ fn broad_phase_finds_what_brute_force_finds() {
             let best = (0..surfaces[0].facet_count())
                 .filter_map(|f| {
                     let fx: Vec<[f64; 3]> = surfaces[0].facet(f).iter().map(|&n| positions[0][n as usize]).collect();
-                    let p = if fx.len() == 3 {
-                        bifirst::contact::geometry::on_triangle(x, fx[0], fx[1], fx[2], 0.02)
-                    } else {
-                        on_quad(x, [fx[0], fx[1], fx[2], fx[3]], 0.02)
-                    }?;
+                    let p = if fx.len() == 3 { bifirst::contact::geometry::on_triangle(x, fx[0], fx[1], fx[2], 0.02) } else { on_quad(x, [fx[0], fx[1], fx[2], fx[3]], 0.02) }?;
                     let size = (0..fx.len()).flat_map(|i| (0..fx.len()).map(move |j| (i, j))).map(|(i, j)| dot(sub(fx[i], fx[j]), sub(fx[i], fx[j])).sqrt()).fold(0.0, f64::max);
                     (p.gap <= margin && p.gap >= -0.5 * size).then_some(p.gap)
                 })

@@ -25,12 +25,7 @@ fn hertz(sets: &[&str], tag: &str, g: f64, k: f64) {
     let floor = sim.contact.as_ref().unwrap().obstacles.iter().position(|o| o.name == "floor").unwrap() as u32;
     let body = &sim.bodies[0];
     // (x, normal force) of every floor contact point, by x.
-    let mut points: Vec<(f64, f64)> = sim
-        .contact_points
-        .iter()
-        .filter(|c| matches!(c.master, Master::Obstacle { obstacle, .. } if obstacle == floor))
-        .map(|c| (body.position(c.slave_node as usize)[0], c.r[0]))
-        .collect();
+    let mut points: Vec<(f64, f64)> = sim.contact_points.iter().filter(|c| matches!(c.master, Master::Obstacle { obstacle, .. } if obstacle == floor)).map(|c| (body.position(c.slave_node as usize)[0], c.r[0])).collect();
     points.sort_by(|a, b| a.0.total_cmp(&b.0));
     let load: f64 = points.iter().map(|p| p.1).sum();
     let center = points.iter().map(|p| p.0 * p.1).sum::<f64>() / load;

@@ -2,10 +2,10 @@
 //! (stick, slip, separation, the apex), the Uzawa step's fixed points, and the law at the
 //! converged contact points of a real run.
 
-#[path = "common/random.rs"]
-mod random;
 #[path = "common/run.rs"]
 mod common_run;
+#[path = "common/random.rs"]
+mod random;
 use bifirst::contact::{project_on_cone, uzawa_step, Status};
 use bifirst::scene::load_scene;
 use bifirst::solver::build_simulation;
@@ -208,7 +208,18 @@ fn uzawa_judge_stops_where_the_cpu_iterations_stop() {
         offsets.push(offsets.last().unwrap() + p.local.len() as u32);
     }
     let judged: Vec<UzawaProblem<f64>> = (0..3)
-        .map(|k| UzawaProblem { point_start: offsets[k], point_end: offsets[k + 1], node_start: nodes.node_offsets[k], node_end: nodes.node_offsets[k + 1], max_iterations: settings[k].1 as u32, colour_first: 0, colours: 0, pad: 0, tolerance: settings[k].0, floor })
+        .map(|k| UzawaProblem {
+            point_start: offsets[k],
+            point_end: offsets[k + 1],
+            node_start: nodes.node_offsets[k],
+            node_end: nodes.node_offsets[k + 1],
+            max_iterations: settings[k].1 as u32,
+            colour_first: 0,
+            colours: 0,
+            pad: 0,
+            tolerance: settings[k].0,
+            floor,
+        })
         .collect();
     let mut states: Vec<UzawaJudgeState<f64>> = judged.iter().map(UzawaJudgeState::start).collect();
     let mut live = vec![1u32; *offsets.last().unwrap() as usize];

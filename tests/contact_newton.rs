@@ -5,9 +5,9 @@
 mod common_run;
 
 use bifirst::contact::semismooth::{natural_map, semismooth_solve};
+use bifirst::contact::uzawa::{solve, Acceleration, Colours, Delassus, Fallback, Local, NodalMap, Outcome, Problem, Sweep};
 use bifirst::scene::load_scene;
 use bifirst::solver::build_simulation;
-use bifirst::contact::uzawa::{solve, Acceleration, Colours, Delassus, Fallback, Local, NodalMap, Outcome, Problem, Sweep};
 
 /// A fixed linear congruential generator in [-1, 1).
 struct Numbers(u64);

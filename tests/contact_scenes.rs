@@ -49,7 +49,6 @@ fn bar_impact_holds_for_a_softer_heavier_faster_bar() {
     bar_impact(&sets, "bar_other", 1.0, 4000.0, 4.0, 0.2, 0.005);
 }
 
-
 /// Block on a floor: stopping distance and friction dissipation against the kinetic energy lost.
 fn sliding_block(sets: &[&str], tag: &str, v0: f64, mu: f64, g: f64, h: f64) {
     let log = run("sliding_block", sets, tag);
@@ -118,4 +117,3 @@ fn stack_3d_holds_for_a_softer_lighter_stack_in_lower_gravity() {
     let sets = ["material.rubber.G=2.0e5", "material.rubber.K=6.0e5", "material.rubber.density=500.0", "gravity=[0.0, 0.0, -3.0]", "contact.friction=0.8"];
     stack_3d(&sets, "stack_other", 500.0, 3.0, 0.2);
 }
-

@@ -75,13 +75,8 @@ fn damaged_logs_are_errors_never_aborts() {
     let mut errors = 0;
     for (case, bytes) in &cases {
         std::fs::write(&log, bytes).unwrap();
-        let commands: [Vec<&str>; 5] = [
-            vec!["summary", p(&log)],
-            vec!["plot", p(&log), "--out", p(&plots)],
-            vec!["state", p(&log)],
-            vec!["run", "--restart", p(&log), "--quiet", "--set", "time.end=0.022", "--out", p(&out)],
-            vec!["sweep-report", p(&sweep)],
-        ];
+        let commands: [Vec<&str>; 5] =
+            [vec!["summary", p(&log)], vec!["plot", p(&log), "--out", p(&plots)], vec!["state", p(&log)], vec!["run", "--restart", p(&log), "--quiet", "--set", "time.end=0.022", "--out", p(&out)], vec!["sweep-report", p(&sweep)]];
         for args in commands {
             let _ = std::fs::remove_file(&out);
             let o = bifirst(&args);
@@ -193,10 +188,13 @@ fn sweep_report_holds_the_record_and_the_logs_against_the_grid() {
     let good = std::fs::read_to_string(&manifest).unwrap();
     let record: Value = serde_json::from_str(&good).unwrap();
     let edits: [(&str, Box<dyn Fn(&mut Value)>); 3] = [
-        ("swapped labels", Box::new(|r: &mut Value| {
-            let (a, b) = (r["variants"][0]["label"].clone(), r["variants"][1]["label"].clone());
-            (r["variants"][0]["label"], r["variants"][1]["label"]) = (b, a);
-        })),
+        (
+            "swapped labels",
+            Box::new(|r: &mut Value| {
+                let (a, b) = (r["variants"][0]["label"].clone(), r["variants"][1]["label"].clone());
+                (r["variants"][0]["label"], r["variants"][1]["label"]) = (b, a);
+            }),
+        ),
         ("copied stem", Box::new(|r: &mut Value| r["variants"][1]["stem"] = r["variants"][0]["stem"].clone())),
         ("stem outside", Box::new(|r: &mut Value| r["variants"][0]["stem"] = "../../../../etc/passwd".into())),
     ];
@@ -349,11 +347,7 @@ fn a_killed_runs_log_reads_in_the_python_readers_default_path() {
     }
     let dir = fresh_dir("killed_python");
     let killed = dir.join("killed.mcap");
-    let mut child = Command::new(env!("CARGO_BIN_EXE_bifirst"))
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .args(["run", "scenes/bar_impact.toml", "--backend", "cpu", "--quiet", "--set", "time.end=100.0", "--out", p(&killed)])
-        .spawn()
-        .unwrap();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_bifirst")).current_dir(env!("CARGO_MANIFEST_DIR")).args(["run", "scenes/bar_impact.toml", "--backend", "cpu", "--quiet", "--set", "time.end=100.0", "--out", p(&killed)]).spawn().unwrap();
     std::thread::sleep(std::time::Duration::from_secs(4));
     child.kill().unwrap();
     child.wait().unwrap();

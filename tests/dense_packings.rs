@@ -242,11 +242,7 @@ fn bodies_that_overlap_at_the_start_are_refused_with_the_node_and_depth() {
 
 #[test]
 fn overlapping_bodies_are_pushed_apart_on_request() {
-    for (tag, sets) in [
-        ("apart_body", vec![]),
-        ("apart_deep", vec!["body.upper.mesh.origin=[0.2, 0.2]"]),
-        ("apart_floor", vec!["body.upper.mesh.origin=[0.2, 0.6]", "body.lower.mesh.origin=[0.0, -0.125]"]),
-    ] {
+    for (tag, sets) in [("apart_body", vec![]), ("apart_deep", vec!["body.upper.mesh.origin=[0.2, 0.2]"]), ("apart_floor", vec!["body.upper.mesh.origin=[0.2, 0.6]", "body.lower.mesh.origin=[0.0, -0.125]"])] {
         let mut sets: Vec<String> = sets.iter().map(|s| s.to_string()).collect();
         sets.push("contact.resolve_initial_overlap=true".into());
         let loaded = load_scene(&scene_file(tag, TWO_BLOCKS), &sets).unwrap();

@@ -13,11 +13,7 @@ use common_random::{random_f, rng};
 use rand::Rng;
 
 fn models() -> Vec<Model> {
-    vec![
-        Model::BlatzKo(BlatzKo { g: 3.0 }),
-        Model::NeoHookean(NeoHookean { g: 2.0, k: 7.0 }),
-        Model::Lvf(Lvf { g: 5.0, k: 3.333, a1: 0.05, a2: 0.05, a3: 0.4, a4: 2.0, a5: 0.1 }),
-    ]
+    vec![Model::BlatzKo(BlatzKo { g: 3.0 }), Model::NeoHookean(NeoHookean { g: 2.0, k: 7.0 }), Model::Lvf(Lvf { g: 5.0, k: 3.333, a1: 0.05, a2: 0.05, a3: 0.4, a4: 2.0, a5: 0.1 })]
 }
 
 /// One element of each kind with its reference nodes moved randomly (still valid).
@@ -65,11 +61,15 @@ fn homogeneous_deformation_gives_the_closed_form_stress() {
                     }
                     f = plane_strain(f);
                 }
-                let u: Vec<[f64; 3]> = mesh.element(0).iter().map(|&n| {
-                    let x = mesh.nodes[n as usize];
-                    let v = (f - Mat3::identity()) * nalgebra::Vector3::new(x[0], x[1], x[2]);
-                    [v[0], v[1], v[2]]
-                }).collect();
+                let u: Vec<[f64; 3]> = mesh
+                    .element(0)
+                    .iter()
+                    .map(|&n| {
+                        let x = mesh.nodes[n as usize];
+                        let v = (f - Mat3::identity()) * nalgebra::Vector3::new(x[0], x[1], x[2]);
+                        [v[0], v[1], v[2]]
+                    })
+                    .collect();
                 let expected = to_voigt(&model.stress(&green_lagrange(&f)));
                 for s in element_stresses(&model, geometry.element_points(0), &u, kind.dim(), formulation) {
                     let err = (s - expected).norm() / expected.norm();
@@ -82,13 +82,16 @@ fn homogeneous_deformation_gives_the_closed_form_stress() {
 
 fn random_displacements(mesh: &Mesh, r: &mut impl Rng) -> Vec<[f64; 3]> {
     let dim = mesh.dim();
-    mesh.element(0).iter().map(|_| {
-        let mut u = [0.0; 3];
-        for c in u.iter_mut().take(dim) {
-            *c = r.random_range(-0.12..0.12);
-        }
-        u
-    }).collect()
+    mesh.element(0)
+        .iter()
+        .map(|_| {
+            let mut u = [0.0; 3];
+            for c in u.iter_mut().take(dim) {
+                *c = r.random_range(-0.12..0.12);
+            }
+            u
+        })
+        .collect()
 }
 
 #[test]
@@ -234,10 +237,14 @@ fn a_homogeneous_deformation_of_a_distorted_patch_is_in_equilibrium() {
                 }
                 f = plane_strain(f);
             }
-            let u: Vec<f64> = mesh.nodes.iter().flat_map(|x| {
-                let v = (f - Mat3::identity()) * nalgebra::Vector3::new(x[0], x[1], x[2]);
-                (0..dim).map(move |i| v[i])
-            }).collect();
+            let u: Vec<f64> = mesh
+                .nodes
+                .iter()
+                .flat_map(|x| {
+                    let v = (f - Mat3::identity()) * nalgebra::Vector3::new(x[0], x[1], x[2]);
+                    (0..dim).map(move |i| v[i])
+                })
+                .collect();
             let mut force = vec![0.0; u.len()];
             let mut out = ElementOutput::default();
             for e in 0..mesh.element_count() {
@@ -442,10 +449,14 @@ fn grouped_fbar_patches_bend_without_locking() {
         let patches = Patches::group(&mesh);
         let grouped = ReferenceGeometry::grouped(&plain, &mesh, &patches);
         let area: f64 = plain.volumes.iter().sum();
-        let u: Vec<[f64; 3]> = mesh.nodes.iter().map(|x| {
-            let (x, y) = (x[0], x[1] - 0.5);
-            [-kappa * x * y, kappa * (x * x + y * y) / 2.0, 0.0]
-        }).collect();
+        let u: Vec<[f64; 3]> = mesh
+            .nodes
+            .iter()
+            .map(|x| {
+                let (x, y) = (x[0], x[1] - 0.5);
+                [-kappa * x * y, kappa * (x * x + y * y) / 2.0, 0.0]
+            })
+            .collect();
         // ∫ y² dA of a 4 x 1 rectangle: its area / 12.
         let exact = 2.0 * g * kappa * kappa * area / 12.0;
         let energies = |k: f64| {

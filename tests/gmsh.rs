@@ -45,10 +45,7 @@ fn gmsh_square_matches_generated_square() {
     let dir = temp_path("gmsh_square");
     std::fs::create_dir_all(&dir).unwrap();
     std::fs::write(dir.join("square.msh"), common_gmsh::unit_square_msh(false)).unwrap();
-    let variants = [
-        ("file", scene(r#"{ file = "square.msh" }"#).replace("{clamp}", "left")),
-        ("generated", scene(r#"{ generator = "rectangle", element = "tri3", size = [1.0, 1.0], divisions = [1, 1] }"#).replace("{clamp}", "x_min")),
-    ];
+    let variants = [("file", scene(r#"{ file = "square.msh" }"#).replace("{clamp}", "left")), ("generated", scene(r#"{ generator = "rectangle", element = "tri3", size = [1.0, 1.0], divisions = [1, 1] }"#).replace("{clamp}", "x_min"))];
     let mut finals = Vec::new();
     for (tag, text) in variants {
         let path = dir.join(format!("{tag}.toml"));

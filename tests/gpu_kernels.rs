@@ -66,10 +66,7 @@ fn uzawa_point_matches_the_shader_layout() {
         };
         let real = precision.size() as u32;
         let shader: Vec<(&str, u32)> = members.iter().map(|(n, o)| (n.as_str(), *o)).collect();
-        assert_eq!(
-            shader,
-            [("r_n", 0), ("r_t1", real), ("r_t2", 2 * real), ("v_n", 3 * real), ("v_t1", 4 * real), ("v_t2", 5 * real), ("mu", 6 * real), ("rho", 7 * real), ("status", 8 * real)]
-        );
+        assert_eq!(shader, [("r_n", 0), ("r_t1", real), ("r_t2", 2 * real), ("v_n", 3 * real), ("v_t1", 4 * real), ("v_t2", 5 * real), ("mu", 6 * real), ("rho", 7 * real), ("status", 8 * real)]);
         let rust: Vec<u32> = offsets.iter().map(|&o| o as u32).collect();
         assert_eq!(rust, [0, 3 * real, 6 * real, 7 * real, 8 * real], "{}", precision.name());
         assert_eq!(span, size as u32, "{}: struct size", precision.name());
@@ -541,13 +538,7 @@ fn world_of(gpu: &Arc<bifirst::gpu::Gpu>, cases: &[Case]) -> GpuWorld {
 
 /// One device pass over every case of the world; returns each case's failure.
 fn evaluate_all(world: &mut GpuWorld, cases: &[Case], tangent: bool, values: &mut [Vec<f64>], dof_out: &mut [Vec<DofOut<f64>>], coefficients: Coefficients<f64>) -> Vec<Option<ElementFailure>> {
-    let mut list: Vec<Evaluation> = cases
-        .iter()
-        .zip(values.iter_mut())
-        .zip(dof_out.iter_mut())
-        .enumerate()
-        .map(|(b, ((c, values), dof_out))| Evaluation { body: b, u: &c.u, tangent, values, dof_out: Some(dof_out), failure: None })
-        .collect();
+    let mut list: Vec<Evaluation> = cases.iter().zip(values.iter_mut()).zip(dof_out.iter_mut()).enumerate().map(|(b, ((c, values), dof_out))| Evaluation { body: b, u: &c.u, tangent, values, dof_out: Some(dof_out), failure: None }).collect();
     world.evaluate(&mut list, coefficients, &mut Default::default()).expect("device pass");
     list.iter().map(|e| e.failure).collect()
 }
@@ -667,10 +658,12 @@ fn grouped_patches_in_the_element_kernel_match_its_cpu_twin() {
             assert_eq!(failures, [None], "{:?}", mesh.kind);
             let on_gpu = world.element_results(0).expect("read back");
             let stride = element_out_stride(cases[0].pattern.element_dofs);
-            let worst = (0..cases[0].mesh.element_count()).map(|e| {
-                let expected = cases[0].cpu_results(e, true);
-                relative_error(&on_gpu[e * stride..e * stride + expected.len()], &expected)
-            }).fold(0.0, f64::max);
+            let worst = (0..cases[0].mesh.element_count())
+                .map(|e| {
+                    let expected = cases[0].cpu_results(e, true);
+                    relative_error(&on_gpu[e * stride..e * stride + expected.len()], &expected)
+                })
+                .fold(0.0, f64::max);
             eprintln!("{} grouped {}: max relative error {worst:.2e}", precision.name(), mesh.kind.name());
             assert!(worst <= tolerance, "{:?} {}: {worst:.3e}", mesh.kind, precision.name());
         }
@@ -760,14 +753,8 @@ fn assembly_kernels_match_their_cpu_twins() {
         for (k, kind) in [ElementKind::Tri3, ElementKind::Quad4, ElementKind::Tet4, ElementKind::Hex8].into_iter().enumerate() {
             let cases = two_bodies(ElementVariant { kind, formulation: Formulation::Displacement, material: "blatz_ko" }, 200 + k as u64);
             let mut rng = random::rng(300 + k as u64);
-            let steps: Vec<Vec<DofStep<f64>>> = cases
-                .iter()
-                .map(|c| {
-                    (0..c.u.len())
-                        .map(|_| DofStep { mass: rng.random_range(0.1..1.0), u_pred: rng.random_range(-0.1..0.1), f_int_t: rng.random_range(-50.0..50.0), f_ext: rng.random_range(-5.0..5.0) })
-                        .collect()
-                })
-                .collect();
+            let steps: Vec<Vec<DofStep<f64>>> =
+                cases.iter().map(|c| (0..c.u.len()).map(|_| DofStep { mass: rng.random_range(0.1..1.0), u_pred: rng.random_range(-0.1..0.1), f_int_t: rng.random_range(-50.0..50.0), f_ext: rng.random_range(-5.0..5.0) }).collect()).collect();
             let coefficients = Coefficients { factor: 0.55, c1: 4e4 };
             let mut world = world_of(&gpu, &cases);
             let list: Vec<(usize, &[DofStep<f64>])> = steps.iter().enumerate().map(|(b, s)| (b, &s[..])).collect();
@@ -1015,7 +1002,12 @@ fn newton_kernels_match_their_cpu_twins() {
                 let r_error = (state.residual - want.residual).abs() / f(out).iter().fold(1e-300f64, |m, x| m.max(x.abs()));
                 // Near convergence the increment is round-off of u: measured against u.
                 let du_error = (state.increment - want.increment).abs() / u.iter().fold(1e-300f64, |m, x| m.max(x.abs()));
-                eprintln!("{} body {b} budgets {budgets:?}, evaluated {evaluated}: status {} after {} increments; u {u_error:.1e}, f_int {f_error:.1e}, g {g_error:.1e}, |g| {r_error:.1e}, |du| {du_error:.1e}", kind.name(), state.status, state.iterations);
+                eprintln!(
+                    "{} body {b} budgets {budgets:?}, evaluated {evaluated}: status {} after {} increments; u {u_error:.1e}, f_int {f_error:.1e}, g {g_error:.1e}, |g| {r_error:.1e}, |du| {du_error:.1e}",
+                    kind.name(),
+                    state.status,
+                    state.iterations
+                );
                 assert_eq!(failure, None);
                 assert_eq!((state.status, state.iterations, state.moved), (want.status, want.iterations, want.moved), "{} body {b}", kind.name());
                 assert!(u_error <= 1e-12 && f_error <= 1e-12 && g_error <= 1e-12 && r_error <= 1e-12 && du_error <= 1e-12, "{} body {b}", kind.name());
@@ -1048,7 +1040,21 @@ fn a_device_newton_call_for_one_body_of_a_large_batch_reads_back_only_its_own() 
     let residual0 = free.iter().map(|&d| first[d as usize].g.powi(2)).sum::<f64>().sqrt();
     let start = vec![0.0; c.u.len()];
     let (mut u, mut out) = (c.u.clone(), first.clone());
-    let call = NewtonCall { body: 399, factor: 1, inverse: Some(inverse.clone()), member, residual: Some(residual0), u: &mut u, dof_out: &mut out, u_start: &start, contact_force: None, outcome: NewtonState::default(), strain_energy: None, failure: None, tangent: None };
+    let call = NewtonCall {
+        body: 399,
+        factor: 1,
+        inverse: Some(inverse.clone()),
+        member,
+        residual: Some(residual0),
+        u: &mut u,
+        dof_out: &mut out,
+        u_start: &start,
+        contact_force: None,
+        outcome: NewtonState::default(),
+        strain_energy: None,
+        failure: None,
+        tangent: None,
+    };
     let mut calls = [call];
     world.newton(&mut calls, &mut [], &mut [], &mut [], coefficients, (2, 1.0), None, &mut Default::default()).expect("device Newton");
     let (state, failure) = (calls[0].outcome, calls[0].failure);
@@ -1084,7 +1090,8 @@ fn a_device_newton_increment_that_inverts_an_element_fails_the_body() {
     let start = vec![0.0; c.u.len()];
     let (mut u, mut out) = (c.u.clone(), first.clone());
     let member = NewtonMember { free_count: free as u32, budget: 5, ..NewtonMember::default() };
-    let mut calls = [NewtonCall { body: 0, factor: 1, inverse: Some(inverse), member, residual: Some(1.0), u: &mut u, dof_out: &mut out, u_start: &start, contact_force: None, outcome: NewtonState::default(), strain_energy: None, failure: None, tangent: None }];
+    let mut calls =
+        [NewtonCall { body: 0, factor: 1, inverse: Some(inverse), member, residual: Some(1.0), u: &mut u, dof_out: &mut out, u_start: &start, contact_force: None, outcome: NewtonState::default(), strain_energy: None, failure: None, tangent: None }];
     world.newton(&mut calls, &mut [], &mut [], &mut [], coefficients, (2, 1.0), None, &mut Default::default()).expect("device Newton");
     let (state, failure) = (calls[0].outcome, calls[0].failure);
     assert_eq!((state.status, state.iterations), (bifirst::gpu::types::NEWTON_FAILED, 1), "{state:?}");
@@ -1098,7 +1105,7 @@ fn a_device_newton_increment_that_inverts_an_element_fails_the_body() {
 /// from their inverses), in 2D and 3D, until the group converges or its budget ends.
 #[test]
 fn newton_contact_kernels_match_their_cpu_twins() {
-    use bifirst::contact::uzawa::{Acceleration, Fallback, Colours, Delassus, Local, NodalMap, Problem, Sweep, SETTLE};
+    use bifirst::contact::uzawa::{Acceleration, Colours, Delassus, Fallback, Local, NodalMap, Problem, Sweep, SETTLE};
     use bifirst::gpu::uzawa_sweep::{NodeGather, UzawaJudgeState, UzawaLocal, UzawaProblem, JUDGE_CONVERGED, JUDGE_SPENT};
     use bifirst::gpu::{ContactLayout, GroupContact};
     use bifirst::solver::UZAWA_STALLS;
@@ -1119,10 +1126,12 @@ fn newton_contact_kernels_match_their_cpu_twins() {
         // Three points, each node j of body 0 against node j of body 1 (free nodes only).
         let nodes: Vec<u32> = (0..(cases[0].u.len() / dim) as u32).filter(|&n| (0..dim).all(|c| free_index(0, n as usize * dim + c).is_some() && free_index(1, n as usize * dim + c).is_some())).take(3).collect();
         let angle = |i: usize| 0.3 + 0.7 * i as f64;
-        let frames: Vec<[[f64; 3]; 3]> = (0..nodes.len()).map(|i| {
-            let (c, s) = (angle(i).cos(), angle(i).sin());
-            [[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]]
-        }).collect();
+        let frames: Vec<[[f64; 3]; 3]> = (0..nodes.len())
+            .map(|i| {
+                let (c, s) = (angle(i).cos(), angle(i).sin());
+                [[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]]
+            })
+            .collect();
         // W = Σ_b H_b K̄_b⁻¹ H_bᵀ / θdt, dense over the points.
         let column = |b: usize, i: usize, a: usize| -> Vec<f64> {
             let mut h = vec![0.0; free[b].len()];
@@ -1264,7 +1273,21 @@ fn newton_contact_kernels_match_their_cpu_twins() {
                 .iter_mut()
                 .zip(outs.iter_mut())
                 .enumerate()
-                .map(|(b, (u, dof_out))| NewtonCall { body: b, factor: 1, inverse: Some(inverses[b].clone()), member: member(b, 0, 0), residual: evaluated.then(|| residual0(b)), u, dof_out, u_start: &starts[b], contact_force: Some(&zeros[b]), outcome: NewtonState::default(), strain_energy: None, failure: None, tangent: None })
+                .map(|(b, (u, dof_out))| NewtonCall {
+                    body: b,
+                    factor: 1,
+                    inverse: Some(inverses[b].clone()),
+                    member: member(b, 0, 0),
+                    residual: evaluated.then(|| residual0(b)),
+                    u,
+                    dof_out,
+                    u_start: &starts[b],
+                    contact_force: Some(&zeros[b]),
+                    outcome: NewtonState::default(),
+                    strain_energy: None,
+                    failure: None,
+                    tangent: None,
+                })
                 .collect();
             for l in local.iter_mut() {
                 l.v_free = [0.0; 3];

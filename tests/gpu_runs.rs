@@ -95,11 +95,7 @@ fn energy_difference(cpu: &Log, gpu: &Log) -> f64 {
     let fields = ["kinetic", "strain", "total", "viscous_dissipation"];
     let scale = cpu.series("/energy", "total").iter().fold(0.0f64, |m, x| m.max(x.abs()));
     assert_eq!(cpu.topics["/energy"].len(), gpu.topics["/energy"].len(), "same number of states");
-    fields
-        .iter()
-        .flat_map(|f| cpu.series("/energy", f).into_iter().zip(gpu.series("/energy", f)))
-        .map(|(a, b)| (a - b).abs() / scale)
-        .fold(0.0, f64::max)
+    fields.iter().flat_map(|f| cpu.series("/energy", f).into_iter().zip(gpu.series("/energy", f))).map(|(a, b)| (a - b).abs() / scale).fold(0.0, f64::max)
 }
 
 #[test]
@@ -299,13 +295,7 @@ fn accuracy_over_uzawa(test: &str, scene: &str, sets: &[&str]) -> impl Fn(&str) 
     for set in sets {
         args.extend(["--set".to_string(), set.to_string()]);
     }
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_bifirst"))
-        .args(&args)
-        .args(["--backend", "gpu", "--out"])
-        .arg(&out)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .unwrap();
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_bifirst")).args(&args).args(["--backend", "gpu", "--out"]).arg(&out).current_dir(env!("CARGO_MANIFEST_DIR")).output().unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let csv = std::fs::read_to_string(out.join("accuracy.csv")).unwrap();
     let rows: Vec<Vec<String>> = csv.lines().map(|l| l.split(',').map(str::to_string).collect()).collect();

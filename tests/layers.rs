@@ -20,12 +20,7 @@ fn source_files(dir: &Path, out: &mut Vec<std::path::PathBuf>) {
 
 fn graph() -> Graph {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
-    let modules: BTreeSet<String> = std::fs::read_dir(&src)
-        .unwrap()
-        .map(|e| e.unwrap().path())
-        .filter_map(|p| p.file_stem().map(|s| s.to_string_lossy().into_owned()))
-        .filter(|m| !["lib", "main", "build"].contains(&m.as_str()))
-        .collect();
+    let modules: BTreeSet<String> = std::fs::read_dir(&src).unwrap().map(|e| e.unwrap().path()).filter_map(|p| p.file_stem().map(|s| s.to_string_lossy().into_owned())).filter(|m| !["lib", "main", "build"].contains(&m.as_str())).collect();
     let mut files = Vec::new();
     source_files(&src, &mut files);
     let mut graph = Graph::new();

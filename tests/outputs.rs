@@ -49,12 +49,7 @@ fn read_vtu(path: &Path) -> Grid {
     let vtk = Vtk::import(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let DataSet::UnstructuredGrid { pieces, .. } = vtk.data else { panic!("an unstructured grid") };
     let piece = pieces.into_iter().next().expect("one piece").into_loaded_piece_data(None).expect("inline piece");
-    Grid {
-        points: piece.points.cast_into::<f64>().expect("f64 points"),
-        cells: piece.cells.types.len(),
-        point_data: arrays(&piece.data.point),
-        cell_data: arrays(&piece.data.cell),
-    }
+    Grid { points: piece.points.cast_into::<f64>().expect("f64 points"), cells: piece.cells.types.len(), point_data: arrays(&piece.data.point), cell_data: arrays(&piece.data.cell) }
 }
 
 fn names(a: &[(String, usize, Vec<f64>)]) -> Vec<(&str, usize)> {
@@ -170,11 +165,7 @@ fn foxglove_messages_validate_against_the_official_schemas() {
     }
     // 2D with an obstacle and friction; 3D with two bodies and a floor; a container box and a
     // polygon; a Newton failure for the log lines.
-    let runs = [
-        common_run::run("sliding_block", &["time.end=0.05"], "fox_2d"),
-        common_run::run("stack_3d", &["time.end=0.05"], "fox_3d"),
-        run_box_wall(),
-    ];
+    let runs = [common_run::run("sliding_block", &["time.end=0.05"], "fox_2d"), common_run::run("stack_3d", &["time.end=0.05"], "fox_3d"), run_box_wall()];
     let mut checked = std::collections::BTreeMap::<&str, usize>::new();
     for log in &runs {
         for (topic, messages) in &log.topics {
@@ -282,11 +273,7 @@ fn quiet_json_run_prints_only_the_machine_readable_summary() {
 fn summary_tells_apart_two_runs_of_one_scene_by_file_and_backend() {
     let run = |backend: &str| {
         let out = temp_path(&format!("summary_{backend}.mcap"));
-        let result = bifirst()
-            .args(["run", scene_path("bar_impact").to_str().unwrap(), "--set", "time.end=0.0005", "--quiet", "--backend", backend, "--out"])
-            .arg(&out)
-            .output()
-            .unwrap();
+        let result = bifirst().args(["run", scene_path("bar_impact").to_str().unwrap(), "--set", "time.end=0.0005", "--quiet", "--backend", backend, "--out"]).arg(&out).output().unwrap();
         assert!(result.status.success(), "{}", String::from_utf8_lossy(&result.stderr));
         out
     };
@@ -307,12 +294,7 @@ fn summary_tells_apart_two_runs_of_one_scene_by_file_and_backend() {
 fn interrupt_run(signal: &str, tag: &str, code: i32) -> common_run::Log {
     use std::io::{BufRead, BufReader};
     let out = temp_path(&format!("{tag}.mcap"));
-    let mut child = bifirst()
-        .args(["run", scene_path("bar_impact").to_str().unwrap(), "--set", "time.end=100.0", "--out"])
-        .arg(&out)
-        .stderr(std::process::Stdio::piped())
-        .spawn()
-        .unwrap();
+    let mut child = bifirst().args(["run", scene_path("bar_impact").to_str().unwrap(), "--set", "time.end=100.0", "--out"]).arg(&out).stderr(std::process::Stdio::piped()).spawn().unwrap();
     // Set-up takes well under a second; after two more, thousands of steps are done.
     std::thread::sleep(std::time::Duration::from_secs(2));
     let lines = BufReader::new(child.stderr.take().unwrap()).lines();
@@ -353,11 +335,7 @@ fn sigint_sigterm_and_sighup_stop_a_run_with_a_complete_log() {
 #[test]
 fn an_interrupt_stops_a_step_that_never_finishes() {
     let out = temp_path("interrupt_in_step.mcap");
-    let mut child = bifirst()
-        .args(["run", scene_path("sliding_block").to_str().unwrap(), "--set", "body.block.mesh.divisions=[800,4]", "--quiet", "--out"])
-        .arg(&out)
-        .spawn()
-        .unwrap();
+    let mut child = bifirst().args(["run", scene_path("sliding_block").to_str().unwrap(), "--set", "body.block.mesh.divisions=[800,4]", "--quiet", "--out"]).arg(&out).spawn().unwrap();
     // Set-up takes well under a second; the first step alone takes minutes.
     std::thread::sleep(std::time::Duration::from_secs(3));
     assert!(child.try_wait().unwrap().is_none(), "the first step is still running");
@@ -432,11 +410,7 @@ fn a_killed_run_is_summarised_as_incomplete_next_to_good_files() {
 #[test]
 fn a_log_cut_at_any_4_kib_boundary_gives_every_message_of_its_complete_chunks() {
     let full = temp_path("to_cut.mcap");
-    let status = bifirst()
-        .args(["run", scene_path("bar_impact").to_str().unwrap(), "--set", "time.end=0.02", "--set", "output.scene_every=0", "--quiet", "--out"])
-        .arg(&full)
-        .status()
-        .unwrap();
+    let status = bifirst().args(["run", scene_path("bar_impact").to_str().unwrap(), "--set", "time.end=0.02", "--set", "output.scene_every=0", "--quiet", "--out"]).arg(&full).status().unwrap();
     assert!(status.success());
     let bytes = std::fs::read(&full).unwrap();
     let summary = mcap::Summary::read(&bytes).unwrap().expect("a finished log");
@@ -464,10 +438,7 @@ fn a_log_cut_at_any_4_kib_boundary_gives_every_message_of_its_complete_chunks() 
 /// names the file.
 #[test]
 fn a_full_disk_is_a_failed_run_not_a_panic() {
-    let out = std::process::Command::new(env!("CARGO_BIN_EXE_bifirst"))
-        .args(["run", scene_path("bar_impact").to_str().unwrap(), "--backend", "cpu", "--quiet", "--out", "/dev/full"])
-        .output()
-        .unwrap();
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_bifirst")).args(["run", scene_path("bar_impact").to_str().unwrap(), "--backend", "cpu", "--quiet", "--out", "/dev/full"]).output().unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert_eq!(out.status.code(), Some(1), "{stderr}");
     assert!(stderr.contains("`/dev/full`") && !stderr.contains("panicked"), "{stderr}");

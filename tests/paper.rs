@@ -143,11 +143,7 @@ fn grains_many_packing_is_reproducible_and_runs() {
 
     // No two grains overlap at t = 0, and none touches a wall.
     let sim = bifirst::solver::build_simulation(&loaded).unwrap();
-    let bounds: Vec<[f64; 4]> = sim
-        .bodies
-        .iter()
-        .map(|b| b.mesh.nodes.iter().fold([f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY], |a, x| [a[0].min(x[0]), a[1].max(x[0]), a[2].min(x[1]), a[3].max(x[1])]))
-        .collect();
+    let bounds: Vec<[f64; 4]> = sim.bodies.iter().map(|b| b.mesh.nodes.iter().fold([f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY], |a, x| [a[0].min(x[0]), a[1].max(x[0]), a[2].min(x[1]), a[3].max(x[1])])).collect();
     let width = bounds.iter().map(|b| b[1]).fold(0.0, f64::max);
     for (i, a) in bounds.iter().enumerate() {
         assert!(a[0] > 0.0 && a[2] > 0.0, "grain {i} is clear of the left and bottom walls");

@@ -7,19 +7,8 @@ use bifirst::scene::load_scene;
 
 #[test]
 fn documented_keys_override_the_scene() {
-    let sets: Vec<String> = [
-        "time.dt=0.005",
-        "time.end=0.5",
-        "time.xi=0.6",
-        "time.theta=0.7",
-        "material.rubber.G=4000",
-        "material.rubber.density=2.5",
-        "body.beam.initial_velocity=[1, 0]",
-        "gravity=[0,-9.81]",
-        "solver.max_cutbacks=3",
-    ]
-    .map(String::from)
-    .to_vec();
+    let sets: Vec<String> =
+        ["time.dt=0.005", "time.end=0.5", "time.xi=0.6", "time.theta=0.7", "material.rubber.G=4000", "material.rubber.density=2.5", "body.beam.initial_velocity=[1, 0]", "gravity=[0,-9.81]", "solver.max_cutbacks=3"].map(String::from).to_vec();
     let loaded = load_scene(&common_run::scene_path("free_vibration_2d"), &sets).expect("overrides are valid");
     let s = &loaded.scene;
     assert_eq!((s.time.dt, s.time.end, s.time.xi, s.time.theta), (0.005, 0.5, 0.6, 0.7));

@@ -150,12 +150,7 @@ mesh = { generator = "box", element = "hex8", size = [1.0, 1.0, 1.0], divisions 
 fn run_cli(tag: &str, args: &[&str]) -> (String, common_run::Log) {
     let scene = Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/free_vibration_2d.toml");
     let out_path = temp_path(&format!("{tag}.mcap"));
-    let out = Command::new(env!("CARGO_BIN_EXE_bifirst"))
-        .args(["run", scene.to_str().unwrap(), "--set", "time.end=0.02", "--out"])
-        .arg(&out_path)
-        .args(args)
-        .output()
-        .unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_bifirst")).args(["run", scene.to_str().unwrap(), "--set", "time.end=0.02", "--out"]).arg(&out_path).args(args).output().unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr).to_string();
     assert!(out.status.success(), "{args:?}: {stderr}");
     (stderr, read_log(&out_path))

@@ -182,10 +182,7 @@ impl KnownAnswer for SlidingBlock {
     }
     fn errors(&self) -> Vec<ErrorTerm> {
         let ((x0, mass), (x1, dissipated)) = (self.start.unwrap_or((f64::NAN, f64::NAN)), self.end.unwrap_or((f64::NAN, f64::NAN)));
-        vec![
-            ErrorTerm::relative("stopping distance", x1 - x0, self.speed * self.speed / (2.0 * self.friction * self.gravity)),
-            ErrorTerm::relative("friction dissipation", dissipated, 0.5 * mass * self.speed * self.speed),
-        ]
+        vec![ErrorTerm::relative("stopping distance", x1 - x0, self.speed * self.speed / (2.0 * self.friction * self.gravity)), ErrorTerm::relative("friction dissipation", dissipated, 0.5 * mass * self.speed * self.speed)]
     }
 }
 
@@ -200,12 +197,8 @@ struct Hertz {
 impl KnownAnswer for Hertz {
     fn observe(&mut self, sim: &Simulation) {
         let floor = sim.contact.as_ref().and_then(|c| c.obstacles.iter().position(|o| o.name == "floor")).map(|i| i as u32);
-        let mut points: Vec<(f64, f64)> = sim
-            .contact_points
-            .iter()
-            .filter(|c| matches!(c.master, Master::Obstacle { obstacle, .. } if Some(obstacle) == floor))
-            .map(|c| (sim.bodies[c.slave_body as usize].position(c.slave_node as usize)[0], c.r[0]))
-            .collect();
+        let mut points: Vec<(f64, f64)> =
+            sim.contact_points.iter().filter(|c| matches!(c.master, Master::Obstacle { obstacle, .. } if Some(obstacle) == floor)).map(|c| (sim.bodies[c.slave_body as usize].position(c.slave_node as usize)[0], c.r[0])).collect();
         points.sort_by(|a, b| a.0.total_cmp(&b.0));
         self.end = Some(points);
     }

@@ -278,10 +278,7 @@ pub fn table(rows: &[Row]) -> String {
         lines.push(cells);
     }
     let widths: Vec<usize> = (0..lines[0].len()).map(|c| lines.iter().map(|l| l.get(c).map_or(0, |s| s.chars().count())).max().unwrap_or(0)).collect();
-    let mut out: String = lines
-        .iter()
-        .map(|l| l.iter().zip(&widths).enumerate().map(|(c, (s, w))| if c == 1 || c == 3 { format!("{s:<w$}") } else { format!("{s:>w$}") }).collect::<Vec<_>>().join("  ").trim_end().to_string() + "\n")
-        .collect();
+    let mut out: String = lines.iter().map(|l| l.iter().zip(&widths).enumerate().map(|(c, (s, w))| if c == 1 || c == 3 { format!("{s:<w$}") } else { format!("{s:>w$}") }).collect::<Vec<_>>().join("  ").trim_end().to_string() + "\n").collect();
     for r in rows {
         if let Some(message) = &r.message {
             out += &format!("variant {} ({}): {message}\n", r.index, r.label);
@@ -302,11 +299,7 @@ mod tests {
     fn the_front_keeps_what_nothing_beats_on_both_time_and_error() {
         let mut rows = vec![row(1.0, 0.1, "finished"), row(2.0, 0.01, "finished"), row(3.0, 0.05, "finished"), row(0.5, 1e-9, "failed"), row(2.0, 0.01, "finished"), row(4.0, 0.01 * (1.0 - 1e-9), "finished")];
         mark_front(&mut rows);
-        assert_eq!(
-            rows.iter().map(|r| r.pareto).collect::<Vec<_>>(),
-            [true, true, false, false, true, false],
-            "a tie stays on the front; a failed run never is; the same error to round-off at more cost is off it"
-        );
+        assert_eq!(rows.iter().map(|r| r.pareto).collect::<Vec<_>>(), [true, true, false, false, true, false], "a tie stays on the front; a failed run never is; the same error to round-off at more cost is off it");
         assert_eq!(cheapest_within(&rows, 0.02).map(|r| r.wall_s), Some(2.0));
         assert!(cheapest_within(&rows, 1e-3).is_none());
     }

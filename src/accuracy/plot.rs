@@ -39,14 +39,7 @@ pub fn pareto_png(path: &Path, title: &str, rows: &[Row], target: f64) -> Result
     let y = log_range(points.iter().map(|p| p.2).chain(std::iter::once(target)));
     let root = BitMapBackend::new(path, (900, 640)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| draw_err(&e))?;
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, (FAMILY, 20))
-        .margin(16)
-        .margin_right(150)
-        .x_label_area_size(45)
-        .y_label_area_size(80)
-        .build_cartesian_2d(x.clone().log_scale(), y.clone().log_scale())
-        .map_err(|e| draw_err(&e))?;
+    let mut chart = ChartBuilder::on(&root).caption(title, (FAMILY, 20)).margin(16).margin_right(150).x_label_area_size(45).y_label_area_size(80).build_cartesian_2d(x.clone().log_scale(), y.clone().log_scale()).map_err(|e| draw_err(&e))?;
     chart
         .configure_mesh()
         .x_desc("wall time per run (s)")
@@ -66,19 +59,13 @@ pub fn pareto_png(path: &Path, title: &str, rows: &[Row], target: f64) -> Result
         .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK.mix(0.5)));
     let mut front: Vec<(f64, f64)> = points.iter().filter(|p| p.0.pareto).map(|p| (p.1, p.2)).collect();
     front.sort_by(|a, b| a.0.total_cmp(&b.0));
-    chart
-        .draw_series(LineSeries::new(front.iter().copied(), front_color.stroke_width(2)))
-        .map_err(|e| draw_err(&e))?
-        .label("Pareto front")
-        .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], front_color.stroke_width(2)));
+    chart.draw_series(LineSeries::new(front.iter().copied(), front_color.stroke_width(2))).map_err(|e| draw_err(&e))?.label("Pareto front").legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], front_color.stroke_width(2)));
     let many = points.len() > 12;
     for (row, t, e) in &points {
         let (color, filled) = if row.pareto { (front_color, true) } else { (other_color, false) };
         let style = if filled { color.filled() } else { color.stroke_width(2) };
         let text = if many { row.index.to_string() } else { row.label.clone() };
-        chart
-            .draw_series(std::iter::once(EmptyElement::at((*t, *e)) + Circle::new((0, 0), 5, style) + Text::new(text, (8, -14), (FAMILY, 12).into_font().color(&BLACK))))
-            .map_err(|e| draw_err(&e))?;
+        chart.draw_series(std::iter::once(EmptyElement::at((*t, *e)) + Circle::new((0, 0), 5, style) + Text::new(text, (8, -14), (FAMILY, 12).into_font().color(&BLACK)))).map_err(|e| draw_err(&e))?;
     }
     chart.configure_series_labels().position(SeriesLabelPosition::UpperRight).label_font((FAMILY, 13)).background_style(WHITE.mix(0.8)).border_style(BLACK).draw().map_err(|e| draw_err(&e))?;
     root.present().map_err(|e| draw_err(&e))

@@ -59,9 +59,7 @@ impl StiffnessPattern {
         let nen = mesh.kind.nodes();
         let ndof = nen * dim;
         let n = dofs.free_count;
-        let local_free = |e: usize| -> Vec<Option<u32>> {
-            mesh.element(e).iter().flat_map(|&node| (0..dim).map(move |i| node as usize * dim + i)).map(|g| dofs.free[g]).collect()
-        };
+        let local_free = |e: usize| -> Vec<Option<u32>> { mesh.element(e).iter().flat_map(|&node| (0..dim).map(move |i| node as usize * dim + i)).map(|g| dofs.free[g]).collect() };
         // Each column's rows, repeated as often as elements share them.
         let (starts, mut rows) = flattened(n, |emit| {
             for c in 0..n {

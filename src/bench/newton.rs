@@ -9,7 +9,7 @@ use crate::assembly::{element_out_stride, StiffnessPattern};
 use crate::cpu;
 use crate::element::Formulation;
 use crate::gpu::peak::Peaks;
-use crate::gpu::types::{Active, DofOut, MemberRange, NewtonMember, NewtonState, NEWTON_ITERATING, MODE_FORCES};
+use crate::gpu::types::{Active, DofOut, MemberRange, NewtonMember, NewtonState, MODE_FORCES, NEWTON_ITERATING};
 use crate::gpu::{Gpu, GpuError, GpuWorld, NewtonCall};
 use crate::material::{BlatzKo, Model};
 use crate::mesh::ElementKind;

@@ -3,10 +3,10 @@
 //! of each slave node on the facets of the master body).
 
 use super::broad;
+use super::configuration::{Configuration, Fill};
 use super::geometry::{self, frame, norm, sub, Projection, Vec3};
 use super::grid::Grid;
 use super::obstacle::Touch;
-use super::configuration::{Configuration, Fill};
 use super::{ContactModel, ContactPoint, Master, Status, Term};
 use crate::precision::Real;
 use rayon::prelude::*;
@@ -328,11 +328,7 @@ impl PairSearch {
         // The masters each slave's nodes are searched against: those whose grown box takes some
         // of the slave's nodes, which needs the slave's box to meet it (and then the grown boxes
         // meet, which is what the kept pairs hold).
-        let masters = near
-            .par_iter()
-            .enumerate()
-            .map(|(s, list)| list.iter().copied().filter(|&m| model.pairs.friction(s, m as usize).is_some() && broad::intersect(boxes[s], grown_boxes[m as usize])).collect())
-            .collect();
+        let masters = near.par_iter().enumerate().map(|(s, list)| list.iter().copied().filter(|&m| model.pairs.friction(s, m as usize).is_some() && broad::intersect(boxes[s], grown_boxes[m as usize])).collect()).collect();
         Self { grown_boxes, masters }
     }
 
@@ -401,10 +397,7 @@ impl PairSearch {
                         if !held_facing || dim != 2 {
                             continue;
                         }
-                        let corner = facing
-                            .iter()
-                            .filter(|(kk, g, _)| *kk == k && *g != f && concave(surfaces[m].facet(f), surfaces[m].facet(*g), &p.normal, &positions[m]))
-                            .min_by(|a, b| a.2.gap.abs().total_cmp(&b.2.gap.abs()));
+                        let corner = facing.iter().filter(|(kk, g, _)| *kk == k && *g != f && concave(surfaces[m].facet(f), surfaces[m].facet(*g), &p.normal, &positions[m])).min_by(|a, b| a.2.gap.abs().total_cmp(&b.2.gap.abs()));
                         if let Some(&(_, g, q)) = corner {
                             let mut c = body_point(s, node, m, surfaces[m].facet(g), &q, dim, mu, second);
                             c.corner = true;

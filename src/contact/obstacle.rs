@@ -125,10 +125,12 @@ impl Obstacle {
     /// Convex polygon (2D), bodies outside; the vertex order may be either way round.
     pub fn polygon(points: &[Vec3]) -> (Vec<Face>, Mode) {
         let n = points.len();
-        let area: Real = (0..n).map(|i| {
-            let (a, b) = (points[i], points[(i + 1) % n]);
-            a[0] * b[1] - b[0] * a[1]
-        }).sum();
+        let area: Real = (0..n)
+            .map(|i| {
+                let (a, b) = (points[i], points[(i + 1) % n]);
+                a[0] * b[1] - b[0] * a[1]
+            })
+            .sum();
         let sign = if area > 0.0 { 1.0 } else { -1.0 };
         let faces = (0..n)
             .map(|i| {

@@ -4,11 +4,11 @@
 //! an overlap deeper than the contact search): it refuses overlapping bodies at t = 0 and
 //! measures the penetration after every step.
 
-use super::geometry::{add, bounds, cross, dot, edge_range, norm, scale, sub, Vec3};
 use super::broad::{self, intersect, Aabb};
+use super::configuration::{Configuration, Fill};
+use super::geometry::{add, bounds, cross, dot, edge_range, norm, scale, sub, Vec3};
 use super::grid::Grid;
 use super::obstacle::Touch;
-use super::configuration::{Configuration, Fill};
 use super::ContactModel;
 use crate::mesh::{ElementKind, Mesh};
 use crate::precision::Real;
@@ -209,7 +209,11 @@ fn to_surface(surface: &super::Surface, positions: &[Vec3], x: Vec3) -> (Real, V
             3 => on_triangle(x, p[0], p[1], p[2]),
             _ => {
                 let (a, b) = (on_triangle(x, p[0], p[1], p[2]), on_triangle(x, p[0], p[2], p[3]));
-                if norm(sub(a, x)) <= norm(sub(b, x)) { a } else { b }
+                if norm(sub(a, x)) <= norm(sub(b, x)) {
+                    a
+                } else {
+                    b
+                }
             }
         };
         let d = norm(sub(closest, x));

@@ -177,10 +177,7 @@ mod tests {
     #[test]
     fn the_rule_gives_the_tables_it_replaces() {
         // Ties in length scale and in boundary nodes, on purpose.
-        let ranks: Vec<Rank> = [(0.1, 8), (0.2, 8), (0.1, 12), (0.1, 8), (0.3, 4), (0.2, 9)]
-            .iter()
-            .map(|&(length_scale, boundary_nodes)| Rank { length_scale, boundary_nodes })
-            .collect();
+        let ranks: Vec<Rank> = [(0.1, 8), (0.2, 8), (0.1, 12), (0.1, 8), (0.3, 4), (0.2, 9)].iter().map(|&(length_scale, boundary_nodes)| Rank { length_scale, boundary_nodes }).collect();
         let n = ranks.len();
         let listed = [(4, 1, 0.7, None), (2, 0, 0.1, Some(2)), (3, 5, 0.0, Some(5))];
         for every in [None, Some(0.3)] {

@@ -12,8 +12,8 @@
 //! `W` (the Delassus operator `H K̄⁻¹ Hᵀ / (θ dt)` in contact frames) is stored by blocks: one
 //! `3 x 3` block for each pair of points that share a body.
 
-use super::geometry::norm;
 use super::anderson::Anderson;
+use super::geometry::norm;
 use super::law::uzawa_step;
 use super::semismooth::semismooth_solve;
 use crate::precision::Real;
@@ -58,7 +58,11 @@ impl Delassus {
             Sweep::Jacobi => self.rows[i].iter().map(|&(_, b)| norm(&self.blocks[b as usize])).sum(),
             Sweep::GaussSeidel => self.rows[i].iter().filter(|&&(j, _)| j as usize == i).map(|&(_, b)| norm(&self.blocks[b as usize])).sum(),
         };
-        if sum > 0.0 { 1.0 / sum } else { 0.0 }
+        if sum > 0.0 {
+            1.0 / sum
+        } else {
+            0.0
+        }
     }
 
     /// `W r` for point `i` without its own block.

@@ -20,10 +20,10 @@ mod newton;
 mod uzawa;
 
 pub use crate::contact::law::uzawa_step;
-pub use newton::{newton_compact, newton_compact_host, newton_contact_first_forces, newton_contact_first_judge, newton_contact_forces, newton_contact_judge, newton_contact_prepare, newton_judge, newton_update};
 pub use crate::contact::uzawa::uzawa_sweep;
-pub use uzawa::{uzawa_judge, uzawa_solve};
 pub use crate::element::{element_energy, element_force_tangent};
+pub use newton::{newton_compact, newton_compact_host, newton_contact_first_forces, newton_contact_first_judge, newton_contact_forces, newton_contact_judge, newton_contact_prepare, newton_judge, newton_update};
+pub use uzawa::{uzawa_judge, uzawa_solve};
 
 use crate::assembly::element_out_stride;
 use crate::element::{ElementError, ElementOutput, Formulation, ReferenceGeometry};
@@ -96,15 +96,7 @@ pub fn assemble_csr(element_out: &[Real], gather_start: &[u32], gather: &[u32], 
 
 /// Internal force of every dof (the element forces the gather map lists for it) and the
 /// theta-method residual `g = c1 m (u - u_pred) - (1-ξ)(f_ext - f_int,t) - ξ (f_ext - f_int)`.
-pub fn assemble_residual(
-    element_out: &[Real],
-    gather_start: &[u32],
-    gather: &[u32],
-    coefficients: Coefficients<Real>,
-    u: &[Real],
-    step: &[DofStep<Real>],
-    dof_out: &mut [DofOut<Real>],
-) {
+pub fn assemble_residual(element_out: &[Real], gather_start: &[u32], gather: &[u32], coefficients: Coefficients<Real>, u: &[Real], step: &[DofStep<Real>], dof_out: &mut [DofOut<Real>]) {
     dof_out.par_iter_mut().with_min_len(PER_TASK).enumerate().for_each(|(d, out)| {
         let f = gather_sum(element_out, gather_start, gather, d);
         let xi = coefficients.factor;
@@ -130,7 +122,6 @@ fn gather_sum(element_out: &[Real], gather_start: &[u32], gather: &[u32], k: usi
 pub fn peak_copy(source: &[Real], destination: &mut [Real]) {
     destination.par_iter_mut().with_min_len(PER_TASK).zip(source).for_each(|(d, s)| *d = *s);
 }
-
 
 /// `peak_fma`: per value, eight independent chains of [`PEAK_FMA_STEPS`] multiply-adds from
 /// it, summed as the kernel sums them (separate multiply and add: the target need not have

@@ -3,13 +3,13 @@
 //! shader spreads it over its invocations so that the sums are taken in the same order. The
 //! engine's CPU path solves with faer instead; these are the oracle of the parity tests.
 
-use crate::gpu::types::{Active, Coefficients, DofOut, DofStep, MemberRange, NewtonMember, NewtonState, NEWTON_CONVERGED, NEWTON_FAILED, NEWTON_HOST, NEWTON_ITERATING, NEWTON_WORKGROUP, NO_FAILURE};
 use super::uzawa::{global, triple};
+use crate::contact::uzawa::SETTLE;
+use crate::gpu::types::{Active, Coefficients, DofOut, DofStep, MemberRange, NewtonMember, NewtonState, NEWTON_CONVERGED, NEWTON_FAILED, NEWTON_HOST, NEWTON_ITERATING, NEWTON_WORKGROUP, NO_FAILURE};
 use crate::gpu::uzawa_sweep::{NodeGather, UzawaJudgeState, UzawaLocal, UzawaProblem, JUDGE_CONVERGED, JUDGE_LIVE};
 use crate::gpu::ContactLayout;
-use crate::precision::Real;
-use crate::contact::uzawa::SETTLE;
 use crate::policy::{REFACTOR_CONTRACTION, TIGHTEN_AFTER, TIGHTEST_INNER, UZAWA_STALLS};
+use crate::precision::Real;
 
 /// The sum of one value per invocation by halves, as `reduce_sum` of `newton.wgsl`.
 fn reduce_sum(mut partial: [Real; NEWTON_WORKGROUP]) -> Real {

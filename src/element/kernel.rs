@@ -54,16 +54,7 @@ pub fn point_gradients(points: &[GaussPoint], u: &[[Real; 3]], dim: usize, formu
 /// Internal force and tangent stiffness of one element; `u` holds its nodal displacements and
 /// `relaxation` the viscoelastic history of its points, if its material has a Prony series.
 #[allow(clippy::too_many_arguments)]
-pub fn element_force_tangent<M: Hyperelastic>(
-    material: &M,
-    points: &[GaussPoint],
-    u: &[[Real; 3]],
-    dim: usize,
-    formulation: Formulation,
-    relaxation: Option<Relaxation>,
-    with_tangent: bool,
-    out: &mut ElementOutput,
-) -> Result<(), ElementError> {
+pub fn element_force_tangent<M: Hyperelastic>(material: &M, points: &[GaussPoint], u: &[[Real; 3]], dim: usize, formulation: Formulation, relaxation: Option<Relaxation>, with_tangent: bool, out: &mut ElementOutput) -> Result<(), ElementError> {
     if formulation == Formulation::Fbar {
         return fbar_force_tangent(material, points, u, dim, relaxation, with_tangent, out);
     }

@@ -6,12 +6,11 @@ mod kernel;
 mod patches;
 pub mod shape;
 
+pub use kernel::{element_cell_fields, element_energy, element_force_tangent, element_point_fields, element_stresses, element_von_mises, point_gradients, CellFields, ElementError, ElementOutput};
 pub use patches::Patches;
-pub use kernel::{element_cell_fields, element_point_fields, element_energy, element_force_tangent, element_stresses, element_von_mises, point_gradients, CellFields, ElementError, ElementOutput};
 
-
-pub use crate::mesh::{CUBE_TETRAHEDRA, QUAD_TRIANGLES};
 use crate::mesh::{ElementKind, Mesh};
+pub use crate::mesh::{CUBE_TETRAHEDRA, QUAD_TRIANGLES};
 use crate::precision::Real;
 use nalgebra::Matrix3;
 use thiserror::Error;
@@ -48,7 +47,6 @@ impl Formulation {
         }
     }
 }
-
 
 const CUBE_TETRAHEDRA_SLICES: [&[usize]; 6] = [&CUBE_TETRAHEDRA[0], &CUBE_TETRAHEDRA[1], &CUBE_TETRAHEDRA[2], &CUBE_TETRAHEDRA[3], &CUBE_TETRAHEDRA[4], &CUBE_TETRAHEDRA[5]];
 

@@ -39,10 +39,7 @@ pub fn quadrature(kind: ElementKind) -> Vec<QuadraturePoint> {
 }
 
 const QUAD_CORNERS: [[Real; 2]; 4] = [[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]];
-const HEX_CORNERS: [[Real; 3]; 8] = [
-    [-1.0, -1.0, -1.0], [1.0, -1.0, -1.0], [1.0, 1.0, -1.0], [-1.0, 1.0, -1.0],
-    [-1.0, -1.0, 1.0], [1.0, -1.0, 1.0], [1.0, 1.0, 1.0], [-1.0, 1.0, 1.0],
-];
+const HEX_CORNERS: [[Real; 3]; 8] = [[-1.0, -1.0, -1.0], [1.0, -1.0, -1.0], [1.0, 1.0, -1.0], [-1.0, 1.0, -1.0], [-1.0, -1.0, 1.0], [1.0, -1.0, 1.0], [1.0, 1.0, 1.0], [-1.0, 1.0, 1.0]];
 
 /// Shape function values `N_a(ξ)`.
 pub fn values(kind: ElementKind, xi: [Real; 3]) -> Vec<Real> {
@@ -51,10 +48,7 @@ pub fn values(kind: ElementKind, xi: [Real; 3]) -> Vec<Real> {
         ElementKind::Tri3 => vec![1.0 - r - s, r, s],
         ElementKind::Tet4 => vec![1.0 - r - s - t, r, s, t],
         ElementKind::Quad4 => QUAD_CORNERS.iter().map(|c| 0.25 * (1.0 + c[0] * r) * (1.0 + c[1] * s)).collect(),
-        ElementKind::Hex8 => HEX_CORNERS
-            .iter()
-            .map(|c| 0.125 * (1.0 + c[0] * r) * (1.0 + c[1] * s) * (1.0 + c[2] * t))
-            .collect(),
+        ElementKind::Hex8 => HEX_CORNERS.iter().map(|c| 0.125 * (1.0 + c[0] * r) * (1.0 + c[1] * s) * (1.0 + c[2] * t)).collect(),
     }
 }
 
@@ -64,19 +58,7 @@ pub fn gradients(kind: ElementKind, xi: [Real; 3]) -> Vec<[Real; 3]> {
     match kind {
         ElementKind::Tri3 => vec![[-1.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0]],
         ElementKind::Tet4 => vec![[-1.0, -1.0, -1.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
-        ElementKind::Quad4 => QUAD_CORNERS
-            .iter()
-            .map(|c| [0.25 * c[0] * (1.0 + c[1] * s), 0.25 * c[1] * (1.0 + c[0] * r), 0.0])
-            .collect(),
-        ElementKind::Hex8 => HEX_CORNERS
-            .iter()
-            .map(|c| {
-                [
-                    0.125 * c[0] * (1.0 + c[1] * s) * (1.0 + c[2] * t),
-                    0.125 * c[1] * (1.0 + c[0] * r) * (1.0 + c[2] * t),
-                    0.125 * c[2] * (1.0 + c[0] * r) * (1.0 + c[1] * s),
-                ]
-            })
-            .collect(),
+        ElementKind::Quad4 => QUAD_CORNERS.iter().map(|c| [0.25 * c[0] * (1.0 + c[1] * s), 0.25 * c[1] * (1.0 + c[0] * r), 0.0]).collect(),
+        ElementKind::Hex8 => HEX_CORNERS.iter().map(|c| [0.125 * c[0] * (1.0 + c[1] * s) * (1.0 + c[2] * t), 0.125 * c[1] * (1.0 + c[0] * r) * (1.0 + c[2] * t), 0.125 * c[2] * (1.0 + c[0] * r) * (1.0 + c[1] * s)]).collect(),
     }
 }

@@ -106,10 +106,7 @@ pub fn open(name: Option<&str>, precision: Option<Precision>) -> Result<Gpu, Gpu
     let list = ranked(adapters());
     let available: Vec<String> = list.iter().map(|a| AdapterReport::of(a).line()).collect();
     let wanted = name.map(str::to_lowercase);
-    let adapter = list
-        .into_iter()
-        .find(|a| wanted.as_ref().is_none_or(|w| a.get_info().name.to_lowercase().contains(w)))
-        .ok_or_else(|| GpuError::NoAdapter { wanted: name.map(String::from), available })?;
+    let adapter = list.into_iter().find(|a| wanted.as_ref().is_none_or(|w| a.get_info().name.to_lowercase().contains(w))).ok_or_else(|| GpuError::NoAdapter { wanted: name.map(String::from), available })?;
     open_adapter(adapter, precision)
 }
 
@@ -134,8 +131,7 @@ fn open_adapter(adapter: Adapter, precision: Option<Precision>) -> Result<Gpu, G
         required_features |= super::clock::FEATURES;
     }
     let descriptor = wgpu::DeviceDescriptor { label: Some("bifirst"), required_features, required_limits: adapter.limits(), ..Default::default() };
-    let (device, queue) =
-        pollster::block_on(adapter.request_device(&descriptor)).map_err(|e| GpuError::Device { adapter: report.name.clone(), message: e.to_string() })?;
+    let (device, queue) = pollster::block_on(adapter.request_device(&descriptor)).map_err(|e| GpuError::Device { adapter: report.name.clone(), message: e.to_string() })?;
     Ok(Gpu { device, queue, adapter: report, precision, clock: None, clock_features })
 }
 
@@ -208,14 +204,7 @@ impl Gpu {
         // checks each module); the storage buffers stay bounded by the device's robust buffer
         // access, which wgpu turns on wherever there is one.
         let module = unsafe { self.device.create_shader_module_trusted(descriptor, SHADER_CHECKS) };
-        let pipeline = self.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-            label: Some(kernel),
-            layout: None,
-            module: &module,
-            entry_point: Some(entry),
-            compilation_options: Default::default(),
-            cache: None,
-        });
+        let pipeline = self.device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor { label: Some(kernel), layout: None, module: &module, entry_point: Some(entry), compilation_options: Default::default(), cache: None });
         match pollster::block_on(scope.pop()) {
             Some(e) => Err(GpuError::Kernel { kernel: kernel.into(), message: e.to_string() }),
             None => Ok(pipeline),

@@ -2,8 +2,8 @@
 //! judged on any card: copy bandwidth (`peak_copy`) and fused multiply-add throughput
 //! (`peak_fma`). CPU twins: [`crate::cpu::peak_copy`], [`crate::cpu::peak_fma`].
 
-use super::world::{from_device, to_device};
 use super::types::PEAK_FMA_STEPS;
+use super::world::{from_device, to_device};
 use super::{Gpu, GpuError};
 use crate::precision::Real;
 use std::time::Instant;
@@ -113,12 +113,5 @@ pub fn measure(gpu: &Gpu, min_seconds: f64) -> Result<Peaks, GpuError> {
     };
     let (copy_values, copy_seconds) = grow(1 << 16, &|v| peak_copy(gpu, v, 8))?;
     let (fma_values, fma_seconds) = grow(1 << 12, &|v| peak_fma(gpu, v, 8))?;
-    Ok(Peaks {
-        bytes_per_second: 2.0 * (copy_values * gpu.precision.size()) as f64 / copy_seconds,
-        flops_per_second: FMA_FLOPS_PER_VALUE * fma_values as f64 / fma_seconds,
-        copy_values,
-        copy_seconds,
-        fma_values,
-        fma_seconds,
-    })
+    Ok(Peaks { bytes_per_second: 2.0 * (copy_values * gpu.precision.size()) as f64 / copy_seconds, flops_per_second: FMA_FLOPS_PER_VALUE * fma_values as f64 / fma_seconds, copy_values, copy_seconds, fma_values, fma_seconds })
 }

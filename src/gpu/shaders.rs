@@ -133,10 +133,7 @@ pub fn source(kernel: &str, precision: Precision, variant: Option<ElementVariant
     }
     if is_newton_kernel(kernel) {
         use super::types::{NEWTON_MAX_FREE, NEWTON_WORKGROUP};
-        module += &format!(
-            "const MAX_FREE = {NEWTON_MAX_FREE}u;\nconst NEWTON_WORKGROUP = {NEWTON_WORKGROUP}u;\nconst REFACTOR_CONTRACTION = {:?};\n",
-            crate::policy::REFACTOR_CONTRACTION
-        );
+        module += &format!("const MAX_FREE = {NEWTON_MAX_FREE}u;\nconst NEWTON_WORKGROUP = {NEWTON_WORKGROUP}u;\nconst REFACTOR_CONTRACTION = {:?};\n", crate::policy::REFACTOR_CONTRACTION);
         module += include("newton")?;
         if kernel == "newton_contact" {
             // The Uzawa points, problems and states it prepares and reads (`uzawa_solve`'s).

@@ -15,19 +15,19 @@ mod newton;
 pub use contact::{ContactLayout, GroupContact};
 pub use newton::NewtonCall;
 
-use rayon::prelude::*;
-use super::uzawa_sweep::UzawaSweeps;
 use super::types::{Active, Coefficients, DofOut, DofStep, MaterialParams, MemberRange, MODE_FORCES, MODE_TANGENT, NO_FAILURE, NO_HISTORY};
+use super::uzawa_sweep::UzawaSweeps;
 use super::{ElementVariant, Gpu, GpuError};
 use crate::assembly::{element_out_stride, DofMap, GatherMap, StiffnessPattern};
-use crate::policy::{RoundPlacement, UzawaPlacement};
 use crate::contact::uzawa::{Outcome, Problem};
 use crate::element::{Formulation, ReferenceGeometry};
 use crate::material::viscous::HISTORY;
 use crate::material::{Model, Relaxation};
 use crate::mesh::Mesh;
-use crate::precision::{same_bits, Precision, Real};
 use crate::policy::PhaseTimes;
+use crate::policy::{RoundPlacement, UzawaPlacement};
+use crate::precision::{same_bits, Precision, Real};
+use rayon::prelude::*;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 use std::time::Instant;
@@ -355,10 +355,7 @@ impl GpuWorld {
             let variant = ElementVariant { kind: body.mesh.kind, formulation: body.formulation, material: body.model.name() };
             let bytes = largest_buffer(body, real);
             if bytes > max_bytes {
-                return Err(GpuError::Kernel {
-                    kernel: "element_force_tangent".into(),
-                    message: format!("a body of {} elements needs a buffer of {bytes} bytes; this device binds at most {max_bytes}", body.mesh.element_count()),
-                });
+                return Err(GpuError::Kernel { kernel: "element_force_tangent".into(), message: format!("a body of {} elements needs a buffer of {bytes} bytes; this device binds at most {max_bytes}", body.mesh.element_count()) });
             }
             match groups.iter_mut().rev().find(|(v, members, total)| *v == variant && members.len() < max_members && total + bytes <= max_bytes) {
                 Some((_, members, total)) => {
@@ -592,8 +589,7 @@ impl GpuWorld {
             }
             let dof_span = |m: usize| b.members[m].dof_start as u64 * 2 * real..(b.members[m].dof_start + b.members[m].dofs) as u64 * 2 * real;
             let value_span = |m: usize| b.members[m].nonzero_start as u64 * real..(b.members[m].nonzero_start + b.members[m].nonzeros) as u64 * real;
-            let wanted: [(Source, Vec<(usize, usize)>); 2] =
-                [(Source::DofOut, mine.iter().copied().filter(|&(i, _)| list[i].dof_out.is_some()).collect()), (Source::Values, mine.iter().copied().filter(|&(i, _)| list[i].tangent).collect())];
+            let wanted: [(Source, Vec<(usize, usize)>); 2] = [(Source::DofOut, mine.iter().copied().filter(|&(i, _)| list[i].dof_out.is_some()).collect()), (Source::Values, mine.iter().copied().filter(|&(i, _)| list[i].tangent).collect())];
             for (slot, (what, chosen)) in wanted.into_iter().enumerate() {
                 let members: Vec<usize> = chosen.iter().map(|&(_, m)| m).collect();
                 let span: &dyn Fn(usize) -> std::ops::Range<u64> = if what == Source::DofOut { &dof_span } else { &value_span };
@@ -701,16 +697,7 @@ impl GpuWorld {
 
     /// [`GpuWorld::read_back`] into another mappable buffer.
     #[allow(clippy::too_many_arguments)]
-    fn read_back_into(
-        &mut self,
-        target: &Buffer,
-        mut encoder: wgpu::CommandEncoder,
-        readback: &ReadBack,
-        kernel: &str,
-        times: &mut PhaseTimes,
-        started: Instant,
-        unpack: impl FnOnce(&[u8]),
-    ) -> Result<(), GpuError> {
+    fn read_back_into(&mut self, target: &Buffer, mut encoder: wgpu::CommandEncoder, readback: &ReadBack, kernel: &str, times: &mut PhaseTimes, started: Instant, unpack: impl FnOnce(&[u8])) -> Result<(), GpuError> {
         for c in &readback.copies {
             let b = &self.batches[c.batch];
             let source = match c.what {

@@ -257,11 +257,7 @@ pub fn measure(net: &Network, obstacle_names: &[String]) -> Measures {
         (0..d).flat_map(|i| (0..d).map(move |j| (i, j))).map(|(i, j)| (m[i][j] - if i == j { mean } else { 0.0 }).powi(2)).sum::<f64>()
     };
     let pressure = (0..d).map(|i| stress[i][i]).sum::<f64>() / d as f64;
-    let (deviator, fabric_anisotropy) = if d == 2 {
-        ((0.5 * deviatoric_norm2(&stress)).sqrt(), 2.0 * (2.0 * deviatoric_norm2(&fabric)).sqrt())
-    } else {
-        ((1.5 * deviatoric_norm2(&stress)).sqrt(), 5.0 * (1.5 * deviatoric_norm2(&fabric)).sqrt())
-    };
+    let (deviator, fabric_anisotropy) = if d == 2 { ((0.5 * deviatoric_norm2(&stress)).sqrt(), 2.0 * (2.0 * deviatoric_norm2(&fabric)).sqrt()) } else { ((1.5 * deviatoric_norm2(&stress)).sqrt(), 5.0 * (1.5 * deviatoric_norm2(&fabric)).sqrt()) };
     let walls: Vec<WallPressure> = net
         .walls
         .iter()
@@ -406,10 +402,7 @@ impl Networks {
 pub fn csv(rows: &[Measures], dim: usize) -> String {
     let axes = ["x", "y", "z"];
     let pairs: Vec<(usize, usize)> = (0..dim).flat_map(|i| (i..dim).map(move |j| (i, j))).collect();
-    let mut header = vec!["t", "solid_fraction", "coordination", "coordination_without_rattlers", "rattlers", "sliding_fraction", "contacts", "wall_contacts", "container_volume"]
-        .into_iter()
-        .map(String::from)
-        .collect::<Vec<_>>();
+    let mut header = vec!["t", "solid_fraction", "coordination", "coordination_without_rattlers", "rattlers", "sliding_fraction", "contacts", "wall_contacts", "container_volume"].into_iter().map(String::from).collect::<Vec<_>>();
     header.extend(pairs.iter().map(|(i, j)| format!("fabric_{}{}", axes[*i], axes[*j])));
     header.push("fabric_anisotropy".into());
     header.extend(pairs.iter().map(|(i, j)| format!("stress_{}{}", axes[*i], axes[*j])));
@@ -418,7 +411,8 @@ pub fn csv(rows: &[Measures], dim: usize) -> String {
     header.extend(walls.iter().map(|w| format!("wall_{w}")));
     let mut out = header.join(",") + "\n";
     for r in rows {
-        let mut cells: Vec<String> = [r.t, r.solid_fraction, r.coordination, r.coordination_without_rattlers, r.rattlers as f64, r.sliding_fraction, r.contacts as f64, r.wall_contacts as f64, r.container_volume].iter().map(|v| format!("{v:e}")).collect();
+        let mut cells: Vec<String> =
+            [r.t, r.solid_fraction, r.coordination, r.coordination_without_rattlers, r.rattlers as f64, r.sliding_fraction, r.contacts as f64, r.wall_contacts as f64, r.container_volume].iter().map(|v| format!("{v:e}")).collect();
         cells.extend(pairs.iter().map(|(i, j)| format!("{:e}", r.fabric[*i][*j])));
         cells.push(format!("{:e}", r.fabric_anisotropy));
         cells.extend(pairs.iter().map(|(i, j)| format!("{:e}", r.stress[*i][*j])));

@@ -96,11 +96,7 @@ fn force_pdf(path: &Path, title: &str, d: &ForceDistribution) -> Result<(), Plot
     chart.draw_series(filled.iter().map(|&p| Circle::new(p, 4, RGBColor(31, 119, 180).filled()))).map_err(|e| err(&e))?;
     if let (Some(beta), Some(amplitude)) = (d.tail_decay, d.tail_amplitude) {
         let line: Vec<(f64, f64)> = (0..=50).map(|k| 1.0 + (x.end - 1.0) * k as f64 / 50.0).map(|f| (f, amplitude * (-beta * f).exp())).filter(|p| p.1 >= 0.5 * lo).collect();
-        chart
-            .draw_series(LineSeries::new(line, RGBColor(214, 39, 40).stroke_width(2)))
-            .map_err(|e| err(&e))?
-            .label(format!("exp(-{beta:.2} f/<f>)"))
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RGBColor(214, 39, 40)));
+        chart.draw_series(LineSeries::new(line, RGBColor(214, 39, 40).stroke_width(2))).map_err(|e| err(&e))?.label(format!("exp(-{beta:.2} f/<f>)")).legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RGBColor(214, 39, 40)));
         chart.configure_series_labels().background_style(WHITE).border_style(BLACK).label_font((FAMILY, 14)).draw().map_err(|e| err(&e))?;
     }
     root.present().map_err(|e| err(&e))

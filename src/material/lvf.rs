@@ -31,12 +31,7 @@ impl Hyperelastic for Lvf {
         let ed = dev(e);
         let ed2 = ed * ed;
         let (s2, s3, z) = (ed2.trace(), (ed2 * ed).trace(), e.trace() / SQRT3);
-        (self.g + 0.25 * self.a3 * z * z) * s2
-            + 1.5 * self.k * z * z
-            + self.a1 * SQRT6 / 3.0 * s3
-            + self.a2 / 3.0 * z.powi(3)
-            + 0.25 * self.a4 * z.powi(4)
-            + 0.25 * self.a5 * s2 * s2
+        (self.g + 0.25 * self.a3 * z * z) * s2 + 1.5 * self.k * z * z + self.a1 * SQRT6 / 3.0 * s3 + self.a2 / 3.0 * z.powi(3) + 0.25 * self.a4 * z.powi(4) + 0.25 * self.a5 * s2 * s2
     }
 
     fn stress(&self, e: &Mat3) -> Mat3 {
@@ -54,13 +49,9 @@ impl Hyperelastic for Lvf {
         let d2w_dzds2 = 0.5 * self.a3 * z;
         let d2w_ds2ds2 = 0.5 * self.a5;
         let ded = ed * 2.0; // ds2/dE
-        // d dev(Ed²)/dE = I⊙Ed + Ed⊙I - 2/3 (Ed⊗I + I⊗Ed)
+                            // d dev(Ed²)/dE = I⊙Ed + Ed⊙I - 2/3 (Ed⊗I + I⊗Ed)
         let d_dev_ed2 = odot(&i, &ed) * 2.0 - (outer(&ed, &i) + outer(&i, &ed)) * (2.0 / 3.0);
-        let d = p * (2.0 * dw_ds2)
-            + outer(&ded, &ded) * d2w_ds2ds2
-            + (outer(&ded, &iz) + outer(&iz, &ded)) * d2w_dzds2
-            + outer(&iz, &iz) * d2w_dz2
-            + d_dev_ed2 * (self.a1 * SQRT6);
+        let d = p * (2.0 * dw_ds2) + outer(&ded, &ded) * d2w_ds2ds2 + (outer(&ded, &iz) + outer(&iz, &ded)) * d2w_dzds2 + outer(&iz, &iz) * d2w_dz2 + d_dev_ed2 * (self.a1 * SQRT6);
         (self.stress_of(&inv), d)
     }
 }

@@ -145,11 +145,7 @@ impl Viscoelastic {
     pub fn branch_energy(&self, kept: &[Real], shear_modulus: Real) -> Real {
         let norm2 = |v: &[Real]| weighted_dot(v, v);
         let s2 = norm2(&kept[KEPT_S..KEPT_S + HISTORY]);
-        self.terms
-            .iter()
-            .enumerate()
-            .map(|(i, p)| (norm2(&kept[KEPT_Q + HISTORY * i..KEPT_Q + HISTORY * (i + 1)]) - p.g * p.g * s2) / (4.0 * p.g * shear_modulus))
-            .sum()
+        self.terms.iter().enumerate().map(|(i, p)| (norm2(&kept[KEPT_Q + HISTORY * i..KEPT_Q + HISTORY * (i + 1)]) - p.g * p.g * s2) / (4.0 * p.g * shear_modulus)).sum()
     }
 }
 

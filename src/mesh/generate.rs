@@ -157,11 +157,7 @@ pub fn cuboid(origin: [Real; 3], size: [Real; 3], div: [usize; 3], kind: Element
     for k in 0..=nz {
         for j in 0..=ny {
             for i in 0..=nx {
-                nodes.push([
-                    origin[0] + size[0] * i as Real / nx as Real,
-                    origin[1] + size[1] * j as Real / ny as Real,
-                    origin[2] + size[2] * k as Real / nz as Real,
-                ]);
+                nodes.push([origin[0] + size[0] * i as Real / nx as Real, origin[1] + size[1] * j as Real / ny as Real, origin[2] + size[2] * k as Real / nz as Real]);
             }
         }
     }
@@ -169,10 +165,7 @@ pub fn cuboid(origin: [Real; 3], size: [Real; 3], div: [usize; 3], kind: Element
     for k in 0..nz {
         for j in 0..ny {
             for i in 0..nx {
-                let c = [
-                    id(i, j, k), id(i + 1, j, k), id(i + 1, j + 1, k), id(i, j + 1, k),
-                    id(i, j, k + 1), id(i + 1, j, k + 1), id(i + 1, j + 1, k + 1), id(i, j + 1, k + 1),
-                ];
+                let c = [id(i, j, k), id(i + 1, j, k), id(i + 1, j + 1, k), id(i, j + 1, k), id(i, j, k + 1), id(i + 1, j, k + 1), id(i + 1, j + 1, k + 1), id(i, j + 1, k + 1)];
                 match kind {
                     ElementKind::Hex8 => conn.extend(c),
                     _ => conn.extend(CUBE_TETRAHEDRA.iter().flatten().map(|&k| c[k])),
@@ -185,10 +178,7 @@ pub fn cuboid(origin: [Real; 3], size: [Real; 3], div: [usize; 3], kind: Element
         for j in 0..=ny {
             for i in 0..=nx {
                 let n = id(i, j, k);
-                for (name, on) in [
-                    ("x_min", i == 0), ("x_max", i == nx), ("y_min", j == 0),
-                    ("y_max", j == ny), ("z_min", k == 0), ("z_max", k == nz),
-                ] {
+                for (name, on) in [("x_min", i == 0), ("x_max", i == nx), ("y_min", j == 0), ("y_max", j == ny), ("z_min", k == 0), ("z_max", k == nz)] {
                     if on {
                         sets.entry(name.into()).or_default().push(n);
                     }
@@ -210,16 +200,16 @@ pub fn ball(center: [Real; 3], radius: Real, n: usize, kind: ElementKind) -> Mes
     let cube = cuboid([-1.0; 3], [2.0; 3], [m, m, m], kind);
     let on_sphere = |[u, v, w]: [Real; 3]| {
         let (u2, v2, w2) = (u * u, v * v, w * w);
-        [
-            u * (1.0 - 0.5 * v2 - 0.5 * w2 + v2 * w2 / 3.0).sqrt(),
-            v * (1.0 - 0.5 * w2 - 0.5 * u2 + w2 * u2 / 3.0).sqrt(),
-            w * (1.0 - 0.5 * u2 - 0.5 * v2 + u2 * v2 / 3.0).sqrt(),
-        ]
+        [u * (1.0 - 0.5 * v2 - 0.5 * w2 + v2 * w2 / 3.0).sqrt(), v * (1.0 - 0.5 * w2 - 0.5 * u2 + w2 * u2 / 3.0).sqrt(), w * (1.0 - 0.5 * u2 - 0.5 * v2 + u2 * v2 / 3.0).sqrt()]
     };
-    let nodes = cube.nodes.iter().map(|&p| {
-        let x = on_sphere(p);
-        [0, 1, 2].map(|i| center[i] + radius * x[i])
-    }).collect();
+    let nodes = cube
+        .nodes
+        .iter()
+        .map(|&p| {
+            let x = on_sphere(p);
+            [0, 1, 2].map(|i| center[i] + radius * x[i])
+        })
+        .collect();
     let faces = ["x_min", "x_max", "y_min", "y_max", "z_min", "z_max"];
     let boundary: Vec<u32> = faces.iter().flat_map(|f| cube.node_sets[*f].iter().copied()).collect();
     let middle = ((n * (m + 1) + n) * (m + 1) + n) as u32;

@@ -80,8 +80,7 @@ pub fn read(bytes: &[u8], group: Option<&str>) -> Result<Mesh, GmshError> {
         let chain: Vec<&str> = e.lines().map(str::trim).take_while(|l| !l.starts_with("Hex dump")).map(|l| l.trim_end_matches([',', '.'])).filter(|l| !l.is_empty()).collect();
         GmshError::Parse(chain.join(": "))
     };
-    let parsed = std::panic::catch_unwind(|| mshio::parse_msh_bytes(bytes).map_err(|e| parse_error(e.to_string())))
-        .map_err(|_| GmshError::Parse("the parser rejected the file".into()))??;
+    let parsed = std::panic::catch_unwind(|| mshio::parse_msh_bytes(bytes).map_err(|e| parse_error(e.to_string()))).map_err(|_| GmshError::Parse("the parser rejected the file".into()))??;
     if (parsed.header.version - 4.1).abs() > 1e-9 {
         return Err(GmshError::Version(parsed.header.version.to_string()));
     }
@@ -118,19 +117,13 @@ pub fn read(bytes: &[u8], group: Option<&str>) -> Result<Mesh, GmshError> {
             entity_groups.insert((3, v.tag), v.physical_tags.clone());
         }
     }
-    let group_names = |dim: i32, tag: i32| -> Vec<String> {
-        entity_groups.get(&(dim, tag)).map(Vec::as_slice).unwrap_or_default().iter().map(|p| names.get(&(dim, p.abs())).cloned().unwrap_or_else(|| format!("physical_{}", p.abs()))).collect()
-    };
+    let group_names = |dim: i32, tag: i32| -> Vec<String> { entity_groups.get(&(dim, tag)).map(Vec::as_slice).unwrap_or_default().iter().map(|p| names.get(&(dim, p.abs())).cloned().unwrap_or_else(|| format!("physical_{}", p.abs()))).collect() };
     let blocks = data.elements.map(|e| e.element_blocks).unwrap_or_default();
-    let kind = blocks
-        .iter()
-        .filter_map(|b| kind_of(b.element_type))
-        .max_by_key(|k| k.dim())
-        .ok_or_else(|| {
-            let mut found: Vec<String> = blocks.iter().map(|b| format!("{:?}", b.element_type)).collect();
-            found.dedup();
-            GmshError::NoElements(if found.is_empty() { "no elements".into() } else { found.join(", ") })
-        })?;
+    let kind = blocks.iter().filter_map(|b| kind_of(b.element_type)).max_by_key(|k| k.dim()).ok_or_else(|| {
+        let mut found: Vec<String> = blocks.iter().map(|b| format!("{:?}", b.element_type)).collect();
+        found.dedup();
+        GmshError::NoElements(if found.is_empty() { "no elements".into() } else { found.join(", ") })
+    })?;
     let mut index: HashMap<u64, u32> = HashMap::new();
     let mut nodes = Vec::new();
     let mut connectivity = Vec::new();

@@ -72,9 +72,7 @@ impl RunRecord {
 
     /// The scene name from `/run`, else the file stem.
     pub fn name(&self) -> String {
-        self.messages("/run").first().and_then(|m| m["scene_name"].as_str()).map(String::from).unwrap_or_else(|| {
-            self.path.file_stem().map_or_else(|| "run".into(), |s| s.to_string_lossy().into_owned())
-        })
+        self.messages("/run").first().and_then(|m| m["scene_name"].as_str()).map(String::from).unwrap_or_else(|| self.path.file_stem().map_or_else(|| "run".into(), |s| s.to_string_lossy().into_owned()))
     }
 }
 

@@ -203,7 +203,11 @@ pub fn table(runs: &[LogSummary]) -> String {
             .iter()
             .map(|r| {
                 let (value, total) = (r.wall_by_phase[i].1, r.wall_by_phase[PHASES.len()].1);
-                if *phase == "total" || total <= 0.0 { format!("{value:.3}") } else { format!("{value:.3} ({:.0}%)", 100.0 * value / total) }
+                if *phase == "total" || total <= 0.0 {
+                    format!("{value:.3}")
+                } else {
+                    format!("{value:.3} ({:.0}%)", 100.0 * value / total)
+                }
             })
             .collect();
         rows.push((label, cells));

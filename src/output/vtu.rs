@@ -13,7 +13,7 @@ use crate::precision::Real;
 use crate::solver::Simulation;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-use vtkio::model::{Attribute, IOBuffer, Attributes, ByteOrder, CellType, Cells, DataArray, DataSet, ElementType, UnstructuredGridPiece, Version, VertexNumbers, Vtk};
+use vtkio::model::{Attribute, Attributes, ByteOrder, CellType, Cells, DataArray, DataSet, ElementType, IOBuffer, UnstructuredGridPiece, Version, VertexNumbers, Vtk};
 
 /// Name of the contact-point series (a body of this name would share its files).
 pub const CONTACT_SERIES: &str = "contact_points";
@@ -53,13 +53,7 @@ fn padded(values: &[Real], dim: usize) -> Vec<Real> {
 }
 
 fn grid(points: Vec<Real>, cells: Cells, data: Attributes) -> Vtk {
-    Vtk {
-        version: Version::Auto,
-        title: String::new(),
-        byte_order: ByteOrder::LittleEndian,
-        data: DataSet::inline(UnstructuredGridPiece { points: points.into(), cells, data }),
-        file_path: None,
-    }
+    Vtk { version: Version::Auto, title: String::new(), byte_order: ByteOrder::LittleEndian, data: DataSet::inline(UnstructuredGridPiece { points: points.into(), cells, data }), file_path: None }
 }
 
 impl VtuSeries {
@@ -95,33 +89,17 @@ impl VtuSeries {
             let points: Vec<Real> = (0..b.mesh.nodes.len()).flat_map(|n| b.position(n)).collect();
             let nen = b.mesh.kind.nodes() as u64;
             let count = b.mesh.element_count();
-            let cells = Cells {
-                cell_verts: VertexNumbers::XML {
-                    connectivity: b.mesh.connectivity.iter().map(|&n| n as u64).collect(),
-                    offsets: (1..=count as u64).map(|e| e * nen).collect(),
-                },
-                types: vec![cell_type(b.mesh.kind); count],
-            };
+            let cells = Cells { cell_verts: VertexNumbers::XML { connectivity: b.mesh.connectivity.iter().map(|&n| n as u64).collect(), offsets: (1..=count as u64).map(|e| e * nen).collect() }, types: vec![cell_type(b.mesh.kind); count] };
             let data = Attributes {
-                point: vec![
-                    array("displacement", ElementType::Vectors, padded(&b.state.u, dim)),
-                    array("velocity", ElementType::Vectors, padded(&b.state.v, dim)),
-                ],
-                cell: vec![
-                    scalars("von_mises", f.iter().map(|c| c.von_mises).collect()),
-                    array("cauchy_stress", ElementType::Generic(9), f.iter().flat_map(|c| c.cauchy).collect()),
-                    scalars("J", f.iter().map(|c| c.jacobian).collect()),
-                ],
+                point: vec![array("displacement", ElementType::Vectors, padded(&b.state.u, dim)), array("velocity", ElementType::Vectors, padded(&b.state.v, dim))],
+                cell: vec![scalars("von_mises", f.iter().map(|c| c.von_mises).collect()), array("cauchy_stress", ElementType::Generic(9), f.iter().flat_map(|c| c.cauchy).collect()), scalars("J", f.iter().map(|c| c.jacobian).collect())],
             };
             self.export(grid(points, cells, data), &self.frame_path(&b.name, frame))?;
         }
         if sim.contact.is_some() {
             let c = &sim.contact_points;
             let points: Vec<Real> = c.iter().flat_map(|p| sim.bodies[p.slave_body as usize].position(p.slave_node as usize)).collect();
-            let cells = Cells {
-                cell_verts: VertexNumbers::XML { connectivity: (0..c.len() as u64).collect(), offsets: (1..=c.len() as u64).collect() },
-                types: vec![CellType::Vertex; c.len()],
-            };
+            let cells = Cells { cell_verts: VertexNumbers::XML { connectivity: (0..c.len() as u64).collect(), offsets: (1..=c.len() as u64).collect() }, types: vec![CellType::Vertex; c.len()] };
             let data = Attributes {
                 point: vec![
                     scalars("gap", c.iter().map(|p| p.gap).collect()),

@@ -36,14 +36,7 @@ impl LoadedScene {
 
 /// Reads and validates a scene file, applying `--set KEY=VALUE` overrides first.
 pub fn load_scene(path: &Path, sets: &[String]) -> Result<LoadedScene, SceneError> {
-    let source = std::fs::read_to_string(path).map_err(|e| SceneError {
-        kind: SceneErrorKind::Reference,
-        file: path.to_path_buf(),
-        line: None,
-        key: String::new(),
-        from_set: None,
-        message: format!("cannot read the scene file: {e}."),
-    })?;
+    let source = std::fs::read_to_string(path).map_err(|e| SceneError { kind: SceneErrorKind::Reference, file: path.to_path_buf(), line: None, key: String::new(), from_set: None, message: format!("cannot read the scene file: {e}.") })?;
     parse_scene(path, source, sets)
 }
 
@@ -52,14 +45,7 @@ pub fn load_scene(path: &Path, sets: &[String]) -> Result<LoadedScene, SceneErro
 pub fn parse_scene(path: &Path, source: String, sets: &[String]) -> Result<LoadedScene, SceneError> {
     let mut table: toml::Table = toml::from_str(&source).map_err(|e| {
         let line = e.span().map(|s| line_of(&source, s.start));
-        SceneError {
-            kind: SceneErrorKind::Syntax,
-            file: path.to_path_buf(),
-            line,
-            key: String::new(),
-            from_set: None,
-            message: format!("not valid TOML: {}", toml_message(e.message().trim_end())),
-        }
+        SceneError { kind: SceneErrorKind::Syntax, file: path.to_path_buf(), line, key: String::new(), from_set: None, message: format!("not valid TOML: {}", toml_message(e.message().trim_end())) }
     })?;
     let mut overrides = Vec::new();
     for set in sets {
@@ -94,10 +80,7 @@ pub fn parse_scene(path: &Path, source: String, sets: &[String]) -> Result<Loade
     let resolved_toml = toml::to_string(&scene).expect("a deserialized scene serializes");
     packing::expand(&mut scene).map_err(|(kind, key, message)| err(kind, key, message))?;
     validate(&scene).map_err(|(kind, key, message)| err(kind, key, message))?;
-    let name = scene
-        .name
-        .clone()
-        .unwrap_or_else(|| path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "scene".into()));
+    let name = scene.name.clone().unwrap_or_else(|| path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_else(|| "scene".into()));
     Ok(LoadedScene { scene, name, path: path.to_path_buf(), resolved_toml, source, overrides })
 }
 
@@ -145,18 +128,15 @@ fn apply_set(table: &mut toml::Table, set: &str) -> Result<String, (String, Stri
         return Err((String::new(), "expected KEY=VALUE.".into()));
     };
     let key = key.trim().to_string();
-    let value: toml::Value = toml::from_str::<toml::Table>(&format!("v = {}", value.trim()))
-        .ok()
-        .and_then(|mut t| t.remove("v"))
-        .ok_or_else(|| {
-            let value = value.trim();
-            let digits = value.strip_prefix(['+', '-']).unwrap_or(value);
-            if !digits.is_empty() && digits.bytes().all(|b| b.is_ascii_digit() || b == b'_') {
-                (key.clone(), format!("`{value}` is beyond TOML's integers (64-bit: at most {}).", i64::MAX))
-            } else {
-                (key.clone(), format!("`{value}` is not a TOML literal (strings need quotes, e.g. \"lvf\")."))
-            }
-        })?;
+    let value: toml::Value = toml::from_str::<toml::Table>(&format!("v = {}", value.trim())).ok().and_then(|mut t| t.remove("v")).ok_or_else(|| {
+        let value = value.trim();
+        let digits = value.strip_prefix(['+', '-']).unwrap_or(value);
+        if !digits.is_empty() && digits.bytes().all(|b| b.is_ascii_digit() || b == b'_') {
+            (key.clone(), format!("`{value}` is beyond TOML's integers (64-bit: at most {}).", i64::MAX))
+        } else {
+            (key.clone(), format!("`{value}` is not a TOML literal (strings need quotes, e.g. \"lvf\")."))
+        }
+    })?;
     let parts: Vec<&str> = key.split('.').collect();
     if parts.iter().any(|p| p.is_empty()) {
         return Err((key.clone(), "the key has an empty part.".into()));
@@ -184,11 +164,7 @@ fn line_of(text: &str, offset: usize) -> usize {
 
 /// Finds the line of the deepest part of `key` written in `source`, or the `--set` behind it.
 fn locate(path: &Path, source: &str, overrides: &[(String, String)], kind: SceneErrorKind, key: &str, message: String) -> SceneError {
-    let from_set = overrides
-        .iter()
-        .rev()
-        .find(|(k, _)| key == k || key.starts_with(&format!("{k}.")))
-        .map(|(_, set)| set.clone());
+    let from_set = overrides.iter().rev().find(|(k, _)| key == k || key.starts_with(&format!("{k}."))).map(|(_, set)| set.clone());
     let line = if from_set.is_some() { None } else { key_line(source, key) };
     SceneError { kind, file: path.to_path_buf(), line, key: key.to_string(), from_set, message }
 }

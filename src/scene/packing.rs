@@ -11,8 +11,8 @@
 //! slave, and a polygon's corners must be slave nodes, or they would sink into the disks.
 
 use super::error::SceneErrorKind::{Invalid, Reference};
-use super::types::{BodySpec, Generator, Interpolation, MeshSpec, ObstacleShape, ObstacleSpec, PackingSpec, Scene};
 use super::types::DEFAULT_SHARE;
+use super::types::{BodySpec, Generator, Interpolation, MeshSpec, ObstacleShape, ObstacleSpec, PackingSpec, Scene};
 use super::validate::{friction, length, names, Failure};
 use crate::mesh::{generate, ElementKind};
 use crate::precision::Real;

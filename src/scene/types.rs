@@ -345,22 +345,7 @@ pub struct PackingSpec {
 
 impl Default for PackingSpec {
     fn default() -> Self {
-        Self {
-            count: 100,
-            seed: 1,
-            material: String::new(),
-            radius: vec![0.4, 0.5],
-            dimension: 2,
-            polygons: None,
-            polyhedra: None,
-            element: None,
-            divisions: 2,
-            columns: 0,
-            gap: 0.05,
-            wall_velocity: 0.0,
-            wall_until: None,
-            wall_friction: 0.0,
-        }
+        Self { count: 100, seed: 1, material: String::new(), radius: vec![0.4, 0.5], dimension: 2, polygons: None, polyhedra: None, element: None, divisions: 2, columns: 0, gap: 0.05, wall_velocity: 0.0, wall_until: None, wall_friction: 0.0 }
     }
 }
 

@@ -146,9 +146,7 @@ pub(super) fn validate(s: &Scene) -> Result<(), Failure> {
             finite_vec(&format!("{key}.initial_velocity"), v, dim)?;
         }
         match (&b.angular_velocity, dim) {
-            (Some(AngularVelocity::Spatial(w)), Some(2)) => {
-                fail(Invalid, format!("{key}.angular_velocity"), format!("in 2D the angular velocity is one number, got {} components.", w.len()))?
-            }
+            (Some(AngularVelocity::Spatial(w)), Some(2)) => fail(Invalid, format!("{key}.angular_velocity"), format!("in 2D the angular velocity is one number, got {} components.", w.len()))?,
             (Some(AngularVelocity::Planar(_)), Some(3)) => fail(Invalid, format!("{key}.angular_velocity"), "in 3D the angular velocity is a vector of 3 components.")?,
             (Some(AngularVelocity::Spatial(w)), _) => finite_vec(&format!("{key}.angular_velocity"), w, Some(3))?,
             _ => {}
@@ -252,23 +250,7 @@ fn validate_material(key: &str, m: &MaterialSpec) -> Result<(), Failure> {
             (single(&m.mu), single(&m.alpha))
         }
     };
-    let params = [
-        ("G", m.G),
-        ("K", m.K),
-        ("a1", m.a1),
-        ("a2", m.a2),
-        ("a3", m.a3),
-        ("a4", m.a4),
-        ("a5", m.a5),
-        ("C10", m.C10),
-        ("C01", m.C01),
-        ("C20", m.C20),
-        ("C30", m.C30),
-        ("Jm", m.Jm),
-        ("mu", mu),
-        ("lambda_m", m.lambda_m),
-        ("alpha", alpha),
-    ];
+    let params = [("G", m.G), ("K", m.K), ("a1", m.a1), ("a2", m.a2), ("a3", m.a3), ("a4", m.a4), ("a5", m.a5), ("C10", m.C10), ("C01", m.C01), ("C20", m.C20), ("C30", m.C30), ("Jm", m.Jm), ("mu", mu), ("lambda_m", m.lambda_m), ("alpha", alpha)];
     let model = serde_json::to_value(m.model).ok().and_then(|v| v.as_str().map(str::to_owned)).unwrap_or_default();
     for (p, v) in params {
         match v {
@@ -529,14 +511,7 @@ fn validate_contact(s: &Scene, _dim: Option<usize>) -> Result<(), Failure> {
 }
 
 fn validate_obstacle(s: &Scene, key: &str, o: &ObstacleSpec, dim: Option<usize>) -> Result<(), Failure> {
-    let fields = [
-        ("point", o.point.is_some()),
-        ("normal", o.normal.is_some()),
-        ("min", o.min.is_some()),
-        ("max", o.max.is_some()),
-        ("inside", o.inside.is_some()),
-        ("points", o.points.is_some()),
-    ];
+    let fields = [("point", o.point.is_some()), ("normal", o.normal.is_some()), ("min", o.min.is_some()), ("max", o.max.is_some()), ("inside", o.inside.is_some()), ("points", o.points.is_some())];
     let wanted: &[&str] = match o.shape {
         ObstacleShape::Plane => &["point", "normal"],
         ObstacleShape::Box => &["min", "max", "inside"],

@@ -2,7 +2,6 @@
 //! Newton solve of one theta-method step (paper eqs. 16-19).
 
 use super::linear::CholeskySolver;
-use crate::policy::{PhaseTimes, REFACTOR_CONTRACTION};
 use super::topology::Topology;
 use crate::assembly::{element_out_stride, DofMap, GatherMap, StiffnessPattern};
 use crate::cpu::{assemble_csr, assemble_residual, dispatch_element_force_tangent, element_energy, element_force_tangent};
@@ -13,9 +12,10 @@ use crate::gpu::{ElementFailure, Evaluation, GpuError, NewtonCall, WorldBody};
 use crate::material::tensor::green_lagrange;
 use crate::material::viscous::HISTORY;
 use crate::material::{BranchStep, Hyperelastic, Model, Relaxation, Viscoelastic};
-use rayon::prelude::*;
 use crate::mesh::Mesh;
+use crate::policy::{PhaseTimes, REFACTOR_CONTRACTION};
 use crate::precision::{same_bits, Real};
+use rayon::prelude::*;
 use std::sync::Arc;
 use std::time::Instant;
 
@@ -63,7 +63,11 @@ impl Prescribed {
 
     /// The velocity just after time `t`.
     fn velocity_after(&self, t: Real) -> Real {
-        if t < self.until { self.velocity } else { 0.0 }
+        if t < self.until {
+            self.velocity
+        } else {
+            0.0
+        }
     }
 }
 
@@ -264,7 +268,6 @@ impl EvaluatedAt {
     }
 }
 
-
 /// Round-off per dof of the internal force, in units of `(K + 4G/3) h^(dim-1)`: a few ε (the
 /// error of `J` times the few terms a node sums).
 pub const STIFFNESS_ROUND_OFF: Real = 4.0 * Real::EPSILON;
@@ -377,16 +380,7 @@ impl Body {
 
     /// What the GPU world uploads of the body.
     pub fn world_body(&self) -> WorldBody<'_> {
-        WorldBody {
-            mesh: self.elements(),
-            geometry: &self.geometry,
-            model: &self.model,
-            formulation: self.formulation,
-            pattern: &self.pattern,
-            gather: &self.gather,
-            dofs: &self.dofs,
-            viscous: self.viscoelastic.is_some(),
-        }
+        WorldBody { mesh: self.elements(), geometry: &self.geometry, model: &self.model, formulation: self.formulation, pattern: &self.pattern, gather: &self.gather, dofs: &self.dofs, viscous: self.viscoelastic.is_some() }
     }
 
     /// The step's start values of every dof (after [`Body::begin_step`]).
@@ -405,8 +399,7 @@ impl Body {
         let t0 = Instant::now();
         let elements = self.patches.as_ref().map_or(&self.mesh, |p| &p.cells);
         let relaxation = self.viscoelastic.as_ref().map(|_| Relaxation { c: self.relaxation_c, history: &self.history });
-        let result = dispatch_element_force_tangent(&self.model, elements, &self.geometry, self.formulation, relaxation, u, with_tangent, &mut self.element_results)
-            .map_err(|(element, error)| self.element_error(element, error));
+        let result = dispatch_element_force_tangent(&self.model, elements, &self.geometry, self.formulation, relaxation, u, with_tangent, &mut self.element_results).map_err(|(element, error)| self.element_error(element, error));
         times.elements += t0.elapsed().as_secs_f64();
         result
     }
@@ -1140,14 +1133,14 @@ impl Body {
         match &self.patches {
             Some(patches) => {
                 let per_patch: Vec<Vec<CellFields>> = (0..patches.cells.element_count()).map(|p| self.patch_point_fields(p)).collect();
-                (0..self.mesh.element_count()).map(|e| {
-                    let (patch, point) = patches.slot(e);
-                    per_patch[patch][point]
-                }).collect()
+                (0..self.mesh.element_count())
+                    .map(|e| {
+                        let (patch, point) = patches.slot(e);
+                        per_patch[patch][point]
+                    })
+                    .collect()
             }
-            None => (0..self.mesh.element_count())
-                .map(|e| element_cell_fields(&self.model, self.geometry.element_points(e), &self.mesh.element_displacements(&self.state.u, e), self.dim, self.formulation))
-                .collect(),
+            None => (0..self.mesh.element_count()).map(|e| element_cell_fields(&self.model, self.geometry.element_points(e), &self.mesh.element_displacements(&self.state.u, e), self.dim, self.formulation)).collect(),
         }
     }
 

@@ -7,10 +7,10 @@
 //! local law; a last solve applies the reactions, `Δu = K̄⁻¹(-g + Hᵀ r)`.
 
 use super::body::{Body, StepParams};
-use crate::policy::{PhaseTimes, TIGHTEST_INNER};
 use crate::contact::uzawa::{self, Colours, Delassus, Local, NodalMap, Outcome, Problem};
 use crate::contact::{uzawa_step, ContactPoint, Settings, Status, WarmStart};
 use crate::gpu::uzawa_sweep::{self, solve_loops_per_sweep};
+use crate::policy::{PhaseTimes, TIGHTEST_INNER};
 use crate::precision::Real;
 use std::collections::HashMap;
 use std::sync::atomic::AtomicBool;
@@ -20,7 +20,6 @@ use std::sync::atomic::AtomicBool;
 /// before the sweeps were accelerated; 0.1 saves a tenth of the sweeps of grains_many (N = 200)
 /// with the same Newton iterations.
 const INNER_TOLERANCE: Real = 0.1;
-
 
 /// Columns solved together: bounds the dense right-hand-side block to `64 x free dofs`.
 const COLUMN_BATCH: usize = 64;
@@ -259,11 +258,16 @@ impl ContactStep {
             x0.push(rhs);
         }
         for (i, c) in self.points.iter().enumerate() {
-            let v = local_velocity(c, dim, |b, d| {
-                let body = &bodies[b];
-                let dv = body.dofs.free[d].map_or(0.0, |f| x0[b][f as usize] / theta_dt);
-                body.trial_velocity(p, d) + dv
-            }, 1);
+            let v = local_velocity(
+                c,
+                dim,
+                |b, d| {
+                    let body = &bodies[b];
+                    let dv = body.dofs.free[d].map_or(0.0, |f| x0[b][f as usize] / theta_dt);
+                    body.trial_velocity(p, d) + dv
+                },
+                1,
+            );
             self.local[i].v_free = v;
         }
         self.free_increment = x0;

@@ -120,9 +120,7 @@ impl CholeskySolver {
         let mat = SparseColMatRef::new(s.pattern.as_ref(), values);
         self.factored = false;
         let stack = MemStack::new(&mut self.scratch);
-        s.symbolic
-            .factorize_numeric_llt(&mut self.factor, mat, Side::Lower, Default::default(), s.par, stack, Default::default())
-            .map_err(|_| LinearError::NotPositiveDefinite)?;
+        s.symbolic.factorize_numeric_llt(&mut self.factor, mat, Side::Lower, Default::default(), s.par, stack, Default::default()).map_err(|_| LinearError::NotPositiveDefinite)?;
         self.factored = true;
         Ok(())
     }

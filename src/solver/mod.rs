@@ -5,20 +5,21 @@ pub mod body;
 pub mod coupling;
 pub mod group;
 pub mod linear;
+mod lockstep;
 pub mod ordering;
 mod restart;
 mod setup;
 pub mod topology;
 
-pub use body::{Body, NodalLoad, StepFailure};
 pub use crate::policy::{PhaseTimes, REFACTOR_CONTRACTION, TIGHTEN_AFTER, UZAWA_STALLS};
+pub use body::{Body, NodalLoad, StepFailure};
 pub use restart::{RestoreError, SavedBody, SavedFactor, SavedReaction, SavedState};
 pub use setup::{build_mesh, build_simulation};
 
 use crate::contact::broad::KeptPairs;
+use crate::contact::configuration::extent;
 use crate::contact::detect::{detect, thin_second_pass};
 use crate::contact::overlap::{overlaps, Overlap, Worst};
-use crate::contact::configuration::extent;
 use crate::contact::{Configuration, ContactModel, ContactPoint, ContactStats, Master};
 use crate::gpu::GpuWorld;
 use crate::precision::{Precision, Real};
@@ -103,7 +104,11 @@ pub struct RunFailure {
 
 /// Where a failed step started, when earlier steps had already shortened it.
 fn started_at(level: usize) -> String {
-    if level == 0 { String::new() } else { format!(" from dt / {}", 1u64 << level) }
+    if level == 0 {
+        String::new()
+    } else {
+        format!(" from dt / {}", 1u64 << level)
+    }
 }
 
 /// Energies of the whole system at the current time.
@@ -434,14 +439,7 @@ impl Simulation {
     /// before anything is committed.
     fn try_step(&mut self, dt: Real, report: &mut StepReport, attempt: Attempt) -> Result<(), StepFailure> {
         let Attempt { thin, raised, last, energy_scale } = attempt;
-        let p = StepParams {
-            dt,
-            xi: if raised { 1.0 } else { self.xi },
-            theta: if raised { 1.0 } else { self.theta },
-            residual_tolerance: self.residual_tolerance,
-            increment_tolerance: self.increment_tolerance,
-            max_iterations: self.max_iterations,
-        };
+        let p = StepParams { dt, xi: if raised { 1.0 } else { self.xi }, theta: if raised { 1.0 } else { self.theta }, residual_tolerance: self.residual_tolerance, increment_tolerance: self.increment_tolerance, max_iterations: self.max_iterations };
         let started = std::time::Instant::now();
         let (mut points, velocity_scale) = self.detect(dt);
         if let (true, Some(model), Some((config, _))) = (thin, &self.contact, &self.committed) {
@@ -573,13 +571,7 @@ impl Simulation {
         }
         let (config, body_speed) = self.committed.as_mut().expect("configured above");
         let body_speed = *body_speed;
-        let obstacle_speed = self
-            .contact
-            .iter()
-            .flat_map(|c| &c.obstacles)
-            .flat_map(|o| [o.motion.velocity(self.t), o.motion.velocity(self.t + dt)])
-            .map(|v| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt())
-            .fold(0.0, Real::max);
+        let obstacle_speed = self.contact.iter().flat_map(|c| &c.obstacles).flat_map(|o| [o.motion.velocity(self.t), o.motion.velocity(self.t + dt)]).map(|v| (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()).fold(0.0, Real::max);
         let h = self.bodies.iter().map(|b| b.length_scale()).fold(Real::INFINITY, Real::min);
         let gravity = self.gravity.iter().map(|g| g * g).sum::<Real>().sqrt();
         let velocity_scale = body_speed.max(obstacle_speed).max(gravity * dt).max(1e-9 * h / dt);
@@ -690,10 +682,7 @@ impl Simulation {
         }
         e.total = e.kinetic + e.strain + e.potential;
         let e0 = self.initial_energy;
-        let scale = [e0, e.total, e.external_work, e.contact_correction, e.friction_dissipation, e.viscous_dissipation, e.numerical_dissipation, e.kinetic, e.strain]
-            .iter()
-            .map(|x| x.abs())
-            .fold(Real::MIN_POSITIVE, Real::max);
+        let scale = [e0, e.total, e.external_work, e.contact_correction, e.friction_dissipation, e.viscous_dissipation, e.numerical_dissipation, e.kinetic, e.strain].iter().map(|x| x.abs()).fold(Real::MIN_POSITIVE, Real::max);
         e.energy_balance_error = (e0 + e.external_work + e.contact_correction - e.total - e.friction_dissipation - e.viscous_dissipation - e.numerical_dissipation).abs() / scale;
         e
     }

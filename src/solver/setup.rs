@@ -2,10 +2,10 @@
 //! Every failure here is a [`SceneError`] pointing at the key responsible.
 
 use super::body::{Body, NodalLoad, Prescribed};
+use super::state_overlaps;
 use super::topology::{Topology, TopologyKey};
 use super::{BoundarySet, Probe, Simulation};
 use crate::contact::obstacle::Shape;
-use super::state_overlaps;
 use crate::contact::overlap::{Host, Overlap};
 use crate::contact::pairs::{BodyPairs, Rank};
 use crate::contact::{ContactModel, Motion, Obstacle, Settings, Surface};
@@ -16,9 +16,9 @@ use crate::precision::Real;
 use crate::scene::SceneErrorKind::{Invalid, Mesh as MeshError, Reference};
 use crate::scene::LARGEST_INPUT;
 use crate::scene::{AngularVelocity, Axis, FormulationChoice, Generator, Interpolation, LoadSpec, LoadedScene, MaterialSpec, MeshSpec, ModelName, ObstacleShape, SceneError, Values};
+use rayon::prelude::*;
 use std::collections::HashMap;
 use std::sync::Arc;
-use rayon::prelude::*;
 
 /// A body's element formulation: the scene's choice, or for `auto` F-bar where K/G exceeds
 /// [`FBAR_ABOVE_K_OVER_G`] (on Quad4 and Hex8 elements, on the cells a generator split into
@@ -70,15 +70,7 @@ pub fn model_of(m: &MaterialSpec) -> Model {
     match m.model {
         ModelName::BlatzKo => Model::BlatzKo(BlatzKo { g }),
         ModelName::NeoHookean => Model::NeoHookean(NeoHookean { g, k }),
-        ModelName::Lvf => Model::Lvf(Lvf {
-            g,
-            k,
-            a1: m.a1.unwrap_or(0.0),
-            a2: m.a2.unwrap_or(0.0),
-            a3: m.a3.unwrap_or(0.0),
-            a4: m.a4.unwrap_or(0.0),
-            a5: m.a5.unwrap_or(0.0),
-        }),
+        ModelName::Lvf => Model::Lvf(Lvf { g, k, a1: m.a1.unwrap_or(0.0), a2: m.a2.unwrap_or(0.0), a3: m.a3.unwrap_or(0.0), a4: m.a4.unwrap_or(0.0), a5: m.a5.unwrap_or(0.0) }),
         ModelName::MooneyRivlin => Model::MooneyRivlin(Decoupled { law: MooneyRivlin { c10: m.C10.unwrap_or(0.0), c01: m.C01.unwrap_or(0.0) }, k }),
         ModelName::Yeoh => Model::Yeoh(Decoupled { law: Yeoh { c10: m.C10.unwrap_or(0.0), c20: m.C20.unwrap_or(0.0), c30: m.C30.unwrap_or(0.0) }, k }),
         ModelName::Gent => Model::Gent(Decoupled { law: Gent { g, jm: m.Jm.unwrap_or_default() }, k }),
@@ -105,12 +97,7 @@ pub fn build_mesh(loaded: &LoadedScene, key: &str, spec: &MeshSpec) -> Result<Me
             let (s, d) = (spec.size.as_ref().expect("validated"), spec.divisions.as_ref().expect("validated"));
             generate::rectangle([v(&spec.origin, 0), v(&spec.origin, 1)], [s[0], s[1]], [d[0], d[1]], kind.expect("validated"))
         }
-        (Some(Generator::Disk), _) => generate::disk(
-            [v(&spec.center, 0), v(&spec.center, 1)],
-            spec.radius.expect("validated"),
-            spec.divisions.as_ref().expect("validated")[0],
-            kind.expect("validated"),
-        ),
+        (Some(Generator::Disk), _) => generate::disk([v(&spec.center, 0), v(&spec.center, 1)], spec.radius.expect("validated"), spec.divisions.as_ref().expect("validated")[0], kind.expect("validated")),
         (Some(Generator::Annulus), _) => {
             let (r, d) = (spec.radii.as_ref().expect("validated"), spec.divisions.as_ref().expect("validated"));
             generate::annulus([v(&spec.center, 0), v(&spec.center, 1)], [r[0], r[1]], spec.angle.unwrap_or(360.0), [d[0], d[1]], kind.expect("validated"))
@@ -128,12 +115,7 @@ pub fn build_mesh(loaded: &LoadedScene, key: &str, spec: &MeshSpec) -> Result<Me
             let bytes = std::fs::read(&path).map_err(|e| loaded.error(Reference, &format!("{key}.file"), format!("cannot read the mesh file `{}`: {e}.", path.display())))?;
             gmsh::read(&bytes, spec.group.as_deref()).map_err(|e| loaded.error(MeshError, &format!("{key}.file"), format!("the Gmsh file `{}` is not usable: {e}.", path.display())))?
         }
-        (Some(Generator::Ball), _) => generate::ball(
-            [v(&spec.center, 0), v(&spec.center, 1), v(&spec.center, 2)],
-            spec.radius.expect("validated"),
-            spec.divisions.as_ref().expect("validated")[0],
-            kind.expect("validated"),
-        ),
+        (Some(Generator::Ball), _) => generate::ball([v(&spec.center, 0), v(&spec.center, 1), v(&spec.center, 2)], spec.radius.expect("validated"), spec.divisions.as_ref().expect("validated")[0], kind.expect("validated")),
         (None, None) => unreachable!("validated: a mesh has a generator or a file"),
     };
     if let Some(w) = &spec.rotation {
@@ -297,11 +279,14 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
         let until = bc.until.unwrap_or(Real::INFINITY);
         vec_len_check(&format!("{key}.velocity"), &velocity)?;
         let components: Vec<usize> = match &bc.components {
-            Some(c) => c.iter().map(|a| match a {
-                Axis::X => 0,
-                Axis::Y => 1,
-                Axis::Z => 2,
-            }).collect(),
+            Some(c) => c
+                .iter()
+                .map(|a| match a {
+                    Axis::X => 0,
+                    Axis::Y => 1,
+                    Axis::Z => 2,
+                })
+                .collect(),
             None => (0..dim).collect(),
         };
         if components.iter().any(|&c| c >= dim) {
@@ -332,59 +317,54 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
     let keys: Vec<Option<TopologyKey>> = (0..meshes.len()).into_par_iter().map(|b| Topology::key(elements(b), &prescribed[b], ordering)).collect();
     let mut first_of: HashMap<&TopologyKey, usize> = HashMap::new();
     let owner_of: Vec<usize> = keys.iter().enumerate().map(|(b, key)| key.as_ref().map_or(b, |k| *first_of.entry(k).or_insert(b))).collect();
-    let built_topologies: HashMap<usize, Result<Topology, String>> = owner_of
-        .iter()
-        .enumerate()
-        .filter(|(b, owner)| b == *owner)
-        .map(|(b, _)| b)
-        .collect::<Vec<_>>()
-        .into_par_iter()
-        .map(|b| (b, Topology::new(elements(b), &prescribed[b], ordering).map_err(|e| e.to_string())))
-        .collect();
+    let built_topologies: HashMap<usize, Result<Topology, String>> =
+        owner_of.iter().enumerate().filter(|(b, owner)| b == *owner).map(|(b, _)| b).collect::<Vec<_>>().into_par_iter().map(|b| (b, Topology::new(elements(b), &prescribed[b], ordering).map_err(|e| e.to_string()))).collect();
     let topologies: Vec<&Result<Topology, String>> = owner_of.iter().map(|o| &built_topologies[o]).collect();
 
     // The bodies are independent (a grain packing has thousands): built in parallel, and the
     // first failing one in the scene's order reported.
     let specs: Vec<_> = scene.body.values().collect();
     let inputs = meshes.into_par_iter().zip(specs).zip(std::mem::take(&mut prescribed)).zip(topologies);
-    let built: Vec<Result<Body, SceneError>> = inputs.map(|((((name, mesh, patches, geometry, formulation), spec), prescribed), topology)| {
-        let key = format!("body.{name}");
-        let material = &scene.material[&spec.material];
-        let v0 = spec.initial_velocity.clone().unwrap_or_else(|| vec![0.0; dim]);
-        vec_len_check(&format!("{key}.initial_velocity"), &v0)?;
-        range_check(&format!("{key}.initial_velocity"), &v0)?;
-        let omega = match (&spec.angular_velocity, dim) {
-            (None, _) => [0.0; 3],
-            (Some(AngularVelocity::Planar(w)), 2) => [0.0, 0.0, *w],
-            (Some(AngularVelocity::Spatial(w)), 3) if w.len() == 3 => [w[0], w[1], w[2]],
-            _ => return Err(loaded.error(Invalid, &format!("{key}.angular_velocity"), "give one number in 2D and a vector of 3 components in 3D.")),
-        };
-        range_check(&format!("{key}.angular_velocity"), &omega)?;
-        let masses = geometry.lumped_masses(patches.as_ref().map_or(&mesh, |p| &p.cells), material.density);
-        let total: Real = masses.iter().sum();
-        let mut c = [0.0; 3];
-        for (m, x) in masses.iter().zip(&mesh.nodes) {
-            for i in 0..3 {
-                c[i] += m * x[i] / total;
+    let built: Vec<Result<Body, SceneError>> = inputs
+        .map(|((((name, mesh, patches, geometry, formulation), spec), prescribed), topology)| {
+            let key = format!("body.{name}");
+            let material = &scene.material[&spec.material];
+            let v0 = spec.initial_velocity.clone().unwrap_or_else(|| vec![0.0; dim]);
+            vec_len_check(&format!("{key}.initial_velocity"), &v0)?;
+            range_check(&format!("{key}.initial_velocity"), &v0)?;
+            let omega = match (&spec.angular_velocity, dim) {
+                (None, _) => [0.0; 3],
+                (Some(AngularVelocity::Planar(w)), 2) => [0.0, 0.0, *w],
+                (Some(AngularVelocity::Spatial(w)), 3) if w.len() == 3 => [w[0], w[1], w[2]],
+                _ => return Err(loaded.error(Invalid, &format!("{key}.angular_velocity"), "give one number in 2D and a vector of 3 components in 3D.")),
+            };
+            range_check(&format!("{key}.angular_velocity"), &omega)?;
+            let masses = geometry.lumped_masses(patches.as_ref().map_or(&mesh, |p| &p.cells), material.density);
+            let total: Real = masses.iter().sum();
+            let mut c = [0.0; 3];
+            for (m, x) in masses.iter().zip(&mesh.nodes) {
+                for i in 0..3 {
+                    c[i] += m * x[i] / total;
+                }
             }
-        }
-        let mut v = [0.0; 3];
-        v[..dim].copy_from_slice(&v0);
-        let initial = move |x: [Real; 3]| {
-            let r = [x[0] - c[0], x[1] - c[1], x[2] - c[2]];
-            [v[0] + omega[1] * r[2] - omega[2] * r[1], v[1] + omega[2] * r[0] - omega[0] * r[2], v[2] + omega[0] * r[1] - omega[1] * r[0]]
-        };
-        let topology = topology.as_ref().map_err(|e| loaded.error(MeshError, &format!("{key}.mesh"), e.clone()))?;
-        let mut body = Body::new(name.clone(), mesh, patches, geometry, model_of(material), formulation, material.density, prescribed, initial, topology);
-        if body.prescribed.is_empty() {
-            free_body_step(loaded, &body, material.density)?;
-        }
-        body.reuse_factorization = scene.solver.reuse_factorization;
-        if let Some(viscoelastic) = viscoelastic_of(material) {
-            body.set_viscoelastic(viscoelastic);
-        }
-        Ok(body)
-    }).collect();
+            let mut v = [0.0; 3];
+            v[..dim].copy_from_slice(&v0);
+            let initial = move |x: [Real; 3]| {
+                let r = [x[0] - c[0], x[1] - c[1], x[2] - c[2]];
+                [v[0] + omega[1] * r[2] - omega[2] * r[1], v[1] + omega[2] * r[0] - omega[0] * r[2], v[2] + omega[0] * r[1] - omega[1] * r[0]]
+            };
+            let topology = topology.as_ref().map_err(|e| loaded.error(MeshError, &format!("{key}.mesh"), e.clone()))?;
+            let mut body = Body::new(name.clone(), mesh, patches, geometry, model_of(material), formulation, material.density, prescribed, initial, topology);
+            if body.prescribed.is_empty() {
+                free_body_step(loaded, &body, material.density)?;
+            }
+            body.reuse_factorization = scene.solver.reuse_factorization;
+            if let Some(viscoelastic) = viscoelastic_of(material) {
+                body.set_viscoelastic(viscoelastic);
+            }
+            Ok(body)
+        })
+        .collect();
     let mut bodies = built.into_iter().collect::<Result<Vec<_>, _>>()?;
     for (name, spec) in &scene.load {
         let b = body_index[spec.body.as_str()];
@@ -424,9 +404,7 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
             return Err(loaded.error(
                 Invalid,
                 &format!("body.{}", b.name),
-                format!(
-                    "the initial state has a non-finite energy (kinetic {kinetic:e}, strain {strain:e}, potential {potential:e}): its density, size, velocities and the gravity are too large together."
-                ),
+                format!("the initial state has a non-finite energy (kinetic {kinetic:e}, strain {strain:e}, potential {potential:e}): its density, size, velocities and the gravity are too large together."),
             ));
         }
     }
@@ -522,7 +500,11 @@ fn separate_initial_overlaps(bodies: &mut [Body], model: &ContactModel) -> Resul
                     let (a, b) = (centroid(&bodies[o.body as usize]), centroid(&bodies[m as usize]));
                     let d = [a[0] - b[0], a[1] - b[1], a[2] - b[2]];
                     let length = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-                    if length > 1e-9 * o.size { d.map(|c| c / length) } else { o.out }
+                    if length > 1e-9 * o.size {
+                        d.map(|c| c / length)
+                    } else {
+                        o.out
+                    }
                 }
             };
             // A little past the surface, so that the node ends outside.

@@ -217,11 +217,7 @@ pub fn largest_stable(axes: &[SweepAxis], rows: &[Row]) -> Vec<(String, Option<S
                 !of.is_empty() && of.iter().all(|r| r.class == Class::Stable)
             };
             let candidates: Vec<&String> = axis.values.iter().filter(|v| stable(v)).collect();
-            let best = if axis.values.iter().all(|v| magnitude(v).is_some()) {
-                candidates.into_iter().max_by(|x, y| magnitude(x).unwrap_or(0.0).total_cmp(&magnitude(y).unwrap_or(0.0)))
-            } else {
-                candidates.into_iter().last()
-            };
+            let best = if axis.values.iter().all(|v| magnitude(v).is_some()) { candidates.into_iter().max_by(|x, y| magnitude(x).unwrap_or(0.0).total_cmp(&magnitude(y).unwrap_or(0.0))) } else { candidates.into_iter().last() };
             (axis.key.clone(), best.cloned())
         })
         .collect()

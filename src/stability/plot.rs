@@ -36,13 +36,8 @@ pub fn map_png(path: &Path, title: &str, axes: &[SweepAxis], rows: &[Row]) -> Re
             }
         }
     };
-    let mut chart = ChartBuilder::on(&root)
-        .caption(title, (FAMILY, 18))
-        .margin(14)
-        .x_label_area_size(45)
-        .y_label_area_size(if axes.len() > 1 { 110 } else { 20 })
-        .build_cartesian_2d(-0.5..nx as f64 - 0.5, -0.5..ny as f64 - 0.5)
-        .map_err(|e| draw_err(&e))?;
+    let mut chart =
+        ChartBuilder::on(&root).caption(title, (FAMILY, 18)).margin(14).x_label_area_size(45).y_label_area_size(if axes.len() > 1 { 110 } else { 20 }).build_cartesian_2d(-0.5..nx as f64 - 0.5, -0.5..ny as f64 - 0.5).map_err(|e| draw_err(&e))?;
     chart
         .configure_mesh()
         .disable_mesh()
@@ -60,12 +55,8 @@ pub fn map_png(path: &Path, title: &str, axes: &[SweepAxis], rows: &[Row]) -> Re
             let of = rows.iter().filter(|r| r.values.first() == Some(x) && (axes.len() < 2 || r.values.get(1) == Some(y)));
             let Some(worst) = of.map(|r| r.class).max() else { continue };
             let (cx, cy) = (i as f64, j as f64);
-            chart
-                .draw_series(std::iter::once(Rectangle::new([(cx - 0.48, cy - 0.48), (cx + 0.48, cy + 0.48)], colour(worst).filled())))
-                .map_err(|e| draw_err(&e))?;
-            chart
-                .draw_series(std::iter::once(Text::new(worst.name().to_string(), (cx - 0.3, cy + 0.1), (FAMILY, 13).into_font().color(&BLACK))))
-                .map_err(|e| draw_err(&e))?;
+            chart.draw_series(std::iter::once(Rectangle::new([(cx - 0.48, cy - 0.48), (cx + 0.48, cy + 0.48)], colour(worst).filled()))).map_err(|e| draw_err(&e))?;
+            chart.draw_series(std::iter::once(Text::new(worst.name().to_string(), (cx - 0.3, cy + 0.1), (FAMILY, 13).into_font().color(&BLACK)))).map_err(|e| draw_err(&e))?;
         }
     }
     root.present().map_err(|e| draw_err(&e))

@@ -75,10 +75,7 @@ fn check_grid(dir: &Path, sweep: &Sweep) -> Result<(), SweepError> {
         return Err(bad(format!("it records {} variants, its axes give {}: it was edited", sweep.variants.len(), grid.len())));
     }
     if let Some((recorded, expected)) = sweep.variants.iter().zip(&grid).find(|(r, e)| r != e) {
-        return Err(bad(format!(
-            "variant {} is recorded as `{}` in `{}.mcap`, its axes give `{}` in `{}.mcap`: it was edited",
-            expected.index, recorded.label, recorded.stem, expected.label, expected.stem
-        )));
+        return Err(bad(format!("variant {} is recorded as `{}` in `{}.mcap`, its axes give `{}` in `{}.mcap`: it was edited", expected.index, recorded.label, recorded.stem, expected.label, expected.stem)));
     }
     Ok(())
 }

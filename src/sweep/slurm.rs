@@ -8,9 +8,7 @@ use std::path::PathBuf;
 
 /// The sbatch options that may stand without a value (`--sbatch exclusive`); every other
 /// option needs one (a bare `time` would write `#SBATCH --time`, which sbatch rejects at submit).
-const SBATCH_FLAGS: [&str; 17] = [
-    "exclusive", "requeue", "no-requeue", "hold", "overcommit", "oversubscribe", "contiguous", "spread-job", "use-min-nodes", "nice", "propagate", "get-user-env", "test-only", "wait", "parsable", "quiet", "verbose",
-];
+const SBATCH_FLAGS: [&str; 17] = ["exclusive", "requeue", "no-requeue", "hold", "overcommit", "oversubscribe", "contiguous", "spread-job", "use-min-nodes", "nice", "propagate", "get-user-env", "test-only", "wait", "parsable", "quiet", "verbose"];
 
 /// `--sbatch KEY=VALUE` (or a bare flag, such as `exclusive`): one `#SBATCH --KEY=VALUE` line.
 #[derive(Debug, Clone, PartialEq)]
@@ -66,12 +64,7 @@ impl SlurmJob<'_> {
     pub fn script(&self) -> String {
         let count = self.sweep.variants.len();
         let output = self.out_dir.join("slurm-%A_%a.out");
-        let defaults = [
-            ("job-name", format!("bifirst-{}", self.sweep.name)),
-            ("array", format!("0-{}", count.saturating_sub(1))),
-            ("cpus-per-task", self.threads.to_string()),
-            ("output", output.to_string_lossy().into_owned()),
-        ];
+        let defaults = [("job-name", format!("bifirst-{}", self.sweep.name)), ("array", format!("0-{}", count.saturating_sub(1))), ("cpus-per-task", self.threads.to_string()), ("output", output.to_string_lossy().into_owned())];
         let mut s = String::from("#!/bin/bash\n");
         let _ = writeln!(s, "# A Slurm job array written by `bifirst sweep --slurm` (bifirst {}): one task per variant", env!("CARGO_PKG_VERSION"));
         let _ = writeln!(s, "# of the sweep of `{}`, {count} variants, logs in {}.", self.sweep.name, self.out_dir.display());

@@ -13,11 +13,11 @@
 use super::contact::{ContactLayout, ContactPasses, ContactPipelines, GroupContact};
 use super::{buffer, to_device, Batch, Evaluation, GpuWorld, Pass, ReadBack, Source, CSR_JOBS, ENERGY_JOBS, FORCES_JOBS, RESIDUAL_JOBS, WORKGROUP};
 use crate::contact::uzawa::Problem;
-use crate::gpu::uzawa_sweep::UzawaSweeps;
 use crate::gpu::types::{Active, Coefficients, ContactState, DofOut, NewtonMember, NewtonState, MODE_FORCES, MODE_TANGENT, NEWTON_FAILED, NEWTON_HOST, NEWTON_ITERATING, NEWTON_MAX_FREE, NO_FAILURE};
+use crate::gpu::uzawa_sweep::UzawaSweeps;
 use crate::gpu::{ElementFailure, Gpu, GpuError};
-use crate::precision::{Precision, Real};
 use crate::policy::PhaseTimes;
+use crate::precision::{Precision, Real};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;

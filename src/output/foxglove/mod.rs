@@ -4,11 +4,11 @@
 
 use crate::contact::geometry::{dot, frame, norm, normalize, scale, sub, Vec3};
 use crate::contact::obstacle::Shape;
+use crate::contact::{Obstacle, Surface};
 use crate::element::CellFields;
 use crate::output::encode;
 use crate::precision::Real;
 use crate::solver::{Body, Simulation};
-use crate::contact::{Obstacle, Surface};
 use rayon::prelude::*;
 use serde_json::value::{to_raw_value, RawValue};
 use serde_json::{json, Value};
@@ -164,8 +164,7 @@ impl View {
         let frame_max = fields.iter().flatten().map(|f| f.von_mises).fold(0.0, Real::max);
         self.von_mises_max = self.von_mises_max.max(frame_max);
         let raw = |entity: Value| to_raw_value(&entity).expect("an entity serializes");
-        let mut entities: Vec<Box<RawValue>> =
-            sim.bodies.par_iter().zip(&self.surfaces).zip(fields).map(|((body, surface), fields)| raw(self.body(t, body, surface, fields))).collect();
+        let mut entities: Vec<Box<RawValue>> = sim.bodies.par_iter().zip(&self.surfaces).zip(fields).map(|((body, surface), fields)| raw(self.body(t, body, surface, fields))).collect();
         if let Some(contact) = &sim.contact {
             entities.extend(contact.obstacles.iter().map(|o| raw(self.obstacle(t, o))));
             entities.push(raw(self.contact_forces(sim)));
@@ -231,12 +230,7 @@ impl View {
     /// Contact forces on the slave nodes as arrows ending at the node, longest = 10% of the
     /// scene's size at the largest force seen so far.
     fn contact_forces(&mut self, sim: &Simulation) -> Value {
-        let forces: Vec<(Vec3, Vec3)> = sim
-            .contact_points
-            .iter()
-            .map(|c| (sim.bodies[c.slave_body as usize].position(c.slave_node as usize), c.force()))
-            .filter(|(_, f)| norm(*f) > 0.0)
-            .collect();
+        let forces: Vec<(Vec3, Vec3)> = sim.contact_points.iter().map(|c| (sim.bodies[c.slave_body as usize].position(c.slave_node as usize), c.force())).filter(|(_, f)| norm(*f) > 0.0).collect();
         self.force_max = forces.iter().map(|(_, f)| norm(*f)).fold(self.force_max, Real::max);
         let arrows: Vec<Value> = forces
             .iter()

@@ -91,13 +91,7 @@ pub fn contour_png(sim: &Simulation, fields: &[Vec<CellFields>], title: &str, pa
     let root = BitMapBackend::new(path, (plot_width + 170, plot_height)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| draw_err(&e))?;
     let (left, right) = root.split_horizontally(plot_width);
-    let mut chart = ChartBuilder::on(&left)
-        .caption(title, (FAMILY, 22))
-        .margin(14)
-        .x_label_area_size(46)
-        .y_label_area_size(70)
-        .build_cartesian_2d(lo[0]..hi[0], lo[1]..hi[1])
-        .map_err(|e| draw_err(&e))?;
+    let mut chart = ChartBuilder::on(&left).caption(title, (FAMILY, 22)).margin(14).x_label_area_size(46).y_label_area_size(70).build_cartesian_2d(lo[0]..hi[0], lo[1]..hi[1]).map_err(|e| draw_err(&e))?;
     chart.configure_mesh().disable_mesh().x_desc("x").y_desc("y").label_style((FAMILY, 13)).draw().map_err(|e| draw_err(&e))?;
     for (b, body_fields) in sim.bodies.iter().zip(fields) {
         let polygons = (0..b.mesh.element_count()).map(|e| {
@@ -120,14 +114,7 @@ pub fn contour_png(sim: &Simulation, fields: &[Vec<CellFields>], title: &str, pa
     }
 
     // The colour bar: 0 at the bottom, the largest element stress at the top.
-    let mut bar = ChartBuilder::on(&right)
-        .margin_top(60)
-        .margin_bottom(60)
-        .margin_right(10)
-        .y_label_area_size(90)
-        .caption("von Mises", (FAMILY, 16))
-        .build_cartesian_2d(0.0..1.0, 0.0..vm_max)
-        .map_err(|e| draw_err(&e))?;
+    let mut bar = ChartBuilder::on(&right).margin_top(60).margin_bottom(60).margin_right(10).y_label_area_size(90).caption("von Mises", (FAMILY, 16)).build_cartesian_2d(0.0..1.0, 0.0..vm_max).map_err(|e| draw_err(&e))?;
     bar.configure_mesh().disable_mesh().disable_x_axis().label_style((FAMILY, 13)).y_label_formatter(&|v| format!("{v:.3e}")).draw().map_err(|e| draw_err(&e))?;
     let steps = 200;
     bar.draw_series((0..steps).map(|k| {

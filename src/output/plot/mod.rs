@@ -14,18 +14,8 @@ use std::path::{Path, PathBuf};
 const FONT: &[u8] = include_bytes!("DejaVuSans.ttf");
 pub(crate) const FAMILY: &str = "sans-serif";
 
-const COLORS: [RGBColor; 10] = [
-    RGBColor(31, 119, 180),
-    RGBColor(255, 127, 14),
-    RGBColor(44, 160, 44),
-    RGBColor(214, 39, 40),
-    RGBColor(148, 103, 189),
-    RGBColor(140, 86, 75),
-    RGBColor(227, 119, 194),
-    RGBColor(127, 127, 127),
-    RGBColor(188, 189, 34),
-    RGBColor(23, 190, 207),
-];
+const COLORS: [RGBColor; 10] =
+    [RGBColor(31, 119, 180), RGBColor(255, 127, 14), RGBColor(44, 160, 44), RGBColor(214, 39, 40), RGBColor(148, 103, 189), RGBColor(140, 86, 75), RGBColor(227, 119, 194), RGBColor(127, 127, 127), RGBColor(188, 189, 34), RGBColor(23, 190, 207)];
 
 #[derive(Debug, thiserror::Error)]
 pub enum PlotError {
@@ -50,10 +40,7 @@ pub(crate) struct Panel {
 impl Panel {
     /// `field` of `topic` against its `t`, for each run; `map` transforms each value.
     fn of(runs: &[RunRecord], title: &str, y_label: &str, topic: &str, value: impl Fn(&serde_json::Value) -> Option<f64>) -> Self {
-        let lines = runs
-            .iter()
-            .map(|r| r.messages(topic).iter().filter_map(|m| Some((m["t"].as_f64()?, value(m)?))).filter(|(t, v)| t.is_finite() && v.is_finite()).collect())
-            .collect();
+        let lines = runs.iter().map(|r| r.messages(topic).iter().filter_map(|m| Some((m["t"].as_f64()?, value(m)?))).filter(|(t, v)| t.is_finite() && v.is_finite()).collect()).collect();
         Self { title: title.into(), x_label: "t".into(), y_label: y_label.into(), lines }
     }
 }
@@ -140,22 +127,8 @@ pub(crate) fn figure(path: &Path, title: &str, names: &[String], panels: &[Panel
         let x = range(panel.lines.iter().flatten().map(|p| p.0));
         let y = range(panel.lines.iter().flatten().map(|p| p.1));
         let (x_format, y_format) = (tick_format(&x), tick_format(&y));
-        let mut chart = ChartBuilder::on(area)
-            .caption(&panel.title, (FAMILY, 18))
-            .margin(12)
-            .x_label_area_size(40)
-            .y_label_area_size(80)
-            .build_cartesian_2d(x, y)
-            .map_err(|e| draw_err(&e))?;
-        chart
-            .configure_mesh()
-            .x_desc(panel.x_label.as_str())
-            .y_desc(panel.y_label.as_str())
-            .label_style((FAMILY, 13))
-            .y_label_formatter(&y_format)
-            .x_label_formatter(&x_format)
-            .draw()
-            .map_err(|e| draw_err(&e))?;
+        let mut chart = ChartBuilder::on(area).caption(&panel.title, (FAMILY, 18)).margin(12).x_label_area_size(40).y_label_area_size(80).build_cartesian_2d(x, y).map_err(|e| draw_err(&e))?;
+        chart.configure_mesh().x_desc(panel.x_label.as_str()).y_desc(panel.y_label.as_str()).label_style((FAMILY, 13)).y_label_formatter(&y_format).x_label_formatter(&x_format).draw().map_err(|e| draw_err(&e))?;
         for (i, line) in panel.lines.iter().enumerate() {
             let color = COLORS[i % COLORS.len()];
             // One pixel wide: plotters' wide lines spike on near-vertical segments.
