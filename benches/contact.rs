@@ -53,7 +53,7 @@ fn detection(c: &mut Criterion) {
         let upper = generate::cuboid([0.0, 0.0, t], [1.0, 1.0, t], [cells, cells, 1], ElementKind::Hex8);
         let surfaces = vec![Surface::of(&lower), Surface::of(&upper)];
         let facets: usize = surfaces.iter().map(Surface::facet_count).sum();
-        let model = ContactModel { settings: Settings { tolerance: 1e-8, max_iterations: 1, sweep: Sweep::GaussSeidel, acceleration: Default::default() }, surfaces, obstacles: Vec::new(), pairs: upper_on_lower(0.3) };
+        let model = ContactModel { settings: Settings { tolerance: 1e-8, max_iterations: 1, sweep: Sweep::GaussSeidel, acceleration: Default::default(), fallback: Default::default() }, surfaces, obstacles: Vec::new(), pairs: upper_on_lower(0.3) };
         let mut config = Configuration::new(&model, vec![lower.nodes.clone(), upper.nodes.clone()]);
         let placed = |_: usize, _: &mut Vec<[f64; 3]>| unreachable!("every body is placed");
         let margin = 0.01 / cells as f64;

@@ -5,6 +5,7 @@
 //!   of a 3D Hex8 block with about 50k unknowns, and `assembly_gpu_<precision>` on a GPU adapter;
 //! - `gpu_element/<precision>/<model>/<element>` and `gpu_assembly/<precision>/<element>`: the
 //!   element and assembly kernels on a GPU adapter (skipped, with the reason, without one).
+//!
 //! Results are recorded in doc/benchmarks.md.
 
 use bifirst::bench::{bench_devices, bench_elements, bench_models, element_label, BenchCase, KINDS};

@@ -329,83 +329,7 @@ pub fn run_bench(options: &BenchOptions, gpus: &[Arc<Gpu>], mut row: impl FnMut(
                 row(make(FORCES, "cpu f64".into(), t, 0, 0.0));
             }
             for (gpu, peaks) in gpus.iter().zip(&peaks) {
-                let backend = format!("gpu {}", gpu.precision.name());
-                let real = gpu.precision.size();
-                // A body the device cannot bind (its element results past the largest storage
-                // buffer) is measured at the largest size that fits, against its own reference.
-                let fitting = fitting_elements(gpu, &case);
-                let smaller = (fitting < case.elements()).then(|| {
-                    let small = BenchCase::new(kind, formulation, case.model.clone(), fitting * 9 / 10);
-                    let reference = cpu_reference(&small);
-                    (small, reference)
-                });
-                let (case, reference) = smaller.as_ref().map_or((&case, &reference), |(c, r)| (c, r));
-                let make = |kernel: &str, backend: String, timing: Timing, traffic: u64, error: f64| BenchRow::new(kernel, &label, case.model.name(), case.elements(), backend, timing, traffic, error);
-                let mut world = case.on(gpu)?;
-                let stride = element_out_stride(case.pattern.element_dofs);
-                let mut values = vec![0.0; case.pattern.nnz()];
-                let mut dof_out = vec![DofOut::default(); case.u.len()];
-                // A whole evaluation first: the displacements and the active list are on the
-                // device, so the kernel rows below time the kernels alone (nothing moves).
-                case.evaluate_on(&mut world, &case.u, true, &mut values, &mut dof_out)?;
-                world.take_traffic();
-                // The passes below alternate the two, so that each uploads its displacement.
-                let states = [case.nudged(), case.u.clone()];
-                if wanted(options, FORCE_TANGENT) {
-                    let results = world.element_results(0)?;
-                    world.take_traffic();
-                    let error = blockwise_error(&results, &reference.results, stride);
-                    let mut result = Ok(());
-                    let t = time_calls(options.min_time, || result = world.replay(WorldKernel::ForceTangent));
-                    result?;
-                    row(make(FORCE_TANGENT, backend.clone(), t, 0, error).with_roofline(kernel_cost(Costed::ForceTangent, &case, real), peaks));
-                }
-                if wanted(options, ASSEMBLY) {
-                    let residual: Vec<Real> = dof_out.iter().map(|d| d.g).collect();
-                    let expected: Vec<Real> = reference.dof_out.iter().map(|d| d.g).collect();
-                    let error = blockwise_error(&values, &reference.values, values.len().max(1)).max(blockwise_error(&residual, &expected, residual.len().max(1)));
-                    let mut result = Ok(());
-                    let t = time_calls(options.min_time, || result = world.replay(WorldKernel::Assembly));
-                    result?;
-                    row(make(ASSEMBLY, backend.clone(), t, 0, error).with_roofline(kernel_cost(Costed::Assembly, &case, real), peaks));
-                }
-                if wanted(options, EVALUATE) {
-                    // What a refactorising Newton iteration costs the device: upload, kernels,
-                    // read-back of the stiffness values and residual.
-                    let (mut result, mut k) = (Ok(()), 0);
-                    let t = time_calls(options.min_time, || {
-                        result = case.evaluate_on(&mut world, &states[k % 2], true, &mut values, &mut dof_out);
-                        k += 1;
-                    });
-                    result?;
-                    let traffic = world.take_traffic().total();
-                    row(make(EVALUATE, backend.clone(), t, traffic, 0.0));
-                }
-                if wanted(options, ENERGY) {
-                    let (mut energies, mut k) = (Ok(Vec::new()), 0);
-                    let t = time_calls(options.min_time, || {
-                        energies = world.element_energies(&[(0, &states[k % 2][..])], &mut PhaseTimes::default());
-                        k += 1;
-                    });
-                    energies?;
-                    let traffic = world.take_traffic().total();
-                    let energy: Real = world.element_energies(&[(0, &case.u[..])], &mut PhaseTimes::default())?[0].iter().sum();
-                    let error = (energy - reference.energy).abs() / reference.energy.abs();
-                    row(make(ENERGY, backend.clone(), t, traffic, error).with_roofline(kernel_cost(Costed::Energy, &case, real), peaks));
-                }
-                if wanted(options, FORCES) {
-                    // Last: its pass leaves the members in the forces-only mode, which the
-                    // rows above would not replay.
-                    case.evaluate_on(&mut world, &case.u, false, &mut values, &mut dof_out)?;
-                    let (results, ndof) = (world.element_results(0)?, case.pattern.element_dofs);
-                    world.take_traffic();
-                    let only_forces = |r: &[Real]| r.chunks(stride).flat_map(|e| e[..ndof].to_vec()).collect::<Vec<Real>>();
-                    let error = blockwise_error(&only_forces(&results), &only_forces(&reference.results), ndof);
-                    let mut result = Ok(());
-                    let t = time_calls(options.min_time, || result = world.replay(WorldKernel::Forces));
-                    result?;
-                    row(make(FORCES, backend.clone(), t, 0, error).with_roofline(kernel_cost(Costed::Forces, &case, real), peaks));
-                }
+                device_element_rows(options, gpu, peaks, (kind, formulation), (&case, &reference), &label, &mut row)?;
             }
         }
     }
@@ -424,6 +348,89 @@ pub fn run_bench(options: &BenchOptions, gpus: &[Arc<Gpu>], mut row: impl FnMut(
     if wanted(options, "uzawa_solve") {
         progress("uzawa_solve");
         uzawa_solve_rows(options, gpus, &mut row)?;
+    }
+    Ok(())
+}
+
+/// The rows of one element case's kernels on one device, each with its error against the CPU
+/// twins' `reference`.
+fn device_element_rows(options: &BenchOptions, gpu: &Arc<Gpu>, peaks: &Peaks, (kind, formulation): (ElementKind, Formulation), (case, reference): (&BenchCase, &Reference), label: &str, row: &mut impl FnMut(BenchRow)) -> Result<(), GpuError> {
+    let backend = format!("gpu {}", gpu.precision.name());
+    let real = gpu.precision.size();
+    // A body the device cannot bind (its element results past the largest storage
+    // buffer) is measured at the largest size that fits, against its own reference.
+    let fitting = fitting_elements(gpu, case);
+    let smaller = (fitting < case.elements()).then(|| {
+        let small = BenchCase::new(kind, formulation, case.model.clone(), fitting * 9 / 10);
+        let reference = cpu_reference(&small);
+        (small, reference)
+    });
+    let (case, reference) = smaller.as_ref().map_or((case, reference), |(c, r)| (c, r));
+    let make = |kernel: &str, backend: String, timing: Timing, traffic: u64, error: f64| BenchRow::new(kernel, label, case.model.name(), case.elements(), backend, timing, traffic, error);
+    let mut world = case.on(gpu)?;
+    let stride = element_out_stride(case.pattern.element_dofs);
+    let mut values = vec![0.0; case.pattern.nnz()];
+    let mut dof_out = vec![DofOut::default(); case.u.len()];
+    // A whole evaluation first: the displacements and the active list are on the
+    // device, so the kernel rows below time the kernels alone (nothing moves).
+    case.evaluate_on(&mut world, &case.u, true, &mut values, &mut dof_out)?;
+    world.take_traffic();
+    // The passes below alternate the two, so that each uploads its displacement.
+    let states = [case.nudged(), case.u.clone()];
+    if wanted(options, FORCE_TANGENT) {
+        let results = world.element_results(0)?;
+        world.take_traffic();
+        let error = blockwise_error(&results, &reference.results, stride);
+        let mut result = Ok(());
+        let t = time_calls(options.min_time, || result = world.replay(WorldKernel::ForceTangent));
+        result?;
+        row(make(FORCE_TANGENT, backend.clone(), t, 0, error).with_roofline(kernel_cost(Costed::ForceTangent, case, real), peaks));
+    }
+    if wanted(options, ASSEMBLY) {
+        let residual: Vec<Real> = dof_out.iter().map(|d| d.g).collect();
+        let expected: Vec<Real> = reference.dof_out.iter().map(|d| d.g).collect();
+        let error = blockwise_error(&values, &reference.values, values.len().max(1)).max(blockwise_error(&residual, &expected, residual.len().max(1)));
+        let mut result = Ok(());
+        let t = time_calls(options.min_time, || result = world.replay(WorldKernel::Assembly));
+        result?;
+        row(make(ASSEMBLY, backend.clone(), t, 0, error).with_roofline(kernel_cost(Costed::Assembly, case, real), peaks));
+    }
+    if wanted(options, EVALUATE) {
+        // What a refactorising Newton iteration costs the device: upload, kernels,
+        // read-back of the stiffness values and residual.
+        let (mut result, mut k) = (Ok(()), 0);
+        let t = time_calls(options.min_time, || {
+            result = case.evaluate_on(&mut world, &states[k % 2], true, &mut values, &mut dof_out);
+            k += 1;
+        });
+        result?;
+        let traffic = world.take_traffic().total();
+        row(make(EVALUATE, backend.clone(), t, traffic, 0.0));
+    }
+    if wanted(options, ENERGY) {
+        let (mut energies, mut k) = (Ok(Vec::new()), 0);
+        let t = time_calls(options.min_time, || {
+            energies = world.element_energies(&[(0, &states[k % 2][..])], &mut PhaseTimes::default());
+            k += 1;
+        });
+        energies?;
+        let traffic = world.take_traffic().total();
+        let energy: Real = world.element_energies(&[(0, &case.u[..])], &mut PhaseTimes::default())?[0].iter().sum();
+        let error = (energy - reference.energy).abs() / reference.energy.abs();
+        row(make(ENERGY, backend.clone(), t, traffic, error).with_roofline(kernel_cost(Costed::Energy, case, real), peaks));
+    }
+    if wanted(options, FORCES) {
+        // Last: its pass leaves the members in the forces-only mode, which the
+        // rows above would not replay.
+        case.evaluate_on(&mut world, &case.u, false, &mut values, &mut dof_out)?;
+        let (results, ndof) = (world.element_results(0)?, case.pattern.element_dofs);
+        world.take_traffic();
+        let only_forces = |r: &[Real]| r.chunks(stride).flat_map(|e| e[..ndof].to_vec()).collect::<Vec<Real>>();
+        let error = blockwise_error(&only_forces(&results), &only_forces(&reference.results), ndof);
+        let mut result = Ok(());
+        let t = time_calls(options.min_time, || result = world.replay(WorldKernel::Forces));
+        result?;
+        row(make(FORCES, backend.clone(), t, 0, error).with_roofline(kernel_cost(Costed::Forces, case, real), peaks));
     }
     Ok(())
 }

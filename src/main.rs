@@ -886,7 +886,7 @@ fn grains_command(run: &Path, out: Option<PathBuf>, at: Option<f64>, json: bool)
     // A line per tenth of a long log's steps.
     let tenths = |what: &'static str| {
         move |k: usize, n: usize| {
-            if n > 10 && (k % (n / 10) == 0 || k == n) {
+            if n > 10 && (k.is_multiple_of(n / 10) || k == n) {
                 eprintln!("  {what} {k}/{n} steps");
             }
         }

@@ -33,7 +33,7 @@ pub enum RunError {
     Restore(#[from] crate::solver::RestoreError),
     /// The run stopped early; the log holds everything up to the last finished step.
     #[error("the run stopped: {reason}. The log `{}` holds everything up to t = {:.6e}.", .summary.output.display(), .summary.t_end)]
-    Stopped { reason: Stop, summary: RunSummary },
+    Stopped { reason: Stop, summary: Box<RunSummary> },
 }
 
 /// Why a run stopped before its end time.
@@ -260,7 +260,7 @@ impl Logger {
     /// at the last finished step of the run, however it ends.
     fn saved(&mut self, sim: &Simulation, last: bool) -> Result<(), OutputError> {
         // With a cadence, the initial state too (a restarted run's is in the log it came from).
-        let due = self.saved_every > 0 && sim.step % self.saved_every == 0 && (sim.step > sim.first_step.1 || sim.step == 0);
+        let due = self.saved_every > 0 && sim.step.is_multiple_of(self.saved_every) && (sim.step > sim.first_step.1 || sim.step == 0);
         if self.saved_step == Some(sim.step) || !(last || due) {
             return Ok(());
         }
@@ -273,7 +273,7 @@ impl Logger {
         if self.frame_step == Some(sim.step) {
             return Ok(());
         }
-        let due = |every: usize| every > 0 && (last || sim.step % every == 0);
+        let due = |every: usize| every > 0 && (last || sim.step.is_multiple_of(every));
         let scene = self.view.is_some() && due(self.scene_every);
         let vtu = self.vtu.is_some() && due(self.vtu_every);
         if !scene && !vtu {
@@ -293,7 +293,7 @@ impl Logger {
 
     /// The contact network (`/contacts`) when its cadence says so, or when `last`.
     fn contacts(&mut self, sim: &Simulation, last: bool) -> Result<(), OutputError> {
-        let due = self.contacts_every > 0 && (last || sim.step % self.contacts_every == 0);
+        let due = self.contacts_every > 0 && (last || sim.step.is_multiple_of(self.contacts_every));
         if !due || self.contacts_step == Some(sim.step) {
             return Ok(());
         }
@@ -382,6 +382,28 @@ struct Totals {
     device_submits: u64,
 }
 
+impl Totals {
+    /// Adds a finished step's counts.
+    fn add(&mut self, report: &StepReport) {
+        self.cutbacks += report.cutbacks;
+        self.overlap_retries += report.overlap_retries;
+        self.energy_retries += report.energy_retries;
+        self.kept_beyond_bounds += report.kept_beyond_bounds;
+        self.newton += report.newton_iterations;
+        self.uzawa += report.uzawa_iterations;
+        self.contact_newton += report.contact_newton_iterations;
+        self.bodies_iterated += report.bodies_iterated;
+        self.device_iterations += report.device_iterations;
+        self.factorizations += report.factorizations;
+        self.max_penetration = self.max_penetration.max(report.contact.max_penetration);
+        self.max_overlap = self.max_overlap.max(report.contact.max_overlap);
+        self.max_overlap_ratio = self.max_overlap_ratio.max(report.contact.max_overlap_ratio);
+        self.wall += report.wall;
+        self.bytes_moved += report.bytes_moved;
+        self.device_submits += report.device_submits;
+    }
+}
+
 /// The status of a run that finished having created more energy than `solver.max_energy_gain`.
 pub const ENERGY_CREATED: &str = "energy_created";
 
@@ -391,55 +413,10 @@ const ENERGY_GAIN_LINES: usize = 10;
 /// Runs a loaded scene to its end time, logging to `out`.
 pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor: &mut dyn Monitor) -> Result<RunSummary, RunError> {
     let started = std::time::Instant::now();
-    let mut sim = build_simulation(loaded)?;
-    let resolved = Backend::resolve(&options.backend)?;
-    if let Some(notice) = &resolved.notice {
-        monitor.warning(notice);
-    }
-    let backend = resolved.backend;
-    let uzawa_notice = backend.uzawa_notice(sim.contact.as_ref().map(|c| c.settings.sweep));
-    if let Some(notice) = &uzawa_notice {
-        monitor.warning(notice);
-    }
-    for notice in &sim.notices {
-        monitor.warning(notice);
-    }
-    monitor.backend(&backend.describe());
-    let bodies: Vec<_> = sim.bodies.iter().map(|b| b.world_body()).collect();
-    sim.world = backend.device_world(&bodies).map_err(BackendError::from)?;
-    if let (Some(path), 3) = (&options.contour, sim.dim) {
-        return Err(PlotError::Draw { path: path.clone(), message: "contour plots are drawn for 2D scenes; use --vtu and ParaView for 3D".into() }.into());
-    }
-    match &options.restart {
-        Some(state) => sim.restore(state)?,
-        None => sim.start(),
-    }
-    sim.interrupt = options.interrupt.clone();
-    let mut logger = Logger::new(out, loaded, &sim, options, &backend)?;
-    let free_dofs: usize = sim.bodies.iter().map(|b| b.dofs.free_count).sum();
-    let start = format!(
-        "bifirst {}: scene `{}` ({}), {}, {free_dofs} free dofs, {} of dt = {:e}, backend {}, {}",
-        env!("CARGO_PKG_VERSION"),
-        loaded.name,
-        loaded.path.display(),
-        crate::output::counted(sim.bodies.len(), "body", "bodies"),
-        crate::output::counted(sim.step_count() - sim.first_step.1, "step", "steps"),
-        sim.dt,
-        backend.describe(),
-        crate::output::counted(rayon::current_num_threads(), "thread", "threads")
-    );
-    // A restarted run's log begins at its state's time.
-    logger.line(sim.t, Level::Info, &start)?;
-    for notice in resolved.notice.iter().chain(&uzawa_notice).chain(&sim.notices) {
-        logger.line(sim.t, Level::Warning, notice)?;
-    }
-    if let Some(reason) = &resolved.reason {
-        logger.line(sim.t, Level::Info, reason)?;
-    }
-    if let Some(state) = &options.restart {
-        logger.line(sim.t, Level::Info, &format!("continued from a saved state at t = {:.6e} (step {})", state.t, state.step))?;
-    }
-    let every = loaded.scene.output.every;
+    let (mut sim, resolved, notices) = set_up(loaded, options, monitor)?;
+    let backend = &resolved.backend;
+    let mut logger = Logger::new(out, loaded, &sim, options, backend)?;
+    log_start(&mut logger, loaded, &sim, &resolved, &notices, options)?;
     let total = sim.step_count();
     monitor.started(total);
     monitor.state(&sim);
@@ -448,127 +425,16 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
     logger.contacts(&sim, false)?;
     logger.saved(&sim, false)?;
     let mut totals = Totals::default();
-    let max_energy_gain = loaded.scene.solver.max_energy_gain;
-    let summary = |sim: &Simulation, totals: &Totals, stop: Option<&Stop>| {
-        let created = sim.energy_created();
-        let (status, message) = match stop {
-            Some(stop) => (stop.status().to_string(), Some(stop.to_string())),
-            None if created > max_energy_gain => {
-                (ENERGY_CREATED.to_string(), Some(format!("the run created {created:.3e} of the energy scale, more than solver.max_energy_gain = {max_energy_gain:.3e} (a time step too large for the impact speed? `bifirst stability` maps it)")))
-            }
-            None => ("finished".to_string(), None),
-        };
-        RunSummary {
-            scene: loaded.name.clone(),
-            status,
-            message,
-            backend: backend.name().to_string(),
-            precision: backend.precision().to_string(),
-            adapter: backend.adapter(),
-            steps: sim.step - sim.first_step.1,
-            last_step: sim.step,
-            t_end: sim.t,
-            cutbacks: totals.cutbacks,
-            newton_iterations: totals.newton,
-            uzawa_iterations: totals.uzawa,
-            contact_newton_iterations: totals.contact_newton,
-            bodies_iterated: totals.bodies_iterated,
-            device_iterations: totals.device_iterations,
-            factorizations: totals.factorizations,
-            max_penetration: totals.max_penetration,
-            max_overlap: totals.max_overlap,
-            max_overlap_ratio: totals.max_overlap_ratio,
-            energy_gain_steps: totals.energy_gain_steps,
-            max_energy_gain: totals.max_energy_gain,
-            overlap_retries: totals.overlap_retries,
-            energy_retries: totals.energy_retries,
-            kept_beyond_bounds: totals.kept_beyond_bounds,
-            energy_created: created,
-            wall_s: started.elapsed().as_secs_f64(),
-            wall_by_phase: totals.wall,
-            bytes_moved: totals.bytes_moved,
-            device_submits: totals.device_submits,
-            kernel_times: backend.kernel_times(),
-            energy: sim.energies(),
-            output: out.to_path_buf(),
-        }
-    };
-    let stop = loop {
-        if sim.finished() {
-            break None;
-        }
-        if sim.interrupted() {
-            break Some((Stop::Interrupted, StepReport { step: sim.step, t: sim.t, ..Default::default() }));
-        }
-        let dissipated = sim.numerical_dissipation;
-        let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| sim.advance()));
-        let report = match result {
-            Ok(Ok(report)) => report,
-            Ok(Err(failure)) if matches!(failure.failure, StepFailure::Interrupted) => {
-                // The abandoned step leaves the state at the last finished one.
-                totals.cutbacks += failure.cutbacks;
-                logger.events(monitor, failure.t, &failure.report.events)?;
-                break Some((Stop::Interrupted, StepReport { step: sim.step, t: sim.t, ..Default::default() }));
-            }
-            Ok(Err(failure)) => {
-                totals.cutbacks += failure.cutbacks;
-                logger.events(monitor, failure.t, &failure.report.events)?;
-                let mut report = failure.report.clone();
-                report.t = failure.t;
-                break Some((Stop::Failed(Box::new(failure)), report));
-            }
-            Err(payload) => break Some((Stop::Panicked(panic_message(payload.as_ref())), StepReport { step: sim.step + 1, t: sim.t, ..Default::default() })),
-        };
-        logger.events(monitor, sim.t, &report.events)?;
-        totals.cutbacks += report.cutbacks;
-        totals.overlap_retries += report.overlap_retries;
-        totals.energy_retries += report.energy_retries;
-        totals.kept_beyond_bounds += report.kept_beyond_bounds;
-        totals.newton += report.newton_iterations;
-        totals.uzawa += report.uzawa_iterations;
-        totals.contact_newton += report.contact_newton_iterations;
-        totals.bodies_iterated += report.bodies_iterated;
-        totals.device_iterations += report.device_iterations;
-        totals.factorizations += report.factorizations;
-        totals.max_penetration = totals.max_penetration.max(report.contact.max_penetration);
-        totals.max_overlap = totals.max_overlap.max(report.contact.max_overlap);
-        totals.max_overlap_ratio = totals.max_overlap_ratio.max(report.contact.max_overlap_ratio);
-        totals.wall += report.wall;
-        totals.bytes_moved += report.bytes_moved;
-        totals.device_submits += report.device_submits;
-        let energies = sim.energies();
-        if !energies.total.is_finite() {
-            break Some((Stop::NotFinite { step: sim.step, t: sim.t }, report));
-        }
-        if let Some(gain) = energy_gain(sim.initial_energy, &energies, dissipated) {
-            totals.energy_gain_steps += 1;
-            totals.max_energy_gain = totals.max_energy_gain.max(gain);
-            if totals.energy_gain_steps <= ENERGY_GAIN_LINES {
-                let more = if totals.energy_gain_steps == ENERGY_GAIN_LINES { " (further such steps are counted in the summary only)" } else { "" };
-                let message = format!("step {} at t = {:.6e} created energy: numerical dissipation {:.3e} of the energy scale (a time step too large for the impact speeds?){more}", report.step, sim.t, -gain);
-                monitor.warning(&message);
-                logger.line(sim.t, Level::Warning, &message)?;
-            }
-        }
-        if report.step % every == 0 || sim.finished() {
-            logger.solver(&report, sim.t, "converged", None)?;
-            logger.contact(&sim, &report)?;
-            logger.state(&sim, energies)?;
-        }
-        logger.frames(&sim, sim.finished())?;
-        logger.contacts(&sim, sim.finished())?;
-        logger.saved(&sim, sim.finished())?;
-        monitor.state(&sim);
-        monitor.step(&report, total);
-    };
+    let stop = step_until_stopped(loaded, &mut sim, &mut logger, monitor, &mut totals)?;
     let contour = |sim: &Simulation| match &options.contour {
         Some(path) => contour_png(sim, &sim.bodies.iter().map(|b| b.cell_fields()).collect::<Vec<_>>(), &format!("{}: von Mises stress at t = {:.4}", loaded.name, sim.t), path),
         None => Ok(()),
     };
+    let summary = |sim: &Simulation, stop: Option<&Stop>| run_summary(loaded, backend, sim, &totals, stop, started, out);
     match stop {
         None => {
             contour(&sim)?;
-            let summary = summary(&sim, &totals, None);
+            let summary = summary(&sim, None);
             let end = format!(
                 "finished: {} steps to t = {:.6e}, {} Newton iterations, {} cut-backs, {:.2} s wall; energy balance error {:.1e}",
                 summary.steps, summary.t_end, summary.newton_iterations, summary.cutbacks, summary.wall_s, summary.energy.energy_balance_error
@@ -591,11 +457,172 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
             if let Err(e) = contour(&sim) {
                 monitor.warning(&e.to_string());
             }
-            let summary = summary(&sim, &totals, Some(&stop));
+            let summary = summary(&sim, Some(&stop));
             logger.summary(&summary, sim.t)?;
             logger.log.finish()?;
-            Err(RunError::Stopped { reason: stop, summary })
+            Err(RunError::Stopped { reason: stop, summary: Box::new(summary) })
         }
+    }
+}
+
+/// The simulation of a run, on its backend, at its start (t = 0 or the restored state); the
+/// backend's choice and the notices the user is warned of.
+fn set_up(loaded: &LoadedScene, options: &RunOptions, monitor: &mut dyn Monitor) -> Result<(Simulation, crate::backend::Resolved, Vec<String>), RunError> {
+    let mut sim = build_simulation(loaded)?;
+    let resolved = Backend::resolve(&options.backend)?;
+    let uzawa_notice = resolved.backend.uzawa_notice(sim.contact.as_ref().map(|c| c.settings.sweep));
+    let notices: Vec<String> = resolved.notice.iter().chain(&uzawa_notice).chain(&sim.notices).cloned().collect();
+    for notice in &notices {
+        monitor.warning(notice);
+    }
+    monitor.backend(&resolved.backend.describe());
+    let bodies: Vec<_> = sim.bodies.iter().map(|b| b.world_body()).collect();
+    sim.world = resolved.backend.device_world(&bodies).map_err(BackendError::from)?;
+    if let (Some(path), 3) = (&options.contour, sim.dim) {
+        return Err(PlotError::Draw { path: path.clone(), message: "contour plots are drawn for 2D scenes; use --vtu and ParaView for 3D".into() }.into());
+    }
+    match &options.restart {
+        Some(state) => sim.restore(state)?,
+        None => sim.start(),
+    }
+    sim.interrupt = options.interrupt.clone();
+    Ok((sim, resolved, notices))
+}
+
+/// The log's first lines: what runs where, the notices, why `auto` chose, where a restart
+/// continues from.
+fn log_start(logger: &mut Logger, loaded: &LoadedScene, sim: &Simulation, resolved: &crate::backend::Resolved, notices: &[String], options: &RunOptions) -> Result<(), RunError> {
+    let free_dofs: usize = sim.bodies.iter().map(|b| b.dofs.free_count).sum();
+    let start = format!(
+        "bifirst {}: scene `{}` ({}), {}, {free_dofs} free dofs, {} of dt = {:e}, backend {}, {}",
+        env!("CARGO_PKG_VERSION"),
+        loaded.name,
+        loaded.path.display(),
+        crate::output::counted(sim.bodies.len(), "body", "bodies"),
+        crate::output::counted(sim.step_count() - sim.first_step.1, "step", "steps"),
+        sim.dt,
+        resolved.backend.describe(),
+        crate::output::counted(rayon::current_num_threads(), "thread", "threads")
+    );
+    // A restarted run's log begins at its state's time.
+    logger.line(sim.t, Level::Info, &start)?;
+    for notice in notices {
+        logger.line(sim.t, Level::Warning, notice)?;
+    }
+    if let Some(reason) = &resolved.reason {
+        logger.line(sim.t, Level::Info, reason)?;
+    }
+    if let Some(state) = &options.restart {
+        logger.line(sim.t, Level::Info, &format!("continued from a saved state at t = {:.6e} (step {})", state.t, state.step))?;
+    }
+    Ok(())
+}
+
+/// The steps of a run, each logged, until it ends (`None`) or stops (why, and the report of the
+/// step it stopped in).
+fn step_until_stopped(loaded: &LoadedScene, sim: &mut Simulation, logger: &mut Logger, monitor: &mut dyn Monitor, totals: &mut Totals) -> Result<Option<(Stop, StepReport)>, RunError> {
+    let every = loaded.scene.output.every;
+    let total = sim.step_count();
+    loop {
+        if sim.finished() {
+            return Ok(None);
+        }
+        if sim.interrupted() {
+            return Ok(Some((Stop::Interrupted, StepReport { step: sim.step, t: sim.t, ..Default::default() })));
+        }
+        let dissipated = sim.numerical_dissipation;
+        let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| sim.advance()));
+        let report = match result {
+            Ok(Ok(report)) => report,
+            Ok(Err(failure)) if matches!(failure.failure, StepFailure::Interrupted) => {
+                // The abandoned step leaves the state at the last finished one.
+                totals.cutbacks += failure.cutbacks;
+                logger.events(monitor, failure.t, &failure.report.events)?;
+                return Ok(Some((Stop::Interrupted, StepReport { step: sim.step, t: sim.t, ..Default::default() })));
+            }
+            Ok(Err(failure)) => {
+                totals.cutbacks += failure.cutbacks;
+                logger.events(monitor, failure.t, &failure.report.events)?;
+                let mut report = failure.report.clone();
+                report.t = failure.t;
+                return Ok(Some((Stop::Failed(failure), report)));
+            }
+            Err(payload) => return Ok(Some((Stop::Panicked(panic_message(payload.as_ref())), StepReport { step: sim.step + 1, t: sim.t, ..Default::default() }))),
+        };
+        logger.events(monitor, sim.t, &report.events)?;
+        totals.add(&report);
+        let energies = sim.energies();
+        if !energies.total.is_finite() {
+            return Ok(Some((Stop::NotFinite { step: sim.step, t: sim.t }, report)));
+        }
+        if let Some(gain) = energy_gain(sim.initial_energy, &energies, dissipated) {
+            totals.energy_gain_steps += 1;
+            totals.max_energy_gain = totals.max_energy_gain.max(gain);
+            if totals.energy_gain_steps <= ENERGY_GAIN_LINES {
+                let more = if totals.energy_gain_steps == ENERGY_GAIN_LINES { " (further such steps are counted in the summary only)" } else { "" };
+                let message = format!("step {} at t = {:.6e} created energy: numerical dissipation {:.3e} of the energy scale (a time step too large for the impact speeds?){more}", report.step, sim.t, -gain);
+                monitor.warning(&message);
+                logger.line(sim.t, Level::Warning, &message)?;
+            }
+        }
+        if report.step % every == 0 || sim.finished() {
+            logger.solver(&report, sim.t, "converged", None)?;
+            logger.contact(sim, &report)?;
+            logger.state(sim, energies)?;
+        }
+        logger.frames(sim, sim.finished())?;
+        logger.contacts(sim, sim.finished())?;
+        logger.saved(sim, sim.finished())?;
+        monitor.state(sim);
+        monitor.step(&report, total);
+    }
+}
+
+/// The summary of a run as it ends: finished, or `stop`; a run that finished having created
+/// more than `solver.max_energy_gain` of the energy scale has status [`ENERGY_CREATED`].
+fn run_summary(loaded: &LoadedScene, backend: &Backend, sim: &Simulation, totals: &Totals, stop: Option<&Stop>, started: std::time::Instant, out: &Path) -> RunSummary {
+    let max_energy_gain = loaded.scene.solver.max_energy_gain;
+    let created = sim.energy_created();
+    let (status, message) = match stop {
+        Some(stop) => (stop.status().to_string(), Some(stop.to_string())),
+        None if created > max_energy_gain => {
+            (ENERGY_CREATED.to_string(), Some(format!("the run created {created:.3e} of the energy scale, more than solver.max_energy_gain = {max_energy_gain:.3e} (a time step too large for the impact speed? `bifirst stability` maps it)")))
+        }
+        None => ("finished".to_string(), None),
+    };
+    RunSummary {
+        scene: loaded.name.clone(),
+        status,
+        message,
+        backend: backend.name().to_string(),
+        precision: backend.precision().to_string(),
+        adapter: backend.adapter(),
+        steps: sim.step - sim.first_step.1,
+        last_step: sim.step,
+        t_end: sim.t,
+        cutbacks: totals.cutbacks,
+        newton_iterations: totals.newton,
+        uzawa_iterations: totals.uzawa,
+        contact_newton_iterations: totals.contact_newton,
+        bodies_iterated: totals.bodies_iterated,
+        device_iterations: totals.device_iterations,
+        factorizations: totals.factorizations,
+        max_penetration: totals.max_penetration,
+        max_overlap: totals.max_overlap,
+        max_overlap_ratio: totals.max_overlap_ratio,
+        energy_gain_steps: totals.energy_gain_steps,
+        max_energy_gain: totals.max_energy_gain,
+        overlap_retries: totals.overlap_retries,
+        energy_retries: totals.energy_retries,
+        kept_beyond_bounds: totals.kept_beyond_bounds,
+        energy_created: created,
+        wall_s: started.elapsed().as_secs_f64(),
+        wall_by_phase: totals.wall,
+        bytes_moved: totals.bytes_moved,
+        device_submits: totals.device_submits,
+        kernel_times: backend.kernel_times(),
+        energy: sim.energies(),
+        output: out.to_path_buf(),
     }
 }
 

@@ -13,6 +13,9 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+/// An edit of a log's JSON record.
+type Edit = Box<dyn Fn(&mut Value)>;
+
 fn bifirst(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_bifirst")).args(args).current_dir(env!("CARGO_MANIFEST_DIR")).output().unwrap()
 }
@@ -59,7 +62,7 @@ fn damaged_logs_are_errors_never_aborts() {
     assert!(o.status.success(), "{}", text(&o));
     let log = std::fs::read_dir(&sweep).unwrap().map(|e| e.unwrap().path()).find(|p| p.extension().is_some_and(|x| x == "mcap")).unwrap();
     let good = std::fs::read(&log).unwrap();
-    let mut rng = SmallRng::seed_from_u64(0x32_10_2026);
+    let mut rng = SmallRng::seed_from_u64(0x3210_2026);
     let (plots, out) = (dir.join("plots"), dir.join("continued.mcap"));
     let mut cases: Vec<(String, Vec<u8>)> = Vec::new();
     for _ in 0..48 {
@@ -187,7 +190,7 @@ fn sweep_report_holds_the_record_and_the_logs_against_the_grid() {
     let manifest = sweep.join("sweep.json");
     let good = std::fs::read_to_string(&manifest).unwrap();
     let record: Value = serde_json::from_str(&good).unwrap();
-    let edits: [(&str, Box<dyn Fn(&mut Value)>); 3] = [
+    let edits: [(&str, Edit); 3] = [
         (
             "swapped labels",
             Box::new(|r: &mut Value| {
@@ -260,7 +263,7 @@ fn a_state_out_of_range_is_refused() {
     let log = sliding_log(&dir, 10);
     let record = bifirst::output::read_run(&log).unwrap();
     let (run, state) = (record.messages("/run")[0].clone(), record.messages("/state").last().unwrap().clone());
-    let edits: [(&str, Box<dyn Fn(&mut Value)>, &str); 3] = [
+    let edits: [(&str, Edit, &str); 3] = [
         ("huge velocity", Box::new(|s: &mut Value| s["bodies"][0]["v"][0] = 1e308.into()), "kinetic energy is inf"),
         ("negative time", Box::new(|s: &mut Value| s["t"] = (-5.0).into()), "time t is -5"),
         ("huge displacement", Box::new(|s: &mut Value| s["bodies"][0]["u"][3] = 1e308.into()), "energy is"),

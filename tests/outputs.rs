@@ -39,7 +39,7 @@ fn arrays(attributes: &[Attribute]) -> Vec<(String, usize, Vec<f64>)> {
     attributes
         .iter()
         .map(|a| match a {
-            Attribute::DataArray(d) => (d.name.clone(), d.num_comp() as usize, d.data.cast_into::<f64>().expect("numeric")),
+            Attribute::DataArray(d) => (d.name.clone(), d.num_comp(), d.data.cast_into::<f64>().expect("numeric")),
             Attribute::Field { name, .. } => panic!("unexpected field data {name}"),
         })
         .collect()

@@ -91,7 +91,7 @@ fn grains_box_compresses_without_failure_penetration_or_pass_through() {
         // by design; a cut-back for any other reason is a failed step.
         cutbacks += report.cutbacks.saturating_sub(report.overlap_retries + report.energy_retries);
         max_penetration = max_penetration.max(report.contact.max_penetration);
-        if report.step % 10 != 0 && !sim.finished() {
+        if !report.step.is_multiple_of(10) && !sim.finished() {
             continue;
         }
         // The box: the left wall has moved by 1.2 t.

@@ -82,7 +82,7 @@ impl Study {
     /// Loads the scene with `sets`, picks its measure (`measure`, else the scene's name) and
     /// validates every variant of the grid of `axes`.
     pub fn plan(scene: &Path, measure: Option<&str>, sets: &[String], axes: &[SweepAxis], base: &BackendRequest) -> Result<Self, AccuracyError> {
-        let loaded = load_scene(scene, sets).map_err(|source| StudyError::Scene { label: "base".into(), source })?;
+        let loaded = load_scene(scene, sets).map_err(|source| StudyError::Scene { label: "base".into(), source: Box::new(source) })?;
         let measure = measure.unwrap_or(&loaded.name).to_string();
         known_answer(&measure, &loaded)?;
         let mut runs = Vec::new();
@@ -99,7 +99,7 @@ impl Study {
                     _ => scene_sets.push(set.clone()),
                 }
             }
-            let loaded = load_scene(scene, &scene_sets).map_err(|source| StudyError::Scene { label: variant.label.clone(), source })?;
+            let loaded = load_scene(scene, &scene_sets).map_err(|source| StudyError::Scene { label: variant.label.clone(), source: Box::new(source) })?;
             known_answer(&measure, &loaded).map_err(|e| AccuracyError::Variant { label: variant.label.clone(), source: Box::new(e) })?;
             runs.push((variant, loaded, request));
         }
@@ -248,7 +248,7 @@ pub fn csv(axes: &[SweepAxis], rows: &[Row]) -> String {
     header.extend(axes.iter().map(|a| a.key.clone()));
     header.extend(["backend", "precision", "status", "steps", "wall_s", "error", "pareto"].map(String::from));
     for t in &terms {
-        header.extend([format!("{t}"), format!("{t} expected"), format!("{t} error")]);
+        header.extend([t.to_string(), format!("{t} expected"), format!("{t} error")]);
     }
     let quote = |s: &str| if s.contains([',', '"']) { format!("\"{}\"", s.replace('"', "\"\"")) } else { s.to_string() };
     let mut out = header.iter().map(|h| quote(h)).collect::<Vec<_>>().join(",") + "\n";

@@ -93,7 +93,7 @@ mod tests {
                 ([c[0] - r[0], c[1] - r[1], c[2] - r[2]], [c[0] + r[0], c[1] + r[1], c[2] + r[2]])
             })
             .collect();
-        let can_touch = |a: usize, b: usize| (a + b) % 7 != 0;
+        let can_touch = |a: usize, b: usize| !(a + b).is_multiple_of(7);
         let found = neighbours(&boxes, can_touch);
         let mut pairs = 0;
         for a in 0..boxes.len() {

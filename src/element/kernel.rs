@@ -156,7 +156,7 @@ pub(super) fn checked_determinant(f: &Mat3) -> Result<Real, ElementError> {
     if det.is_nan() {
         return Err(ElementError::NonFinite);
     }
-    if !(det > 0.0) {
+    if det.is_nan() || det <= 0.0 {
         return Err(ElementError::Inverted(det));
     }
     Ok(det)

@@ -102,7 +102,7 @@ impl ReferenceGeometry {
                     }
                 }
                 let det = jac.determinant();
-                if !(det > 1e-10 * scale) {
+                if det.is_nan() || det <= 1e-10 * scale {
                     let what = if det < 0.0 { "inverted" } else { "degenerate" };
                     return Err(BadReferenceElement { element: e, what, det });
                 }

@@ -823,20 +823,35 @@ fn runs(members: &[usize]) -> Vec<Vec<usize>> {
     out
 }
 
-impl Batch {
-    fn new(gpu: &Arc<Gpu>, variant: ElementVariant, members: Vec<usize>, bodies: &[WorldBody], coefficients: &Buffer, max_bytes: u64, traffic: &mut Traffic) -> Result<Self, GpuError> {
-        let kind = variant.kind;
-        let dim = kind.dim();
-        let stride = element_out_stride(kind.nodes() * dim);
-        let precision = gpu.precision;
-        let real = precision.size();
+/// A batch's members laid end to end: their ranges, the distinct materials, the geometry and
+/// connectivity (node numbers shifted to the batch's), the gather maps (entries shifted to the
+/// batch's element results), the totals, and the free dofs with each member's range of them.
+struct BatchLayout {
+    ranges: Vec<MemberRange>,
+    materials: Vec<MaterialParams<Real>>,
+    geometry: Vec<Real>,
+    connectivity: Vec<u32>,
+    csr_start: Vec<u32>,
+    csr: Vec<u32>,
+    dof_start: Vec<u32>,
+    dof: Vec<u32>,
+    elements: usize,
+    dofs: usize,
+    nnz: usize,
+    history: usize,
+    free_dofs: Vec<u32>,
+    free_range: Vec<(u32, u32)>,
+}
+
+impl BatchLayout {
+    fn of(members: &[usize], bodies: &[WorldBody], stride: usize, dim: usize) -> Self {
         let mut ranges = Vec::with_capacity(members.len());
         let mut materials: Vec<MaterialParams<Real>> = Vec::new();
         let (mut geometry, mut connectivity) = (Vec::new(), Vec::new());
         let (mut csr_start, mut csr, mut dof_start, mut dof) = (vec![0u32], Vec::new(), vec![0u32], Vec::new());
         let (mut elements, mut dofs, mut nnz, mut history) = (0usize, 0usize, 0usize, 0usize);
         let (mut free_dofs, mut free_range) = (Vec::new(), Vec::with_capacity(members.len()));
-        for &b in &members {
+        for &b in members {
             let body = &bodies[b];
             let free_start = free_dofs.len() as u32;
             free_dofs.extend(body.dofs.free_pairs().map(|(d, _)| d as u32));
@@ -877,6 +892,18 @@ impl Batch {
             dofs += body_dofs;
             nnz += body.pattern.nnz();
         }
+        Self { ranges, materials, geometry, connectivity, csr_start, csr, dof_start, dof, elements, dofs, nnz, history, free_dofs, free_range }
+    }
+}
+
+impl Batch {
+    fn new(gpu: &Arc<Gpu>, variant: ElementVariant, members: Vec<usize>, bodies: &[WorldBody], coefficients: &Buffer, max_bytes: u64, traffic: &mut Traffic) -> Result<Self, GpuError> {
+        let kind = variant.kind;
+        let dim = kind.dim();
+        let stride = element_out_stride(kind.nodes() * dim);
+        let precision = gpu.precision;
+        let real = precision.size();
+        let BatchLayout { ranges, materials, geometry, connectivity, csr_start, csr, dof_start, dof, elements, dofs, nnz, history, free_dofs, free_range } = BatchLayout::of(&members, bodies, stride, dim);
         if (elements * stride) as u64 >= u64::from(u32::MAX) {
             return Err(GpuError::Kernel { kernel: "element_force_tangent".into(), message: format!("{elements} elements of {} are too many for 32-bit indices", kind.name()) });
         }

@@ -59,14 +59,14 @@ impl Gent {
 impl IsochoricLaw for Gent {
     fn energy(&self, i1: Real, _i2: Real) -> Real {
         let r = self.reserve(i1);
-        if !(r > 0.0) {
+        if r.is_nan() || r <= 0.0 {
             return Real::MAX;
         }
         -0.5 * self.g * self.jm * r.ln()
     }
     fn derivatives(&self, i1: Real, _i2: Real) -> Isochoric {
         let r = self.reserve(i1);
-        if !(r > 0.0) {
+        if r.is_nan() || r <= 0.0 {
             return Isochoric { d1: Real::MAX, d2: 0.0, d11: Real::MAX, d12: 0.0, d22: 0.0 };
         }
         Isochoric { d1: 0.5 * self.g / r, d11: 0.5 * self.g / (self.jm * r * r), ..Default::default() }

@@ -91,7 +91,7 @@ pub fn annulus(center: [Real; 2], [a, b]: [Real; 2], angle: Real, [nr, nt]: [usi
         }
     }
     // Cells run outwards (i) then counter-clockwise (j): counter-clockwise corners.
-    let connectivity = quad_grid_cells(nr, nt, kind, |i, j| id(i, j));
+    let connectivity = quad_grid_cells(nr, nt, kind, id);
     let mut sets = BTreeMap::new();
     sets.insert("inner".into(), (0..columns).map(|j| id(0, j)).collect());
     sets.insert("outer".into(), (0..columns).map(|j| id(nr, j)).collect());

@@ -73,6 +73,39 @@ pub(super) fn generator_dim(mesh: &MeshSpec) -> Option<usize> {
 }
 
 pub(super) fn validate(s: &Scene) -> Result<(), Failure> {
+    validate_stepping(s)?;
+    validate_sizes(s)?;
+    validate_names(s)?;
+    for (name, m) in &s.material {
+        validate_material(&format!("material.{name}"), m)?;
+    }
+    let dim = validate_bodies(s)?;
+    if let Some(g) = &s.gravity {
+        finite_vec("gravity", g, dim)?;
+    }
+    validate_boundaries(s, dim)?;
+    validate_contact(s, dim)?;
+    for (name, o) in &s.obstacle {
+        if s.boundary.contains_key(name) {
+            fail(Invalid, format!("obstacle.{name}"), format!("a boundary set is also named `{name}`; both would log to /reaction/{name}."))?;
+        }
+        validate_obstacle(s, &format!("obstacle.{name}"), o, dim)?;
+    }
+    for (name, load) in &s.load {
+        validate_load(s, &format!("load.{name}"), load, dim)?;
+    }
+    for (name, p) in &s.probe {
+        let key = format!("probe.{name}");
+        if !s.body.contains_key(&p.body) {
+            fail(Reference, format!("{key}.body"), format!("unknown body `{}` (the scene defines: {}).", p.body, names(s.body.keys())))?;
+        }
+        finite_vec(&format!("{key}.point"), &p.point, dim)?;
+    }
+    Ok(())
+}
+
+/// The time stepping and the solver's tolerances and bounds.
+fn validate_stepping(s: &Scene) -> Result<(), Failure> {
     let t = &s.time;
     positive("time.dt".into(), "the time step", t.dt)?;
     positive("time.end".into(), "the end time", t.end)?;
@@ -85,7 +118,7 @@ pub(super) fn validate(s: &Scene) -> Result<(), Failure> {
     positive("solver.residual_tolerance".into(), "the residual tolerance", s.solver.residual_tolerance)?;
     positive("solver.increment_tolerance".into(), "the increment tolerance", s.solver.increment_tolerance)?;
     for (key, v) in [("solver.max_overlap", s.solver.max_overlap), ("solver.max_step_energy_gain", s.solver.max_step_energy_gain), ("solver.max_energy_gain", s.solver.max_energy_gain)] {
-        if !(v > 0.0) {
+        if v.is_nan() || v <= 0.0 {
             fail(Invalid, key, format!("the bound must be positive, or inf to turn it off (got {v})."))?;
         }
     }
@@ -97,6 +130,11 @@ pub(super) fn validate(s: &Scene) -> Result<(), Failure> {
         let message = format!("{steps:.3e} steps to time.end = {}, more than limits.max_steps = {}; raise the limit (`--set limits.max_steps=N`) if you mean it.", t.end, s.limits.max_steps);
         fail(Invalid, "time.dt", message)?;
     }
+    Ok(())
+}
+
+/// The steps and generated elements within the scene's limits, and the output cadences.
+fn validate_sizes(s: &Scene) -> Result<(), Failure> {
     let mut elements: u128 = 0;
     for (name, b) in &s.body {
         let count = generated_elements(&b.mesh);
@@ -116,6 +154,11 @@ pub(super) fn validate(s: &Scene) -> Result<(), Failure> {
         let message = format!("`channels` gives each of the scene's {} bodies its own MCAP channel, and a log holds at most {} of them; use \"auto\" or \"batched\" (one `/bodies` message per step).", s.body.len(), BodyLog::MAX_CHANNELS);
         fail(Invalid, "output.bodies", message)?;
     }
+    Ok(())
+}
+
+/// Every section's names fit for MCAP topics and file names.
+fn validate_names(s: &Scene) -> Result<(), Failure> {
     let named = [("material", names_of(&s.material)), ("body", names_of(&s.body)), ("boundary", names_of(&s.boundary)), ("load", names_of(&s.load)), ("probe", names_of(&s.probe)), ("obstacle", names_of(&s.obstacle))];
     for (section, list) in named {
         // Names become MCAP topics and file names.
@@ -123,9 +166,12 @@ pub(super) fn validate(s: &Scene) -> Result<(), Failure> {
             fail(Invalid, format!("{section}.{bad}"), "names may only use letters, digits, `_`, `-` and `.` (they become MCAP topics and file names).")?;
         }
     }
-    for (name, m) in &s.material {
-        validate_material(&format!("material.{name}"), m)?;
-    }
+    Ok(())
+}
+
+/// The bodies: their materials, meshes and initial velocities. Returns the scene's dimension
+/// where the generated meshes say it.
+fn validate_bodies(s: &Scene) -> Result<Option<usize>, Failure> {
     if s.body.is_empty() {
         fail(Invalid, "body", "the scene has no body.")?;
     }
@@ -152,9 +198,11 @@ pub(super) fn validate(s: &Scene) -> Result<(), Failure> {
             _ => {}
         }
     }
-    if let Some(g) = &s.gravity {
-        finite_vec("gravity", g, dim)?;
-    }
+    Ok(dim)
+}
+
+/// The boundary sets: their bodies, stop times, velocities and components.
+fn validate_boundaries(s: &Scene, dim: Option<usize>) -> Result<(), Failure> {
     for (name, bc) in &s.boundary {
         let key = format!("boundary.{name}");
         if !s.body.contains_key(&bc.body) {
@@ -174,23 +222,6 @@ pub(super) fn validate(s: &Scene) -> Result<(), Failure> {
                 fail(Invalid, format!("{key}.components"), "`z` in a 2D scene.")?;
             }
         }
-    }
-    validate_contact(s, dim)?;
-    for (name, o) in &s.obstacle {
-        if s.boundary.contains_key(name) {
-            fail(Invalid, format!("obstacle.{name}"), format!("a boundary set is also named `{name}`; both would log to /reaction/{name}."))?;
-        }
-        validate_obstacle(s, &format!("obstacle.{name}"), o, dim)?;
-    }
-    for (name, load) in &s.load {
-        validate_load(s, &format!("load.{name}"), load, dim)?;
-    }
-    for (name, p) in &s.probe {
-        let key = format!("probe.{name}");
-        if !s.body.contains_key(&p.body) {
-            fail(Reference, format!("{key}.body"), format!("unknown body `{}` (the scene defines: {}).", p.body, names(s.body.keys())))?;
-        }
-        finite_vec(&format!("{key}.point"), &p.point, dim)?;
     }
     Ok(())
 }
@@ -265,7 +296,7 @@ fn validate_material(key: &str, m: &MaterialSpec) -> Result<(), Failure> {
     match m.model {
         ModelName::MooneyRivlin => {
             let (c10, c01) = (m.C10.unwrap_or(0.0), m.C01.unwrap_or(0.0));
-            if !(c10 + c01 > 0.0) {
+            if (c10 + c01).is_nan() || c10 + c01 <= 0.0 {
                 fail(Invalid, format!("{key}.C10"), format!("the small-strain shear modulus G = 2 (C10 + C01) must be above zero (C10 = {c10}, C01 = {c01})."))?;
             }
         }
@@ -292,7 +323,7 @@ fn validate_prony(key: &str, terms: &[PronySpec]) -> Result<(), Failure> {
         positive(format!("{key}.viscoelastic.{i}.tau"), "the relaxation time tau", t.tau)?;
     }
     let sum: Real = terms.iter().map(|t| t.g).sum();
-    if !(sum < 1.0) {
+    if sum.is_nan() || sum >= 1.0 {
         return fail(Invalid, format!("{key}.viscoelastic"), format!("the relative moduli must sum to less than 1 (got Σ g = {sum}): 1 - Σ g is the share of the isochoric stress left after a long hold."));
     }
     Ok(())
@@ -320,7 +351,7 @@ fn validate_ogden(key: &str, m: &MaterialSpec) -> Result<(), Failure> {
         return fail(Invalid, format!("{key}.alpha"), format!("term {} has the exponent 0 (its energy μ/α (λ^α - 1) is undefined).", p + 1));
     }
     let g: Real = 0.5 * mu.iter().zip(&alpha).map(|(m, a)| m * a).sum::<Real>();
-    if !(g > 0.0) {
+    if g.is_nan() || g <= 0.0 {
         return fail(Invalid, format!("{key}.mu"), format!("the small-strain shear modulus G = ½ Σ μₚ αₚ must be above zero (got {g})."));
     }
     Ok(())
@@ -362,13 +393,18 @@ fn validate_mesh(key: &str, m: &MeshSpec) -> Result<(), Failure> {
     if kind.dim() != dim {
         fail(Invalid, format!("{key}.element"), format!("{} is a {}D element; this generator makes {dim}D meshes.", kind.name(), kind.dim()))?;
     }
-    let need = |field: &str, present: bool| if present { Ok(()) } else { fail(Invalid, format!("{key}.{field}"), format!("this generator needs `{field}`.")) };
     if let Some(w) = &m.rotation {
         if dim != 3 {
             fail(Invalid, format!("{key}.rotation"), "a rotation turns a 3D mesh (box or ball); place 2D meshes by their points.")?;
         }
         finite_vec(&format!("{key}.rotation"), w, Some(3))?;
     }
+    validate_generator(key, m, generator, kind, dim)
+}
+
+/// The parameters of one generator.
+fn validate_generator(key: &str, m: &MeshSpec, generator: Generator, kind: crate::mesh::ElementKind, dim: usize) -> Result<(), Failure> {
+    let need = |field: &str, present: bool| if present { Ok(()) } else { fail(Invalid, format!("{key}.{field}"), format!("this generator needs `{field}`.")) };
     match generator {
         Generator::Rectangle | Generator::Box => {
             need("size", m.size.is_some())?;

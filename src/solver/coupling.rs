@@ -15,6 +15,9 @@ use crate::precision::Real;
 use std::collections::HashMap;
 use std::sync::atomic::AtomicBool;
 
+/// The non-zero entries `(free dof, value)` of a row of `H`.
+type SparseRow = Vec<(u32, Real)>;
+
 /// The Uzawa iterations of a Newton iteration go this much below the contact tolerance, so that
 /// their own error does not keep the reactions from settling between Newton iterations. 0.01
 /// before the sweeps were accelerated; 0.1 saves a tenth of the sweeps of grains_many (N = 200)
@@ -35,7 +38,7 @@ pub struct ContactStep {
     per_body: Vec<(Vec<u32>, Vec<u32>)>,
     /// Per body and listed point, the non-zero entries `(free dof, value)` of `H` in each of
     /// the point's directions.
-    h: Vec<Vec<[Vec<(u32, Real)>; 3]>>,
+    h: Vec<Vec<[SparseRow; 3]>>,
     pub r: Vec<[Real; 3]>,
     pub local: Vec<Local>,
     nodal: NodalMap,

@@ -42,23 +42,13 @@ pub(super) fn newton_in_lockstep(groups: &mut [Group], world: &mut GpuWorld, c: 
         let wanted = |_: &Body| true;
         let evaluating: Vec<bool> = live.iter().zip(&iterating).map(|(&l, &i)| l && !i).collect();
         let others_on_device = device_residual && on_device(groups, &evaluating, &wanted, world, first);
-        let mut evaluated =
-            if others_on_device || iterating.contains(&true) { device_pass(groups, if others_on_device { &evaluating } else { &none }, PassKind { tangent: false, iterating: &iterating, unevaluated: first }, world, c, &wanted, times) } else { groups.iter().map(|_| Ok(())).collect() };
+        let mut evaluated = if others_on_device || iterating.contains(&true) {
+            device_pass(groups, if others_on_device { &evaluating } else { &none }, PassKind { tangent: false, iterating: &iterating, unevaluated: first }, world, c, &wanted, times)
+        } else {
+            groups.iter().map(|_| Ok(())).collect()
+        };
         if !others_on_device {
-            let on_cpu: Vec<Result<(), StepFailure>> = groups
-                .par_iter_mut()
-                .zip(&evaluating)
-                .map(|(g, &e)| {
-                    if !e {
-                        return Ok(());
-                    }
-                    for body in g.bodies.iter_mut() {
-                        body.evaluate_residual_on_cpu(c.p, &mut g.newton.report.wall)?;
-                    }
-                    Ok(())
-                })
-                .collect();
-            for (result, cpu) in evaluated.iter_mut().zip(on_cpu) {
+            for (result, cpu) in evaluated.iter_mut().zip(evaluate_on_cpu(groups, &evaluating, c)) {
                 if result.is_ok() {
                     *result = cpu;
                 }
@@ -90,7 +80,11 @@ pub(super) fn newton_in_lockstep(groups: &mut [Group], world: &mut GpuWorld, c: 
         let p = c.p;
         let needs_tangent = |b: &Body| b.needs_tangent(p);
         // Else each body's `refresh_factor` assembles its tangent on the CPU.
-        let tangents = if on_device(groups, &continuing, &needs_tangent, world, first) { device_pass(groups, &continuing, PassKind { tangent: true, iterating: &none, unevaluated: false }, world, c, &needs_tangent, times) } else { groups.iter().map(|_| Ok(())).collect() };
+        let tangents = if on_device(groups, &continuing, &needs_tangent, world, first) {
+            device_pass(groups, &continuing, PassKind { tangent: true, iterating: &none, unevaluated: false }, world, c, &needs_tangent, times)
+        } else {
+            groups.iter().map(|_| Ok(())).collect()
+        };
         let begun: Vec<Option<Result<bool, StepFailure>>> = groups.par_iter_mut().zip(tangents).zip(&continuing).map(|((g, tangents), &go)| go.then(|| tangents.and_then(|()| g.begin_increment(c)))).collect();
         let mut waiting = vec![false; groups.len()];
         for (k, result) in begun.into_iter().enumerate() {
@@ -118,6 +112,23 @@ pub(super) fn newton_in_lockstep(groups: &mut [Group], world: &mut GpuWorld, c: 
         first = false;
     }
     outcome.into_iter().map(|o| o.expect("every group has an outcome")).collect()
+}
+
+/// The forces and residuals of the `evaluating` groups' bodies on the CPU twins, in parallel.
+fn evaluate_on_cpu(groups: &mut [Group], evaluating: &[bool], c: &Context) -> Vec<Result<(), StepFailure>> {
+    groups
+        .par_iter_mut()
+        .zip(evaluating)
+        .map(|(g, &e)| {
+            if !e {
+                return Ok(());
+            }
+            for body in g.bodies.iter_mut() {
+                body.evaluate_residual_on_cpu(c.p, &mut g.newton.report.wall)?;
+            }
+            Ok(())
+        })
+        .collect()
 }
 
 /// The groups whose first evaluation of a step goes to the device with their Newton iterations
@@ -314,10 +325,13 @@ struct PassLayout<'a> {
     evaluations_start: Vec<usize>,
 }
 
+/// A call's state, strain energy, element failure and the tangent it handed back.
+type CallEnd = (NewtonState<Real>, Option<Real>, Option<ElementFailure>, Option<Vec<Real>>);
+
 /// What a pass leaves a group that iterated on the device: per call its state, strain energy,
 /// element failure and the tangent it handed back; per contact its outcome.
 struct IterationEnds {
-    calls: Vec<(NewtonState<Real>, Option<Real>, Option<ElementFailure>, Option<Vec<Real>>)>,
+    calls: Vec<CallEnd>,
     contacts: Vec<ContactState<Real>>,
 }
 
@@ -420,15 +434,8 @@ fn iterations_share<'a>(g: &'a mut Group, inverses: Vec<Option<Vec<Real>>>, kind
         let settings = c.settings.expect("contact points need contact settings");
         let obstacle = contact.obstacle_velocities();
         let (problem, slot_nodes) = contact.problem_and_slots(settings);
-        let group = GroupContact {
-            calls: Vec::new(),
-            slot_nodes,
-            obstacle,
-            u_base,
-            iterations_before: newton.report.iterations as u32,
-            tolerance: settings.tolerance,
-            outcome: ContactState { stalls: newton.uzawa_stalls as u32, ..ContactState::default() },
-        };
+        let group =
+            GroupContact { calls: Vec::new(), slot_nodes, obstacle, u_base, iterations_before: newton.report.iterations as u32, tolerance: settings.tolerance, outcome: ContactState { stalls: newton.uzawa_stalls as u32, ..ContactState::default() } };
         (problem, group)
     });
     (calls, contact, Vec::new())

@@ -24,7 +24,7 @@ use crate::contact::{Configuration, ContactModel, ContactPoint, ContactStats, Ma
 use crate::gpu::GpuWorld;
 use crate::precision::{Precision, Real};
 pub use body::StepParams;
-use group::solve_groups;
+use group::{solve_groups, GroupReport};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -85,6 +85,37 @@ pub struct StepReport {
     pub raised_theta: usize,
     /// Sub-steps kept beyond a bound at the smallest step the cut-backs allow.
     pub kept_beyond_bounds: usize,
+}
+
+impl StepReport {
+    /// Adds the counts of one attempt's groups (of those that converged, also in an attempt that failed); the
+    /// first failure fails the attempt. The attempt took as many Newton iterations as its
+    /// slowest group.
+    fn add_groups(&mut self, groups: Vec<Result<GroupReport, StepFailure>>) -> Result<(), StepFailure> {
+        let (mut failure, mut iterations) = (None, 0);
+        for g in groups {
+            let g = match g {
+                Ok(g) => g,
+                Err(e) => {
+                    failure.get_or_insert(e);
+                    continue;
+                }
+            };
+            iterations = iterations.max(g.iterations);
+            self.uzawa_iterations += g.uzawa_iterations;
+            self.contact_newton_iterations += g.contact_newton_iterations;
+            self.bodies_iterated += g.bodies_iterated;
+            self.device_iterations += g.device_iterations;
+            self.factorizations += g.factorizations;
+            self.residual_norm = self.residual_norm.max(g.residual_norm);
+            self.wall += g.wall;
+        }
+        if let Some(e) = failure {
+            return Err(e);
+        }
+        self.newton_iterations += iterations;
+        Ok(())
+    }
 }
 
 /// A step that could not be completed even after all cut-backs.
@@ -349,7 +380,7 @@ impl Simulation {
     /// rejected attempt up to `max_cutbacks` levels (each half is itself retried the same way).
     /// A step that needed a retry sets the level the next one starts at to the deepest it
     /// used; [`GROW_AFTER`] steps in a row without one take the level back up by one.
-    pub fn advance(&mut self) -> Result<StepReport, RunFailure> {
+    pub fn advance(&mut self) -> Result<StepReport, Box<RunFailure>> {
         let started = std::time::Instant::now();
         let dt = self.step_dt();
         let mut report = StepReport { step: self.step + 1, dt, ..Default::default() };
@@ -379,7 +410,7 @@ impl Simulation {
                 report.t = self.t;
                 Ok(report)
             }
-            Err((failure, sub_dt)) => Err(RunFailure { step: self.step + 1, t: self.t, dt: sub_dt, cutbacks: report.cutbacks, level, failure, report }),
+            Err((failure, sub_dt)) => Err(Box::new(RunFailure { step: self.step + 1, t: self.t, dt: sub_dt, cutbacks: report.cutbacks, level, failure, report })),
         }
     }
 
@@ -461,29 +492,7 @@ impl Simulation {
         }
         let stop = self.interrupt.as_deref();
         let (points, groups) = solve_groups(&mut self.bodies, points, &p, settings.as_ref(), &warm, velocity_scale, self.world.as_mut(), stop, &mut report.wall);
-        let (mut failure, mut iterations) = (None, 0);
-        for group in groups {
-            match group {
-                Ok(g) => {
-                    iterations = iterations.max(g.iterations);
-                    report.uzawa_iterations += g.uzawa_iterations;
-                    report.contact_newton_iterations += g.contact_newton_iterations;
-                    report.bodies_iterated += g.bodies_iterated;
-                    report.device_iterations += g.device_iterations;
-                    report.factorizations += g.factorizations;
-                    report.residual_norm = report.residual_norm.max(g.residual_norm);
-                    report.wall += g.wall;
-                }
-                Err(e) => {
-                    failure.get_or_insert(e);
-                }
-            }
-        }
-        if let Some(e) = failure {
-            return Err(e);
-        }
-        // The step took as many Newton iterations as its slowest group.
-        report.newton_iterations += iterations;
+        report.add_groups(groups)?;
         // The step's overlaps, measured once on its end state (the state `commit` keeps).
         let started = std::time::Instant::now();
         let mut config = std::mem::take(&mut self.spare_configuration);

@@ -194,220 +194,44 @@ fn nodal_load(loaded: &LoadedScene, key: &str, spec: &LoadSpec, mesh: &Mesh) -> 
     Ok(NodalLoad { forces, ramp: spec.ramp })
 }
 
+/// A body's mesh as its elements are integrated: its name, the mesh, the F-bar patches of an
+/// unstructured simplex mesh, the reference geometry and the formulation.
+type BodyMesh = (String, Mesh, Option<Patches>, ReferenceGeometry, Formulation);
+
 /// Sets up every body, boundary set and probe of the scene.
 pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> {
     let scene = &loaded.scene;
-    for (name, material) in &scene.material {
-        let (k, g) = model_of(material).bulk_shear();
-        if k / g > MAX_K_OVER_G {
-            let message = format!("K/G = {:.3e} is beyond {MAX_K_OVER_G:.0e}: the shear stresses would be below the round-off of the volumetric ones in f64 (rubber is 1e3 to 1e5).", k / g);
-            return Err(loaded.error(Invalid, &format!("material.{name}.K"), message));
-        }
-    }
-    let mut meshes = Vec::new();
+    check_materials(loaded)?;
     let mut notices = Vec::new();
-    let mut dim = None;
-    for (name, spec) in &scene.body {
-        let key = format!("body.{name}.mesh");
-        let mesh = build_mesh(loaded, &key, &spec.mesh)?;
-        match dim {
-            Some(d) if d != mesh.dim() => return Err(loaded.error(Invalid, &key, format!("a {}D mesh in a {d}D scene.", mesh.dim()))),
-            _ => dim = Some(mesh.dim()),
-        }
-        let where_ = if spec.mesh.file.is_some() { format!("{key}.file") } else { key.clone() };
-        if let Some((n, x)) = mesh.nodes.iter().enumerate().find(|(_, x)| !within_range(&x[..])) {
-            return Err(loaded.error(Invalid, &where_, format!("node {n} is at {x:?}, beyond ±{LARGEST_INPUT:e}{RANGE_WHY}.")));
-        }
-        let cells = simplex_cells(&spec.mesh, mesh.kind);
-        let formulation = formulation_of(&spec.material, spec.formulation.unwrap_or_default(), &model_of(&scene.material[&spec.material]), &mut notices);
-        let bad_geometry = |e: crate::element::BadReferenceElement| loaded.error(MeshError, &where_, format!("{e}; the mesh must have positive element volumes at t = 0."));
-        // F-bar on simplices averages the volume change over the cells a generator split (the
-        // body is meshed by its cells, each integrated as its simplices), or over patches of
-        // neighbouring simplices.
-        let (mesh, patches, geometry) = match (formulation, cells) {
-            (Formulation::Fbar, Some(cell)) => {
-                let cells = build_mesh(loaded, &key, &MeshSpec { element: Some(cell), ..spec.mesh.clone() })?;
-                let geometry = ReferenceGeometry::simplex_patches(&cells).map_err(bad_geometry)?;
-                (cells, None, geometry)
-            }
-            (Formulation::Fbar, None) if !Formulation::fbar_applies(mesh.kind) => {
-                let simplices = ReferenceGeometry::new(&mesh).map_err(bad_geometry)?;
-                let patches = Patches::group(&mesh);
-                let geometry = ReferenceGeometry::grouped(&simplices, &mesh, &patches);
-                (mesh, Some(patches), geometry)
-            }
-            _ => {
-                let geometry = ReferenceGeometry::new(&mesh).map_err(bad_geometry)?;
-                (mesh, None, geometry)
-            }
-        };
-        meshes.push((name.clone(), mesh, patches, geometry, formulation));
-    }
-    let dim = dim.expect("a scene has a body");
-    let range_check = |key: &str, v: &[Real]| {
-        if within_range(v) {
-            Ok(())
-        } else {
-            Err(loaded.error(Invalid, key, format!("{v:?} is beyond ±{LARGEST_INPUT:e}{RANGE_WHY}.")))
-        }
-    };
-    let vec_len_check = |key: &str, v: &[Real]| {
-        if v.len() == dim {
-            Ok(())
-        } else {
-            Err(loaded.error(Invalid, key, format!("expected {dim} components (the scene is {dim}D), got {}.", v.len())))
-        }
-    };
+    let (meshes, dim) = body_meshes(loaded, &mut notices)?;
     let body_index: HashMap<&str, usize> = scene.body.keys().enumerate().map(|(i, n)| (n.as_str(), i)).collect();
-
-    // Boundary sets -> prescribed dofs per body.
-    let mut sets = Vec::new();
-    let mut prescribed: Vec<Vec<Prescribed>> = vec![Vec::new(); meshes.len()];
-    let mut owner: HashMap<(usize, usize), String> = HashMap::new();
-    for (set_index, (name, bc)) in scene.boundary.iter().enumerate() {
-        let key = format!("boundary.{name}");
-        let b = body_index[bc.body.as_str()];
-        let mesh = &meshes[b].1;
-        let nodes = mesh.node_sets.get(&bc.nodes).ok_or_else(|| {
-            let known: Vec<&str> = mesh.node_sets.keys().map(String::as_str).collect();
-            loaded.error(Reference, &format!("{key}.nodes"), format!("body `{}` has no node set `{}` (it has: {}).", bc.body, bc.nodes, known.join(", ")))
-        })?;
-        if nodes.is_empty() {
-            return Err(loaded.error(Invalid, &format!("{key}.nodes"), format!("the node set `{}` of body `{}` names no nodes.", bc.nodes, bc.body)));
-        }
-        let velocity = bc.velocity.clone().unwrap_or_else(|| vec![0.0; dim]);
-        let until = bc.until.unwrap_or(Real::INFINITY);
-        vec_len_check(&format!("{key}.velocity"), &velocity)?;
-        let components: Vec<usize> = match &bc.components {
-            Some(c) => c
-                .iter()
-                .map(|a| match a {
-                    Axis::X => 0,
-                    Axis::Y => 1,
-                    Axis::Z => 2,
-                })
-                .collect(),
-            None => (0..dim).collect(),
-        };
-        if components.iter().any(|&c| c >= dim) {
-            return Err(loaded.error(Invalid, &format!("{key}.components"), format!("`z` in a {dim}D scene.")));
-        }
-        for &n in nodes {
-            for &c in &components {
-                let dof = n as usize * dim + c;
-                if let Some(first) = owner.get(&(b, dof)) {
-                    // A dof shared by two sets keeps its first owner; their velocities must agree.
-                    let existing = prescribed[b].iter().find(|p| p.dof == dof).expect("owned dof is prescribed");
-                    if (existing.velocity - velocity[c]).abs() > 0.0 || (existing.until != until && existing.velocity != 0.0) {
-                        return Err(loaded.error(Invalid, &format!("{key}.velocity"), format!("node {n} is also prescribed by `boundary.{first}` with another velocity.")));
-                    }
-                    continue;
-                }
-                owner.insert((b, dof), name.clone());
-                prescribed[b].push(Prescribed { dof, velocity: velocity[c], set: set_index, until });
-            }
-        }
-        sets.push(BoundarySet { name: name.clone(), body: b });
-    }
-
-    // One topology per distinct body (connectivity and prescribed dofs), built in parallel and
-    // shared; a failure is reported for the first body in the scene's order that has it.
-    let ordering = scene.solver.ordering;
-    let elements = |b: usize| meshes[b].2.as_ref().map_or(&meshes[b].1, |p: &Patches| &p.cells);
-    let keys: Vec<Option<TopologyKey>> = (0..meshes.len()).into_par_iter().map(|b| Topology::key(elements(b), &prescribed[b], ordering)).collect();
-    let mut first_of: HashMap<&TopologyKey, usize> = HashMap::new();
-    let owner_of: Vec<usize> = keys.iter().enumerate().map(|(b, key)| key.as_ref().map_or(b, |k| *first_of.entry(k).or_insert(b))).collect();
-    let built_topologies: HashMap<usize, Result<Topology, String>> =
-        owner_of.iter().enumerate().filter(|(b, owner)| b == *owner).map(|(b, _)| b).collect::<Vec<_>>().into_par_iter().map(|b| (b, Topology::new(elements(b), &prescribed[b], ordering).map_err(|e| e.to_string()))).collect();
-    let topologies: Vec<&Result<Topology, String>> = owner_of.iter().map(|o| &built_topologies[o]).collect();
-
-    // The bodies are independent (a grain packing has thousands): built in parallel, and the
-    // first failing one in the scene's order reported.
-    let specs: Vec<_> = scene.body.values().collect();
-    let inputs = meshes.into_par_iter().zip(specs).zip(std::mem::take(&mut prescribed)).zip(topologies);
-    let built: Vec<Result<Body, SceneError>> = inputs
-        .map(|((((name, mesh, patches, geometry, formulation), spec), prescribed), topology)| {
-            let key = format!("body.{name}");
-            let material = &scene.material[&spec.material];
-            let v0 = spec.initial_velocity.clone().unwrap_or_else(|| vec![0.0; dim]);
-            vec_len_check(&format!("{key}.initial_velocity"), &v0)?;
-            range_check(&format!("{key}.initial_velocity"), &v0)?;
-            let omega = match (&spec.angular_velocity, dim) {
-                (None, _) => [0.0; 3],
-                (Some(AngularVelocity::Planar(w)), 2) => [0.0, 0.0, *w],
-                (Some(AngularVelocity::Spatial(w)), 3) if w.len() == 3 => [w[0], w[1], w[2]],
-                _ => return Err(loaded.error(Invalid, &format!("{key}.angular_velocity"), "give one number in 2D and a vector of 3 components in 3D.")),
-            };
-            range_check(&format!("{key}.angular_velocity"), &omega)?;
-            let masses = geometry.lumped_masses(patches.as_ref().map_or(&mesh, |p| &p.cells), material.density);
-            let total: Real = masses.iter().sum();
-            let mut c = [0.0; 3];
-            for (m, x) in masses.iter().zip(&mesh.nodes) {
-                for i in 0..3 {
-                    c[i] += m * x[i] / total;
-                }
-            }
-            let mut v = [0.0; 3];
-            v[..dim].copy_from_slice(&v0);
-            let initial = move |x: [Real; 3]| {
-                let r = [x[0] - c[0], x[1] - c[1], x[2] - c[2]];
-                [v[0] + omega[1] * r[2] - omega[2] * r[1], v[1] + omega[2] * r[0] - omega[0] * r[2], v[2] + omega[0] * r[1] - omega[1] * r[0]]
-            };
-            let topology = topology.as_ref().map_err(|e| loaded.error(MeshError, &format!("{key}.mesh"), e.clone()))?;
-            let mut body = Body::new(name.clone(), mesh, patches, geometry, model_of(material), formulation, material.density, prescribed, initial, topology);
-            if body.prescribed.is_empty() {
-                free_body_step(loaded, &body, material.density)?;
-            }
-            body.reuse_factorization = scene.solver.reuse_factorization;
-            if let Some(viscoelastic) = viscoelastic_of(material) {
-                body.set_viscoelastic(viscoelastic);
-            }
-            Ok(body)
-        })
-        .collect();
-    let mut bodies = built.into_iter().collect::<Result<Vec<_>, _>>()?;
+    let (sets, prescribed) = prescribed_dofs(loaded, &meshes, &body_index, dim)?;
+    let mut bodies = build_bodies(loaded, meshes, prescribed, dim)?;
     for (name, spec) in &scene.load {
         let b = body_index[spec.body.as_str()];
         let load = nodal_load(loaded, &format!("load.{name}"), spec, &bodies[b].mesh)?;
         bodies[b].loads.push(load);
     }
-
-    let mut probes = Vec::new();
-    for (name, p) in &scene.probe {
-        let b = body_index[p.body.as_str()];
-        let mesh = &bodies[b].mesh;
-        let dist = |x: &[Real; 3]| (0..dim).map(|i| (x[i] - p.point[i]).powi(2)).sum::<Real>();
-        let node = (0..mesh.nodes.len()).min_by(|&i, &j| dist(&mesh.nodes[i]).total_cmp(&dist(&mesh.nodes[j]))).expect("a mesh has nodes");
-        let elements = (0..mesh.element_count()).filter(|&e| mesh.element(e).contains(&(node as u32))).collect();
-        probes.push(Probe { name: name.clone(), body: b, node, elements });
-    }
-
+    let probes = scene
+        .probe
+        .iter()
+        .map(|(name, p)| {
+            let b = body_index[p.body.as_str()];
+            let mesh = &bodies[b].mesh;
+            let dist = |x: &[Real; 3]| (0..dim).map(|i| (x[i] - p.point[i]).powi(2)).sum::<Real>();
+            let node = (0..mesh.nodes.len()).min_by(|&i, &j| dist(&mesh.nodes[i]).total_cmp(&dist(&mesh.nodes[j]))).expect("a mesh has nodes");
+            let elements = (0..mesh.element_count()).filter(|&e| mesh.element(e).contains(&(node as u32))).collect();
+            Probe { name: name.clone(), body: b, node, elements }
+        })
+        .collect();
     let mut gravity = [0.0; 3];
     if let Some(g) = &scene.gravity {
-        vec_len_check("gravity", g)?;
-        range_check("gravity", g)?;
+        components_check(loaded, "gravity", g, dim)?;
+        range_check(loaded, "gravity", g)?;
         gravity[..dim].copy_from_slice(g);
     }
     let contact = build_contact(loaded, &bodies, dim)?;
-    if let Some(model) = &contact {
-        if scene.contact.resolve_initial_overlap {
-            separate_initial_overlaps(&mut bodies, model).map_err(|(key, message)| loaded.error(Invalid, &key, message))?;
-        }
-        if let Some(o) = initial_overlaps(&bodies, model).into_iter().max_by(|a, b| a.ratio().total_cmp(&b.ratio())) {
-            let (key, message) = describe_overlap(&bodies, model, &o);
-            return Err(loaded.error(Invalid, &key, format!("{message}; move them apart, or set `contact.resolve_initial_overlap = true` to push them apart before the first step.")));
-        }
-    }
-    for b in &bodies {
-        let (kinetic, strain, potential) = (b.kinetic_energy(), b.strain_energy(), b.potential_energy(&gravity));
-        if ![kinetic, strain, potential].iter().all(|e| e.is_finite()) {
-            return Err(loaded.error(
-                Invalid,
-                &format!("body.{}", b.name),
-                format!("the initial state has a non-finite energy (kinetic {kinetic:e}, strain {strain:e}, potential {potential:e}): its density, size, velocities and the gravity are too large together."),
-            ));
-        }
-    }
+    check_initial_state(loaded, &mut bodies, contact.as_ref(), &gravity)?;
     Ok(Simulation {
         notices,
         dim,
@@ -447,6 +271,219 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
         committed: None,
         spare_configuration: Default::default(),
     })
+}
+
+/// Every material's K/G within what f64 resolves.
+fn check_materials(loaded: &LoadedScene) -> Result<(), SceneError> {
+    for (name, material) in &loaded.scene.material {
+        let (k, g) = model_of(material).bulk_shear();
+        if k / g > MAX_K_OVER_G {
+            let message = format!("K/G = {:.3e} is beyond {MAX_K_OVER_G:.0e}: the shear stresses would be below the round-off of the volumetric ones in f64 (rubber is 1e3 to 1e5).", k / g);
+            return Err(loaded.error(Invalid, &format!("material.{name}.K"), message));
+        }
+    }
+    Ok(())
+}
+
+/// A value within what the energies can multiply.
+fn range_check(loaded: &LoadedScene, key: &str, v: &[Real]) -> Result<(), SceneError> {
+    if within_range(v) {
+        Ok(())
+    } else {
+        Err(loaded.error(Invalid, key, format!("{v:?} is beyond ±{LARGEST_INPUT:e}{RANGE_WHY}.")))
+    }
+}
+
+/// A vector with the scene's number of components.
+fn components_check(loaded: &LoadedScene, key: &str, v: &[Real], dim: usize) -> Result<(), SceneError> {
+    if v.len() == dim {
+        Ok(())
+    } else {
+        Err(loaded.error(Invalid, key, format!("expected {dim} components (the scene is {dim}D), got {}.", v.len())))
+    }
+}
+
+/// Every body's mesh, as its elements are integrated, and the scene's dimension.
+fn body_meshes(loaded: &LoadedScene, notices: &mut Vec<String>) -> Result<(Vec<BodyMesh>, usize), SceneError> {
+    let scene = &loaded.scene;
+    let mut meshes = Vec::new();
+    let mut dim = None;
+    for (name, spec) in &scene.body {
+        let key = format!("body.{name}.mesh");
+        let mesh = build_mesh(loaded, &key, &spec.mesh)?;
+        match dim {
+            Some(d) if d != mesh.dim() => return Err(loaded.error(Invalid, &key, format!("a {}D mesh in a {d}D scene.", mesh.dim()))),
+            _ => dim = Some(mesh.dim()),
+        }
+        let where_ = if spec.mesh.file.is_some() { format!("{key}.file") } else { key.clone() };
+        if let Some((n, x)) = mesh.nodes.iter().enumerate().find(|(_, x)| !within_range(&x[..])) {
+            return Err(loaded.error(Invalid, &where_, format!("node {n} is at {x:?}, beyond ±{LARGEST_INPUT:e}{RANGE_WHY}.")));
+        }
+        let cells = simplex_cells(&spec.mesh, mesh.kind);
+        let formulation = formulation_of(&spec.material, spec.formulation.unwrap_or_default(), &model_of(&scene.material[&spec.material]), notices);
+        let bad_geometry = |e: crate::element::BadReferenceElement| loaded.error(MeshError, &where_, format!("{e}; the mesh must have positive element volumes at t = 0."));
+        // F-bar on simplices averages the volume change over the cells a generator split (the
+        // body is meshed by its cells, each integrated as its simplices), or over patches of
+        // neighbouring simplices.
+        let (mesh, patches, geometry) = match (formulation, cells) {
+            (Formulation::Fbar, Some(cell)) => {
+                let cells = build_mesh(loaded, &key, &MeshSpec { element: Some(cell), ..spec.mesh.clone() })?;
+                let geometry = ReferenceGeometry::simplex_patches(&cells).map_err(bad_geometry)?;
+                (cells, None, geometry)
+            }
+            (Formulation::Fbar, None) if !Formulation::fbar_applies(mesh.kind) => {
+                let simplices = ReferenceGeometry::new(&mesh).map_err(bad_geometry)?;
+                let patches = Patches::group(&mesh);
+                let geometry = ReferenceGeometry::grouped(&simplices, &mesh, &patches);
+                (mesh, Some(patches), geometry)
+            }
+            _ => {
+                let geometry = ReferenceGeometry::new(&mesh).map_err(bad_geometry)?;
+                (mesh, None, geometry)
+            }
+        };
+        meshes.push((name.clone(), mesh, patches, geometry, formulation));
+    }
+    Ok((meshes, dim.expect("a scene has a body")))
+}
+
+/// The boundary sets, and per body its prescribed dofs.
+fn prescribed_dofs(loaded: &LoadedScene, meshes: &[BodyMesh], body_index: &HashMap<&str, usize>, dim: usize) -> Result<(Vec<BoundarySet>, Vec<Vec<Prescribed>>), SceneError> {
+    let mut sets = Vec::new();
+    let mut prescribed: Vec<Vec<Prescribed>> = vec![Vec::new(); meshes.len()];
+    let mut owner: HashMap<(usize, usize), String> = HashMap::new();
+    for (set_index, (name, bc)) in loaded.scene.boundary.iter().enumerate() {
+        let key = format!("boundary.{name}");
+        let b = body_index[bc.body.as_str()];
+        let mesh = &meshes[b].1;
+        let nodes = mesh.node_sets.get(&bc.nodes).ok_or_else(|| {
+            let known: Vec<&str> = mesh.node_sets.keys().map(String::as_str).collect();
+            loaded.error(Reference, &format!("{key}.nodes"), format!("body `{}` has no node set `{}` (it has: {}).", bc.body, bc.nodes, known.join(", ")))
+        })?;
+        if nodes.is_empty() {
+            return Err(loaded.error(Invalid, &format!("{key}.nodes"), format!("the node set `{}` of body `{}` names no nodes.", bc.nodes, bc.body)));
+        }
+        let velocity = bc.velocity.clone().unwrap_or_else(|| vec![0.0; dim]);
+        let until = bc.until.unwrap_or(Real::INFINITY);
+        components_check(loaded, &format!("{key}.velocity"), &velocity, dim)?;
+        let components: Vec<usize> = match &bc.components {
+            Some(c) => c
+                .iter()
+                .map(|a| match a {
+                    Axis::X => 0,
+                    Axis::Y => 1,
+                    Axis::Z => 2,
+                })
+                .collect(),
+            None => (0..dim).collect(),
+        };
+        if components.iter().any(|&c| c >= dim) {
+            return Err(loaded.error(Invalid, &format!("{key}.components"), format!("`z` in a {dim}D scene.")));
+        }
+        for &n in nodes {
+            for &c in &components {
+                let dof = n as usize * dim + c;
+                if let Some(first) = owner.get(&(b, dof)) {
+                    // A dof shared by two sets keeps its first owner; their velocities must agree.
+                    let existing = prescribed[b].iter().find(|p| p.dof == dof).expect("owned dof is prescribed");
+                    if (existing.velocity - velocity[c]).abs() > 0.0 || (existing.until != until && existing.velocity != 0.0) {
+                        return Err(loaded.error(Invalid, &format!("{key}.velocity"), format!("node {n} is also prescribed by `boundary.{first}` with another velocity.")));
+                    }
+                    continue;
+                }
+                owner.insert((b, dof), name.clone());
+                prescribed[b].push(Prescribed { dof, velocity: velocity[c], set: set_index, until });
+            }
+        }
+        sets.push(BoundarySet { name: name.clone(), body: b });
+    }
+    Ok((sets, prescribed))
+}
+
+/// The bodies, in parallel (a grain packing has thousands), on one topology per distinct body
+/// (connectivity and prescribed dofs), built in parallel and shared; a failure is reported for
+/// the first body in the scene's order that has it.
+fn build_bodies(loaded: &LoadedScene, meshes: Vec<BodyMesh>, prescribed: Vec<Vec<Prescribed>>, dim: usize) -> Result<Vec<Body>, SceneError> {
+    let scene = &loaded.scene;
+    let ordering = scene.solver.ordering;
+    let elements = |b: usize| meshes[b].2.as_ref().map_or(&meshes[b].1, |p: &Patches| &p.cells);
+    let keys: Vec<Option<TopologyKey>> = (0..meshes.len()).into_par_iter().map(|b| Topology::key(elements(b), &prescribed[b], ordering)).collect();
+    let mut first_of: HashMap<&TopologyKey, usize> = HashMap::new();
+    let owner_of: Vec<usize> = keys.iter().enumerate().map(|(b, key)| key.as_ref().map_or(b, |k| *first_of.entry(k).or_insert(b))).collect();
+    let built_topologies: HashMap<usize, Result<Topology, String>> =
+        owner_of.iter().enumerate().filter(|(b, owner)| b == *owner).map(|(b, _)| b).collect::<Vec<_>>().into_par_iter().map(|b| (b, Topology::new(elements(b), &prescribed[b], ordering).map_err(|e| e.to_string()))).collect();
+    let topologies: Vec<&Result<Topology, String>> = owner_of.iter().map(|o| &built_topologies[o]).collect();
+    let specs: Vec<_> = scene.body.values().collect();
+    let inputs = meshes.into_par_iter().zip(specs).zip(prescribed).zip(topologies);
+    let built: Vec<Result<Body, SceneError>> = inputs.map(|(((mesh, spec), prescribed), topology)| build_body(loaded, mesh, spec, prescribed, topology, dim)).collect();
+    built.into_iter().collect()
+}
+
+/// One body: its initial velocity (translation and rotation about its centre of mass), its
+/// material and its step bound.
+fn build_body(loaded: &LoadedScene, (name, mesh, patches, geometry, formulation): BodyMesh, spec: &crate::scene::BodySpec, prescribed: Vec<Prescribed>, topology: &Result<Topology, String>, dim: usize) -> Result<Body, SceneError> {
+    let scene = &loaded.scene;
+    let key = format!("body.{name}");
+    let material = &scene.material[&spec.material];
+    let v0 = spec.initial_velocity.clone().unwrap_or_else(|| vec![0.0; dim]);
+    components_check(loaded, &format!("{key}.initial_velocity"), &v0, dim)?;
+    range_check(loaded, &format!("{key}.initial_velocity"), &v0)?;
+    let omega = match (&spec.angular_velocity, dim) {
+        (None, _) => [0.0; 3],
+        (Some(AngularVelocity::Planar(w)), 2) => [0.0, 0.0, *w],
+        (Some(AngularVelocity::Spatial(w)), 3) if w.len() == 3 => [w[0], w[1], w[2]],
+        _ => return Err(loaded.error(Invalid, &format!("{key}.angular_velocity"), "give one number in 2D and a vector of 3 components in 3D.")),
+    };
+    range_check(loaded, &format!("{key}.angular_velocity"), &omega)?;
+    let masses = geometry.lumped_masses(patches.as_ref().map_or(&mesh, |p| &p.cells), material.density);
+    let total: Real = masses.iter().sum();
+    let mut c = [0.0; 3];
+    for (m, x) in masses.iter().zip(&mesh.nodes) {
+        for i in 0..3 {
+            c[i] += m * x[i] / total;
+        }
+    }
+    let mut v = [0.0; 3];
+    v[..dim].copy_from_slice(&v0);
+    let initial = move |x: [Real; 3]| {
+        let r = [x[0] - c[0], x[1] - c[1], x[2] - c[2]];
+        [v[0] + omega[1] * r[2] - omega[2] * r[1], v[1] + omega[2] * r[0] - omega[0] * r[2], v[2] + omega[0] * r[1] - omega[1] * r[0]]
+    };
+    let topology = topology.as_ref().map_err(|e| loaded.error(MeshError, &format!("{key}.mesh"), e.clone()))?;
+    let mut body = Body::new(name.clone(), mesh, patches, geometry, model_of(material), formulation, material.density, prescribed, initial, topology);
+    if body.prescribed.is_empty() {
+        free_body_step(loaded, &body, material.density)?;
+    }
+    body.reuse_factorization = scene.solver.reuse_factorization;
+    if let Some(viscoelastic) = viscoelastic_of(material) {
+        body.set_viscoelastic(viscoelastic);
+    }
+    Ok(body)
+}
+
+/// The state at t = 0: no body inside another (pushed apart first if the scene asks), every
+/// energy finite.
+fn check_initial_state(loaded: &LoadedScene, bodies: &mut [Body], contact: Option<&ContactModel>, gravity: &[Real; 3]) -> Result<(), SceneError> {
+    if let Some(model) = contact {
+        if loaded.scene.contact.resolve_initial_overlap {
+            separate_initial_overlaps(bodies, model).map_err(|(key, message)| loaded.error(Invalid, &key, message))?;
+        }
+        if let Some(o) = initial_overlaps(bodies, model).into_iter().max_by(|a, b| a.ratio().total_cmp(&b.ratio())) {
+            let (key, message) = describe_overlap(bodies, model, &o);
+            return Err(loaded.error(Invalid, &key, format!("{message}; move them apart, or set `contact.resolve_initial_overlap = true` to push them apart before the first step.")));
+        }
+    }
+    for b in bodies.iter() {
+        let (kinetic, strain, potential) = (b.kinetic_energy(), b.strain_energy(), b.potential_energy(gravity));
+        if ![kinetic, strain, potential].iter().all(|e| e.is_finite()) {
+            return Err(loaded.error(
+                Invalid,
+                &format!("body.{}", b.name),
+                format!("the initial state has a non-finite energy (kinetic {kinetic:e}, strain {strain:e}, potential {potential:e}): its density, size, velocities and the gravity are too large together."),
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// Overlaps at t = 0 smaller than this (in element sizes) are round-off of bodies that touch.

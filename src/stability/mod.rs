@@ -86,11 +86,11 @@ impl Study {
     /// Loads the scene with `sets` and validates every variant of the grid of `axes` before
     /// any runs.
     pub fn plan(scene: &Path, sets: &[String], axes: &[SweepAxis]) -> Result<Self, StudyError> {
-        let base = load_scene(scene, sets).map_err(|source| StudyError::Scene { label: "base".into(), source })?;
+        let base = load_scene(scene, sets).map_err(|source| StudyError::Scene { label: "base".into(), source: Box::new(source) })?;
         let mut runs = Vec::new();
         for variant in variants(&base.name, axes)? {
             let all: Vec<String> = sets.iter().chain(&variant.sets).cloned().collect();
-            let loaded = load_scene(scene, &all).map_err(|source| StudyError::Scene { label: variant.label.clone(), source })?;
+            let loaded = load_scene(scene, &all).map_err(|source| StudyError::Scene { label: variant.label.clone(), source: Box::new(source) })?;
             runs.push((variant, loaded));
         }
         Ok(Self { name: base.name, axes: axes.to_vec(), runs })

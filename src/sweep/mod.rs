@@ -31,7 +31,7 @@ pub enum SweepError {
     #[error("`--sbatch {0}` needs a value (`--sbatch {0}=...`); only flags such as `exclusive` stand alone")]
     SbatchValue(String),
     #[error("variant {label}: {source}")]
-    Scene { label: String, source: SceneError },
+    Scene { label: String, source: Box<SceneError> },
     #[error("cannot find the scene `{path}`: {source}")]
     ScenePath { path: PathBuf, source: std::io::Error },
     #[error("cannot write `{path}`: {source}")]
@@ -48,7 +48,7 @@ pub enum StudyError {
     #[error(transparent)]
     Sweep(#[from] SweepError),
     #[error("variant {label}: {source}")]
-    Scene { label: String, source: SceneError },
+    Scene { label: String, source: Box<SceneError> },
     #[error("variant {label}: {source}")]
     Run { label: String, source: Box<RunError> },
     #[error("cannot write `{path}`: {source}")]
@@ -61,7 +61,7 @@ impl StudyError {
     pub fn outcome(label: &str, result: Result<RunSummary, RunError>) -> Result<(RunSummary, Option<Stop>), Self> {
         match result {
             Ok(summary) => Ok((summary, None)),
-            Err(RunError::Stopped { reason, summary }) => Ok((summary, Some(reason))),
+            Err(RunError::Stopped { reason, summary }) => Ok((*summary, Some(reason))),
             Err(e) => Err(Self::Run { label: label.to_string(), source: Box::new(e) }),
         }
     }
@@ -207,7 +207,8 @@ impl VariantOutcome {
     /// The run summary, also for a run that stopped early (its log is still valid).
     pub fn summary(&self) -> Option<&RunSummary> {
         match &self.result {
-            Ok(s) | Err(RunError::Stopped { summary: s, .. }) => Some(s),
+            Ok(s) => Some(s),
+            Err(RunError::Stopped { summary, .. }) => Some(summary),
             Err(_) => None,
         }
     }
@@ -228,7 +229,7 @@ impl Sweep {
     /// The grid of `axes` over `scene` with `base_sets` applied first; the base scene is
     /// validated here, the variants' own values by [`Sweep::load`].
     pub fn plan(scene: &Path, base_sets: &[String], axes: &[SweepAxis]) -> Result<Self, SweepError> {
-        let base = load_scene(scene, base_sets).map_err(|source| SweepError::Scene { label: "base".into(), source })?;
+        let base = load_scene(scene, base_sets).map_err(|source| SweepError::Scene { label: "base".into(), source: Box::new(source) })?;
         let variants = variants(&base.name, axes)?;
         let scene = std::fs::canonicalize(scene).map_err(|source| SweepError::ScenePath { path: scene.into(), source })?;
         Ok(Self { name: base.name, scene, sets: base_sets.to_vec(), axes: axes.to_vec(), variants })
@@ -244,7 +245,7 @@ impl Sweep {
                 let sets: Vec<String> = self.sets.iter().chain(&variant.sets).cloned().collect();
                 match load_scene(&self.scene, &sets) {
                     Ok(loaded) => Ok((variant.clone(), loaded)),
-                    Err(source) => Err(SweepError::Scene { label: variant.label.clone(), source }),
+                    Err(source) => Err(SweepError::Scene { label: variant.label.clone(), source: Box::new(source) }),
                 }
             })
             .collect()

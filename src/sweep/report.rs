@@ -44,11 +44,14 @@ impl Report {
     }
 }
 
+/// A variant the directory should hold: its index, label, `--set`s and log.
+type Expected = (Option<usize>, String, Vec<String>, PathBuf);
+
 /// Reads every log of the grid recorded in `dir` ([`MANIFEST_FILE`]), or every `*.mcap` in `dir`
 /// when it has no record.
 pub fn report(dir: &Path) -> Result<Report, SweepError> {
     let read_dir = |e: std::io::Error| SweepError::Read { path: dir.into(), message: e.to_string() };
-    let (name, expected): (Option<String>, Vec<(Option<usize>, String, Vec<String>, PathBuf)>) = match Sweep::read_manifest(dir)? {
+    let (name, expected): (Option<String>, Vec<Expected>) = match Sweep::read_manifest(dir)? {
         Some(sweep) => {
             check_grid(dir, &sweep)?;
             (Some(sweep.name.clone()), sweep.variants.iter().map(|v| (Some(v.index), v.label.clone(), v.sets.clone(), Sweep::log_path(dir, v))).collect())

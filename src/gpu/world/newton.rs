@@ -42,6 +42,58 @@ const DISPATCHES: usize = 4;
 /// member order, and the workgroups of the energy pass over them.
 type BatchCalls = (usize, Vec<(usize, usize)>, [u32; 3]);
 
+/// What the submissions of a [`GpuWorld::newton`] call record: its batches' calls, the passes of
+/// its groups in contact (their batch), the solve dispatches per increment and the number of
+/// groups in contact.
+struct CallPlan<'a> {
+    work: &'a [BatchCalls],
+    contact: Option<&'a (usize, ContactPasses)>,
+    solves: usize,
+    contacts: usize,
+}
+
+/// Takes every call's state, displacements, residuals and strain energy from a submission's
+/// read-back (`landing` from `GpuWorld::queue_states`), in parallel (100 000 grains a call), and
+/// the stiffness values of the members in contact handed back (`tangents`: call, where,
+/// entries).
+fn unpack_calls(precision: Precision, calls: &mut [NewtonCall], landing: &[[usize; 6]], tangents: &[(usize, usize, usize)], bytes: &[u8]) {
+    let real = precision.size();
+    calls.par_iter_mut().zip(landing).for_each(|(call, [state_at, flags_at, u_at, out_at, energy_at, elements])| {
+        call.outcome = bytemuck::pod_read_unaligned(&bytes[*state_at..state_at + std::mem::size_of::<NewtonState<Real>>()]);
+        let flags: [u32; 2] = bytemuck::pod_read_unaligned(&bytes[*flags_at..flags_at + 8]);
+        call.failure = (call.outcome.status == NEWTON_FAILED).then(|| super::failure_of(flags)).flatten();
+        let n = call.u.len();
+        super::copy_from_device(precision, &bytes[*u_at..u_at + n * real], call.u);
+        super::copy_from_device(precision, &bytes[*out_at..out_at + n * 2 * real], bytemuck::cast_slice_mut(call.dof_out));
+        // Summed in element order, as the energy pass's results are.
+        call.strain_energy = Some(super::from_device(precision, &bytes[*energy_at..energy_at + elements * real]).iter().sum());
+    });
+    for &(i, at, entries) in tangents {
+        let call = &mut calls[i];
+        call.tangent = (call.outcome.status == NEWTON_HOST).then(|| super::from_device(precision, &bytes[at..at + entries * real]));
+    }
+}
+
+/// Takes the reactions of the groups in contact and their states from a submission's read-back
+/// (where each lands: `(reactions, states)`).
+fn unpack_contact(precision: Precision, problems: &mut [Problem], contacts: &mut [GroupContact], (r_at, states_at): (usize, usize), bytes: &[u8]) {
+    let real = precision.size();
+    let mut at = r_at;
+    for p in problems.iter_mut() {
+        let end = at + p.r.len() * 3 * real;
+        super::copy_from_device(precision, &bytes[at..end], bytemuck::cast_slice_mut(p.r));
+        at = end;
+    }
+    let size = std::mem::size_of::<ContactState<Real>>();
+    for (k, g) in contacts.iter_mut().enumerate() {
+        g.outcome = bytemuck::pod_read_unaligned(&bytes[states_at + k * size..states_at + (k + 1) * size]);
+    }
+}
+
+/// What the read-back of a call's groups in contact holds: their batch, their members `(call,
+/// member)`, points and groups.
+type ContactTarget<'a> = (usize, &'a [(usize, usize)], usize, usize);
+
 /// One body's share of [`GpuWorld::newton`].
 pub struct NewtonCall<'a> {
     pub body: usize,
@@ -274,9 +326,78 @@ impl GpuWorld {
         let started = Instant::now();
         let precision = self.gpu.precision;
         assert_eq!(precision, Precision::F64, "device Newton iterations need f64 kernels");
-        let real = precision.size();
         let coefficient_buffer = self.coefficients.clone();
         self.upload(&coefficient_buffer, 0, &to_device(precision, &[coefficients.factor, coefficients.c1]));
+        let work = self.stage_calls(calls)?;
+        let contact = if contacts.is_empty() { None } else { Some(self.stage_contact(calls, problems, contacts, dim, theta_dt)?) };
+        // An increment's solve runs every sweep its problem may take, as the host's does, where
+        // a software adapter's dispatches allow: a solve cut short hands its group back
+        // (`judge`: its problem still live).
+        let solves = match &self.contact {
+            Some(sweeps) if contact.is_some() => sweeps.whole_dispatches(problems.iter().map(|p| p.max_iterations).max().unwrap_or(0)),
+            _ => 0,
+        };
+        // The members of the groups in contact, `(call, member)`, whose tangents the device
+        // computes when it hands them back.
+        let in_contact = match &contact {
+            Some((batch, _)) => self.stage_host_tangents(*batch, calls, contacts)?,
+            None => Vec::new(),
+        };
+        let points = problems.iter().map(|p| p.local.len()).sum::<usize>();
+        let target = self.newton_target(&work, list, contact.as_ref().map(|(batch, _)| (*batch, &in_contact[..], points, contacts.len())));
+        let plan = CallPlan { work: &work, contact: contact.as_ref(), solves, contacts: contacts.len() };
+        let mut t0 = started;
+        let mut iterations = calls.iter().map(|c| c.member.budget).max().unwrap_or(0).min(ITERATIONS_PER_SUBMIT);
+        let evaluate_first = calls.first().is_some_and(|c| c.residual.is_none());
+        assert!(calls.iter().all(|c| c.residual.is_none() == evaluate_first), "a call's members are all evaluated, or none");
+        let mut first = true;
+        loop {
+            let mut encoder = self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("newton") });
+            let mut readback = ReadBack::default();
+            let evaluated = if first { Some(self.record_evaluation(list, &mut encoder, &mut readback)?) } else { None };
+            self.record_iterations(&mut encoder, &plan, first && evaluate_first, iterations);
+            let landing = self.queue_states(&mut readback, &work, calls.len());
+            // The stiffness values of the members in contact, `(call, where, entries)`: taken
+            // for those handed back.
+            let tangent_landing: Vec<(usize, usize, usize)> = match &contact {
+                Some((batch, _)) => {
+                    let (b, real) = (&self.batches[*batch], precision.size() as u64);
+                    let members: Vec<usize> = in_contact.iter().map(|&(_, m)| m).collect();
+                    let value_span = |m: usize| b.members[m].nonzero_start as u64 * real..(b.members[m].nonzero_start + b.members[m].nonzeros) as u64 * real;
+                    let at = readback.queue_runs(*batch, Source::Values, &members, &value_span);
+                    in_contact.iter().zip(at).map(|(&(i, m), at)| (i, at, b.members[m].nonzeros as usize)).collect()
+                }
+                None => Vec::new(),
+            };
+            let contact_landing = contact.as_ref().map(|(_, passes)| {
+                let r = readback.queue_buffer(&self.contact.as_ref().expect("staged").buffers().r, (points * 3 * precision.size()) as u64);
+                (r, readback.queue_buffer(&passes.states, (contacts.len() * std::mem::size_of::<ContactState<Real>>()) as u64))
+            });
+            let mut iterating = false;
+            self.read_back_into(&target, encoder, &readback, "newton_update", times, t0, |bytes| {
+                if let Some(landing) = &evaluated {
+                    super::unpack_evaluation(precision, list, landing, bytes);
+                }
+                unpack_calls(precision, calls, &landing, &tangent_landing, bytes);
+                iterating = calls.iter().any(|call| call.outcome.status == NEWTON_ITERATING);
+                if let Some(at) = contact_landing {
+                    unpack_contact(precision, problems, contacts, at, bytes);
+                }
+            })?;
+            first = false;
+            if !iterating || interrupt.is_some_and(|f| f.load(Ordering::SeqCst)) {
+                break;
+            }
+            iterations = calls.iter().filter(|c| c.outcome.status == NEWTON_ITERATING).map(|c| c.member.budget - c.outcome.iterations).max().unwrap_or(1);
+            t0 = Instant::now();
+        }
+        self.after_newton(&work, calls, contacts);
+        Ok(())
+    }
+
+    /// Makes each batch's Newton buffers when a call first needs them and stages the calls,
+    /// batch by batch.
+    fn stage_calls(&mut self, calls: &mut [NewtonCall]) -> Result<Vec<BatchCalls>, GpuError> {
         let by_batch = self.stage_displacements(&calls.iter().map(|c| (c.body, &*c.u)).collect::<Vec<_>>());
         let mut work: Vec<BatchCalls> = Vec::with_capacity(by_batch.len());
         for (batch, mine) in by_batch {
@@ -292,191 +413,126 @@ impl GpuWorld {
             let energy = self.stage_newton(batch, &mine, calls);
             work.push((batch, mine, energy));
         }
-        let contact = if contacts.is_empty() { None } else { Some(self.stage_contact(calls, problems, contacts, dim, theta_dt)?) };
-        // An increment's solve runs every sweep its problem may take, as the host's does, where
-        // a software adapter's dispatches allow: a solve cut short hands its group back
-        // (`judge`: its problem still live).
-        let solves = match &self.contact {
-            Some(sweeps) if contact.is_some() => sweeps.whole_dispatches(problems.iter().map(|p| p.max_iterations).max().unwrap_or(0)),
-            _ => 0,
-        };
-        // The members of the groups in contact, `(call, member)`, whose tangents the device
-        // computes when it hands them back.
-        let (in_contact, tangent_bytes) = match &contact {
-            Some((batch, _)) => {
-                let mine = self.stage_host_tangents(*batch, calls, contacts)?;
-                let entries: u64 = mine.iter().map(|&(_, m)| self.batches[*batch].members[m].nonzeros as u64).sum();
-                (mine, entries * real as u64)
-            }
-            None => (Vec::new(), 0),
-        };
+        Ok(work)
+    }
+
+    /// The read-back buffer of a call, grown when its submissions need more: per member its
+    /// failure flags and state, per dof its displacement and residual, per element its energy
+    /// (every span a multiple of 8 bytes), after an evaluation pass's read-back when one shares
+    /// it; with groups in contact (`(batch, members, points, groups)`) their reactions, states
+    /// and the stiffness values of their members.
+    fn newton_target(&mut self, work: &[BatchCalls], list: &[Evaluation], contact: Option<ContactTarget>) -> Buffer {
+        let real = self.gpu.precision.size();
         let total = |f: fn(&crate::gpu::types::MemberRange) -> u32| -> usize { work.iter().map(|(b, mine, _)| mine.iter().map(|&(_, m)| f(&self.batches[*b].members[m]) as usize).sum::<usize>()).sum() };
         let (total_dofs, total_elements) = (total(|r| r.dofs), total(|r| r.elements));
         let total_members: usize = work.iter().map(|(_, mine, _)| mine.len()).sum();
-        // Per member its failure flags and state, per dof its displacement and residual, per
-        // element its energy (every span a multiple of 8 bytes), after an evaluation pass's
-        // read-back when one shares it.
-        let points = problems.iter().map(|p| p.local.len()).sum::<usize>();
-        let contact_bytes = if contact.is_some() { (points * 3 * real + contacts.len() * std::mem::size_of::<ContactState<Real>>() + 16) as u64 } else { 0 };
-        let bytes = (total_members * (8 + std::mem::size_of::<NewtonState<Real>>()) + total_dofs * 3 * real + total_elements * real) as u64 + if list.is_empty() { 0 } else { self.readback.size() } + contact_bytes + tangent_bytes;
+        let contact_bytes = contact.map_or(0, |(batch, members, points, groups)| {
+            let entries: usize = members.iter().map(|&(_, m)| self.batches[batch].members[m].nonzeros as usize).sum();
+            (points * 3 * real + groups * std::mem::size_of::<ContactState<Real>>() + 16 + entries * real) as u64
+        });
+        let bytes = (total_members * (8 + std::mem::size_of::<NewtonState<Real>>()) + total_dofs * 3 * real + total_elements * real) as u64 + if list.is_empty() { 0 } else { self.readback.size() } + contact_bytes;
         if self.newton_readback.as_ref().is_none_or(|(_, size)| *size < bytes) {
             self.newton_readback = Some((buffer(&self.gpu, "newton readback", bytes as usize, BufferUsages::MAP_READ | BufferUsages::COPY_DST), bytes));
         }
-        let target = self.newton_readback.as_ref().expect("made above").0.clone();
-        let mut t0 = started;
-        let mut iterations = calls.iter().map(|c| c.member.budget).max().unwrap_or(0).min(ITERATIONS_PER_SUBMIT);
-        let evaluate_first = calls.first().is_some_and(|c| c.residual.is_none());
-        assert!(calls.iter().all(|c| c.residual.is_none() == evaluate_first), "a call's members are all evaluated, or none");
-        let mut first = true;
-        loop {
-            let mut encoder = self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("newton") });
-            let mut readback = ReadBack::default();
-            let evaluated = if first { Some(self.record_evaluation(list, &mut encoder, &mut readback)?) } else { None };
-            {
-                let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("newton"), timestamp_writes: None });
-                // The members' first evaluation and its convergence test: `newton_judge` from a
-                // state without a residual before (`Real::MAX`) and without an increment tests
-                // it as `Body::converged` tests a step's first evaluation.
-                // Groups in contact: `newton_contact`'s `first_forces` (the contact forces of the
-                // reactions the step starts from) before the test and `first_judge` (the group's
-                // verdict, the law at the reactions) after it.
-                if first && evaluate_first {
-                    for (batch, _, _) in &work {
-                        let n = self.batches[*batch].newton.as_ref().expect("staged");
-                        let mine = contact.as_ref().filter(|(at, _)| at == batch).map(|(_, passes)| passes);
-                        let pipelines = self.contact_pipelines.as_ref();
-                        n.forces.dispatch_indirect(&self.gpu, &mut pass, &n.dispatch, 12);
-                        n.residual.dispatch_indirect(&self.gpu, &mut pass, &n.dispatch, 24);
-                        if let (Some(c), Some(p)) = (mine, pipelines) {
-                            c.record_first_forces(&self.gpu, &mut pass, p);
-                        }
-                        n.judge.dispatch_indirect(&self.gpu, &mut pass, &n.dispatch, 36);
-                        if let (Some(c), Some(p)) = (mine, pipelines) {
-                            c.record_first_judge(&self.gpu, &mut pass, p);
-                        }
-                        n.compact.dispatch(&self.gpu, &mut pass, 1);
-                    }
+        self.newton_readback.as_ref().expect("made above").0.clone()
+    }
+
+    /// Records one submission's compute pass: the members' first evaluation and its test when
+    /// they come unevaluated (`evaluate_first`), `iterations` Newton iterations, the tangents of
+    /// the members in contact handed back, and the members' energies.
+    fn record_iterations(&self, encoder: &mut wgpu::CommandEncoder, plan: &CallPlan, evaluate_first: bool, iterations: u32) {
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("newton"), timestamp_writes: None });
+        let pipelines = self.contact_pipelines.as_ref();
+        let contact_of = |batch: usize| plan.contact.filter(|(at, _)| *at == batch).map(|(_, passes)| passes);
+        // The members' first evaluation and its convergence test: `newton_judge` from a state
+        // without a residual before (`Real::MAX`) and without an increment tests it as
+        // `Body::converged` tests a step's first evaluation. Groups in contact:
+        // `newton_contact`'s `first_forces` (the contact forces of the reactions the step starts
+        // from) before the test and `first_judge` (the group's verdict, the law at the
+        // reactions) after it.
+        if evaluate_first {
+            for (batch, _, _) in plan.work {
+                let n = self.batches[*batch].newton.as_ref().expect("staged");
+                let mine = contact_of(*batch);
+                n.forces.dispatch_indirect(&self.gpu, &mut pass, &n.dispatch, 12);
+                n.residual.dispatch_indirect(&self.gpu, &mut pass, &n.dispatch, 24);
+                if let (Some(c), Some(p)) = (mine, pipelines) {
+                    c.record_first_forces(&self.gpu, &mut pass, p);
                 }
-                for _ in 0..iterations {
-                    for (batch, _, _) in &work {
-                        let b = &self.batches[*batch];
-                        let n = b.newton.as_ref().expect("staged");
-                        let mine = contact.as_ref().filter(|(at, _)| at == batch).map(|(_, passes)| passes);
-                        let pipelines = self.contact_pipelines.as_ref();
-                        if let (Some(c), Some(p)) = (mine, pipelines) {
-                            c.record_prepare(&self.gpu, &mut pass, p);
-                            for _ in 0..solves {
-                                self.contact.as_ref().expect("staged").record_solve(&mut pass, contacts.len());
-                            }
-                            c.record_forces(&self.gpu, &mut pass, p);
-                        }
-                        n.update.dispatch_indirect(&self.gpu, &mut pass, &n.dispatch, 0);
-                        n.forces.dispatch_indirect(&self.gpu, &mut pass, &n.dispatch, 12);
-                        n.residual.dispatch_indirect(&self.gpu, &mut pass, &n.dispatch, 24);
-                        n.judge.dispatch_indirect(&self.gpu, &mut pass, &n.dispatch, 36);
-                        if let (Some(c), Some(p)) = (mine, pipelines) {
-                            c.record_judge(&self.gpu, &mut pass, p);
-                        }
-                        n.compact.dispatch(&self.gpu, &mut pass, 1);
-                    }
+                n.judge.dispatch_indirect(&self.gpu, &mut pass, &n.dispatch, 36);
+                if let (Some(c), Some(p)) = (mine, pipelines) {
+                    c.record_first_judge(&self.gpu, &mut pass, p);
                 }
-                if let Some((batch, _)) = &contact {
-                    let h = self.batches[*batch].newton.as_ref().and_then(|n| n.host_tangents.as_ref()).expect("staged");
-                    h.compact.dispatch(&self.gpu, &mut pass, 1);
-                    h.tangent.dispatch_indirect(&self.gpu, &mut pass, &h.dispatch, 0);
-                    h.csr.dispatch_indirect(&self.gpu, &mut pass, &h.dispatch, 12);
-                }
-                for (batch, _, energy) in &work {
-                    self.batches[*batch].newton.as_ref().expect("staged").energy.dispatch_xyz(&self.gpu, &mut pass, *energy);
-                }
+                n.compact.dispatch(&self.gpu, &mut pass, 1);
             }
-            // Per call: where its state, failure flags, displacements, residuals and element
-            // energies land, and how many elements it has.
-            let mut landing = vec![[0usize; 6]; calls.len()];
-            for (batch, mine, _) in &work {
-                let b = &self.batches[*batch];
-                let members: Vec<usize> = mine.iter().map(|&(_, m)| m).collect();
-                let state_size = std::mem::size_of::<NewtonState<Real>>() as u64;
-                let flag_span = |m: usize| 8 * m as u64..8 * (m as u64 + 1);
-                let flags = readback.queue_runs(*batch, Source::Failure, &members, &flag_span);
-                let state_span = |m: usize| m as u64 * state_size..(m as u64 + 1) * state_size;
-                let bytes_of = |m: usize, per_dof: usize| {
-                    let dofs = super::dof_span(&b.members, &[m]);
-                    (dofs.start * per_dof) as u64..(dofs.end * per_dof) as u64
-                };
-                let u_span = |m: usize| bytes_of(m, real);
-                let dof_span = |m: usize| bytes_of(m, 2 * real);
-                let states = readback.queue_runs(*batch, Source::NewtonState, &members, &state_span);
-                let us = readback.queue_runs(*batch, Source::Displacement, &members, &u_span);
-                let outs = readback.queue_runs(*batch, Source::DofOut, &members, &dof_span);
-                let element_span = |m: usize| b.members[m].element_start as u64 * real as u64..(b.members[m].element_start + b.members[m].elements) as u64 * real as u64;
-                let energies = readback.queue_runs(*batch, Source::Energy, &members, &element_span);
-                for (k, &(i, m)) in mine.iter().enumerate() {
-                    landing[i] = [states[k], flags[k], us[k], outs[k], energies[k], b.members[m].elements as usize];
-                }
-            }
-            // The stiffness values of the members in contact, `(call, where, entries)`: taken
-            // for those handed back.
-            let tangent_landing: Vec<(usize, usize, usize)> = match &contact {
-                Some((batch, _)) => {
-                    let b = &self.batches[*batch];
-                    let members: Vec<usize> = in_contact.iter().map(|&(_, m)| m).collect();
-                    let value_span = |m: usize| b.members[m].nonzero_start as u64 * real as u64..(b.members[m].nonzero_start + b.members[m].nonzeros) as u64 * real as u64;
-                    let at = readback.queue_runs(*batch, Source::Values, &members, &value_span);
-                    in_contact.iter().zip(at).map(|(&(i, m), at)| (i, at, b.members[m].nonzeros as usize)).collect()
-                }
-                None => Vec::new(),
-            };
-            let contact_landing = contact.as_ref().map(|(_, passes)| {
-                let r = readback.queue_buffer(&self.contact.as_ref().expect("staged").buffers().r, (points * 3 * real) as u64);
-                (r, readback.queue_buffer(&passes.states, (contacts.len() * std::mem::size_of::<ContactState<Real>>()) as u64))
-            });
-            let mut iterating = false;
-            self.read_back_into(&target, encoder, &readback, "newton_update", times, t0, |bytes| {
-                if let Some(landing) = &evaluated {
-                    super::unpack_evaluation(precision, list, landing, bytes);
-                }
-                // Every member's state, displacements and residuals, in parallel (100 000 grains
-                // a call).
-                calls.par_iter_mut().zip(&landing).for_each(|(call, [state_at, flags_at, u_at, out_at, energy_at, elements])| {
-                    call.outcome = bytemuck::pod_read_unaligned(&bytes[*state_at..state_at + std::mem::size_of::<NewtonState<Real>>()]);
-                    let flags: [u32; 2] = bytemuck::pod_read_unaligned(&bytes[*flags_at..flags_at + 8]);
-                    call.failure = (call.outcome.status == NEWTON_FAILED).then(|| super::failure_of(flags)).flatten();
-                    let n = call.u.len();
-                    super::copy_from_device(precision, &bytes[*u_at..u_at + n * real], call.u);
-                    super::copy_from_device(precision, &bytes[*out_at..out_at + n * 2 * real], bytemuck::cast_slice_mut(call.dof_out));
-                    // Summed in element order, as the energy pass's results are.
-                    call.strain_energy = Some(super::from_device(precision, &bytes[*energy_at..energy_at + elements * real]).iter().sum());
-                });
-                for &(i, at, entries) in &tangent_landing {
-                    let call = &mut calls[i];
-                    call.tangent = (call.outcome.status == NEWTON_HOST).then(|| super::from_device(precision, &bytes[at..at + entries * real]));
-                }
-                iterating = calls.iter().any(|call| call.outcome.status == NEWTON_ITERATING);
-                if let Some((r_at, states_at)) = contact_landing {
-                    let mut at = r_at;
-                    for p in problems.iter_mut() {
-                        let end = at + p.r.len() * 3 * real;
-                        super::copy_from_device(precision, &bytes[at..end], bytemuck::cast_slice_mut(p.r));
-                        at = end;
-                    }
-                    let size = std::mem::size_of::<ContactState<Real>>();
-                    for (k, g) in contacts.iter_mut().enumerate() {
-                        g.outcome = bytemuck::pod_read_unaligned(&bytes[states_at + k * size..states_at + (k + 1) * size]);
-                    }
-                }
-            })?;
-            first = false;
-            if !iterating || interrupt.is_some_and(|f| f.load(Ordering::SeqCst)) {
-                break;
-            }
-            iterations = calls.iter().filter(|c| c.outcome.status == NEWTON_ITERATING).map(|c| c.member.budget - c.outcome.iterations).max().unwrap_or(1);
-            t0 = Instant::now();
         }
-        // The device's displacements are the host's now: the mirror follows, so that the next
-        // pass does not send them back. The contact forces the device computed for the groups
-        // in contact are not the host's: theirs go up again next time.
-        for (batch, mine, _) in &work {
+        for _ in 0..iterations {
+            for (batch, _, _) in plan.work {
+                let n = self.batches[*batch].newton.as_ref().expect("staged");
+                let mine = contact_of(*batch);
+                if let (Some(c), Some(p)) = (mine, pipelines) {
+                    c.record_prepare(&self.gpu, &mut pass, p);
+                    for _ in 0..plan.solves {
+                        self.contact.as_ref().expect("staged").record_solve(&mut pass, plan.contacts);
+                    }
+                    c.record_forces(&self.gpu, &mut pass, p);
+                }
+                n.update.dispatch_indirect(&self.gpu, &mut pass, &n.dispatch, 0);
+                n.forces.dispatch_indirect(&self.gpu, &mut pass, &n.dispatch, 12);
+                n.residual.dispatch_indirect(&self.gpu, &mut pass, &n.dispatch, 24);
+                n.judge.dispatch_indirect(&self.gpu, &mut pass, &n.dispatch, 36);
+                if let (Some(c), Some(p)) = (mine, pipelines) {
+                    c.record_judge(&self.gpu, &mut pass, p);
+                }
+                n.compact.dispatch(&self.gpu, &mut pass, 1);
+            }
+        }
+        if let Some((batch, _)) = plan.contact {
+            let h = self.batches[*batch].newton.as_ref().and_then(|n| n.host_tangents.as_ref()).expect("staged");
+            h.compact.dispatch(&self.gpu, &mut pass, 1);
+            h.tangent.dispatch_indirect(&self.gpu, &mut pass, &h.dispatch, 0);
+            h.csr.dispatch_indirect(&self.gpu, &mut pass, &h.dispatch, 12);
+        }
+        for (batch, _, energy) in plan.work {
+            self.batches[*batch].newton.as_ref().expect("staged").energy.dispatch_xyz(&self.gpu, &mut pass, *energy);
+        }
+    }
+
+    /// Queues each call's state, failure flags, displacements, residuals and element energies;
+    /// returns per call where they land and how many elements it has.
+    fn queue_states(&self, readback: &mut ReadBack, work: &[BatchCalls], calls: usize) -> Vec<[usize; 6]> {
+        let real = self.gpu.precision.size();
+        let mut landing = vec![[0usize; 6]; calls];
+        for (batch, mine, _) in work {
+            let b = &self.batches[*batch];
+            let members: Vec<usize> = mine.iter().map(|&(_, m)| m).collect();
+            let state_size = std::mem::size_of::<NewtonState<Real>>() as u64;
+            let flag_span = |m: usize| 8 * m as u64..8 * (m as u64 + 1);
+            let flags = readback.queue_runs(*batch, Source::Failure, &members, &flag_span);
+            let state_span = |m: usize| m as u64 * state_size..(m as u64 + 1) * state_size;
+            let bytes_of = |m: usize, per_dof: usize| {
+                let dofs = super::dof_span(&b.members, &[m]);
+                (dofs.start * per_dof) as u64..(dofs.end * per_dof) as u64
+            };
+            let u_span = |m: usize| bytes_of(m, real);
+            let dof_span = |m: usize| bytes_of(m, 2 * real);
+            let states = readback.queue_runs(*batch, Source::NewtonState, &members, &state_span);
+            let us = readback.queue_runs(*batch, Source::Displacement, &members, &u_span);
+            let outs = readback.queue_runs(*batch, Source::DofOut, &members, &dof_span);
+            let element_span = |m: usize| b.members[m].element_start as u64 * real as u64..(b.members[m].element_start + b.members[m].elements) as u64 * real as u64;
+            let energies = readback.queue_runs(*batch, Source::Energy, &members, &element_span);
+            for (k, &(i, m)) in mine.iter().enumerate() {
+                landing[i] = [states[k], flags[k], us[k], outs[k], energies[k], b.members[m].elements as usize];
+            }
+        }
+        landing
+    }
+
+    /// After a call: the device's displacements are the host's now, and the mirror follows, so
+    /// that the next pass does not send them back. The contact forces the device computed for
+    /// the groups in contact are not the host's: theirs go up again next time.
+    fn after_newton(&mut self, work: &[BatchCalls], calls: &[NewtonCall], contacts: &[GroupContact]) {
+        for (batch, mine, _) in work {
             let b = &mut self.batches[*batch];
             let spans = mine.iter().map(|&(i, m)| (b.members[m].dof_start as usize, &*calls[i].u)).collect();
             super::update_mirrors(&mut b.u_host, spans);
@@ -486,7 +542,6 @@ impl GpuWorld {
             let dofs = super::dof_span(&self.batches[batch].members, &[m]);
             self.batches[batch].newton.as_mut().expect("staged").contact_host[dofs].fill(Real::NAN);
         }
-        Ok(())
     }
 
     /// Stages the groups in contact of a Newton call: their problems into the Uzawa solve's

@@ -61,7 +61,7 @@ fn clip(a: (f64, f64), b: (f64, f64), lo: [Real; 2], hi: [Real; 2]) -> Option<((
             }
         }
     }
-    (t0 < t1).then(|| ((a.0 + t0 * dx, a.1 + t0 * dy), (a.0 + t1 * dx, a.1 + t1 * dy)))
+    (t0 < t1).then_some(((a.0 + t0 * dx, a.1 + t0 * dy), (a.0 + t1 * dx, a.1 + t1 * dy)))
 }
 
 /// Writes the contours of the current state of a 2D simulation to `path`; `fields` are the
