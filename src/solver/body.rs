@@ -164,12 +164,12 @@ pub struct Body {
     pub mesh: Mesh,
     /// The F-bar patches of an unstructured simplex mesh, which the element kernels integrate
     /// instead of the mesh's own elements ([`Body::elements`]).
-    pub patches: Option<Patches>,
+    pub(super) patches: Option<Patches>,
     /// The geometry of what the element kernels integrate.
     pub geometry: ReferenceGeometry,
     pub model: Model,
     /// The material's Prony series, if it has one.
-    pub viscoelastic: Option<Viscoelastic>,
+    pub(super) viscoelastic: Option<Viscoelastic>,
     /// When the step being solved ends.
     step_end: Real,
     /// The step's relaxation `c` and each quadrature point's history `H` ([`Body::begin_step`]).
@@ -179,15 +179,15 @@ pub struct Body {
     pub formulation: Formulation,
     pub dim: usize,
     /// Lumped mass of each dof.
-    pub mass: Vec<Real>,
+    pub(super) mass: Vec<Real>,
     pub dofs: Arc<DofMap>,
     pub pattern: Arc<StiffnessPattern>,
-    pub prescribed: Vec<Prescribed>,
+    pub(super) prescribed: Vec<Prescribed>,
     pub state: State,
     /// The state of the step being solved, committed by [`Body::commit`].
     pub trial: State,
     /// Reaction at each prescribed dof (same order as `prescribed`) at the end of the trial step.
-    pub reactions: Vec<Real>,
+    pub(super) reactions: Vec<Real>,
     /// Smallest edge length: the floor of the increment test.
     length_scale: Real,
     /// Largest dof mass: with `length_scale`, sets the residual floor below round-off.
@@ -208,12 +208,12 @@ pub struct Body {
     evaluated: EvaluatedAt,
     f_ext: Vec<Real>,
     /// The surface loads on this body (`[load.*]`), and their nodal forces in this step.
-    pub loads: Vec<NodalLoad>,
+    pub(super) loads: Vec<NodalLoad>,
     f_load: Vec<Real>,
     /// Contact-free residual of the last evaluation, every dof.
-    pub g: Vec<Real>,
+    pub(super) g: Vec<Real>,
     /// Nodal forces of the current contact reactions, every dof.
-    pub contact_force: Vec<Real>,
+    pub(super) contact_force: Vec<Real>,
     force_scale: Real,
     last_increment: Option<Real>,
     /// The trial displacements equal the committed ones: nothing of the body moved this step
@@ -223,7 +223,7 @@ pub struct Body {
     unmet: Vec<Unmet>,
     /// Keep a factorisation across Newton iterations and steps while it contracts the residual
     /// fast enough ([`REFACTOR_CONTRACTION`]); `false` refactorises every iteration.
-    pub reuse_factorization: bool,
+    pub(super) reuse_factorization: bool,
     /// `c1 = 1/(θ dt²)` of the current factorisation; `None` when there is none.
     factor_c1: Option<Real>,
     /// Counts the factorisations: what a device copy of `K̄⁻¹` was computed from.

@@ -293,35 +293,35 @@ pub struct Simulation {
     pub bodies: Vec<Body>,
     pub sets: Vec<BoundarySet>,
     pub probes: Vec<Probe>,
-    pub gravity: [Real; 3],
+    gravity: [Real; 3],
     pub t: Real,
     pub step: usize,
-    pub end: Real,
+    end: Real,
     pub dt: Real,
-    pub xi: Real,
-    pub theta: Real,
-    pub residual_tolerance: Real,
-    pub increment_tolerance: Real,
-    pub max_iterations: usize,
-    pub max_cutbacks: usize,
+    xi: Real,
+    theta: Real,
+    residual_tolerance: Real,
+    increment_tolerance: Real,
+    max_iterations: usize,
+    max_cutbacks: usize,
     /// Step control: the deepest overlap a kept step may leave, in element sizes, and the
     /// share of the energy scale a kept step may create ([`StepFailure::Overlap`],
     /// [`StepFailure::EnergyGain`]).
-    pub max_overlap: Real,
-    pub max_step_energy_gain: Real,
+    max_overlap: Real,
+    max_step_energy_gain: Real,
     /// Cut-back level the next step starts at (its sub-steps are `dt / 2^level`), and the easy
     /// steps taken at it since: after [`GROW_AFTER`] the level drops by one (dt doubles back).
-    pub level: usize,
-    pub easy_steps: usize,
+    level: usize,
+    easy_steps: usize,
     /// The deepest overlap the last committed sub-step left, in element sizes.
-    pub last_overlap: Real,
+    last_overlap: Real,
     /// Cumulative work of the reactions of prescribed sets and of moving obstacles.
-    pub external_work: Real,
+    external_work: Real,
     pub friction_dissipation: Real,
     /// Cumulative work of the viscoelastic overstress ([`Energies::viscous_dissipation`]).
-    pub viscous_dissipation: Real,
+    viscous_dissipation: Real,
     pub numerical_dissipation: Real,
-    pub contact_correction: Real,
+    contact_correction: Real,
     /// Total energy at t = 0 (set by [`Simulation::start`]).
     pub initial_energy: Real,
     pub contact: Option<ContactModel>,
@@ -342,7 +342,7 @@ pub struct Simulation {
     /// The broad phase's body pairs, kept between steps (they do not change the points or
     /// overlaps found). The overlap search after a step takes the detection's: found for grown
     /// boxes, they hold the pairs of the boxes themselves until a box leaves them.
-    pub kept_pairs: KeptPairs,
+    kept_pairs: KeptPairs,
     /// The committed state's configuration and largest nodal speed, as the step that committed
     /// it left them (its overlap search built the configuration): the next detection starts
     /// from them instead of visiting every node again. `None` until a step is taken, and after
