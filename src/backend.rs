@@ -100,15 +100,11 @@ pub enum Backend {
     Gpu(Arc<Gpu>, UzawaPlacement, RoundPlacement),
 }
 
-/// Why `auto` runs on the CPU on a machine with a hardware GPU. Measured on an NVIDIA H100
-/// against the CPU backend of the same build and machine (16 cores; doc/benchmarks.md, "GPU
-/// pipeline"): the GPU backend was 1.1x to 1.2x slower on grains (N = 1000), stack_3d,
-/// love_laursen and a 54 000-dof block, because the factorisations, solves and contact stay on
-/// the CPU and the device passes add a fixed cost per Newton iteration. At scale on an NVIDIA
-/// H200 (doc/benchmarks.md, "The GPU at scale"), with the Newton iterations on the device: 1.8x
-/// to 3.1x slower on 2D grains N = 1 000 to 100 000 and 3D grains N = 1 000 and 10 000, 1.09x
-/// on the 54 000-dof block; only stack_3d ran faster (1.12x), on fewer Newton iterations that
-/// round-off gave it, not on the device's speed. So no size is named where the GPU wins.
+/// Why `auto` runs on the CPU on a machine with a hardware GPU: the GPU backend was measured
+/// slower than the CPU backend of the same build and machine on every scene and size, on an
+/// NVIDIA H100 and an H200 (doc/benchmarks.md, "GPU pipeline" and "The GPU at scale"), because
+/// the factorisations, solves and contact stay on the host and the device is refilled every
+/// call; so no size is named where the GPU wins.
 pub const AUTO_REASON_GPU: &str = "was measured slower than the CPU backend on every scene (doc/benchmarks.md); `--backend gpu` runs on it";
 
 /// `--uzawa auto` on a hardware adapter: the fewest contact points of a Newton round, and the

@@ -427,9 +427,8 @@ fn body_point(s: usize, node: u32, m: usize, facet: &[u32], p: &Projection, dim:
 
 /// A corner is concave when it turns by more than this (sine of the angle, about 11.5°). Below
 /// it the two segments are nearly one line: a node held by one sinks little through the other,
-/// and a second, nearly parallel point slowed the Uzawa sweeps (at 3°, grains_many N = 200 took
-/// 153 sweeps a step instead of 143, with the same overlaps); the corners that let nodes through
-/// turned by 20° and more.
+/// and a second, nearly parallel point only slows the Uzawa sweeps; the corners that let nodes
+/// through turned by 20° and more (doc/benchmarks.md, "Contact below the elements").
 const CONCAVE: Real = 0.2;
 
 /// Whether segments `a` (outward unit normal `normal`) and `b` of one 2D body meet at a concave

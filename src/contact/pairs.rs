@@ -1,8 +1,8 @@
 //! Which body pairs can touch, with which friction, and which body is the slave of each pass.
 //!
 //! Kept as the scene's rule (every pair, the listed pairs, the role order), not as an n x n
-//! table: a packing of N grains has N²/2 pairs, and the tables (three of them, up to 16 bytes
-//! an entry) took 0.8 GB at N = 4 000 grains and 3.8 GB at N = 10 000.
+//! table: a packing of N grains has N²/2 pairs, and tables over them grow past the memory of
+//! the packings users run (doc/benchmarks.md, "Large packings").
 
 use crate::precision::Real;
 use std::cmp::Ordering;

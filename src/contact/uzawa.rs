@@ -270,9 +270,9 @@ pub enum Fallback {
 pub const NEWTON_ATTEMPTS: usize = 4;
 
 /// Sweeps between two looks at whether the Gauss-Seidel sweeps stall, and the sweeps before the
-/// first: with Anderson mixing most solves end within 65 sweeps, some after a stretch that looks
-/// stalled (grains_many at its defaults handed 66 Newton iterations to problems the sweeps then
-/// solved, 0.4 s of a 1.6 s run, with the look from sweep 32).
+/// first: with Anderson mixing most solves end within 65 sweeps, some after a stretch that only
+/// looks stalled, which an earlier look hands to the Newton solve for nothing (doc/benchmarks.md,
+/// "Jammed packings").
 const STALL_WINDOW: usize = 16;
 const FIRST_LOOK: usize = 256;
 

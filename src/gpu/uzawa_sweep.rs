@@ -51,10 +51,10 @@ pub const SOLVE_SWEEPS: usize = 512;
 pub const SOFTWARE_LOOP_BUDGET: usize = 60_000;
 
 /// Dispatches of `uzawa_solve` a device Newton increment records on a software adapter, whose
-/// dispatches take fewer sweeps ([`SOFTWARE_LOOP_BUDGET`]) and cost lavapipe about 0.1 ms each
-/// even when every problem has stopped: up to four, so that a solve of a grain cluster runs to
-/// its end (grains_many N = 800 with `contact.max_iterations = 500`: at most five); one cut
-/// short hands its group back. A hardware GPU takes every sweep in one dispatch.
+/// dispatches take fewer sweeps ([`SOFTWARE_LOOP_BUDGET`]) and cost even when every problem has
+/// stopped: enough that a grain cluster's solve mostly runs to its end (doc/benchmarks.md,
+/// "Figures behind constants"); one cut short hands its group back. A hardware GPU takes every
+/// sweep in one dispatch.
 pub const SOFTWARE_SOLVE_DISPATCHES: usize = 4;
 
 /// An upper bound on the loop iterations of one `uzawa_solve` invocation per sweep of a

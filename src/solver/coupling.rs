@@ -19,9 +19,8 @@ use std::sync::atomic::AtomicBool;
 type SparseRow = Vec<(u32, Real)>;
 
 /// The Uzawa iterations of a Newton iteration go this much below the contact tolerance, so that
-/// their own error does not keep the reactions from settling between Newton iterations. 0.01
-/// before the sweeps were accelerated; 0.1 saves a tenth of the sweeps of grains_many (N = 200)
-/// with the same Newton iterations.
+/// their own error does not keep the reactions from settling between Newton iterations; with
+/// accelerated sweeps a tenth is enough (doc/benchmarks.md, "Figures behind constants").
 const INNER_TOLERANCE: Real = 0.1;
 
 /// Columns solved together: bounds the dense right-hand-side block to `64 x free dofs`.

@@ -155,7 +155,7 @@ impl CholeskySolver {
 /// The inverse, row by row, of the symmetric matrix whose lower triangle `values` fills the CSC
 /// pattern `col_ptr`, `row_idx`, from a dense Cholesky factorisation: for a body of tens of dofs
 /// (a grain) a few dense kernels, where a sparse factor's solves of the identity's columns walk
-/// the factor once per column (grains_many N = 20 000 on 2 cores: 4.5x less time, by `perf`).
+/// the factor once per column (doc/benchmarks.md, "A grain in flight in one submission a step").
 /// `None` if the matrix is not positive definite.
 pub fn dense_inverse(col_ptr: &[u32], row_idx: &[u32], values: &[Real]) -> Option<Vec<Real>> {
     use faer::linalg::cholesky::llt::{factor, inverse};

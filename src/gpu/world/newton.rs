@@ -26,11 +26,9 @@ use wgpu::{Buffer, BufferUsages, ComputePipeline};
 
 /// Device iterations recorded in the first submission of a call: a body that converges on the
 /// device mostly does so in one to three, a group in contact in four to eleven, and an iteration
-/// recorded for members that have stopped costs empty dispatches (grains_many N = 800 to
-/// t = 0.15 with the groups in contact on the device: 91 submits with 8, 82 with 12, as fast on
-/// lavapipe; 20 000 falling grains: the same 85 submits). The second records what is left of
-/// the largest budget, so that a call takes at most two submissions however many iterations it
-/// needs.
+/// recorded for members that have stopped costs only empty dispatches (doc/benchmarks.md,
+/// "Figures behind constants"). The second records what is left of the largest budget, so that
+/// a call takes at most two submissions however many iterations it needs.
 const ITERATIONS_PER_SUBMIT: u32 = 12;
 
 /// The indirect dispatches (x, y, z) of update, forces, residual and judge, then the length of
