@@ -1404,3 +1404,23 @@ fn uzawa_solve_of_a_dense_problem_matches_the_cpu() {
         assert!(worst <= 1e-12, "problem {k}: {worst:.3e}");
     }
 }
+
+/// Bind groups are made by resource name, from naga's reflection of each entry point: a name
+/// the kernel does not declare, or a resource its entry point uses left unbound, is the
+/// binding code disagreeing with the kernel, caught where the bind group is made rather than
+/// as a wrong buffer at some binding number.
+#[test]
+fn bind_groups_take_the_bindings_the_kernel_declares_by_name() {
+    let Some(gpu) = gpu_or_skip("bind_groups_take_the_bindings_the_kernel_declares_by_name", Precision::F64) else { return };
+    let pipeline = gpu.pipeline("peak_copy", None).unwrap();
+    let buffer = |label| gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some(label), size: 1024, usage: wgpu::BufferUsages::STORAGE, mapped_at_creation: false });
+    let (a, b) = (buffer("a"), buffer("b"));
+    // The names in either order, and a name the entry point does not use would be left out.
+    gpu.bind_named(&pipeline, ("peak_copy", "main", None), &[("destination", &b), ("source", &a)]);
+    let misspelt = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| gpu.bind_named(&pipeline, ("peak_copy", "main", None), &[("source", &a), ("destinaton", &b)])));
+    let message = *misspelt.expect_err("a name the kernel does not declare").downcast::<String>().unwrap();
+    assert!(message.contains("declares no resource `destinaton`"), "{message}");
+    let missing = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| gpu.bind_named(&pipeline, ("peak_copy", "main", None), &[("source", &a)])));
+    let message = *missing.expect_err("a used resource left unbound").downcast::<String>().unwrap();
+    assert!(message.contains("uses `destination`, which is not bound"), "{message}");
+}

@@ -3,6 +3,7 @@
 
 use super::shaders::ElementVariant;
 use crate::precision::Precision;
+use std::sync::Arc;
 use wgpu::{Adapter, Backends, DeviceType};
 
 #[derive(Debug, thiserror::Error)]
@@ -53,6 +54,13 @@ impl AdapterReport {
 }
 
 /// An open device with the precision its pipelines use.
+/// What naga's reflection of a kernel's module says of its resources: every one, by name with
+/// its binding, and per entry point the names of those it uses.
+struct Reflection {
+    declared: Vec<(String, u32)>,
+    used: std::collections::HashMap<String, Vec<String>>,
+}
+
 pub struct Gpu {
     pub device: wgpu::Device,
     pub queue: wgpu::Queue,
@@ -62,6 +70,9 @@ pub struct Gpu {
     clock: Option<super::clock::KernelClock>,
     /// Whether the device was opened with what the clock needs.
     clock_features: bool,
+    /// Per kernel and variant, its resources by name with their bindings, and those each entry
+    /// point uses ([`Gpu::bind_named`]), read once.
+    bindings: std::sync::Mutex<std::collections::HashMap<String, Arc<Reflection>>>,
 }
 
 fn adapters_of(backends: Backends) -> Vec<Adapter> {
@@ -132,7 +143,7 @@ fn open_adapter(adapter: Adapter, precision: Option<Precision>) -> Result<Gpu, G
     }
     let descriptor = wgpu::DeviceDescriptor { label: Some("bifirst"), required_features, required_limits: adapter.limits(), ..Default::default() };
     let (device, queue) = pollster::block_on(adapter.request_device(&descriptor)).map_err(|e| GpuError::Device { adapter: report.name.clone(), message: e.to_string() })?;
-    Ok(Gpu { device, queue, adapter: report, precision, clock: None, clock_features })
+    Ok(Gpu { device, queue, adapter: report, precision, clock: None, clock_features, bindings: Default::default() })
 }
 
 /// The checks wgpu would add to our kernels, all left out: every loop counts up to a bound and
@@ -183,10 +194,64 @@ impl Gpu {
         self.clock.as_ref().map(super::clock::KernelClock::times)
     }
 
-    /// A bind group of `pipeline`'s group 0: each `(binding, buffer)` bound whole.
-    pub fn bind(&self, label: Option<&str>, pipeline: &wgpu::ComputePipeline, bound: &[(u32, &wgpu::Buffer)]) -> wgpu::BindGroup {
-        let entries: Vec<wgpu::BindGroupEntry> = bound.iter().map(|&(binding, b)| wgpu::BindGroupEntry { binding, resource: b.as_entire_binding() }).collect();
-        self.device.create_bind_group(&wgpu::BindGroupDescriptor { label, layout: &pipeline.get_bind_group_layout(0), entries: &entries })
+    /// A bind group of `pipeline`'s group 0 (`kernel`'s `entry` point for `variant`) with each
+    /// `(name, buffer)` bound whole at the binding the kernel declares for that name: naga's
+    /// reflection of the composed module, not numbers kept by hand. Names the entry point does
+    /// not use are left out, so one list can serve every entry point of a module.
+    ///
+    /// # Panics
+    /// When a name is not one of the module's resources, or the entry point uses a resource
+    /// the list lacks: the kernel and the code that binds it disagree.
+    pub fn bind_named(&self, pipeline: &wgpu::ComputePipeline, kernel: (&str, &str, Option<ElementVariant>), bound: &[(&str, &wgpu::Buffer)]) -> wgpu::BindGroup {
+        self.bind_resources(pipeline, kernel, &bound.iter().map(|&(name, b)| (name, b.as_entire_binding())).collect::<Vec<_>>())
+    }
+
+    /// [`Gpu::bind_named`] with any binding resources (a range of a buffer, for one).
+    pub fn bind_resources(&self, pipeline: &wgpu::ComputePipeline, (kernel, entry, variant): (&str, &str, Option<ElementVariant>), bound: &[(&str, wgpu::BindingResource)]) -> wgpu::BindGroup {
+        let reflection = self.reflection(kernel, variant);
+        let used = reflection.used.get(entry).unwrap_or_else(|| panic!("`{kernel}` has no entry point `{entry}`"));
+        let mut entries = Vec::with_capacity(used.len());
+        for (name, resource) in bound {
+            let (_, binding) = reflection.declared.iter().find(|(n, _)| n == name).unwrap_or_else(|| panic!("`{kernel}` declares no resource `{name}`"));
+            if used.contains(&name.to_string()) {
+                entries.push(wgpu::BindGroupEntry { binding: *binding, resource: resource.clone() });
+            }
+        }
+        for name in used {
+            assert!(bound.iter().any(|(n, _)| n == name), "`{kernel}`'s `{entry}` uses `{name}`, which is not bound");
+        }
+        self.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(kernel), layout: &pipeline.get_bind_group_layout(0), entries: &entries })
+    }
+
+    /// The reflection of a kernel's module for `variant` (made once).
+    fn reflection(&self, kernel: &str, variant: Option<ElementVariant>) -> Arc<Reflection> {
+        let key = format!("{kernel}/{variant:?}");
+        if let Some(found) = self.bindings.lock().expect("not poisoned").get(&key) {
+            return found.clone();
+        }
+        let (module, info) = self.reflect(kernel, variant);
+        let named = |(_, g): (naga::Handle<naga::GlobalVariable>, &naga::GlobalVariable)| Some((g.name.clone()?, g.binding.as_ref()?.binding));
+        let declared: Vec<(String, u32)> = module.global_variables.iter().filter_map(named).collect();
+        let used = module
+            .entry_points
+            .iter()
+            .enumerate()
+            .map(|(i, e)| {
+                let uses = info.get_entry_point(i);
+                (e.name.clone(), module.global_variables.iter().filter(|(handle, _)| !uses[*handle].is_empty()).filter_map(named).map(|(name, _)| name).collect())
+            })
+            .collect();
+        let found = Arc::new(Reflection { declared, used });
+        self.bindings.lock().expect("not poisoned").insert(key, found.clone());
+        found
+    }
+
+    /// The composed module of a kernel at this device's precision, parsed and analysed by naga.
+    fn reflect(&self, kernel: &str, variant: Option<ElementVariant>) -> (naga::Module, naga::valid::ModuleInfo) {
+        let source = super::shaders::source(kernel, self.precision, variant, self.device.limits().max_compute_workgroup_storage_size).unwrap_or_else(|e| panic!("`{kernel}` composes: {e}"));
+        let module = naga::front::wgsl::parse_str(&source).unwrap_or_else(|e| panic!("`{kernel}` parses: {e}"));
+        let info = naga::valid::Validator::new(naga::valid::ValidationFlags::all(), naga::valid::Capabilities::all()).validate(&module).unwrap_or_else(|e| panic!("`{kernel}` validates: {e}"));
+        (module, info)
     }
 
     /// A compute pipeline for a shader of `shaders/` at this device's precision; shader errors

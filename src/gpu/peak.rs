@@ -29,6 +29,7 @@ pub struct Peaks {
 /// A kernel of one or two storage buffers, run on `values` and timed.
 struct Probe {
     pipeline: ComputePipeline,
+    kernel: &'static str,
 }
 
 impl Probe {
@@ -39,7 +40,7 @@ impl Probe {
         let usage = BufferUsages::STORAGE | BufferUsages::COPY_SRC;
         let first = gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some("peak"), contents: &bytes, usage });
         let second = gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some("peak result"), size: bytes.len() as u64, usage, mapped_at_creation: false });
-        let bind_group = gpu.bind(Some("peak"), &self.pipeline, &[(0, &first), (1, &second)]);
+        let bind_group = gpu.bind_named(&self.pipeline, (self.kernel, "main", None), &[("source", &first), ("destination", &second)]);
         let items = if vec4s { values.len() / 4 } else { values.len() };
         let groups = items.div_ceil(WORKGROUP);
         let dispatch = |encoder: &mut wgpu::CommandEncoder| {
@@ -74,12 +75,12 @@ impl Probe {
 
 /// `peak_copy` on `values` (a multiple of 4 long): the copy and the seconds per call.
 pub fn peak_copy(gpu: &Gpu, values: &[Real], calls: u32) -> Result<(Vec<Real>, f64), GpuError> {
-    Probe { pipeline: gpu.pipeline("peak_copy", None)? }.run(gpu, values, true, calls)
+    Probe { pipeline: gpu.pipeline("peak_copy", None)?, kernel: "peak_copy" }.run(gpu, values, true, calls)
 }
 
 /// `peak_fma` on `values`: the results and the seconds per call.
 pub fn peak_fma(gpu: &Gpu, values: &[Real], calls: u32) -> Result<(Vec<Real>, f64), GpuError> {
-    Probe { pipeline: gpu.pipeline("peak_fma", None)? }.run(gpu, values, false, calls)
+    Probe { pipeline: gpu.pipeline("peak_fma", None)?, kernel: "peak_fma" }.run(gpu, values, false, calls)
 }
 
 /// Floating-point operations of `peak_fma` per value.

@@ -70,7 +70,7 @@ impl UzawaStepKernel {
         let device = &gpu.device;
         let storage = device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(KERNEL), contents: &bytes, usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC });
         let staging = device.create_buffer(&wgpu::BufferDescriptor { label: Some("uzawa_step readback"), size: bytes.len() as u64, usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST, mapped_at_creation: false });
-        let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(KERNEL), layout: &self.pipeline.get_bind_group_layout(0), entries: &[wgpu::BindGroupEntry { binding: 0, resource: storage.as_entire_binding() }] });
+        let bind_group = gpu.bind_named(&self.pipeline, (KERNEL, "main", None), &[("points", &storage)]);
         let (x, y) = super::dispatch_rows(points.len().div_ceil(WORKGROUP));
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(KERNEL) });
         {

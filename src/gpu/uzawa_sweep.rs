@@ -446,21 +446,21 @@ impl UzawaSweeps {
         let colour_start = storage(gpu, "uzawa colour starts", colour_entries * 4, none);
         let count = buffer(gpu, "uzawa problem count", std::mem::size_of::<SolveCount>(), BufferUsages::UNIFORM | BufferUsages::COPY_DST);
         let staging = buffer(gpu, "uzawa read-back", points * 3 * real + state_bytes, BufferUsages::MAP_READ | BufferUsages::COPY_DST);
-        let layout = self.pipeline.get_bind_group_layout(0);
+        // Each kernel's resources by the names it gives them (`Gpu::bind_named`); a sweep's bind
+        // group per colour, with that colour's range of `ranges`.
         let bind_groups = (0..colours)
             .map(|c| {
-                let whole = [&block, &row_start, &row_entries, &locals, &order, &live, &r];
-                let mut entries: Vec<wgpu::BindGroupEntry> = whole.iter().enumerate().map(|(i, b)| wgpu::BindGroupEntry { binding: i as u32, resource: b.as_entire_binding() }).collect();
                 let range = wgpu::BufferBinding { buffer: &ranges, offset: c as u64 * self.range_stride, size: wgpu::BufferSize::new(std::mem::size_of::<ColourRange>() as u64) };
-                entries.push(wgpu::BindGroupEntry { binding: 7, resource: wgpu::BindingResource::Buffer(range) });
-                entries.push(wgpu::BindGroupEntry { binding: 8, resource: dr.as_entire_binding() });
-                gpu.device.create_bind_group(&wgpu::BindGroupDescriptor { label: Some(KERNEL), layout: &layout, entries: &entries })
+                let whole = [("blocks", &block), ("row_start", &row_start), ("row_entries", &row_entries), ("locals", &locals), ("order", &order), ("live", &live), ("r", &r), ("dr", &dr)];
+                let mut entries: Vec<(&str, wgpu::BindingResource)> = whole.iter().map(|&(name, b)| (name, b.as_entire_binding())).collect();
+                entries.push(("colour", wgpu::BindingResource::Buffer(range)));
+                gpu.bind_resources(&self.pipeline, (KERNEL, "main", None), &entries)
             })
             .collect();
-        let judge_group = gpu.bind(Some(JUDGE), &self.judge, &[(5, &live), (6, &r), (7, &dr), (8, &judged), (9, &states), (10, &node_start), (11, &node_points), (12, &node_coefs), (13, &frames), (14, &count)]);
-        // Bindings 0 to 14: the judge's from 6 on (`include/uzawa_nodal.wgsl`).
-        let whole = [&block, &row_start, &row_entries, &locals, &solve_order, &colour_start, &r, &dr, &judged, &states, &node_start, &node_points, &node_coefs, &frames, &count];
-        let solve_group = gpu.bind(Some(SOLVE), &self.solve, &whole.iter().enumerate().map(|(i, &b)| (i as u32, b)).collect::<Vec<_>>());
+        let nodal = [("problems", &judged), ("states", &states), ("node_start", &node_start), ("node_points", &node_points), ("node_coefs", &node_coefs), ("frames", &frames), ("count", &count)];
+        let judge_group = gpu.bind_named(&self.judge, (JUDGE, "main", None), &[&nodal[..], &[("live", &live), ("r", &r), ("dr", &dr)]].concat());
+        let solve = [("blocks", &block), ("row_start", &row_start), ("row_entries", &row_entries), ("locals", &locals), ("order", &solve_order), ("colour_start", &colour_start), ("r", &r), ("dr", &dr)];
+        let solve_group = gpu.bind_named(&self.solve, (SOLVE, "main", None), &[&nodal[..], &solve[..]].concat());
         self.buffers = Some(Buffers {
             points,
             blocks,

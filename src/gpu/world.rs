@@ -36,12 +36,6 @@ use wgpu::{BindGroup, Buffer, BufferUsages, ComputePipeline};
 
 /// Invocations per workgroup of the kernels that take one item per invocation.
 const WORKGROUP: usize = 64;
-/// The binding of the job list (`jobs`) in `element_force_tangent` (both entry points),
-/// `assemble_residual`, `element_energy` and `assemble_csr`.
-const FORCES_JOBS: usize = 7;
-const RESIDUAL_JOBS: usize = 8;
-const ENERGY_JOBS: usize = 6;
-const CSR_JOBS: usize = 6;
 
 /// The bytes one thread copies at a time into the staging memory of a large upload.
 const COPY_STRETCH: usize = 1 << 20;
@@ -98,26 +92,28 @@ pub struct Evaluation<'a> {
 struct Pass {
     pipeline: ComputePipeline,
     bind_group: BindGroup,
-    buffers: Vec<Buffer>,
+    /// The buffers bound, by the names the kernel gives them.
+    buffers: Vec<(&'static str, Buffer)>,
+    variant: Option<ElementVariant>,
     entry: (&'static str, &'static str),
 }
 
 impl Pass {
-    fn new(gpu: &Gpu, kernel: &'static str, entry: &'static str, variant: Option<ElementVariant>, buffers: &[&Buffer]) -> Result<Self, GpuError> {
-        Ok(Self::bound(gpu, gpu.pipeline_at(kernel, entry, variant)?, (kernel, entry), buffers))
+    fn new(gpu: &Gpu, kernel: &'static str, entry: &'static str, variant: Option<ElementVariant>, buffers: &[(&'static str, &Buffer)]) -> Result<Self, GpuError> {
+        Ok(Self::bound(gpu, gpu.pipeline_at(kernel, entry, variant)?, (kernel, entry), variant, buffers))
     }
 
-    fn bound(gpu: &Gpu, pipeline: ComputePipeline, entry: (&'static str, &'static str), buffers: &[&Buffer]) -> Self {
-        let bind_group = gpu.bind(None, &pipeline, &buffers.iter().enumerate().map(|(i, &b)| (i as u32, b)).collect::<Vec<_>>());
-        Self { pipeline, bind_group, buffers: buffers.iter().map(|&b| b.clone()).collect(), entry }
+    /// A pass of a pipeline made before, with `buffers` bound by name.
+    fn bound(gpu: &Gpu, pipeline: ComputePipeline, entry: (&'static str, &'static str), variant: Option<ElementVariant>, buffers: &[(&'static str, &Buffer)]) -> Self {
+        let bind_group = gpu.bind_named(&pipeline, (entry.0, entry.1, variant), buffers);
+        Self { pipeline, bind_group, buffers: buffers.iter().map(|&(name, b)| (name, b.clone())).collect(), variant, entry }
     }
 
-    /// The same pipeline and buffers with another job list at binding `at` ([`FORCES_JOBS`],
-    /// ...): device Newton iterations run the batch's passes over lists of their own.
-    fn with_jobs(&self, gpu: &Gpu, at: usize, jobs: &Buffer) -> Self {
-        let mut buffers: Vec<&Buffer> = self.buffers.iter().collect();
-        buffers[at] = jobs;
-        Self::bound(gpu, self.pipeline.clone(), self.entry, &buffers)
+    /// The same pipeline and buffers with another job list (`jobs`): device Newton iterations
+    /// run the batch's passes over lists of their own.
+    fn with_jobs(&self, gpu: &Gpu, jobs: &Buffer) -> Self {
+        let buffers: Vec<(&'static str, &Buffer)> = self.buffers.iter().map(|(name, b)| (*name, if *name == "jobs" { jobs } else { b })).collect();
+        Self::bound(gpu, self.pipeline.clone(), self.entry, self.variant, &buffers)
     }
 
     /// One z-slice per active member, enough workgroups of `per_group` items for `max_items`.
@@ -931,17 +927,20 @@ impl Batch {
         let energy = buffer(gpu, "energy", elements * real, copy_out);
         let history = buffer(gpu, "history", history * real, write);
         let v = Some(variant);
-        let element_buffers = [&geometry, &connectivity, &u, &element_out, &failure, &member_buffer, &material_buffer, &active, &history];
-        let residual_bindings = [&element_out, &dof_start, &dof, coefficients, &u, &step, &dof_out, &member_buffer, &active];
-        let energy_bindings = [&geometry, &connectivity, &u, &energy, &member_buffer, &material_buffer, &active];
+        let element_buffers =
+            [("geometry", &geometry), ("connectivity", &connectivity), ("u", &u), ("element_out", &element_out), ("failure", &failure), ("members", &member_buffer), ("materials", &material_buffer), ("jobs", &active), ("history", &history)];
+        let residual_bindings = [("element_out", &element_out), ("gather_start", &dof_start), ("gather", &dof), ("coefficients", coefficients), ("u", &u), ("step", &step), ("dof_out", &dof_out), ("members", &member_buffer), ("jobs", &active)];
+        let energy_bindings = [("geometry", &geometry), ("connectivity", &connectivity), ("u", &u), ("energy", &energy), ("members", &member_buffer), ("materials", &material_buffer), ("jobs", &active)];
         // The pipelines compile in parallel: a software adapter compiles each on the CPU.
         let tangent = {
-            let (gpu, buffers) = (gpu.clone(), element_buffers.map(Buffer::clone));
-            Deferred::spawn(move || Pass::new(&gpu, "element_force_tangent", "main", v, &buffers.each_ref()))
+            let (gpu, buffers) = (gpu.clone(), element_buffers.map(|(name, b)| (name, b.clone())));
+            Deferred::spawn(move || Pass::new(&gpu, "element_force_tangent", "main", v, &buffers.each_ref().map(|(name, b)| (*name, b))))
         };
         let (forces, csr_pass, residual, element_energy) = std::thread::scope(|scope| {
             let forces = scope.spawn(|| Pass::new(gpu, "element_force_tangent", "forces", v, &element_buffers));
-            let csr = scope.spawn(|| Pass::new(gpu, "assemble_csr", "main", None, &[&element_out, &csr_start, &csr, coefficients, &values, &member_buffer, &active]));
+            let csr = scope.spawn(|| {
+                Pass::new(gpu, "assemble_csr", "main", None, &[("element_out", &element_out), ("gather_start", &csr_start), ("gather", &csr), ("coefficients", coefficients), ("values", &values), ("members", &member_buffer), ("jobs", &active)])
+            });
             let residual = scope.spawn(|| Pass::new(gpu, "assemble_residual", "main", None, &residual_bindings));
             let energy = Pass::new(gpu, "element_energy", "main", v, &energy_bindings);
             let join = |h: std::thread::ScopedJoinHandle<'_, Result<Pass, GpuError>>| h.join().expect("a pipeline compiles without panicking");

@@ -127,78 +127,40 @@ impl ContactPasses {
         let states = made("contact states", bytemuck::cast_slice(&l.states), storage | BufferUsages::COPY_SRC);
         let call = made("contact call", bytemuck::bytes_of(&l.call), BufferUsages::UNIFORM);
         let n = newton;
-        let prepare = gpu.bind(
-            Some("newton_contact"),
-            &pipelines.prepare,
-            &[
-                (0, &n.inverse),
-                (1, &n.free),
-                (2, &n.newton),
-                (3, &n.state),
-                (4, &b.dof_out),
-                (5, &b.u),
-                (6, &b.member_buffer),
-                (7, &n.x0),
-                (8, &n.u_base),
-                (10, &groups),
-                (11, &group_members),
-                (12, &uzawa.locals),
-                (13, &uzawa.states),
-                (14, &uzawa.judged),
-                (15, &term_start),
-                (16, &term_slots),
-                (17, &term_coefs),
-                (18, &obstacle),
-                (19, &uzawa.frames),
-                (20, &node_dof),
-                (26, &call),
-            ],
-        );
-        let forces = gpu.bind(
-            Some("newton_contact"),
-            &pipelines.forces,
-            &[
-                (3, &n.state),
-                (9, &n.contact),
-                (10, &groups),
-                (11, &group_members),
-                (13, &uzawa.states),
-                (14, &uzawa.judged),
-                (19, &uzawa.frames),
-                (20, &node_dof),
-                (21, &uzawa.node_start),
-                (22, &uzawa.node_points),
-                (23, &uzawa.node_coefs),
-                (24, &uzawa.r),
-                (25, &states),
-                (26, &call),
-            ],
-        );
-        let judge = gpu.bind(Some("newton_contact"), &pipelines.judge, &[(2, &n.newton), (3, &n.state), (10, &groups), (11, &group_members), (14, &uzawa.judged), (25, &states), (26, &call)]);
-        let node_gather = [(21, &uzawa.node_start), (22, &uzawa.node_points), (23, &uzawa.node_coefs)];
-        let mut first_forces_entries = vec![(3, &n.state), (9, &n.contact), (10, &groups), (11, &group_members), (14, &uzawa.judged), (19, &uzawa.frames), (20, &node_dof), (24, &uzawa.r), (26, &call)];
-        first_forces_entries.extend(node_gather);
-        let first_forces = gpu.bind(Some("newton_contact"), &pipelines.first_forces, &first_forces_entries);
-        let mut first_judge_entries = vec![
-            (3, &n.state),
-            (5, &b.u),
-            (7, &n.x0),
-            (8, &n.u_base),
-            (10, &groups),
-            (11, &group_members),
-            (12, &uzawa.locals),
-            (14, &uzawa.judged),
-            (15, &term_start),
-            (16, &term_slots),
-            (17, &term_coefs),
-            (18, &obstacle),
-            (19, &uzawa.frames),
-            (20, &node_dof),
-            (24, &uzawa.r),
-            (26, &call),
+        // Every resource of `newton_contact` by the name the kernel gives it; each entry point's
+        // bind group takes those it uses (naga's reflection, `Gpu::bind_named`).
+        let all = [
+            ("inverse", &n.inverse),
+            ("free_dofs", &n.free),
+            ("newton", &n.newton),
+            ("state", &n.state),
+            ("dof_out", &b.dof_out),
+            ("u", &b.u),
+            ("members", &b.member_buffer),
+            ("x0", &n.x0),
+            ("u_base", &n.u_base),
+            ("contact", &n.contact),
+            ("groups", &groups),
+            ("group_members", &group_members),
+            ("locals", &uzawa.locals),
+            ("uzawa_states", &uzawa.states),
+            ("problems", &uzawa.judged),
+            ("term_start", &term_start),
+            ("term_slots", &term_slots),
+            ("term_coefs", &term_coefs),
+            ("obstacle", &obstacle),
+            ("frames", &uzawa.frames),
+            ("node_dof", &node_dof),
+            ("node_start", &uzawa.node_start),
+            ("node_points", &uzawa.node_points),
+            ("node_coefs", &uzawa.node_coefs),
+            ("r", &uzawa.r),
+            ("contact_states", &states),
+            ("call", &call),
         ];
-        first_judge_entries.extend(node_gather);
-        let first_judge = gpu.bind(Some("newton_contact"), &pipelines.first_judge, &first_judge_entries);
+        let bind = |pipeline: &ComputePipeline, entry: &str| gpu.bind_named(pipeline, ("newton_contact", entry, None), &all);
+        let (prepare, forces, judge) = (bind(&pipelines.prepare, "prepare"), bind(&pipelines.forces, "forces"), bind(&pipelines.judge, "judge"));
+        let (first_forces, first_judge) = (bind(&pipelines.first_forces, "first_forces"), bind(&pipelines.first_judge, "first_judge"));
         Self { prepare, forces, judge, first_forces, first_judge, states, problems: l.groups.len() as u32 }
     }
 

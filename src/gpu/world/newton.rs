@@ -11,7 +11,7 @@
 //! submission.
 
 use super::contact::{ContactLayout, ContactPasses, ContactPipelines, GroupContact};
-use super::{buffer, to_device, Batch, Evaluation, GpuWorld, Pass, ReadBack, Source, CSR_JOBS, ENERGY_JOBS, FORCES_JOBS, RESIDUAL_JOBS, WORKGROUP};
+use super::{buffer, to_device, Batch, Evaluation, GpuWorld, Pass, ReadBack, Source, WORKGROUP};
 use crate::contact::uzawa::Problem;
 use crate::gpu::types::{Active, Coefficients, ContactState, DofOut, NewtonMember, NewtonState, MODE_FORCES, MODE_TANGENT, NEWTON_FAILED, NEWTON_HOST, NEWTON_ITERATING, NEWTON_MAX_FREE, NO_FAILURE};
 use crate::gpu::uzawa_sweep::UzawaSweeps;
@@ -149,8 +149,8 @@ impl HostTangents {
         let call = buffer(gpu, "host tangents call", members * 8, write);
         let jobs = buffer(gpu, "host tangents jobs", members * 8, write);
         let dispatch = buffer(gpu, "host tangents dispatch", DISPATCH_WORDS * 4, write | BufferUsages::INDIRECT);
-        let (tangent, csr) = (tangent.with_jobs(gpu, FORCES_JOBS, &jobs), b.csr.with_jobs(gpu, CSR_JOBS, &jobs));
-        let compact = Pass::bound(gpu, pipelines.compact_host.clone(), ("newton_compact", "host"), &[&call, state, &jobs, &dispatch]);
+        let (tangent, csr) = (tangent.with_jobs(gpu, &jobs), b.csr.with_jobs(gpu, &jobs));
+        let compact = Pass::bound(gpu, pipelines.compact_host.clone(), ("newton_compact", "host"), None, &[("call", &call), ("state", state), ("jobs", &jobs), ("dispatch", &dispatch)]);
         Self { call, dispatch, compact, tangent, csr }
     }
 }
@@ -247,11 +247,12 @@ impl NewtonBuffers {
         let call = buffer(gpu, "newton call", members * 8, write);
         let jobs = buffer(gpu, "newton jobs", members * 8, write);
         let dispatch = buffer(gpu, "newton dispatch", DISPATCH_WORDS * 4, write | BufferUsages::INDIRECT);
-        let (forces, residual) = (b.forces.with_jobs(gpu, FORCES_JOBS, &jobs), b.residual.with_jobs(gpu, RESIDUAL_JOBS, &jobs));
-        let energy = b.element_energy.with_jobs(gpu, ENERGY_JOBS, &call);
-        let update = Pass::bound(gpu, pipelines.update.clone(), ("newton_update", "main"), &[&inverse, &free, &newton, &state, &b.dof_out, &b.u, &b.member_buffer, &jobs, &contact]);
-        let judge = Pass::bound(gpu, pipelines.judge.clone(), ("newton_judge", "main"), &[&free, &newton, &state, &b.dof_out, &b.u, &u_start, &b.step, coefficients, &b.failure, &b.member_buffer, &jobs, &contact]);
-        let compact = Pass::bound(gpu, pipelines.compact.clone(), ("newton_compact", "main"), &[&call, &state, &jobs, &dispatch]);
+        let (forces, residual) = (b.forces.with_jobs(gpu, &jobs), b.residual.with_jobs(gpu, &jobs));
+        let energy = b.element_energy.with_jobs(gpu, &call);
+        let common = [("free_dofs", &free), ("newton", &newton), ("state", &state), ("dof_out", &b.dof_out), ("u", &b.u), ("members", &b.member_buffer), ("jobs", &jobs), ("contact", &contact)];
+        let update = Pass::bound(gpu, pipelines.update.clone(), ("newton_update", "main"), None, &[&common[..], &[("inverse", &inverse)]].concat());
+        let judge = Pass::bound(gpu, pipelines.judge.clone(), ("newton_judge", "main"), None, &[&common[..], &[("u_start", &u_start), ("step", &b.step), ("coefficients", coefficients), ("failure", &b.failure)]].concat());
+        let compact = Pass::bound(gpu, pipelines.compact.clone(), ("newton_compact", "main"), None, &[("call", &call), ("state", &state), ("jobs", &jobs), ("dispatch", &dispatch)]);
         Ok(Self {
             inverse,
             free,
