@@ -13,7 +13,7 @@
 //! ([`Anderson::reject`], by the caller, who judges the nodal forces) and the history restarts;
 //! a least-squares problem too ill-conditioned to trust is not used.
 
-use super::law::project_on_cone;
+use super::law::{ContactLaw, Law};
 use crate::precision::Real;
 
 /// Sweeps remembered: enough to capture the few slow modes of a contact problem, few enough that
@@ -71,7 +71,7 @@ impl Anderson {
             *x = g + scale * d;
         }
         for (i, r) in swept.iter_mut().enumerate() {
-            *r = project_on_cone(*r, mu(i)).0;
+            *r = Law::project(*r, mu(i)).0;
         }
         true
     }

@@ -21,7 +21,7 @@ pub mod surface;
 pub mod uzawa;
 
 pub use configuration::Configuration;
-pub use law::{project_on_cone, uzawa_step, Status};
+pub use law::{project_on_cone, uzawa_step, ContactLaw, Coulomb, Law, Status};
 pub use obstacle::{Motion, Obstacle};
 pub use surface::Surface;
 pub use uzawa::Sweep;

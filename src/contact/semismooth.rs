@@ -17,7 +17,7 @@
 //! residual, the complementarity test of `solver::coupling`, and the last Newton step, each at
 //! most `tolerance * max(largest nodal force, floor)`.
 
-use super::law::uzawa_step;
+use super::law::{ContactLaw, Law};
 use super::uzawa::{Delassus, Local, NodalMap};
 use crate::precision::Real;
 use faer::linalg::solvers::Solve;
@@ -61,21 +61,10 @@ pub fn natural_map(w: &Delassus, local: &[Local], r: &[[Real; 3]], dim: usize, m
             let l = &local[i];
             let wr = w.row_times(i, r);
             let v = [l.v_free[0] + wr[0] + l.shift, l.v_free[1] + wr[1], l.v_free[2] + wr[2]];
-            let projected = uzawa_step(r[i], v, l.mu, l.rho).0;
+            let projected = Law::step(r[i], v, l.mu, l.rho).0;
             if let Some(j) = jacobian.as_deref_mut() {
-                let vt = (v[1] * v[1] + v[2] * v[2]).sqrt();
-                let tau = [r[i][0] - l.rho * (v[0] + l.mu * vt), r[i][1] - l.rho * v[1], r[i][2] - l.rho * v[2]];
-                let d = projection_jacobian(tau, l.mu, dim);
-                // M = ∂ṽ/∂v: the identity and, in the normal row, μ v_t / |v_t|.
-                let mut m = [0.0; 9];
-                for a in 0..3 {
-                    m[4 * a] = 1.0;
-                }
-                if vt > 0.0 {
-                    m[1] = l.mu * v[1] / vt;
-                    m[2] = l.mu * v[2] / vt;
-                }
-                j.push((d, times(&d, &m)));
+                let d = Law::projection_jacobian(Law::predictor(r[i], v, l.mu, l.rho), l.mu, dim);
+                j.push((d, times(&d, &Law::predictor_velocity_jacobian(v, l.mu))));
             }
             let mut f = [r[i][0] - projected[0], r[i][1] - projected[1], r[i][2] - projected[2]];
             f[dim..].iter_mut().for_each(|x| *x = 0.0);
@@ -93,41 +82,6 @@ fn times(a: &[Real; 9], b: &[Real; 9]) -> [Real; 9] {
         }
     }
     out
-}
-
-/// A generalised Jacobian of the projection on `K_μ = { |r_t| <= μ r_n }` at `tau` (row-major
-/// `3 x 3`, normal first; `dim` components used). At the cone's edges, one of the two sides.
-pub fn projection_jacobian(tau: [Real; 3], mu: Real, dim: usize) -> [Real; 9] {
-    let mut d = [0.0; 9];
-    let tt = (tau[1] * tau[1] + tau[2] * tau[2]).sqrt();
-    if mu == 0.0 {
-        d[0] = if tau[0] > 0.0 { 1.0 } else { 0.0 };
-        return d;
-    }
-    if tt <= mu * tau[0] {
-        for a in 0..dim {
-            d[4 * a] = 1.0;
-        }
-        return d;
-    }
-    if mu * tt <= -tau[0] {
-        return d;
-    }
-    let s = 1.0 / (1.0 + mu * mu);
-    let rn = (tau[0] + mu * tt) * s;
-    let t = [0.0, tau[1] / tt, tau[2] / tt];
-    d[0] = s;
-    for b in 1..dim {
-        d[b] = mu * t[b] * s;
-    }
-    for a in 1..dim {
-        d[3 * a] = mu * t[a] * s;
-        for b in 1..dim {
-            let projector = if a == b { 1.0 } else { 0.0 } - t[a] * t[b];
-            d[3 * a + b] = mu * mu * t[a] * t[b] * s + mu * rn * projector / tt;
-        }
-    }
-    d
 }
 
 /// Every entry of `J + shift I` of [`natural_map`] at the point it was evaluated (`jacobian`

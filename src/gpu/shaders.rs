@@ -87,7 +87,8 @@ pub fn is_element_kernel(kernel: &str) -> bool {
     kernel.starts_with("element_")
 }
 
-/// Whether a kernel steps contact points with the law of `include/contact_law.wgsl`.
+/// Whether a kernel steps contact points with the engine's contact law (its include,
+/// `ContactLaw::INCLUDE`: `include/contact_law.wgsl` for Coulomb).
 pub fn is_contact_kernel(kernel: &str) -> bool {
     kernel.starts_with("uzawa_")
 }
@@ -147,13 +148,13 @@ pub fn source(kernel: &str, precision: Precision, variant: Option<ElementVariant
             module += include("uzawa")?;
             module += include("contact_frame")?;
             // `first_judge`'s test of the law at the reactions a step starts from.
-            module += include("contact_law")?;
+            module += include(<crate::contact::law::Law as crate::contact::law::ContactLaw>::INCLUDE)?;
         }
     }
     if is_contact_kernel(kernel) {
         // The CPU twin's bound, so that both sweeps stop a point's local steps alike.
         module += &format!("const LOCAL_STEPS = {}u;\n", crate::contact::uzawa::LOCAL_STEPS);
-        module += include("contact_law")?;
+        module += include(<crate::contact::law::Law as crate::contact::law::ContactLaw>::INCLUDE)?;
         if kernel != "uzawa_step" {
             module += include("uzawa")?;
         }
