@@ -53,7 +53,6 @@ impl AdapterReport {
     }
 }
 
-/// An open device with the precision its pipelines use.
 /// What naga's reflection of a kernel's module says of its resources: every one, by name with
 /// its binding, and per entry point the names of those it uses.
 struct Reflection {
@@ -61,6 +60,7 @@ struct Reflection {
     used: std::collections::HashMap<String, Vec<String>>,
 }
 
+/// An open device with the precision its pipelines use.
 pub struct Gpu {
     pub device: wgpu::Device,
     pub queue: wgpu::Queue,
