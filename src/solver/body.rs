@@ -19,6 +19,8 @@ use rayon::prelude::*;
 use std::sync::Arc;
 use std::time::Instant;
 
+mod device;
+
 /// Displacement, velocity and internal force of every dof.
 #[derive(Debug, Clone)]
 pub struct State {
@@ -368,29 +370,9 @@ impl Body {
         self.viscoelastic = Some(viscoelastic);
     }
 
-    /// The step's viscoelastic relaxation, if the body has a Prony series.
-    pub fn relaxation(&self) -> Option<Relaxation<'_>> {
-        self.viscoelastic.as_ref().map(|_| Relaxation { c: self.relaxation_c, history: &self.history })
-    }
-
     /// What the element kernels integrate: the body's mesh, or its F-bar patches.
     pub fn elements(&self) -> &Mesh {
         self.patches.as_ref().map_or(&self.mesh, |p| &p.cells)
-    }
-
-    /// What the GPU world uploads of the body.
-    pub fn world_body(&self) -> WorldBody<'_> {
-        WorldBody { mesh: self.elements(), geometry: &self.geometry, model: &self.model, formulation: self.formulation, pattern: &self.pattern, gather: &self.gather, dofs: &self.dofs, viscous: self.viscoelastic.is_some() }
-    }
-
-    /// The step's start values of every dof (after [`Body::begin_step`]).
-    pub fn step_inputs(&self) -> &[DofStep<Real>] {
-        &self.step_inputs
-    }
-
-    /// A device failure of an evaluation that involved this body.
-    pub fn device_failure(&self, error: &GpuError) -> StepFailure {
-        StepFailure::Device { body: self.name.clone(), error: error.to_string() }
     }
 
     /// `element_force_tangent` of every element at `u` on the CPU, into the element results
@@ -532,31 +514,6 @@ impl Body {
     pub fn reuse_evaluation(&mut self, p: &StepParams) {
         self.tangent_current = false;
         self.absorb_residual(p);
-    }
-
-    /// The body's share of a GPU world evaluation at the trial displacement: the tangent if
-    /// `tangent`, the residual if `residual`. Finish with [`Body::finish_device_evaluation`].
-    pub fn device_evaluation(&mut self, body: usize, tangent: bool, residual: bool) -> Evaluation<'_> {
-        self.tangent_current = false;
-        self.evaluated.valid = false;
-        Evaluation { body, u: &self.trial.u, tangent, values: &mut self.values, dof_out: residual.then_some(&mut self.dof_out[..]), failure: None }
-    }
-
-    /// Takes the results of a GPU world evaluation (see [`Body::device_evaluation`]). A residual
-    /// the device did not compute (f32 kernels) is computed here in f64 by the CPU twins, so
-    /// that Newton converges to the same answer and the f32 tangent only changes how fast.
-    pub fn finish_device_evaluation(&mut self, p: &StepParams, failure: Option<ElementFailure>, tangent: bool, residual: bool) -> Result<(), StepFailure> {
-        if let Some(failure) = failure {
-            return Err(self.element_failure(&self.trial.u, failure));
-        }
-        self.tangent_current = tangent;
-        if residual {
-            if !tangent {
-                self.evaluated.record(&self.trial.u, &self.step_inputs, coefficients(p));
-            }
-            self.absorb_residual(p);
-        }
-        Ok(())
     }
 
     /// The f64 residual on the CPU for a device that evaluates tangents only (f32 kernels):
@@ -734,12 +691,6 @@ impl Body {
     /// between [`Body::begin_step`] and [`Body::commit`].
     pub fn still(&self) -> bool {
         self.still
-    }
-
-    /// Per dof, `u_t + dt (1 - θ) v_t`: the trial velocity is `(u - base) / θdt` (a device
-    /// that takes the increments of a group in contact computes it so).
-    pub fn trial_velocity_base(&self, p: &StepParams) -> Vec<Real> {
-        self.state.u.iter().zip(&self.state.v).map(|(u, v)| u + p.dt * (1.0 - p.theta) * v).collect()
     }
 
     /// Velocity of dof `d` implied by the trial displacement (eq. 15).
@@ -950,114 +901,6 @@ impl Body {
     /// The fill-reducing ordering of the factorisation and the entries of its factor.
     pub fn factor_report(&self) -> (super::ordering::Ordering, usize) {
         (self.solver.ordering(), self.solver.factor_entries())
-    }
-
-    /// Whether the next increments can be taken on the device ([`crate::gpu::GpuWorld::newton`]):
-    /// the body has free dofs and keeps a factorisation fit for them.
-    pub fn iterates_on_device(&self, p: &StepParams) -> bool {
-        self.dofs.free_count > 0 && !self.needs_factorization(p)
-    }
-
-    /// Whether the body's factorisation is one for this step's `c1` that the next increment may
-    /// use, right after [`Body::refresh_factor`] (which keeps or renews it): its next increment
-    /// can be taken on the device.
-    pub fn factor_fit(&self, p: &StepParams) -> bool {
-        self.dofs.free_count > 0 && self.factor_kept_for(p)
-    }
-
-    /// Which factorisation the body holds (a new number for each).
-    pub fn factor_version(&self) -> u64 {
-        self.factor_version
-    }
-
-    /// `K̄⁻¹` of the free dofs of the kept factorisation, row by row, for a device that applies
-    /// it: a dense inverse of the values factorised, which the body holds while it has no newer
-    /// tangent ([`Body::kept_factor`]); else, or if the dense factorisation fails, the columns
-    /// of the factor's solves with the identity (`K̄` is symmetric).
-    pub fn effective_inverse(&mut self, times: &mut PhaseTimes) -> Vec<Real> {
-        if !self.tangent_current {
-            let t0 = Instant::now();
-            let dense = self.solver.dense_inverse(&self.values);
-            times.solve += t0.elapsed().as_secs_f64();
-            if let Some(inverse) = dense {
-                return inverse;
-            }
-        }
-        let n = self.dofs.free_count;
-        let mut x = vec![0.0; n * n];
-        for f in 0..n {
-            x[f * n + f] = 1.0;
-        }
-        self.solve_effective(&mut x, times);
-        x
-    }
-
-    /// The body's share of device Newton iterations from its evaluated iterate: the tolerances
-    /// of [`Body::converged`] (the parts that do not change while it iterates), at most
-    /// `budget` increments, `inverse` when the device does not hold this factorisation's;
-    /// `evaluated`: the trial displacement's evaluation is the body's (else the device evaluates
-    /// it first).
-    pub fn newton_call(&mut self, body: usize, p: &StepParams, motion_scale: Real, budget: usize, inverse: Option<Vec<Real>>, evaluated: bool) -> NewtonCall<'_> {
-        let [constant, per_travel, stiffness] = self.residual_floor_terms(p);
-        let member = NewtonMember {
-            budget: budget as u32,
-            residual_tolerance: p.residual_tolerance,
-            floor: constant + stiffness,
-            floor_per_travel: per_travel,
-            increment_tolerance: p.increment_tolerance,
-            increment_floor: self.increment_floor(motion_scale),
-            round_off: 1e3 * Real::EPSILON * self.stiffness_spread(),
-            ..NewtonMember::default()
-        };
-        let residual = evaluated.then(|| self.residual_norm());
-        if !evaluated {
-            self.evaluated.valid = false;
-        }
-        NewtonCall {
-            body,
-            factor: self.factor_version,
-            inverse,
-            member,
-            residual,
-            u: &mut self.trial.u,
-            dof_out: &mut self.dof_out,
-            u_start: &self.state.u,
-            contact_force: Some(&self.contact_force),
-            outcome: NewtonState::default(),
-            strain_energy: None,
-            failure: None,
-            tangent: None,
-        }
-    }
-
-    /// Takes the end of device Newton iterations ([`Body::newton_call`]): the last iterate and
-    /// its evaluation, as if the host had taken the increments, so that the next convergence
-    /// test ([`Body::converged`], the host's word) sees the last increment and the residual
-    /// before the last. A call that evaluated the body first and stopped there took no increment:
-    /// the test then sees a first evaluation.
-    /// A `tangent` that came back ([`NewtonCall::tangent`]) is kept for a refactorisation at
-    /// this iterate.
-    pub fn finish_device_newton(&mut self, p: &StepParams, outcome: &NewtonState<Real>, strain_energy: Option<Real>, failure: Option<ElementFailure>, tangent: Option<&[Real]>) -> Result<(), StepFailure> {
-        self.device_tangent = tangent.map(|values| (self.trial.u.clone(), values.to_vec()));
-        if let Some(failure) = failure {
-            return Err(self.element_failure(&self.trial.u, failure));
-        }
-        self.tangent_current = false;
-        self.still &= outcome.moved == 0;
-        if outcome.iterations > 0 {
-            self.last_increment = Some(outcome.increment);
-            self.previous_residual = Some(outcome.previous_residual);
-        }
-        self.evaluated.record(&self.trial.u, &self.step_inputs, coefficients(p));
-        self.evaluated.strain = strain_energy;
-        self.absorb_residual(p);
-        Ok(())
-    }
-
-    /// The strain energy at the trial displacement when a device Newton call left it there
-    /// ([`Body::finish_device_newton`]) and the displacement has not changed since, bit for bit.
-    pub fn evaluated_strain_energy(&self) -> Option<Real> {
-        self.evaluated.strain.filter(|_| self.evaluated.valid && same_bits(&self.trial.u, &self.evaluated.u))
     }
 
     /// Solves `K̄ x = rhs` in place (free dofs) with the last factorisation, for one or more
