@@ -61,9 +61,10 @@ pub fn natural_map(w: &Delassus, local: &[Local], r: &[[Real; 3]], dim: usize, m
             let l = &local[i];
             let wr = w.row_times(i, r);
             let v = [l.v_free[0] + wr[0] + l.shift, l.v_free[1] + wr[1], l.v_free[2] + wr[2]];
-            let projected = Law::step(r[i], v, l.mu, l.rho).0;
+            let tau = Law::predictor(r[i], v, l.mu, l.rho);
+            let projected = Law::project(tau, l.mu).0;
             if let Some(j) = jacobian.as_deref_mut() {
-                let d = Law::projection_jacobian(Law::predictor(r[i], v, l.mu, l.rho), l.mu, dim);
+                let d = Law::projection_jacobian(tau, l.mu, dim);
                 j.push((d, times(&d, &Law::predictor_velocity_jacobian(v, l.mu))));
             }
             let mut f = [r[i][0] - projected[0], r[i][1] - projected[1], r[i][2] - projected[2]];

@@ -213,7 +213,7 @@ impl Gpu {
         let mut entries = Vec::with_capacity(used.len());
         for (name, resource) in bound {
             let (_, binding) = reflection.declared.iter().find(|(n, _)| n == name).unwrap_or_else(|| panic!("`{kernel}` declares no resource `{name}`"));
-            if used.contains(&name.to_string()) {
+            if used.iter().any(|u| u == name) {
                 entries.push(wgpu::BindGroupEntry { binding: *binding, resource: resource.clone() });
             }
         }
