@@ -121,7 +121,7 @@ impl BenchCase {
     /// A GPU world of this one body, with its step inputs uploaded.
     pub fn on(&self, gpu: &Arc<Gpu>) -> Result<GpuWorld, GpuError> {
         let mut world = GpuWorld::new(gpu.clone(), &[self.world_body()])?;
-        world.begin_step(&[(0, &self.step[..])]);
+        world.set_step_inputs(&[(0, &self.step[..])]);
         world.take_traffic();
         Ok(world)
     }

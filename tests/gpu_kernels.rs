@@ -9,7 +9,7 @@ use bifirst::contact::Status;
 use bifirst::cpu;
 use bifirst::element::{ElementOutput, Formulation, Patches, ReferenceGeometry};
 use bifirst::gpu::shaders::{is_element_kernel, validate, ElementVariant, DECOUPLED, SHADERS};
-use bifirst::gpu::types::{Active, Coefficients, ContactCall, ContactGroup, ContactState, DofOut, DofStep, MaterialParams, MemberRange, NewtonMember, NewtonState, MODE_TANGENT, NEWTON_CONVERGED, NEWTON_HOST, NEWTON_ITERATING};
+use bifirst::gpu::types::{Active, Coefficients, ContactCall, ContactGroup, ContactState, DofOut, DofState, DofStep, MaterialParams, MemberRange, NewtonMember, NewtonState, StepMotion, MODE_TANGENT, NEWTON_CONVERGED, NEWTON_HOST, NEWTON_ITERATING};
 use bifirst::gpu::uzawa_step::{UzawaPoint, UzawaStepKernel};
 use bifirst::gpu::{ElementFailure, Evaluation, GpuWorld, NewtonCall, WorldBody};
 use bifirst::material::{ArrudaBoyce, BlatzKo, Decoupled, Gent, Lvf, Model, MooneyRivlin, NeoHookean, Ogden, Relaxation, Yeoh};
@@ -144,6 +144,11 @@ fn kernel_structs_match_the_shader_layouts() {
         check_all_real_struct(kernel, None, "Coefficients", &["factor", "c1"], [size_of::<Coefficients<f32>>(), size_of::<Coefficients<f64>>()]);
     }
     check_all_real_struct("assemble_residual", None, "DofStep", &["mass", "u_pred", "f_int_t", "f_ext"], [size_of::<DofStep<f32>>(), size_of::<DofStep<f64>>()]);
+    for kernel in ["step_begin", "step_commit"] {
+        check_all_real_struct(kernel, None, "DofState", &["u", "v", "f_int"], [size_of::<DofState<f32>>(), size_of::<DofState<f64>>()]);
+        check_all_real_struct(kernel, None, "StepMotion", &["dt", "dt_explicit", "theta_dt", "pad"], [size_of::<StepMotion<f32>>(), size_of::<StepMotion<f64>>()]);
+    }
+    assert_eq!(bytemuck::cast::<_, [f64; 3]>(DofState::<f64> { u: 1.0, v: 2.0, f_int: 3.0 }), [1.0, 2.0, 3.0], "field order");
     let d = DofStep::<f64> { mass: 1.0, u_pred: 2.0, f_int_t: 3.0, f_ext: 4.0 };
     assert_eq!(bytemuck::cast::<_, [f64; 4]>(d), [1.0, 2.0, 3.0, 4.0], "field order");
     check_all_real_struct("assemble_residual", None, "DofOut", &["f_int", "g"], [size_of::<DofOut<f32>>(), size_of::<DofOut<f64>>()]);
@@ -548,6 +553,51 @@ fn buffers_for(cases: &[Case]) -> (Vec<Vec<f64>>, Vec<Vec<DofOut<f64>>>) {
 }
 
 /// `max |a - b| / max |b|` over a block: the relative error in the max norm.
+#[test]
+fn step_kernels_match_their_cpu_twins() {
+    // Issue 59: a body that steps on the device begins each step from the committed state the
+    // device keeps (`step_begin`) and commits a kept step there (`step_commit`). Members of 5,
+    // 70 and 131 dofs (one, two and three workgroups), one left out of the commit and one out
+    // of both: its values must stay as they were.
+    let Some(gpu) = gpu_or_skip("step_kernels_match_their_cpu_twins", Precision::F64) else { return };
+    let mut rng = random::rng(59);
+    let sizes = [5u32, 70, 131, 9];
+    let members: Vec<MemberRange> = sizes
+        .iter()
+        .scan(0, |start, &dofs| {
+            let m = MemberRange { dof_start: *start, dofs, ..Default::default() };
+            *start += dofs;
+            Some(m)
+        })
+        .collect();
+    let n = sizes.iter().sum::<u32>() as usize;
+    let mut value = || rng.random_range(-2.0..2.0);
+    let committed: Vec<DofState<f64>> = (0..n).map(|_| DofState { u: value(), v: value(), f_int: value() }).collect();
+    let step: Vec<DofStep<f64>> = (0..n).map(|_| DofStep { mass: value().abs(), u_pred: value(), f_int_t: value(), f_ext: value() }).collect();
+    let u: Vec<f64> = (0..n).map(|_| value()).collect();
+    let dof_out: Vec<DofOut<f64>> = (0..n).map(|_| DofOut { f_int: value(), g: value() }).collect();
+    let (commit, begin) = ([0usize, 2], [0usize, 1, 2]);
+    let (commit_motion, begin_motion) = (StepMotion::of(1e-3, 0.55), StepMotion::of(5e-4, 1.0));
+    let got = bifirst::gpu::world::run_step_kernels(&gpu, &members, (&commit, commit_motion), (&begin, begin_motion), &committed, &step, &u, &dof_out).expect("the step kernels run");
+    let (mut c, mut s, mut x, mut x0) = (committed.clone(), step.clone(), u.clone(), vec![0.0; n]);
+    for &m in &commit {
+        cpu::step_commit(commit_motion, &mut c, &x, &dof_out, members[m]);
+    }
+    for &m in &begin {
+        cpu::step_begin(begin_motion, &c, &mut s, &mut x, &mut x0, members[m]);
+    }
+    let flat = |c: &[DofState<f64>]| c.iter().flat_map(|d| [d.u, d.v, d.f_int]).collect::<Vec<f64>>();
+    let flat_step = |s: &[DofStep<f64>]| s.iter().flat_map(|d| [d.mass, d.u_pred, d.f_int_t, d.f_ext]).collect::<Vec<f64>>();
+    let errors = [relative_error(&flat(&got.0), &flat(&c)), relative_error(&flat_step(&got.1), &flat_step(&s)), relative_error(&got.2, &x), relative_error(&got.3, &x0)];
+    eprintln!("committed, step, u, u_start: relative errors {errors:?}");
+    assert!(errors.iter().all(|&e| e <= 1e-12), "{errors:?}");
+    let last = members[3].dof_start as usize..n;
+    assert_eq!(flat(&got.0[last.clone()]), flat(&committed[last.clone()]), "a member outside both lists keeps its committed state");
+    assert_eq!(got.2[last.clone()], u[last.clone()], "and its displacements");
+    let moved = members[1].dof_start as usize..members[2].dof_start as usize;
+    assert_eq!(flat(&got.0[moved.clone()]), flat(&committed[moved]), "a member begun but not committed keeps its committed state");
+}
+
 fn relative_error(a: &[f64], b: &[f64]) -> f64 {
     let scale = b.iter().fold(1e-300, |m: f64, x| m.max(x.abs()));
     a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max) / scale
@@ -758,7 +808,7 @@ fn assembly_kernels_match_their_cpu_twins() {
             let coefficients = Coefficients { factor: 0.55, c1: 4e4 };
             let mut world = world_of(&gpu, &cases);
             let list: Vec<(usize, &[DofStep<f64>])> = steps.iter().enumerate().map(|(b, s)| (b, &s[..])).collect();
-            world.begin_step(&list);
+            world.set_step_inputs(&list);
             let (mut values, mut dof_out) = buffers_for(&cases);
             let failures = evaluate_all(&mut world, &cases, true, &mut values, &mut dof_out, coefficients);
             assert_eq!(failures, [None, None]);
@@ -818,7 +868,7 @@ fn one_device_pass_serves_any_number_of_bodies() {
     let coefficients = Coefficients { factor: 0.5, c1: 10.0 };
     let steps: Vec<Vec<DofStep<f64>>> = cases.iter().map(|c| vec![DofStep { mass: 1.0, u_pred: 0.0, f_int_t: 0.0, f_ext: 0.0 }; c.u.len()]).collect();
     let list: Vec<(usize, &[DofStep<f64>])> = steps.iter().enumerate().map(|(b, s)| (b, &s[..])).collect();
-    world.begin_step(&list);
+    world.set_step_inputs(&list);
     let (mut values, mut dof_out) = buffers_for(&cases);
     let before = world.submits();
     evaluate_all(&mut world, &cases, true, &mut values, &mut dof_out, coefficients);
@@ -961,7 +1011,7 @@ fn newton_kernels_match_their_cpu_twins() {
             }
             // The device, both members in one call.
             let mut world = world_of(&gpu, &cases);
-            world.begin_step(&steps.iter().enumerate().map(|(b, s)| (b, &s[..])).collect::<Vec<_>>());
+            world.set_step_inputs(&steps.iter().enumerate().map(|(b, s)| (b, &s[..])).collect::<Vec<_>>());
             let mut us: Vec<Vec<f64>> = cases.iter().map(|c| c.u.clone()).collect();
             // Results the device must not take in when it evaluates first.
             let mut outs = if evaluated { first.clone() } else { first.iter().map(|o| vec![DofOut { f_int: f64::NAN, g: f64::NAN }; o.len()]).collect() };
@@ -991,9 +1041,13 @@ fn newton_kernels_match_their_cpu_twins() {
             let strains: Vec<f64> = calls.iter().map(|c| c.strain_energy.expect("the call's energies")).collect();
             drop(calls);
             for (b, ((state, failure), (want, u, out))) in got.into_iter().zip(&expected).enumerate() {
-                // The strain energy at the returned iterate, as the twin gives it there.
+                // The strain energy at the returned iterate, as the twins give it there
+                // (`element_energy`, then `newton_energy`'s sum over the member).
                 let c = &cases[b];
-                let twin: f64 = (0..c.mesh.element_count()).map(|e| cpu::element_energy(&c.model, c.geometry.element_points(e), &c.mesh.element_displacements(&us[b], e), c.mesh.dim(), c.formulation)).sum();
+                let elements: Vec<f64> = (0..c.mesh.element_count()).map(|e| cpu::element_energy(&c.model, c.geometry.element_points(e), &c.mesh.element_displacements(&us[b], e), c.mesh.dim(), c.formulation)).collect();
+                let mut twin = [0.0];
+                cpu::newton_energy(&elements, &[MemberRange { elements: elements.len() as u32, ..Default::default() }], &[Active { member: 0, mode: 0 }], &mut twin);
+                let twin = twin[0];
                 assert!((strains[b] - twin).abs() <= 1e-12 * twin.abs(), "{} body {b}: strain energy {} against the twin's {twin}", kind.name(), strains[b]);
                 let g = |o: &[DofOut<f64>]| o.iter().map(|o| o.g).collect::<Vec<_>>();
                 let f = |o: &[DofOut<f64>]| o.iter().map(|o| o.f_int).collect::<Vec<_>>();
@@ -1033,7 +1087,7 @@ fn a_device_newton_call_for_one_body_of_a_large_batch_reads_back_only_its_own() 
     let bodies: Vec<WorldBody> = (0..400).map(|_| c.world_body()).collect();
     let mut world = GpuWorld::new(gpu, &bodies).expect("device world");
     let step: Vec<DofStep<f64>> = c.u.iter().map(|&x| DofStep { mass: 1.0, u_pred: 0.9 * x, f_int_t: 0.0, f_ext: 0.0 }).collect();
-    world.begin_step(&(0..400).map(|b| (b, &step[..])).collect::<Vec<_>>());
+    world.set_step_inputs(&(0..400).map(|b| (b, &step[..])).collect::<Vec<_>>());
     let (inverse, free) = (effective_inverse(&c, coefficients), c.dofs.free_pairs().map(|(d, _)| d as u32).collect::<Vec<_>>());
     let member = NewtonMember { free_count: free.len() as u32, budget: 2, ..NewtonMember::default() };
     let first = cpu_residual(&c, &c.u, &step, coefficients);
@@ -1082,7 +1136,7 @@ fn a_device_newton_increment_that_inverts_an_element_fails_the_body() {
     let c = case(ElementVariant { kind: ElementKind::Quad4, formulation: Formulation::Displacement, material: "blatz_ko" }, 600);
     let mut world = GpuWorld::new(Arc::new(gpu), &[c.world_body()]).expect("device world");
     let step: Vec<DofStep<f64>> = c.u.iter().map(|&x| DofStep { mass: 1.0, u_pred: 0.9 * x, f_int_t: 0.0, f_ext: 0.0 }).collect();
-    world.begin_step(&[(0, &step[..])]);
+    world.set_step_inputs(&[(0, &step[..])]);
     // A thousand times the increment, backwards: the body turns inside out.
     let inverse: Vec<f64> = effective_inverse(&c, coefficients).into_iter().map(|x| -1e3 * x).collect();
     let free = c.dofs.free_count;
@@ -1265,7 +1319,7 @@ fn newton_contact_kernels_match_their_cpu_twins() {
             let twin_handed: Vec<bool> = (0..2).map(|b| handed[..handed_back].iter().any(|a| a.member as usize == b)).collect();
             // The device: both bodies' calls and their group in one call.
             let mut world = world_of(&gpu, &cases);
-            world.begin_step(&steps.iter().enumerate().map(|(b, s)| (b, &s[..])).collect::<Vec<_>>());
+            world.set_step_inputs(&steps.iter().enumerate().map(|(b, s)| (b, &s[..])).collect::<Vec<_>>());
             let mut us: Vec<Vec<f64>> = cases.iter().map(|c| c.u.clone()).collect();
             let mut outs = first.clone();
             let zeros: Vec<Vec<f64>> = cases.iter().map(|c| vec![0.0; c.u.len()]).collect();

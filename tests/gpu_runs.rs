@@ -607,3 +607,33 @@ fn kernel_times_name_every_kernel_a_run_dispatches_and_change_nothing_else() {
     let refused = bifirst::backend::Backend::resolve(&cpu.backend).err().expect("the CPU backend has no kernels to time");
     assert!(refused.to_string().contains("--kernel-times"), "{refused}");
 }
+
+#[test]
+fn a_falling_grain_that_steps_on_the_device_sends_nothing_per_dof_up() {
+    // Issue 59: a grain in flight that steps on the device (`--rounds gpu`) keeps its committed
+    // state there: the device commits a kept step and begins the next from it, so a step sends
+    // up only the call's parameters and lists, not the step inputs, trial and start
+    // displacements (48 bytes a dof before: about 3 300 a grain of this scene).
+    let test = "a_falling_grain_that_steps_on_the_device_sends_nothing_per_dof_up";
+    if !gpu_available(test) {
+        return;
+    }
+    let sets: Vec<String> = ["packing.count=12", "time.end=0.05", "gravity=[0.0,-9.81]"].iter().map(|s| s.to_string()).collect();
+    let loaded = bifirst::scene::load_scene(&scene_path("grains_many"), &sets).expect("scene");
+    let mut sim = bifirst::solver::build_simulation(&loaded).expect("simulation");
+    let gpu = std::sync::Arc::new(bifirst::gpu::open(None, Some(Precision::F64)).expect("an adapter"));
+    let bodies: Vec<_> = sim.bodies.iter().map(|b| b.world_body()).collect();
+    let mut world = bifirst::gpu::GpuWorld::new(gpu, &bodies).expect("world");
+    world.rounds = RoundPlacement::Gpu;
+    drop(bodies);
+    sim.world = Some(world);
+    sim.start();
+    let dofs: usize = sim.bodies.iter().map(|b| b.state.u.len()).sum();
+    let per_step: Vec<u64> = (0..5).map(|_| sim.advance().expect("a step").bytes_moved).collect();
+    eprintln!("{} grains, {dofs} dofs: bytes per step {per_step:?}", sim.bodies.len());
+    // What still crosses: the trial displacements and `DofOut` down (24 bytes a dof), and per
+    // grain its call's parameters, state, lists and flags and its element energies.
+    for (s, &bytes) in per_step.iter().enumerate().skip(1) {
+        assert!(bytes <= 24 * dofs as u64 + 600 * sim.bodies.len() as u64, "step {s}: {bytes} bytes for {dofs} dofs");
+    }
+}

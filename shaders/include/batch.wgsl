@@ -53,3 +53,19 @@ struct DofOut {
     f_int: real,
     g: real,
 }
+
+// A dof's committed state, which the device keeps between the steps of a body that steps there
+// (`step_begin`, `step_commit`).
+struct DofState {
+    u: real,
+    v: real,
+    f_int: real,
+}
+
+// The theta rule of one step: its length, dt (1 - θ) and θ dt.
+struct StepMotion {
+    dt: real,
+    dt_explicit: real,
+    theta_dt: real,
+    pad: real,
+}

@@ -61,7 +61,7 @@ pub(super) fn newton_rows(options: &BenchOptions, gpus: &[Arc<Gpu>], peaks: &[Pe
     for (gpu, peaks) in gpus.iter().zip(peaks).filter(|(g, _)| g.precision == Precision::F64) {
         let bodies_on_device: Vec<_> = (0..bodies).map(|_| case.world_body()).collect();
         let mut world = GpuWorld::new(gpu.clone(), &bodies_on_device)?;
-        world.begin_step(&(0..bodies).map(|b| (b, &case.step[..])).collect::<Vec<_>>());
+        world.set_step_inputs(&(0..bodies).map(|b| (b, &case.step[..])).collect::<Vec<_>>());
         if !(0..bodies).all(|b| world.newton_capable(b)) {
             continue;
         }

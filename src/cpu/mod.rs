@@ -11,18 +11,21 @@
 //! | `uzawa_step` | [`uzawa_step`] |
 //! | `uzawa_sweep` | [`uzawa_sweep`] |
 //! | `uzawa_judge`, `uzawa_solve` | [`uzawa_judge`], [`uzawa_solve`] |
-//! | `newton_update`, `newton_judge`, `newton_compact` (`main`, `host`) | [`newton_update`], [`newton_judge`], [`newton_compact`], [`newton_compact_host`] |
+//! | `newton_update`, `newton_judge`, `newton_compact` (`main`, `host`), `newton_energy` | [`newton_update`], [`newton_judge`], [`newton_compact`], [`newton_compact_host`], [`newton_energy`] |
 //! | `newton_contact` (`prepare`, `forces`, `judge`, `first_forces`, `first_judge`) | [`newton_contact_prepare`], [`newton_contact_forces`], [`newton_contact_judge`], [`newton_contact_first_forces`], [`newton_contact_first_judge`] |
+//! | `step_begin`, `step_commit` | [`step_begin`], [`step_commit`] |
 //! | `peak_copy` | [`peak_copy`] |
 //! | `peak_fma` | [`peak_fma`] |
 
 mod newton;
+mod step;
 mod uzawa;
 
 pub use crate::contact::law::uzawa_step;
 pub use crate::contact::uzawa::uzawa_sweep;
 pub use crate::element::{element_energy, element_force_tangent};
-pub use newton::{newton_compact, newton_compact_host, newton_contact_first_forces, newton_contact_first_judge, newton_contact_forces, newton_contact_judge, newton_contact_prepare, newton_judge, newton_update};
+pub use newton::{newton_compact, newton_compact_host, newton_contact_first_forces, newton_contact_first_judge, newton_contact_forces, newton_contact_judge, newton_contact_prepare, newton_energy, newton_judge, newton_update};
+pub use step::{step_begin, step_commit};
 pub use uzawa::{uzawa_judge, uzawa_solve};
 
 use crate::assembly::element_out_stride;

@@ -130,6 +130,20 @@ pub fn newton_judge(
     s.residual = residual;
 }
 
+/// `newton_energy`: each listed member's strain energy, the sum of its elements' energies in
+/// element order.
+pub fn newton_energy(energy: &[Real], members: &[MemberRange], call: &[Active], member_energy: &mut [Real]) {
+    for job in call {
+        let m = job.member as usize;
+        let range = members[m];
+        let mut total = 0.0;
+        for e in range.element_start..range.element_start + range.elements {
+            total += energy[e as usize];
+        }
+        member_energy[m] = total;
+    }
+}
+
 /// `newton_compact`: the members of the call's list still iterating, in its order, into `jobs`;
 /// returns their count (the dispatches' z). `left`: the count the last compaction returned
 /// (the call's length before the first); none left, nothing changes.

@@ -19,9 +19,12 @@ pub const SHADERS: &[(&str, &str)] = &[
     ("element_force_tangent", include_str!("../../shaders/element_force_tangent.wgsl")),
     ("newton_compact", include_str!("../../shaders/newton_compact.wgsl")),
     ("newton_contact", include_str!("../../shaders/newton_contact.wgsl")),
+    ("newton_energy", include_str!("../../shaders/newton_energy.wgsl")),
     ("newton_judge", include_str!("../../shaders/newton_judge.wgsl")),
     ("newton_update", include_str!("../../shaders/newton_update.wgsl")),
     ("peak_copy", include_str!("../../shaders/peak_copy.wgsl")),
+    ("step_begin", include_str!("../../shaders/step_begin.wgsl")),
+    ("step_commit", include_str!("../../shaders/step_commit.wgsl")),
     ("peak_fma", include_str!("../../shaders/peak_fma.wgsl")),
     ("uzawa_judge", include_str!("../../shaders/uzawa_judge.wgsl")),
     ("uzawa_solve", include_str!("../../shaders/uzawa_solve.wgsl")),
@@ -95,7 +98,7 @@ pub fn is_contact_kernel(kernel: &str) -> bool {
 
 /// Whether a kernel runs over the members of a batch (`shaders/include/batch.wgsl`).
 pub fn is_batch_kernel(kernel: &str) -> bool {
-    is_element_kernel(kernel) || kernel.starts_with("assemble_") || is_newton_kernel(kernel)
+    is_element_kernel(kernel) || kernel.starts_with("assemble_") || kernel.starts_with("step_") || is_newton_kernel(kernel)
 }
 
 /// Whether a kernel is one of a device Newton iteration's own (`shaders/include/newton.wgsl`).

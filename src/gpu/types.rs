@@ -46,6 +46,34 @@ pub struct DofOut<R> {
     pub g: R,
 }
 
+/// `struct DofState` of `shaders/include/batch.wgsl`: a dof's committed state, kept on the device
+/// for a body that steps there (`step_begin`, `step_commit`).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct DofState<R> {
+    pub u: R,
+    pub v: R,
+    pub f_int: R,
+}
+
+/// `struct StepMotion` of `shaders/include/batch.wgsl`: the theta rule of one step.
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct StepMotion<R> {
+    pub dt: R,
+    /// `dt (1 - θ)`, computed once as the host's `Body::trial_velocity` computes it.
+    pub dt_explicit: R,
+    /// `θ dt`.
+    pub theta_dt: R,
+    pub pad: R,
+}
+
+impl StepMotion<f64> {
+    pub fn of(dt: f64, theta: f64) -> Self {
+        Self { dt, dt_explicit: dt * (1.0 - theta), theta_dt: theta * dt, pad: 0.0 }
+    }
+}
+
 // SAFETY: each is `repr(C)` with all fields of one type `R`: no padding, and every bit pattern of
 // f32 or f64 is valid.
 macro_rules! pod {
@@ -54,7 +82,7 @@ macro_rules! pod {
         unsafe impl<R: Pod> Pod for $t<R> {}
     )*};
 }
-pod!(MaterialParams, Coefficients, DofStep, DofOut);
+pod!(MaterialParams, Coefficients, DofStep, DofOut, DofState, StepMotion);
 
 impl MaterialParams<f64> {
     pub fn of(model: &crate::material::Model) -> Self {

@@ -11,11 +11,13 @@
 
 mod contact;
 mod newton;
+mod step;
 
 pub use contact::{ContactLayout, GroupContact};
 pub use newton::NewtonCall;
+pub use step::{run_step_kernels, StepEnd, StepKernelsOut, StepStart};
 
-use super::types::{Active, Coefficients, DofOut, DofStep, MaterialParams, MemberRange, MODE_FORCES, MODE_TANGENT, NO_FAILURE, NO_HISTORY};
+use super::types::{Active, Coefficients, DofOut, MaterialParams, MemberRange, MODE_FORCES, MODE_TANGENT, NEWTON_MAX_FREE, NO_FAILURE, NO_HISTORY};
 use super::uzawa_sweep::UzawaSweeps;
 use super::{ElementVariant, Gpu, GpuError};
 use crate::assembly::{element_out_stride, DofMap, GatherMap, StiffnessPattern};
@@ -254,6 +256,8 @@ enum Source {
     Energy,
     Displacement,
     NewtonState,
+    /// A device Newton call's strain energy per member (`newton_energy`).
+    MemberEnergy,
 }
 
 /// The copies of one pass into the read-back buffer, each landing 8-byte aligned after the last.
@@ -330,12 +334,17 @@ fn buffer_init(gpu: &Gpu, label: &str, contents: &[u8], usage: BufferUsages) -> 
     gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents: &padded, usage })
 }
 
-/// Device bytes of the largest buffer a body brings to a batch, and of its element results.
+/// Device bytes of the largest buffer a body brings to a batch, and of its element results. In
+/// f64 that counts the `K̄⁻¹` of a body small enough to iterate on the device: a batch is cut
+/// where its inverses would pass the binding limit, so that every such body has a slot
+/// (doc/benchmarks.md, "Bytes a grain moves per step").
 fn largest_buffer(body: &WorldBody, real: usize) -> u64 {
     let stride = element_out_stride(body.pattern.element_dofs);
     let element_out = body.mesh.element_count() * stride * real;
     let gathers = (body.gather.csr.len() + body.gather.dof.len()) * 4;
-    (element_out.max(gathers).max(body.pattern.nnz() * real)) as u64
+    let free = body.dofs.free_count;
+    let inverse = if real == 8 && free <= NEWTON_MAX_FREE { free * free * real } else { 0 };
+    (element_out.max(gathers).max(body.pattern.nnz() * real).max(inverse)) as u64
 }
 
 impl GpuWorld {
@@ -475,17 +484,6 @@ impl GpuWorld {
         }
     }
 
-    /// The step's start values of the listed bodies, for `assemble_residual` (once per step;
-    /// they go up with the next submit, one write per run of consecutive members whose values
-    /// changed: a grain at rest starts every step from the same ones).
-    pub fn begin_step(&mut self, steps: &[(usize, &[DofStep<Real>])]) {
-        for batch in 0..self.batches.len() {
-            let mut mine: Vec<(usize, &[Real])> = steps.iter().filter(|(body, _)| self.place[*body].0 == batch).map(|&(body, step)| (self.place[body].1, bytemuck::cast_slice(step))).collect();
-            mine.sort_unstable_by_key(|&(m, _)| m);
-            self.stage_mirror(batch, Mirror::Step, &mine);
-        }
-    }
-
     /// A viscoelastic body's relaxation for the step (`c` and each point's history `H`), up with
     /// the next submit.
     pub fn set_relaxation(&mut self, body: usize, relaxation: Relaxation) {
@@ -502,24 +500,34 @@ impl GpuWorld {
 
     /// Takes the listed members' values (`(member, values)`, in member order) into a mirror,
     /// member by member on every thread, and uploads those that changed since they last went
-    /// up, one write per run of consecutive members.
-    fn stage_mirror(&mut self, batch: usize, mirror: Mirror, mine: &[(usize, &[Real])]) {
+    /// up, one write per run of consecutive members. Returns the members that went up.
+    fn stage_mirror(&mut self, batch: usize, mirror: Mirror, mine: &[(usize, &[Real])]) -> Vec<usize> {
         let b = &mut self.batches[batch];
         let starts: Vec<usize> = mine.iter().map(|&(m, _)| b.members[m].dof_start as usize).collect();
         let (host, buffer, per_dof) = b.mirror(mirror);
         let changed = update_mirrors(host, starts.iter().zip(mine).map(|(&start, &(_, values))| (per_dof * start, values)).collect());
         let host = std::mem::take(host);
         let members: Vec<usize> = mine.iter().zip(changed).filter(|(_, c)| *c).map(|(&(m, _), _)| m).collect();
+        if !matches!(mirror, Mirror::NewtonContact) {
+            self.settle_prologue(batch, &members);
+        }
         for run in runs(&members) {
             let dofs = dof_span(&self.batches[batch].members, &run);
             self.upload_reals(&buffer, per_dof * dofs.start, &host[per_dof * dofs.start..per_dof * dofs.end]);
         }
         *self.batches[batch].mirror(mirror).0 = host;
+        members
     }
 
     /// Copies the displacements of the listed bodies (`(body, u)`) into their batches' mirrors
     /// and uploads them; returns, per batch with any of them, the list indices in member order.
     fn stage_displacements(&mut self, list: &[(usize, &[Real])]) -> Vec<(usize, Vec<usize>)> {
+        self.stage_displacements_but(list, &|_| false)
+    }
+
+    /// [`GpuWorld::stage_displacements`], but for the list indices `kept` names, whose device
+    /// displacements stay as they are (a step's predictor, which the device computed).
+    fn stage_displacements_but(&mut self, list: &[(usize, &[Real])], kept: &dyn Fn(usize) -> bool) -> Vec<(usize, Vec<usize>)> {
         let mut order: Vec<usize> = (0..list.len()).collect();
         order.sort_by_key(|&i| self.place[list[i].0]);
         let mut by_batch: Vec<(usize, Vec<usize>)> = Vec::new();
@@ -531,8 +539,13 @@ impl GpuWorld {
             }
         }
         for (batch, mine) in &by_batch {
-            let members: Vec<(usize, &[Real])> = mine.iter().map(|&i| (self.place[list[i].0].1, list[i].1)).collect();
-            self.stage_mirror(*batch, Mirror::Displacement, &members);
+            let members: Vec<(usize, &[Real])> = mine.iter().filter(|&&i| !kept(i)).map(|&i| (self.place[list[i].0].1, list[i].1)).collect();
+            let sent = self.stage_mirror(*batch, Mirror::Displacement, &members);
+            if let Some(n) = self.batches[*batch].newton.as_mut() {
+                for m in sent {
+                    n.resident.touched(m);
+                }
+            }
         }
         by_batch
     }
@@ -545,23 +558,32 @@ impl GpuWorld {
         let t0 = Instant::now();
         let coefficient_buffer = self.coefficients.clone();
         self.upload(&coefficient_buffer, 0, &to_device(self.gpu.precision, &[coefficients.factor, coefficients.c1]));
-        let mut encoder = self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("evaluate") });
+        let mut encoder = None;
         let mut readback = ReadBack::default();
         let landing = self.record_evaluation(list, &mut encoder, &mut readback)?;
+        let encoder = encoder.expect("made by the evaluation");
         let precision = self.gpu.precision;
         self.read_back(encoder, &readback, "element_force_tangent", times, t0, |bytes| unpack_evaluation(precision, list, &landing, bytes))
     }
 
     /// Uploads the displacements and active lists of an evaluation pass and records its
-    /// dispatches and read-back copies; returns where each evaluation's failure flags,
-    /// residuals and values land.
-    fn record_evaluation(&mut self, list: &[Evaluation], encoder: &mut wgpu::CommandEncoder, readback: &mut ReadBack) -> Result<Vec<[usize; 3]>, GpuError> {
+    /// dispatches and read-back copies into `encoder` (made after the displacements went up, so
+    /// that a step's start at its head comes after them); returns where each evaluation's
+    /// failure flags, residuals and values land.
+    fn record_evaluation(&mut self, list: &[Evaluation], encoder: &mut Option<wgpu::CommandEncoder>, readback: &mut ReadBack) -> Result<Vec<[usize; 3]>, GpuError> {
         let real = self.gpu.precision.size() as u64;
         let by_batch = self.stage_displacements(&list.iter().map(|e| (e.body, e.u)).collect::<Vec<_>>());
+        if encoder.is_none() {
+            *encoder = Some(self.encoder("evaluate"));
+        }
+        let encoder = encoder.as_mut().expect("made above");
         let mut landing = vec![[0usize; 3]; list.len()];
         for (batch, mine) in by_batch {
             // (list index, member) in member order.
             let mine: Vec<(usize, usize)> = mine.into_iter().map(|i| (i, self.place[list[i].body].1)).collect();
+            if let Some(n) = self.batches[batch].newton.as_mut() {
+                mine.iter().for_each(|&(_, m)| n.resident.touched(m));
+            }
             let active: Vec<Active> = mine.iter().map(|&(i, m)| Active { member: m as u32, mode: if list[i].tangent { MODE_TANGENT } else { MODE_FORCES } }).collect();
             let b = &self.batches[batch];
             let (active_buffer, failure_buffer) = (b.active.clone(), b.failure.clone());
@@ -607,7 +629,7 @@ impl GpuWorld {
         let mut readback = ReadBack::default();
         // Where each body's energies land in the read-back, and how many there are.
         let mut landing = vec![(0usize, 0usize); list.len()];
-        let mut encoder = self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("energies") });
+        let mut encoder = self.encoder("energies");
         for (batch, mine) in by_batch {
             let members: Vec<usize> = mine.iter().map(|&i| self.place[list[i].0].1).collect();
             let active: Vec<Active> = members.iter().map(|&m| Active { member: m as u32, mode: MODE_FORCES }).collect();
@@ -638,7 +660,7 @@ impl GpuWorld {
                 b.tangent.ready()?;
             }
         }
-        let mut encoder = self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("replay") });
+        let mut encoder = self.encoder("replay");
         for b in &self.batches {
             let all = b.members.len();
             let most = |f: fn(&MemberRange) -> u32| b.members.iter().map(|m| f(m) as usize).max().unwrap_or(0);
@@ -660,11 +682,25 @@ impl GpuWorld {
         Ok(())
     }
 
-    /// Submits `encoder`'s commands, counted in [`GpuWorld::submits`].
+    /// Submits `encoder`'s commands, counted in [`GpuWorld::submits`]. A submission that fails
+    /// may have lost a step's start: the device's committed states are not trusted after it.
     fn submit(&mut self, encoder: wgpu::CommandEncoder) -> Result<(), GpuError> {
-        self.gpu.submit(encoder)?;
+        let submitted = self.gpu.submit(encoder);
+        self.prologue_submitted();
+        if let Err(e) = submitted {
+            self.forget_committed();
+            return Err(e);
+        }
         self.submits += 1;
         Ok(())
+    }
+
+    /// A command encoder with the step's start at its head when it is waiting
+    /// ([`GpuWorld::begin_step`]): every submission of the world's batches starts from one.
+    fn encoder(&mut self, label: &str) -> wgpu::CommandEncoder {
+        let mut encoder = self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) });
+        self.record_prologue(&mut encoder);
+        encoder
     }
 
     /// A body's element results as the last pass left them (forces, then the packed tangent):
@@ -676,7 +712,7 @@ impl GpuWorld {
         let stride = self.batches[b].stride as u64;
         let (start, size) = (range.element_start as u64 * stride * real, range.elements as u64 * stride * real);
         let staging = self.gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some("element results"), size: size.max(8), usage: BufferUsages::MAP_READ | BufferUsages::COPY_DST, mapped_at_creation: false });
-        let mut encoder = self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("element results") });
+        let mut encoder = self.encoder("element results");
         encoder.copy_buffer_to_buffer(&self.batches[b].element_out, start, &staging, 0, size);
         self.submit(encoder)?;
         self.traffic.down += size;
@@ -703,6 +739,7 @@ impl GpuWorld {
                 Source::Energy => &b.energy,
                 Source::Displacement => &b.u,
                 Source::NewtonState => &b.newton.as_ref().expect("a batch whose Newton states are read has them").state,
+                Source::MemberEnergy => &b.newton.as_ref().expect("a batch whose Newton energies are read has them").member_energy,
             };
             encoder.copy_buffer_to_buffer(source, c.source.start, target, c.target, c.source.end - c.source.start);
         }

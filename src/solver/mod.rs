@@ -21,7 +21,8 @@ use crate::contact::configuration::extent;
 use crate::contact::detect::{detect, thin_second_pass};
 use crate::contact::overlap::{overlaps, Overlap, Worst};
 use crate::contact::{Configuration, ContactModel, ContactPoint, ContactStats, Master};
-use crate::gpu::GpuWorld;
+use crate::gpu::types::StepMotion;
+use crate::gpu::{GpuWorld, StepEnd, StepStart};
 use crate::precision::{Precision, Real};
 pub use body::StepParams;
 use group::{solve_groups, GroupReport};
@@ -484,8 +485,14 @@ impl Simulation {
         let t = self.t;
         self.bodies.par_iter_mut().for_each(|body| body.begin_step(&p, &gravity, t));
         if let Some(world) = &mut self.world {
-            let steps: Vec<_> = self.bodies.iter().enumerate().map(|(b, body)| (b, body.step_inputs())).collect();
-            world.begin_step(&steps);
+            // A body with contact points iterates with the host's step inputs mostly: its step
+            // begins there, so that nothing the device began is overwritten by its uploads.
+            let mut touching = vec![false; self.bodies.len()];
+            for t in points.iter().flat_map(|c| c.terms()) {
+                touching[t.body as usize] = true;
+            }
+            let starts: Vec<StepStart> = self.bodies.iter().enumerate().map(|(b, body)| body.step_start(b, !touching[b])).collect();
+            world.begin_step(&starts, StepMotion::of(p.dt, p.theta)).map_err(|e| self.bodies[0].device_failure(&e))?;
             for (b, relaxation) in self.bodies.iter().enumerate().filter_map(|(b, body)| Some((b, body.relaxation()?))) {
                 world.set_relaxation(b, relaxation);
             }
@@ -549,6 +556,10 @@ impl Simulation {
         self.contact_points = points;
         for body in &mut self.bodies {
             body.commit();
+        }
+        if let Some(world) = &mut self.world {
+            let ends: Vec<StepEnd> = self.bodies.iter().enumerate().map(|(b, body)| body.step_end(b)).collect();
+            world.commit_step(&ends, StepMotion::of(p.dt, p.theta));
         }
         if let Some((old, _)) = self.committed.replace((config, speed)) {
             self.spare_configuration = old;

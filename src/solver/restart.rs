@@ -235,6 +235,9 @@ impl Simulation {
             }
         }
         check_values(saved)?;
+        if let Some(world) = &mut self.world {
+            world.forget_committed();
+        }
         for (b, s) in self.bodies.iter_mut().zip(&saved.bodies) {
             b.state.u.clone_from(&s.u);
             b.state.v.clone_from(&s.v);

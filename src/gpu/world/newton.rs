@@ -17,7 +17,7 @@ use crate::gpu::types::{Active, Coefficients, ContactState, DofOut, NewtonMember
 use crate::gpu::uzawa_sweep::UzawaSweeps;
 use crate::gpu::{ElementFailure, Gpu, GpuError};
 use crate::policy::PhaseTimes;
-use crate::precision::{Precision, Real};
+use crate::precision::{same_bits, Precision, Real};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -54,17 +54,16 @@ struct CallPlan<'a> {
 /// read-back (`landing` from `GpuWorld::queue_states`), in parallel (100 000 grains a call), and
 /// the stiffness values of the members in contact handed back (`tangents`: call, where,
 /// entries).
-fn unpack_calls(precision: Precision, calls: &mut [NewtonCall], landing: &[[usize; 6]], tangents: &[(usize, usize, usize)], bytes: &[u8]) {
+fn unpack_calls(precision: Precision, calls: &mut [NewtonCall], landing: &[[usize; 5]], tangents: &[(usize, usize, usize)], bytes: &[u8]) {
     let real = precision.size();
-    calls.par_iter_mut().zip(landing).for_each(|(call, [state_at, flags_at, u_at, out_at, energy_at, elements])| {
+    calls.par_iter_mut().zip(landing).for_each(|(call, [state_at, flags_at, u_at, out_at, energy_at])| {
         call.outcome = bytemuck::pod_read_unaligned(&bytes[*state_at..state_at + std::mem::size_of::<NewtonState<Real>>()]);
         let flags: [u32; 2] = bytemuck::pod_read_unaligned(&bytes[*flags_at..flags_at + 8]);
         call.failure = (call.outcome.status == NEWTON_FAILED).then(|| super::failure_of(flags)).flatten();
         let n = call.u.len();
         super::copy_from_device(precision, &bytes[*u_at..u_at + n * real], call.u);
         super::copy_from_device(precision, &bytes[*out_at..out_at + n * 2 * real], bytemuck::cast_slice_mut(call.dof_out));
-        // Summed in element order, as the energy pass's results are.
-        call.strain_energy = Some(super::from_device(precision, &bytes[*energy_at..energy_at + elements * real]).iter().sum());
+        call.strain_energy = Some(super::from_device(precision, &bytes[*energy_at..energy_at + real])[0]);
     });
     for &(i, at, entries) in tangents {
         let call = &mut calls[i];
@@ -176,8 +175,11 @@ pub(super) struct NewtonBuffers {
     dispatch: Buffer,
     forces: Pass,
     residual: Pass,
-    /// `element_energy` over the call's list.
+    /// `element_energy` over the call's list, and `newton_energy`'s sums of its members' into
+    /// `member_energy`.
     energy: Pass,
+    energy_sum: Pass,
+    pub(super) member_energy: Buffer,
     update: Pass,
     judge: Pass,
     compact: Pass,
@@ -189,6 +191,8 @@ pub(super) struct NewtonBuffers {
     pub(super) start_host: Vec<Real>,
     pub(super) contact_host: Vec<Real>,
     inverse_version: Vec<Option<u64>>,
+    /// The members' committed states, for steps begun and committed on the device.
+    pub(super) resident: super::step::Resident,
 }
 
 /// Where each member's `K̄⁻¹` lies in a batch's `inverse` buffer: members of at most
@@ -216,6 +220,8 @@ pub(super) struct NewtonPipelines {
     judge: ComputePipeline,
     compact: ComputePipeline,
     compact_host: ComputePipeline,
+    energy_sum: ComputePipeline,
+    step: super::step::StepPipelines,
 }
 
 impl NewtonPipelines {
@@ -225,6 +231,8 @@ impl NewtonPipelines {
             judge: gpu.pipeline_at("newton_judge", "main", None)?,
             compact: gpu.pipeline_at("newton_compact", "main", None)?,
             compact_host: gpu.pipeline_at("newton_compact", "host", None)?,
+            energy_sum: gpu.pipeline_at("newton_energy", "main", None)?,
+            step: super::step::StepPipelines::new(gpu)?,
         })
     }
 }
@@ -253,6 +261,9 @@ impl NewtonBuffers {
         let update = Pass::bound(gpu, pipelines.update.clone(), ("newton_update", "main"), None, &[&common[..], &[("inverse", &inverse)]].concat());
         let judge = Pass::bound(gpu, pipelines.judge.clone(), ("newton_judge", "main"), None, &[&common[..], &[("u_start", &u_start), ("step", &b.step), ("coefficients", coefficients), ("failure", &b.failure)]].concat());
         let compact = Pass::bound(gpu, pipelines.compact.clone(), ("newton_compact", "main"), None, &[("call", &call), ("state", &state), ("jobs", &jobs), ("dispatch", &dispatch)]);
+        let resident = super::step::Resident::new(gpu, &pipelines.step, b, &u_start);
+        let member_energy = buffer(gpu, "member energy", members * real, storage | BufferUsages::COPY_SRC);
+        let energy_sum = Pass::bound(gpu, pipelines.energy_sum.clone(), ("newton_energy", "main"), None, &[("energy", &b.energy), ("members", &b.member_buffer), ("jobs", &call), ("dispatch", &dispatch), ("member_energy", &member_energy)]);
         Ok(Self {
             inverse,
             free,
@@ -268,14 +279,17 @@ impl NewtonBuffers {
             forces,
             residual,
             energy,
+            energy_sum,
+            member_energy,
             update,
             judge,
             compact,
             host_tangents: None,
-            newton_host: vec![NewtonMember::default(); members],
+            newton_host: vec![NewtonMember { residual_tolerance: Real::NAN, ..NewtonMember::default() }; members],
             start_host: vec![Real::NAN; dofs],
             contact_host: vec![Real::NAN; dofs],
             inverse_version: vec![None; members],
+            resident,
         })
     }
 }
@@ -351,9 +365,10 @@ impl GpuWorld {
         assert!(calls.iter().all(|c| c.residual.is_none() == evaluate_first), "a call's members are all evaluated, or none");
         let mut first = true;
         loop {
-            let mut encoder = self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("newton") });
+            let mut encoder = None;
             let mut readback = ReadBack::default();
             let evaluated = if first { Some(self.record_evaluation(list, &mut encoder, &mut readback)?) } else { None };
+            let mut encoder = encoder.unwrap_or_else(|| self.encoder("newton"));
             self.record_iterations(&mut encoder, &plan, first && evaluate_first, iterations);
             let landing = self.queue_states(&mut readback, &work, calls.len());
             // The stiffness values of the members in contact, `(call, where, entries)`: taken
@@ -397,7 +412,14 @@ impl GpuWorld {
     /// Makes each batch's Newton buffers when a call first needs them and stages the calls,
     /// batch by batch.
     fn stage_calls(&mut self, calls: &mut [NewtonCall]) -> Result<Vec<BatchCalls>, GpuError> {
-        let by_batch = self.stage_displacements(&calls.iter().map(|c| (c.body, &*c.u)).collect::<Vec<_>>());
+        // An unevaluated call of a body whose step the device began starts from the device's
+        // predictor.
+        let predicted = |c: &NewtonCall| {
+            let (b, m) = self.place[c.body];
+            c.residual.is_none() && self.batches[b].newton.as_ref().is_some_and(|n| n.resident.predicted[m])
+        };
+        let kept: Vec<bool> = calls.iter().map(predicted).collect();
+        let by_batch = self.stage_displacements_but(&calls.iter().map(|c| (c.body, &*c.u)).collect::<Vec<_>>(), &|i| kept[i]);
         let mut work: Vec<BatchCalls> = Vec::with_capacity(by_batch.len());
         for (batch, mine) in by_batch {
             if self.batches[batch].newton.is_none() {
@@ -423,13 +445,13 @@ impl GpuWorld {
     fn newton_target(&mut self, work: &[BatchCalls], list: &[Evaluation], contact: Option<ContactTarget>) -> Buffer {
         let real = self.gpu.precision.size();
         let total = |f: fn(&crate::gpu::types::MemberRange) -> u32| -> usize { work.iter().map(|(b, mine, _)| mine.iter().map(|&(_, m)| f(&self.batches[*b].members[m]) as usize).sum::<usize>()).sum() };
-        let (total_dofs, total_elements) = (total(|r| r.dofs), total(|r| r.elements));
+        let total_dofs = total(|r| r.dofs);
         let total_members: usize = work.iter().map(|(_, mine, _)| mine.len()).sum();
         let contact_bytes = contact.map_or(0, |(batch, members, points, groups)| {
             let entries: usize = members.iter().map(|&(_, m)| self.batches[batch].members[m].nonzeros as usize).sum();
             (points * 3 * real + groups * std::mem::size_of::<ContactState<Real>>() + 16 + entries * real) as u64
         });
-        let bytes = (total_members * (8 + std::mem::size_of::<NewtonState<Real>>()) + total_dofs * 3 * real + total_elements * real) as u64 + if list.is_empty() { 0 } else { self.readback.size() } + contact_bytes;
+        let bytes = (total_members * (16 + std::mem::size_of::<NewtonState<Real>>()) + total_dofs * 3 * real) as u64 + if list.is_empty() { 0 } else { self.readback.size() } + contact_bytes;
         if self.newton_readback.as_ref().is_none_or(|(_, size)| *size < bytes) {
             self.newton_readback = Some((buffer(&self.gpu, "newton readback", bytes as usize, BufferUsages::MAP_READ | BufferUsages::COPY_DST), bytes));
         }
@@ -492,16 +514,18 @@ impl GpuWorld {
             h.tangent.dispatch_indirect(&self.gpu, &mut pass, &h.dispatch, 0);
             h.csr.dispatch_indirect(&self.gpu, &mut pass, &h.dispatch, 12);
         }
-        for (batch, _, energy) in plan.work {
-            self.batches[*batch].newton.as_ref().expect("staged").energy.dispatch_xyz(&self.gpu, &mut pass, *energy);
+        for (batch, mine, energy) in plan.work {
+            let n = self.batches[*batch].newton.as_ref().expect("staged");
+            n.energy.dispatch_xyz(&self.gpu, &mut pass, *energy);
+            n.energy_sum.dispatch(&self.gpu, &mut pass, mine.len().div_ceil(WORKGROUP) as u32);
         }
     }
 
     /// Queues each call's state, failure flags, displacements, residuals and element energies;
     /// returns per call where they land and how many elements it has.
-    fn queue_states(&self, readback: &mut ReadBack, work: &[BatchCalls], calls: usize) -> Vec<[usize; 6]> {
+    fn queue_states(&self, readback: &mut ReadBack, work: &[BatchCalls], calls: usize) -> Vec<[usize; 5]> {
         let real = self.gpu.precision.size();
-        let mut landing = vec![[0usize; 6]; calls];
+        let mut landing = vec![[0usize; 5]; calls];
         for (batch, mine, _) in work {
             let b = &self.batches[*batch];
             let members: Vec<usize> = mine.iter().map(|&(_, m)| m).collect();
@@ -518,10 +542,10 @@ impl GpuWorld {
             let states = readback.queue_runs(*batch, Source::NewtonState, &members, &state_span);
             let us = readback.queue_runs(*batch, Source::Displacement, &members, &u_span);
             let outs = readback.queue_runs(*batch, Source::DofOut, &members, &dof_span);
-            let element_span = |m: usize| b.members[m].element_start as u64 * real as u64..(b.members[m].element_start + b.members[m].elements) as u64 * real as u64;
-            let energies = readback.queue_runs(*batch, Source::Energy, &members, &element_span);
-            for (k, &(i, m)) in mine.iter().enumerate() {
-                landing[i] = [states[k], flags[k], us[k], outs[k], energies[k], b.members[m].elements as usize];
+            let energy_span = |m: usize| (m * real) as u64..((m + 1) * real) as u64;
+            let energies = readback.queue_runs(*batch, Source::MemberEnergy, &members, &energy_span);
+            for (k, &(i, _)) in mine.iter().enumerate() {
+                landing[i] = [states[k], flags[k], us[k], outs[k], energies[k]];
             }
         }
         landing
@@ -535,6 +559,13 @@ impl GpuWorld {
             let b = &mut self.batches[*batch];
             let spans = mine.iter().map(|&(i, m)| (b.members[m].dof_start as usize, &*calls[i].u)).collect();
             super::update_mirrors(&mut b.u_host, spans);
+            let n = b.newton.as_mut().expect("staged");
+            for &(i, m) in mine {
+                match calls[i].failure {
+                    None => n.resident.took(m),
+                    Some(_) => n.resident.touched(m),
+                }
+            }
         }
         for &c in contacts.iter().flat_map(|g| &g.calls) {
             let (batch, m) = self.place[calls[c].body];
@@ -616,6 +647,7 @@ impl GpuWorld {
         let b = &mut self.batches[batch];
         let n = b.newton.as_mut().expect("made before staging");
         let mut states = Vec::with_capacity(mine.len());
+        let mut changed = Vec::new();
         // New inverses of members whose slots follow each other go up in one write (after a
         // step that refactorised every grain, one inverse per grain): (offset, end, inverses).
         let mut inverse_runs: Vec<(u64, u64, Vec<Vec<Real>>)> = Vec::new();
@@ -635,7 +667,13 @@ impl GpuWorld {
                 }
                 n.inverse_version[m] = Some(call.factor);
             }
-            n.newton_host[m] = NewtonMember { inverse_start: slot, free_start, free_count, ..call.member };
+            let member = NewtonMember { inverse_start: slot, free_start, free_count, ..call.member };
+            // The device reads a member's parameters only: those it holds need not go up again
+            // (a grain in flight keeps its tolerances from step to step).
+            if !same_bits(&[member], &n.newton_host[m..=m]) {
+                n.newton_host[m] = member;
+                changed.push(m);
+            }
             let residual = call.residual.unwrap_or(Real::MAX);
             states.push(NewtonState { status: NEWTON_ITERATING, residual, previous_residual: residual, ..NewtonState::default() });
         }
@@ -643,9 +681,12 @@ impl GpuWorld {
         let member_size = std::mem::size_of::<NewtonMember<Real>>() as u64;
         let state_size = std::mem::size_of::<NewtonState<Real>>() as u64;
         let mut k = 0;
-        for run in super::runs(&members) {
+        for run in super::runs(&changed) {
             let first = run[0] as u64;
             uploads.push((n.newton.clone(), first * member_size, bytemuck::cast_slice(&n.newton_host[run[0]..=*run.last().expect("a run has members")]).to_vec()));
+        }
+        for run in super::runs(&members) {
+            let first = run[0] as u64;
             uploads.push((n.state.clone(), first * state_size, bytemuck::cast_slice(&states[k..k + run.len()]).to_vec()));
             k += run.len();
         }
@@ -682,6 +723,7 @@ impl GpuWorld {
         // Members evaluated on the host side of the call: their results; the others' the
         // device computes first.
         let evaluated: Vec<(usize, &[u8])> = mine.iter().filter(|&&(i, _)| calls[i].residual.is_some()).map(|&(i, m)| (m, bytemuck::cast_slice::<DofOut<Real>, u8>(calls[i].dof_out))).collect();
+        self.settle_prologue(batch, &evaluated.iter().map(|&(m, _)| m).collect::<Vec<_>>());
         self.upload_member_runs(batch, &residuals, 2 * real, &evaluated);
         [fx, fy, count]
     }

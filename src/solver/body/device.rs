@@ -21,6 +21,25 @@ impl Body {
         &self.step_inputs
     }
 
+    /// What the device takes at the start of the body's step ([`crate::gpu::GpuWorld::begin_step`]);
+    /// `free`: the step has no contact point on the body.
+    pub fn step_start(&self, body: usize, free: bool) -> StepStart<'_> {
+        StepStart { body, inputs: &self.step_inputs, u: &self.state.u, on_device: free && self.may_step_on_device() }
+    }
+
+    /// The committed state the device follows after a kept step ([`crate::gpu::GpuWorld::commit_step`]).
+    pub fn step_end(&self, body: usize) -> StepEnd<'_> {
+        StepEnd { body, u: &self.state.u, v: &self.state.v, f_int: &self.state.f_int, on_device: self.may_step_on_device() }
+    }
+
+    /// Whether the device may begin and commit the body's steps from the state it keeps: its
+    /// step inputs then follow from that state alone (no surface loads, whose forces change
+    /// with time; no prescribed dofs, which move by their own rule; no Prony series, whose
+    /// history the host advances).
+    fn may_step_on_device(&self) -> bool {
+        self.loads.is_empty() && self.prescribed.is_empty() && self.viscoelastic.is_none()
+    }
+
     /// A device failure of an evaluation that involved this body.
     pub fn device_failure(&self, error: &GpuError) -> StepFailure {
         StepFailure::Device { body: self.name.clone(), error: error.to_string() }

@@ -1,0 +1,32 @@
+// The start of a step of each listed member from the committed state the device keeps
+// (`step_commit`), so that nothing per dof goes up for a body that steps on the device:
+//   u_pred = u_t + dt v_t,   step = (m, u_pred, f_int,t, f_ext),   u = u_pred,   u_start = u_t,
+// the mass and external force kept from the member's last uploaded step (a body with neither
+// surface loads nor prescribed dofs: they do not change). One dof per invocation, over the
+// members as `assemble_residual`. CPU twin: `cpu::step_begin`.
+
+const WORKGROUP = 64u;
+
+@group(0) @binding(0) var<uniform> motion: StepMotion;
+@group(0) @binding(1) var<storage, read> committed: array<DofState>;
+@group(0) @binding(2) var<storage, read_write> step: array<DofStep>;
+@group(0) @binding(3) var<storage, read_write> u: array<real>;
+@group(0) @binding(4) var<storage, read_write> u_start: array<real>;
+@group(0) @binding(5) var<storage, read> members: array<MemberRange>;
+@group(0) @binding(6) var<storage, read> jobs: array<Active>;
+
+@compute @workgroup_size(WORKGROUP)
+fn main(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workgroup: vec3<u32>) {
+    let range = members[jobs[workgroup.z].member];
+    let local = chunk_of(workgroup) * WORKGROUP + lane;
+    if local >= range.dofs {
+        return;
+    }
+    let d = range.dof_start + local;
+    let c = committed[d];
+    let u_pred = c.u + motion.dt * c.v;
+    step[d].u_pred = u_pred;
+    step[d].f_int_t = c.f_int;
+    u[d] = u_pred;
+    u_start[d] = c.u;
+}

@@ -1,0 +1,319 @@
+//! Steps begun and committed on the device. A body that takes its steps there (device Newton
+//! iterations, neither surface loads nor prescribed dofs nor Prony series) keeps its committed
+//! state `(u, v, f_int)` in a device buffer: `step_commit` derives it from the step's last iterate
+//! when the host keeps the step, and `step_begin` computes the next step's inputs from it, so that
+//! its steps send nothing per dof up. The host's copy of the state is its own (it takes the
+//! displacements and forces that come back); the device's is the one its steps start from.
+//!
+//! A member's device state is used only while the host knows it is the committed one: it is set
+//! up from the host's state after a step that ended with a device Newton call, and from then on
+//! derived by `step_commit` while each kept step ends so. A step that ends otherwise (on the host,
+//! or a body the host moved since) drops it, and the next step's inputs go up from the host
+//! again.
+
+use super::{buffer, Batch, GpuWorld, Mirror, Pass, WORKGROUP};
+use crate::gpu::types::{Active, DofOut, DofState, DofStep, MemberRange, StepMotion, MODE_FORCES};
+use crate::gpu::{Gpu, GpuError};
+use crate::precision::{same_bits, Precision, Real};
+use wgpu::{Buffer, BufferUsages, ComputePipeline};
+
+/// What the host hands the world at the start of one body's step.
+pub struct StepStart<'a> {
+    pub body: usize,
+    /// The step's inputs as the host computed them (they go up unless the device computes its own).
+    pub inputs: &'a [DofStep<Real>],
+    /// The committed displacements: the start displacements of the step's Newton calls.
+    pub u: &'a [Real],
+    /// Whether the device may begin the body's steps: no surface loads, no prescribed dofs, no
+    /// Prony series ([`crate::solver::Body`] decides).
+    pub on_device: bool,
+}
+
+/// The committed state of one body after the host kept a step.
+pub struct StepEnd<'a> {
+    pub body: usize,
+    pub u: &'a [Real],
+    pub v: &'a [Real],
+    pub f_int: &'a [Real],
+    pub on_device: bool,
+}
+
+/// The pipelines of `step_begin` and `step_commit`.
+pub(super) struct StepPipelines {
+    begin: ComputePipeline,
+    commit: ComputePipeline,
+}
+
+impl StepPipelines {
+    pub(super) fn new(gpu: &Gpu) -> Result<Self, GpuError> {
+        Ok(Self { begin: gpu.pipeline_at("step_begin", "main", None)?, commit: gpu.pipeline_at("step_commit", "main", None)? })
+    }
+}
+
+/// A batch's committed states on the device and what the host knows of them, per member.
+pub(super) struct Resident {
+    committed: Buffer,
+    motions: [Buffer; 2],
+    jobs: [Buffer; 2],
+    begin: Pass,
+    commit: Pass,
+    /// The device's committed state is the host's committed state (bit for bit, but for the
+    /// velocity, which `step_commit` computes as the host does).
+    valid: Vec<bool>,
+    /// The device's `u` and `dof_out` are those a device Newton call left and the host took.
+    current: Vec<bool>,
+    /// The device's `u` is its own predictor (`step_begin`), which the host's mirror does not
+    /// hold: the step's first Newton call starts from it instead of uploading the host's.
+    pub(super) predicted: Vec<bool>,
+    /// The members whose kept step `step_commit` commits before the next `step_begin`, and
+    /// that step's motion.
+    pending: Option<(Vec<usize>, StepMotion<Real>)>,
+    /// The members the next submission's head begins (`[0]`) and commits (`[1]`), and whether
+    /// each member is in either.
+    lists: [Vec<usize>; 2],
+    involved: Vec<bool>,
+}
+
+impl Resident {
+    pub(super) fn new(gpu: &Gpu, pipelines: &StepPipelines, b: &Batch, u_start: &Buffer) -> Self {
+        let real = gpu.precision.size();
+        let (dofs, members) = (b.u_host.len(), b.members.len());
+        let committed = buffer(gpu, "committed state", dofs * 3 * real, BufferUsages::STORAGE | BufferUsages::COPY_DST);
+        let motion = || buffer(gpu, "step motion", 4 * real, BufferUsages::UNIFORM | BufferUsages::COPY_DST);
+        let jobs = || buffer(gpu, "step jobs", members * 8, BufferUsages::STORAGE | BufferUsages::COPY_DST);
+        let (motions, jobs) = ([motion(), motion()], [jobs(), jobs()]);
+        let begin =
+            Pass::bound(gpu, pipelines.begin.clone(), ("step_begin", "main"), None, &[("motion", &motions[0]), ("committed", &committed), ("step", &b.step), ("u", &b.u), ("u_start", u_start), ("members", &b.member_buffer), ("jobs", &jobs[0])]);
+        let commit = Pass::bound(gpu, pipelines.commit.clone(), ("step_commit", "main"), None, &[("motion", &motions[1]), ("committed", &committed), ("u", &b.u), ("dof_out", &b.dof_out), ("members", &b.member_buffer), ("jobs", &jobs[1])]);
+        Self { committed, motions, jobs, begin, commit, valid: vec![false; members], current: vec![false; members], predicted: vec![false; members], pending: None, lists: [Vec::new(), Vec::new()], involved: vec![false; members] }
+    }
+
+    /// A member's `u` or `dof_out` changed on the device by other means than a Newton call the
+    /// host took (an upload, an evaluation).
+    pub(super) fn touched(&mut self, m: usize) {
+        self.current[m] = false;
+        self.predicted[m] = false;
+    }
+
+    /// A device Newton call left the member's iterate and forces, and the host took them.
+    pub(super) fn took(&mut self, m: usize) {
+        self.current[m] = true;
+        self.predicted[m] = false;
+    }
+}
+
+impl GpuWorld {
+    /// The step inputs of the listed bodies as the host computed them, up with the next submit
+    /// (where they changed): a step whose inputs the device does not compute.
+    pub fn set_step_inputs(&mut self, steps: &[(usize, &[DofStep<Real>])]) {
+        for batch in 0..self.batches.len() {
+            let mut mine: Vec<(usize, &[Real])> = steps.iter().filter(|(body, _)| self.place[*body].0 == batch).map(|&(body, step)| (self.place[body].1, bytemuck::cast_slice(step))).collect();
+            mine.sort_unstable_by_key(|&(m, _)| m);
+            self.stage_mirror(batch, Mirror::Step, &mine);
+        }
+    }
+
+    /// Starts a step. The bodies whose committed state the device holds take their inputs from
+    /// it: `step_commit` of the step kept before and `step_begin` are recorded first in the
+    /// step's first submission (or alone, before an upload that would overwrite what they read or
+    /// write). The others' inputs go up (one write per run of consecutive members whose values
+    /// changed: a grain at rest starts every step from the same ones).
+    pub fn begin_step(&mut self, starts: &[StepStart], motion: StepMotion<Real>) -> Result<(), GpuError> {
+        self.flush_prologue()?;
+        for batch in 0..self.batches.len() {
+            let mut mine: Vec<&StepStart> = starts.iter().filter(|s| self.place[s.body].0 == batch).collect();
+            mine.sort_unstable_by_key(|s| self.place[s.body].1);
+            let on_device = |s: &StepStart| s.on_device && self.batches[batch].newton.as_ref().is_some_and(|n| n.resident.valid[self.place[s.body].1]);
+            let (device, host): (Vec<&StepStart>, Vec<&StepStart>) = mine.into_iter().partition(|s| on_device(s));
+            let host: Vec<(usize, &[Real])> = host.iter().map(|s| (self.place[s.body].1, bytemuck::cast_slice(s.inputs))).collect();
+            self.stage_mirror(batch, Mirror::Step, &host);
+            let members: Vec<usize> = device.iter().map(|s| self.place[s.body].1).collect();
+            let b = &mut self.batches[batch];
+            let Some(n) = b.newton.as_mut() else { continue };
+            let r = &mut n.resident;
+            r.current.fill(false);
+            r.predicted.fill(false);
+            for (s, &m) in device.iter().zip(&members) {
+                let dofs = super::dof_span(&b.members, &[m]);
+                b.step_host[4 * dofs.start..4 * dofs.end].fill(Real::NAN);
+                b.u_host[dofs.clone()].fill(Real::NAN);
+                n.start_host[dofs].copy_from_slice(s.u);
+                r.predicted[m] = true;
+            }
+            // A member that steps with the host's inputs drops its device state (its step's
+            // uploads would come before a commit waiting for it): it is set up again from the
+            // host's when a step of its ends on the device.
+            let commit = r.pending.take().map(|(list, motion)| (list.into_iter().filter(|m| r.predicted[*m]).collect::<Vec<_>>(), motion)).filter(|(list, _)| !list.is_empty());
+            for (valid, predicted) in r.valid.iter_mut().zip(&r.predicted) {
+                *valid &= *predicted;
+            }
+            if members.is_empty() && commit.is_none() {
+                continue;
+            }
+            for (k, (list, motion)) in [(1, commit), (0, (!members.is_empty()).then_some((members, motion)))].into_iter().filter_map(|(k, w)| Some((k, w?))) {
+                let r = &mut self.batches[batch].newton.as_mut().expect("a batch with committed states").resident;
+                for &m in &list {
+                    r.involved[m] = true;
+                }
+                let (motion_buffer, jobs) = (r.motions[k].clone(), r.jobs[k].clone());
+                let jobs_list: Vec<Active> = list.iter().map(|&m| Active { member: m as u32, mode: MODE_FORCES }).collect();
+                self.upload(&motion_buffer, 0, &super::to_device(self.gpu.precision, &[motion.dt, motion.dt_explicit, motion.theta_dt, motion.pad]));
+                self.upload(&jobs, 0, bytemuck::cast_slice(&jobs_list));
+                let r = &mut self.batches[batch].newton.as_mut().expect("a batch with committed states").resident;
+                r.lists[k] = list;
+            }
+        }
+        Ok(())
+    }
+
+    /// Records the step's start where it is waiting (`step_commit`, then `step_begin`, per
+    /// batch) at the head of `encoder`.
+    pub(super) fn record_prologue(&mut self, encoder: &mut wgpu::CommandEncoder) {
+        for b in &mut self.batches {
+            let Some(n) = b.newton.as_mut() else { continue };
+            let r = &mut n.resident;
+            for k in [1, 0] {
+                let list = std::mem::take(&mut r.lists[k]);
+                let most = list.iter().map(|&m| b.members[m].dofs as usize).max().unwrap_or(0);
+                (if k == 0 { &r.begin } else { &r.commit }).record(&self.gpu, encoder, WORKGROUP, most, list.len());
+            }
+        }
+    }
+
+    /// The step's start went with a submission: its members may take uploads again.
+    pub(super) fn prologue_submitted(&mut self) {
+        for n in self.batches.iter_mut().filter_map(|b| b.newton.as_mut()) {
+            if n.resident.lists.iter().all(Vec::is_empty) {
+                n.resident.involved.fill(false);
+            }
+        }
+    }
+
+    /// Submits the step's start alone if it is waiting and an upload is about to change what it
+    /// reads or writes of `members` of `batch`. A submission that fails here leaves the device's
+    /// committed states untrusted, and the next submission reports the failure.
+    pub(super) fn settle_prologue(&mut self, batch: usize, members: &[usize]) {
+        let Some(r) = self.batches[batch].newton.as_ref().map(|n| &n.resident) else { return };
+        if !members.iter().any(|&m| r.involved[m]) {
+            return;
+        }
+        // Uploads apply before the commands of the submission they go with: once the step's
+        // start is recorded, none may touch its members until it is submitted.
+        assert!(r.lists.iter().any(|l| !l.is_empty()), "an upload to a member of a step's start recorded but not submitted");
+        if self.flush_prologue().is_err() {
+            self.forget_committed();
+        }
+    }
+
+    /// Submits the step's start alone if any of it is waiting.
+    fn flush_prologue(&mut self) -> Result<(), GpuError> {
+        if self.batches.iter().filter_map(|b| b.newton.as_ref()).any(|n| n.resident.lists.iter().any(|l| !l.is_empty())) {
+            let encoder = self.encoder("step");
+            self.submit(encoder)?;
+        }
+        Ok(())
+    }
+
+    /// After the host kept a step (`motion` its theta rule): each listed body's committed state
+    /// on the device follows the host's. One whose step ended with a device Newton call the host
+    /// took, at the displacements the host kept, commits on the device before the next step
+    /// begins (or, the first time, takes the host's state: one upload); the others' device state
+    /// is dropped.
+    pub fn commit_step(&mut self, ends: &[StepEnd], motion: StepMotion<Real>) {
+        if self.gpu.precision != Precision::F64 {
+            return;
+        }
+        for batch in 0..self.batches.len() {
+            let mut mine: Vec<&StepEnd> = ends.iter().filter(|e| self.place[e.body].0 == batch).collect();
+            mine.sort_unstable_by_key(|e| self.place[e.body].1);
+            let b = &mut self.batches[batch];
+            let Some(n) = b.newton.as_mut() else { continue };
+            let r = &mut n.resident;
+            let (mut commits, mut uploads) = (Vec::new(), Vec::new());
+            for e in mine {
+                let m = self.place[e.body].1;
+                let dofs = super::dof_span(&b.members, &[m]);
+                let current = e.on_device && r.current[m] && same_bits(&b.u_host[dofs], e.u);
+                match (current, r.valid[m]) {
+                    (true, true) => commits.push(m),
+                    (true, false) => uploads.push((m, e)),
+                    (false, _) => r.valid[m] = false,
+                }
+                r.current[m] = false;
+            }
+            r.pending = (!commits.is_empty()).then_some((commits, motion));
+            let members: Vec<usize> = uploads.iter().map(|&(m, _)| m).collect();
+            for &m in &members {
+                r.valid[m] = true;
+            }
+            let committed = r.committed.clone();
+            self.settle_prologue(batch, &members);
+            let states: Vec<(usize, Vec<DofState<Real>>)> = uploads.iter().map(|&(m, e)| (m, (0..e.u.len()).map(|d| DofState { u: e.u[d], v: e.v[d], f_int: e.f_int[d] }).collect())).collect();
+            let pieces: Vec<(usize, &[u8])> = states.iter().map(|(m, s)| (*m, bytemuck::cast_slice(s))).collect();
+            self.upload_member_runs(batch, &committed, 3 * 8, &pieces);
+        }
+    }
+
+    /// Drops every committed state the device holds (the host's changed: a restored state).
+    pub fn forget_committed(&mut self) {
+        for n in self.batches.iter_mut().filter_map(|b| b.newton.as_mut()) {
+            let r = &mut n.resident;
+            r.valid.fill(false);
+            r.pending = None;
+            r.lists = [Vec::new(), Vec::new()];
+            r.involved.fill(false);
+            r.predicted.fill(false);
+        }
+    }
+}
+
+/// What the step kernels leave: the committed states, the step inputs, the trial and the start
+/// displacements.
+pub type StepKernelsOut = (Vec<DofState<Real>>, Vec<DofStep<Real>>, Vec<Real>, Vec<Real>);
+
+/// `step_commit` over the members `commit` lists, then `step_begin` over those `begin` lists,
+/// alone on an f64 device from the given buffers, in one submission as a step's start records
+/// them; what they leave, for the parity tests with the CPU twins.
+#[allow(clippy::too_many_arguments)]
+pub fn run_step_kernels(
+    gpu: &Gpu,
+    members: &[MemberRange],
+    (commit, commit_motion): (&[usize], StepMotion<Real>),
+    (begin, begin_motion): (&[usize], StepMotion<Real>),
+    committed: &[DofState<Real>],
+    step: &[DofStep<Real>],
+    u: &[Real],
+    dof_out: &[DofOut<Real>],
+) -> Result<StepKernelsOut, GpuError> {
+    assert_eq!(gpu.precision, Precision::F64, "the device keeps committed states in f64 only");
+    let pipelines = StepPipelines::new(gpu)?;
+    let rw = BufferUsages::STORAGE | BufferUsages::COPY_SRC | BufferUsages::COPY_DST;
+    let init = |label: &str, bytes: &[u8], usage: BufferUsages| super::buffer_init(gpu, label, bytes, usage);
+    let (committed_b, step_b, u_b, u_start_b) = (init("committed", bytemuck::cast_slice(committed), rw), init("step", bytemuck::cast_slice(step), rw), init("u", bytemuck::cast_slice(u), rw), buffer(gpu, "u start", u.len() * 8, rw));
+    let (dof_out_b, members_b) = (init("dof out", bytemuck::cast_slice(dof_out), BufferUsages::STORAGE), init("members", bytemuck::cast_slice(members), BufferUsages::STORAGE));
+    let uniform = BufferUsages::UNIFORM;
+    let motion = |m: StepMotion<Real>| init("motion", bytemuck::cast_slice(&[m]), uniform);
+    let jobs = |list: &[usize]| init("jobs", bytemuck::cast_slice(&list.iter().map(|&m| Active { member: m as u32, mode: MODE_FORCES }).collect::<Vec<_>>()), BufferUsages::STORAGE);
+    let (commit_motion, begin_motion, commit_jobs, begin_jobs) = (motion(commit_motion), motion(begin_motion), jobs(commit), jobs(begin));
+    let commit_pass = Pass::bound(gpu, pipelines.commit, ("step_commit", "main"), None, &[("motion", &commit_motion), ("committed", &committed_b), ("u", &u_b), ("dof_out", &dof_out_b), ("members", &members_b), ("jobs", &commit_jobs)]);
+    let begin_pass = Pass::bound(gpu, pipelines.begin, ("step_begin", "main"), None, &[("motion", &begin_motion), ("committed", &committed_b), ("step", &step_b), ("u", &u_b), ("u_start", &u_start_b), ("members", &members_b), ("jobs", &begin_jobs)]);
+    let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("step kernels") });
+    let most = |list: &[usize]| list.iter().map(|&m| members[m].dofs as usize).max().unwrap_or(0);
+    commit_pass.record(gpu, &mut encoder, WORKGROUP, most(commit), commit.len());
+    begin_pass.record(gpu, &mut encoder, WORKGROUP, most(begin), begin.len());
+    let read = |buffer: &Buffer, bytes: usize, encoder: &mut wgpu::CommandEncoder| {
+        let staging = buffer_of(gpu, bytes);
+        encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, bytes as u64);
+        staging
+    };
+    let sizes = [std::mem::size_of_val(committed), std::mem::size_of_val(step), u.len() * 8, u.len() * 8];
+    let staged: Vec<Buffer> = [&committed_b, &step_b, &u_b, &u_start_b].iter().zip(sizes).map(|(b, bytes)| read(b, bytes, &mut encoder)).collect();
+    gpu.submit(encoder)?;
+    let bytes: Vec<Vec<u8>> = staged.iter().zip(sizes).map(|(b, size)| gpu.read_range("step_begin", b, size as u64)).collect::<Result<_, _>>()?;
+    Ok((bytemuck::pod_collect_to_vec(&bytes[0]), bytemuck::pod_collect_to_vec(&bytes[1]), bytemuck::pod_collect_to_vec(&bytes[2]), bytemuck::pod_collect_to_vec(&bytes[3])))
+}
+
+/// A mappable buffer of `bytes` for a read-back.
+fn buffer_of(gpu: &Gpu, bytes: usize) -> Buffer {
+    buffer(gpu, "step read-back", bytes, BufferUsages::MAP_READ | BufferUsages::COPY_DST)
+}
