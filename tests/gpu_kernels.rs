@@ -1028,6 +1028,7 @@ fn newton_kernels_match_their_cpu_twins() {
                     u,
                     dof_out,
                     u_start: &starts[b],
+                    inputs: &steps[b],
                     contact_force: Some(&pushes[b]),
                     outcome: NewtonState::default(),
                     strain_energy: None,
@@ -1042,11 +1043,13 @@ fn newton_kernels_match_their_cpu_twins() {
             drop(calls);
             for (b, ((state, failure), (want, u, out))) in got.into_iter().zip(&expected).enumerate() {
                 // The strain energy at the returned iterate, as the twins give it there
-                // (`element_energy`, then `newton_energy`'s sum over the member).
+                // (`element_energy`, then `newton_finish`'s sum over the member).
                 let c = &cases[b];
                 let elements: Vec<f64> = (0..c.mesh.element_count()).map(|e| cpu::element_energy(&c.model, c.geometry.element_points(e), &c.mesh.element_displacements(&us[b], e), c.mesh.dim(), c.formulation)).collect();
                 let mut twin = [0.0];
-                cpu::newton_energy(&elements, &[MemberRange { elements: elements.len() as u32, ..Default::default() }], &[Active { member: 0, mode: 0 }], &mut twin);
+                let range = MemberRange { elements: elements.len() as u32, dofs: us[b].len() as u32, ..Default::default() };
+                let mut forces = vec![0.0; us[b].len()];
+                cpu::newton_finish(&elements, &outs[b], &[range], &[Active { member: 0, mode: 0 }], &mut twin, &mut forces);
                 let twin = twin[0];
                 assert!((strains[b] - twin).abs() <= 1e-12 * twin.abs(), "{} body {b}: strain energy {} against the twin's {twin}", kind.name(), strains[b]);
                 let g = |o: &[DofOut<f64>]| o.iter().map(|o| o.g).collect::<Vec<_>>();
@@ -1103,6 +1106,7 @@ fn a_device_newton_call_for_one_body_of_a_large_batch_reads_back_only_its_own() 
         u: &mut u,
         dof_out: &mut out,
         u_start: &start,
+        inputs: &step,
         contact_force: None,
         outcome: NewtonState::default(),
         strain_energy: None,
@@ -1144,8 +1148,22 @@ fn a_device_newton_increment_that_inverts_an_element_fails_the_body() {
     let start = vec![0.0; c.u.len()];
     let (mut u, mut out) = (c.u.clone(), first.clone());
     let member = NewtonMember { free_count: free as u32, budget: 5, ..NewtonMember::default() };
-    let mut calls =
-        [NewtonCall { body: 0, factor: 1, inverse: Some(inverse), member, residual: Some(1.0), u: &mut u, dof_out: &mut out, u_start: &start, contact_force: None, outcome: NewtonState::default(), strain_energy: None, failure: None, tangent: None }];
+    let mut calls = [NewtonCall {
+        body: 0,
+        factor: 1,
+        inverse: Some(inverse),
+        member,
+        residual: Some(1.0),
+        u: &mut u,
+        dof_out: &mut out,
+        u_start: &start,
+        inputs: &step,
+        contact_force: None,
+        outcome: NewtonState::default(),
+        strain_energy: None,
+        failure: None,
+        tangent: None,
+    }];
     world.newton(&mut calls, &mut [], &mut [], &mut [], coefficients, (2, 1.0), None, &mut Default::default()).expect("device Newton");
     let (state, failure) = (calls[0].outcome, calls[0].failure);
     assert_eq!((state.status, state.iterations), (bifirst::gpu::types::NEWTON_FAILED, 1), "{state:?}");
@@ -1336,6 +1354,7 @@ fn newton_contact_kernels_match_their_cpu_twins() {
                     u,
                     dof_out,
                     u_start: &starts[b],
+                    inputs: &steps[b],
                     contact_force: Some(&zeros[b]),
                     outcome: NewtonState::default(),
                     strain_energy: None,

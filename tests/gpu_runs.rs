@@ -612,8 +612,10 @@ fn kernel_times_name_every_kernel_a_run_dispatches_and_change_nothing_else() {
 fn a_falling_grain_that_steps_on_the_device_sends_nothing_per_dof_up() {
     // Issue 59: a grain in flight that steps on the device (`--rounds gpu`) keeps its committed
     // state there: the device commits a kept step and begins the next from it, so a step sends
-    // up only the call's parameters and lists, not the step inputs, trial and start
-    // displacements (48 bytes a dof before: about 3 300 a grain of this scene).
+    // up only the call's state and lists, not the step inputs, trial and start displacements
+    // (48 bytes a dof before: about 3 300 a grain of this scene); the device sums the strain
+    // energy and packs the internal forces, so that 16 bytes a dof come back (40 before, and
+    // one energy per element).
     let test = "a_falling_grain_that_steps_on_the_device_sends_nothing_per_dof_up";
     if !gpu_available(test) {
         return;
@@ -631,9 +633,34 @@ fn a_falling_grain_that_steps_on_the_device_sends_nothing_per_dof_up() {
     let dofs: usize = sim.bodies.iter().map(|b| b.state.u.len()).sum();
     let per_step: Vec<u64> = (0..5).map(|_| sim.advance().expect("a step").bytes_moved).collect();
     eprintln!("{} grains, {dofs} dofs: bytes per step {per_step:?}", sim.bodies.len());
-    // What still crosses: the trial displacements and `DofOut` down (24 bytes a dof), and per
-    // grain its call's parameters, state, lists and flags and its element energies.
+    // What still crosses: the trial displacements and internal forces down (16 bytes a dof),
+    // and per grain its call's state, lists, flags and strain energy.
     for (s, &bytes) in per_step.iter().enumerate().skip(1) {
-        assert!(bytes <= 24 * dofs as u64 + 600 * sim.bodies.len() as u64, "step {s}: {bytes} bytes for {dofs} dofs");
+        assert!(bytes <= 16 * dofs as u64 + 250 * sim.bodies.len() as u64, "step {s}: {bytes} bytes for {dofs} dofs");
     }
+}
+
+#[test]
+fn grains_that_step_on_the_device_retry_their_rejected_steps_as_the_cpu_backend_does() {
+    // Issue 59: a step rejected after its Newton iterations (an overlap deeper than
+    // `solver.max_overlap` here) commits nothing on the device either: its retry begins again
+    // from the committed state the device keeps, and a kept step's commit waits until the next
+    // begins. The retries, iterations and energies are the CPU backend's.
+    let test = "grains_that_step_on_the_device_retry_their_rejected_steps_as_the_cpu_backend_does";
+    if !gpu_available(test) {
+        return;
+    }
+    let path = scene_path("grains_many");
+    let sets = ["packing.count=12", "time.end=0.3", "gravity=[0.0,-9.81]", "solver.max_overlap=1e-4", "output.scene_every=0"];
+    let field = |log: &Log, name: &str| log.topics["/summary"][0][name].as_u64().unwrap_or_else(|| panic!("{name}"));
+    let cpu = run_with(&path, &sets, &format!("{test}_cpu"), &options(BackendChoice::Cpu, None));
+    let gpu = run_with(&path, &sets, &format!("{test}_gpu"), &every_round_on_the_gpu());
+    let worst = energy_difference(&cpu, &gpu);
+    eprintln!("{} overlap retries, {} device iterations; energies differ by {worst:.2e}", field(&gpu, "overlap_retries"), field(&gpu, "device_iterations"));
+    assert!(field(&cpu, "overlap_retries") > 0, "the scene retries steps");
+    for name in ["overlap_retries", "cutbacks", "newton_iterations", "steps"] {
+        assert_eq!(field(&gpu, name), field(&cpu, name), "{name}");
+    }
+    assert!(field(&gpu, "device_iterations") > 0);
+    assert!(worst <= 1e-9, "energies differ by {worst:.3e}");
 }

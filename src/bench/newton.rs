@@ -75,7 +75,22 @@ pub(super) fn newton_rows(options: &BenchOptions, gpus: &[Arc<Gpu>], peaks: &[Pe
                     u.copy_from_slice(&case.u);
                     out.copy_from_slice(&first);
                     let inverse = (!world.newton_inverse_current(b, 1)).then(|| inverse.clone());
-                    NewtonCall { body: b, factor: 1, inverse, member, residual: Some(residual0), u, dof_out: out, u_start: &start, contact_force: None, outcome: NewtonState::default(), strain_energy: None, failure: None, tangent: None }
+                    NewtonCall {
+                        body: b,
+                        factor: 1,
+                        inverse,
+                        member,
+                        residual: Some(residual0),
+                        u,
+                        dof_out: out,
+                        u_start: &start,
+                        inputs: &case.step,
+                        contact_force: None,
+                        outcome: NewtonState::default(),
+                        strain_energy: None,
+                        failure: None,
+                        tangent: None,
+                    }
                 })
                 .collect();
             if let Err(e) = world.newton(&mut calls, &mut [], &mut [], &mut [], case.coefficients, (2, 1.0), None, &mut PhaseTimes::default()) {

@@ -11,7 +11,7 @@
 //! | `uzawa_step` | [`uzawa_step`] |
 //! | `uzawa_sweep` | [`uzawa_sweep`] |
 //! | `uzawa_judge`, `uzawa_solve` | [`uzawa_judge`], [`uzawa_solve`] |
-//! | `newton_update`, `newton_judge`, `newton_compact` (`main`, `host`), `newton_energy` | [`newton_update`], [`newton_judge`], [`newton_compact`], [`newton_compact_host`], [`newton_energy`] |
+//! | `newton_update`, `newton_judge`, `newton_compact` (`main`, `host`), `newton_finish` | [`newton_update`], [`newton_judge`], [`newton_compact`], [`newton_compact_host`], [`newton_finish`] |
 //! | `newton_contact` (`prepare`, `forces`, `judge`, `first_forces`, `first_judge`) | [`newton_contact_prepare`], [`newton_contact_forces`], [`newton_contact_judge`], [`newton_contact_first_forces`], [`newton_contact_first_judge`] |
 //! | `step_begin`, `step_commit` | [`step_begin`], [`step_commit`] |
 //! | `peak_copy` | [`peak_copy`] |
@@ -24,7 +24,7 @@ mod uzawa;
 pub use crate::contact::law::uzawa_step;
 pub use crate::contact::uzawa::uzawa_sweep;
 pub use crate::element::{element_energy, element_force_tangent};
-pub use newton::{newton_compact, newton_compact_host, newton_contact_first_forces, newton_contact_first_judge, newton_contact_forces, newton_contact_judge, newton_contact_prepare, newton_energy, newton_judge, newton_update};
+pub use newton::{newton_compact, newton_compact_host, newton_contact_first_forces, newton_contact_first_judge, newton_contact_forces, newton_contact_judge, newton_contact_prepare, newton_finish, newton_judge, newton_update};
 pub use step::{step_begin, step_commit};
 pub use uzawa::{uzawa_judge, uzawa_solve};
 
@@ -102,10 +102,7 @@ pub fn assemble_csr(element_out: &[Real], gather_start: &[u32], gather: &[u32], 
 pub fn assemble_residual(element_out: &[Real], gather_start: &[u32], gather: &[u32], coefficients: Coefficients<Real>, u: &[Real], step: &[DofStep<Real>], dof_out: &mut [DofOut<Real>]) {
     dof_out.par_iter_mut().with_min_len(PER_TASK).enumerate().for_each(|(d, out)| {
         let f = gather_sum(element_out, gather_start, gather, d);
-        let xi = coefficients.factor;
-        let s = step[d];
-        let inertia = coefficients.c1 * s.mass * (u[d] - s.u_pred);
-        *out = DofOut { f_int: f, g: inertia - (1.0 - xi) * (s.f_ext - s.f_int_t) - xi * (s.f_ext - f) };
+        *out = DofOut { f_int: f, g: step[d].residual(coefficients, u[d], f) };
     });
 }
 

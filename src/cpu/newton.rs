@@ -130,9 +130,9 @@ pub fn newton_judge(
     s.residual = residual;
 }
 
-/// `newton_energy`: each listed member's strain energy, the sum of its elements' energies in
-/// element order.
-pub fn newton_energy(energy: &[Real], members: &[MemberRange], call: &[Active], member_energy: &mut [Real]) {
+/// `newton_finish`: each listed member's strain energy, the sum of its elements' energies in
+/// element order, and its internal forces packed per dof.
+pub fn newton_finish(energy: &[Real], dof_out: &[DofOut<Real>], members: &[MemberRange], call: &[Active], member_energy: &mut [Real], forces: &mut [Real]) {
     for job in call {
         let m = job.member as usize;
         let range = members[m];
@@ -141,6 +141,9 @@ pub fn newton_energy(energy: &[Real], members: &[MemberRange], call: &[Active], 
             total += energy[e as usize];
         }
         member_energy[m] = total;
+        for d in range.dof_start..range.dof_start + range.dofs {
+            forces[d as usize] = dof_out[d as usize].f_int;
+        }
     }
 }
 

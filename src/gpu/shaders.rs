@@ -19,7 +19,7 @@ pub const SHADERS: &[(&str, &str)] = &[
     ("element_force_tangent", include_str!("../../shaders/element_force_tangent.wgsl")),
     ("newton_compact", include_str!("../../shaders/newton_compact.wgsl")),
     ("newton_contact", include_str!("../../shaders/newton_contact.wgsl")),
-    ("newton_energy", include_str!("../../shaders/newton_energy.wgsl")),
+    ("newton_finish", include_str!("../../shaders/newton_finish.wgsl")),
     ("newton_judge", include_str!("../../shaders/newton_judge.wgsl")),
     ("newton_update", include_str!("../../shaders/newton_update.wgsl")),
     ("peak_copy", include_str!("../../shaders/peak_copy.wgsl")),

@@ -38,6 +38,16 @@ pub struct DofStep<R> {
     pub f_ext: R,
 }
 
+impl DofStep<f64> {
+    /// The contact-free residual of the dof at displacement `u` with internal force `f`, as
+    /// `assemble_residual` computes it: `c1 m (u - u_pred) - (1-ξ)(f_ext - f_int,t) - ξ (f_ext - f)`.
+    pub fn residual(&self, coefficients: Coefficients<f64>, u: f64, f: f64) -> f64 {
+        let xi = coefficients.factor;
+        let inertia = coefficients.c1 * self.mass * (u - self.u_pred);
+        inertia - (1.0 - xi) * (self.f_ext - self.f_int_t) - xi * (self.f_ext - f)
+    }
+}
+
 /// `struct DofOut` of `shaders/include/batch.wgsl`.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq)]

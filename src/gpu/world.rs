@@ -256,8 +256,10 @@ enum Source {
     Energy,
     Displacement,
     NewtonState,
-    /// A device Newton call's strain energy per member (`newton_energy`).
+    /// A device Newton call's strain energy per member, and its internal forces per dof
+    /// (`newton_finish`).
     MemberEnergy,
+    NewtonForces,
 }
 
 /// The copies of one pass into the read-back buffer, each landing 8-byte aligned after the last.
@@ -740,6 +742,7 @@ impl GpuWorld {
                 Source::Displacement => &b.u,
                 Source::NewtonState => &b.newton.as_ref().expect("a batch whose Newton states are read has them").state,
                 Source::MemberEnergy => &b.newton.as_ref().expect("a batch whose Newton energies are read has them").member_energy,
+                Source::NewtonForces => &b.newton.as_ref().expect("a batch whose Newton forces are read has them").packed_forces,
             };
             encoder.copy_buffer_to_buffer(source, c.source.start, target, c.target, c.source.end - c.source.start);
         }

@@ -13,7 +13,7 @@
 use super::contact::{ContactLayout, ContactPasses, ContactPipelines, GroupContact};
 use super::{buffer, to_device, Batch, Evaluation, GpuWorld, Pass, ReadBack, Source, WORKGROUP};
 use crate::contact::uzawa::Problem;
-use crate::gpu::types::{Active, Coefficients, ContactState, DofOut, NewtonMember, NewtonState, MODE_FORCES, MODE_TANGENT, NEWTON_FAILED, NEWTON_HOST, NEWTON_ITERATING, NEWTON_MAX_FREE, NO_FAILURE};
+use crate::gpu::types::{Active, Coefficients, ContactState, DofOut, DofStep, NewtonMember, NewtonState, MODE_FORCES, MODE_TANGENT, NEWTON_FAILED, NEWTON_HOST, NEWTON_ITERATING, NEWTON_MAX_FREE, NO_FAILURE};
 use crate::gpu::uzawa_sweep::UzawaSweeps;
 use crate::gpu::{ElementFailure, Gpu, GpuError};
 use crate::policy::PhaseTimes;
@@ -54,7 +54,7 @@ struct CallPlan<'a> {
 /// read-back (`landing` from `GpuWorld::queue_states`), in parallel (100 000 grains a call), and
 /// the stiffness values of the members in contact handed back (`tangents`: call, where,
 /// entries).
-fn unpack_calls(precision: Precision, calls: &mut [NewtonCall], landing: &[[usize; 5]], tangents: &[(usize, usize, usize)], bytes: &[u8]) {
+fn unpack_calls(precision: Precision, calls: &mut [NewtonCall], (landing, coefficients): (&[[usize; 5]], Coefficients<Real>), tangents: &[(usize, usize, usize)], bytes: &[u8]) {
     let real = precision.size();
     calls.par_iter_mut().zip(landing).for_each(|(call, [state_at, flags_at, u_at, out_at, energy_at])| {
         call.outcome = bytemuck::pod_read_unaligned(&bytes[*state_at..state_at + std::mem::size_of::<NewtonState<Real>>()]);
@@ -62,7 +62,12 @@ fn unpack_calls(precision: Precision, calls: &mut [NewtonCall], landing: &[[usiz
         call.failure = (call.outcome.status == NEWTON_FAILED).then(|| super::failure_of(flags)).flatten();
         let n = call.u.len();
         super::copy_from_device(precision, &bytes[*u_at..u_at + n * real], call.u);
-        super::copy_from_device(precision, &bytes[*out_at..out_at + n * 2 * real], bytemuck::cast_slice_mut(call.dof_out));
+        // The forces alone: the residual follows from them, as `assemble_residual` computes it,
+        // with the step inputs the host holds.
+        let forces = super::from_device(precision, &bytes[*out_at..out_at + n * real]);
+        for (d, (out, f)) in call.dof_out.iter_mut().zip(forces).enumerate() {
+            *out = DofOut { f_int: f, g: call.inputs[d].residual(coefficients, call.u[d], f) };
+        }
         call.strain_energy = Some(super::from_device(precision, &bytes[*energy_at..energy_at + real])[0]);
     });
     for &(i, at, entries) in tangents {
@@ -110,6 +115,9 @@ pub struct NewtonCall<'a> {
     pub dof_out: &'a mut [DofOut<Real>],
     /// The displacements at the start of the step.
     pub u_start: &'a [Real],
+    /// The step's inputs as the host holds them: the residual returned is computed from the
+    /// device's forces with them.
+    pub inputs: &'a [DofStep<Real>],
     /// The contact forces per dof (`None`: zero, a body without contact points).
     pub contact_force: Option<&'a [Real]>,
     /// Out: where the iterations ended.
@@ -175,11 +183,12 @@ pub(super) struct NewtonBuffers {
     dispatch: Buffer,
     forces: Pass,
     residual: Pass,
-    /// `element_energy` over the call's list, and `newton_energy`'s sums of its members' into
-    /// `member_energy`.
+    /// `element_energy` over the call's list, then `newton_finish`: each member's sum of them
+    /// into `member_energy`, its internal forces packed into `packed_forces`.
     energy: Pass,
-    energy_sum: Pass,
+    finish: Pass,
     pub(super) member_energy: Buffer,
+    pub(super) packed_forces: Buffer,
     update: Pass,
     judge: Pass,
     compact: Pass,
@@ -220,7 +229,7 @@ pub(super) struct NewtonPipelines {
     judge: ComputePipeline,
     compact: ComputePipeline,
     compact_host: ComputePipeline,
-    energy_sum: ComputePipeline,
+    finish: ComputePipeline,
     step: super::step::StepPipelines,
 }
 
@@ -231,7 +240,7 @@ impl NewtonPipelines {
             judge: gpu.pipeline_at("newton_judge", "main", None)?,
             compact: gpu.pipeline_at("newton_compact", "main", None)?,
             compact_host: gpu.pipeline_at("newton_compact", "host", None)?,
-            energy_sum: gpu.pipeline_at("newton_energy", "main", None)?,
+            finish: gpu.pipeline_at("newton_finish", "main", None)?,
             step: super::step::StepPipelines::new(gpu)?,
         })
     }
@@ -263,7 +272,14 @@ impl NewtonBuffers {
         let compact = Pass::bound(gpu, pipelines.compact.clone(), ("newton_compact", "main"), None, &[("call", &call), ("state", &state), ("jobs", &jobs), ("dispatch", &dispatch)]);
         let resident = super::step::Resident::new(gpu, &pipelines.step, b, &u_start);
         let member_energy = buffer(gpu, "member energy", members * real, storage | BufferUsages::COPY_SRC);
-        let energy_sum = Pass::bound(gpu, pipelines.energy_sum.clone(), ("newton_energy", "main"), None, &[("energy", &b.energy), ("members", &b.member_buffer), ("jobs", &call), ("dispatch", &dispatch), ("member_energy", &member_energy)]);
+        let packed_forces = buffer(gpu, "newton forces", dofs * real, storage | BufferUsages::COPY_SRC);
+        let finish = Pass::bound(
+            gpu,
+            pipelines.finish.clone(),
+            ("newton_finish", "main"),
+            None,
+            &[("energy", &b.energy), ("dof_out", &b.dof_out), ("members", &b.member_buffer), ("jobs", &call), ("dispatch", &dispatch), ("member_energy", &member_energy), ("forces", &packed_forces)],
+        );
         Ok(Self {
             inverse,
             free,
@@ -279,8 +295,9 @@ impl NewtonBuffers {
             forces,
             residual,
             energy,
-            energy_sum,
+            finish,
             member_energy,
+            packed_forces,
             update,
             judge,
             compact,
@@ -392,7 +409,7 @@ impl GpuWorld {
                 if let Some(landing) = &evaluated {
                     super::unpack_evaluation(precision, list, landing, bytes);
                 }
-                unpack_calls(precision, calls, &landing, &tangent_landing, bytes);
+                unpack_calls(precision, calls, (&landing, coefficients), &tangent_landing, bytes);
                 iterating = calls.iter().any(|call| call.outcome.status == NEWTON_ITERATING);
                 if let Some(at) = contact_landing {
                     unpack_contact(precision, problems, contacts, at, bytes);
@@ -438,7 +455,7 @@ impl GpuWorld {
     }
 
     /// The read-back buffer of a call, grown when its submissions need more: per member its
-    /// failure flags and state, per dof its displacement and residual, per element its energy
+    /// failure flags and state, per dof its displacement and internal force, its strain energy
     /// (every span a multiple of 8 bytes), after an evaluation pass's read-back when one shares
     /// it; with groups in contact (`(batch, members, points, groups)`) their reactions, states
     /// and the stiffness values of their members.
@@ -451,7 +468,7 @@ impl GpuWorld {
             let entries: usize = members.iter().map(|&(_, m)| self.batches[batch].members[m].nonzeros as usize).sum();
             (points * 3 * real + groups * std::mem::size_of::<ContactState<Real>>() + 16 + entries * real) as u64
         });
-        let bytes = (total_members * (16 + std::mem::size_of::<NewtonState<Real>>()) + total_dofs * 3 * real) as u64 + if list.is_empty() { 0 } else { self.readback.size() } + contact_bytes;
+        let bytes = (total_members * (16 + std::mem::size_of::<NewtonState<Real>>()) + total_dofs * 2 * real) as u64 + if list.is_empty() { 0 } else { self.readback.size() } + contact_bytes;
         if self.newton_readback.as_ref().is_none_or(|(_, size)| *size < bytes) {
             self.newton_readback = Some((buffer(&self.gpu, "newton readback", bytes as usize, BufferUsages::MAP_READ | BufferUsages::COPY_DST), bytes));
         }
@@ -517,7 +534,7 @@ impl GpuWorld {
         for (batch, mine, energy) in plan.work {
             let n = self.batches[*batch].newton.as_ref().expect("staged");
             n.energy.dispatch_xyz(&self.gpu, &mut pass, *energy);
-            n.energy_sum.dispatch(&self.gpu, &mut pass, mine.len().div_ceil(WORKGROUP) as u32);
+            n.finish.dispatch(&self.gpu, &mut pass, mine.len().div_ceil(WORKGROUP) as u32);
         }
     }
 
@@ -538,10 +555,10 @@ impl GpuWorld {
                 (dofs.start * per_dof) as u64..(dofs.end * per_dof) as u64
             };
             let u_span = |m: usize| bytes_of(m, real);
-            let dof_span = |m: usize| bytes_of(m, 2 * real);
+            let force_span = |m: usize| bytes_of(m, real);
             let states = readback.queue_runs(*batch, Source::NewtonState, &members, &state_span);
             let us = readback.queue_runs(*batch, Source::Displacement, &members, &u_span);
-            let outs = readback.queue_runs(*batch, Source::DofOut, &members, &dof_span);
+            let outs = readback.queue_runs(*batch, Source::NewtonForces, &members, &force_span);
             let energy_span = |m: usize| (m * real) as u64..((m + 1) * real) as u64;
             let energies = readback.queue_runs(*batch, Source::MemberEnergy, &members, &energy_span);
             for (k, &(i, _)) in mine.iter().enumerate() {

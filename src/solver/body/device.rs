@@ -146,6 +146,7 @@ impl Body {
             u: &mut self.trial.u,
             dof_out: &mut self.dof_out,
             u_start: &self.state.u,
+            inputs: &self.step_inputs,
             contact_force: Some(&self.contact_force),
             outcome: NewtonState::default(),
             strain_energy: None,
