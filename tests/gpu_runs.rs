@@ -664,3 +664,49 @@ fn grains_that_step_on_the_device_retry_their_rejected_steps_as_the_cpu_backend_
     assert!(field(&gpu, "device_iterations") > 0);
     assert!(worst <= 1e-9, "energies differ by {worst:.3e}");
 }
+
+/// Sets the interrupt flag once step `at` has finished, as Ctrl-C would between two steps.
+struct InterruptAfter {
+    at: usize,
+    flag: std::sync::Arc<std::sync::atomic::AtomicBool>,
+}
+
+impl bifirst::run::Monitor for InterruptAfter {
+    fn step(&mut self, report: &bifirst::solver::StepReport, _total: usize) {
+        if report.step == self.at {
+            self.flag.store(true, std::sync::atomic::Ordering::SeqCst);
+        }
+    }
+}
+
+#[test]
+fn grains_that_step_on_the_device_restart_from_a_log_where_the_whole_run_ends() {
+    // Issue 59: a restored state is the host's, and the device holds no committed state for it:
+    // the restarted run's first step begins on the host and sets them up again from the
+    // restored state, and the run ends where the uninterrupted one does, to the bit here.
+    let test = "grains_that_step_on_the_device_restart_from_a_log_where_the_whole_run_ends";
+    if !gpu_available(test) {
+        return;
+    }
+    let sets: Vec<String> = ["packing.count=12", "time.end=0.1", "gravity=[0.0,-9.81]", "output.scene_every=0", "output.state_every=5"].iter().map(|s| s.to_string()).collect();
+    let loaded = bifirst::scene::load_scene(&scene_path("grains_many"), &sets).expect("scene");
+    let whole = temp_path(&format!("{test}_whole.mcap"));
+    bifirst::run::run_scene(&loaded, &whole, &every_round_on_the_gpu(), &mut bifirst::run::Silent).expect("the whole run finishes");
+    let cut = temp_path(&format!("{test}_cut.mcap"));
+    let flag = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let options = RunOptions { interrupt: Some(flag.clone()), ..every_round_on_the_gpu() };
+    assert!(bifirst::run::run_scene(&loaded, &cut, &options, &mut InterruptAfter { at: 7, flag }).is_err(), "the run stops after step 7");
+    let (reloaded, state) = bifirst::run::restart_from(&cut, None, &[]).expect("the log holds a state");
+    assert_eq!(state.step, 7);
+    let continued = temp_path(&format!("{test}_continued.mcap"));
+    bifirst::run::run_scene(&reloaded, &continued, &RunOptions { restart: Some(state), ..every_round_on_the_gpu() }, &mut bifirst::run::Silent).expect("the restarted run finishes");
+    let last = |path: &Path| -> bifirst::solver::SavedState { serde_json::from_value(bifirst::output::read_run(path).expect("log").messages("/state").last().expect("a state").clone()).expect("a saved state") };
+    let (a, b) = (last(&whole), last(&continued));
+    assert_eq!(a.step, b.step);
+    let values = |s: &bifirst::solver::SavedState| s.bodies.iter().flat_map(|b| b.u.iter().chain(&b.v).copied()).collect::<Vec<f64>>();
+    let (x, y) = (values(&a), values(&b));
+    let scale = x.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+    let difference = x.iter().zip(&y).fold(0.0f64, |m, (p, q)| m.max((p - q).abs())) / scale;
+    eprintln!("end states differ by {difference:.2e} (relative)");
+    assert!(difference <= 1e-12, "end states differ by {difference:e}");
+}
