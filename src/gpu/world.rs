@@ -256,9 +256,9 @@ enum Source {
     Energy,
     Displacement,
     NewtonState,
-    /// A device Newton call's strain energy per member, and its internal forces per dof
-    /// (`newton_finish`).
+    /// A device Newton call's strain energy per member (`newton_finish`).
     MemberEnergy,
+    /// A device Newton call's internal forces, packed per dof (`newton_finish`).
     NewtonForces,
 }
 

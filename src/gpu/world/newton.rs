@@ -6,7 +6,8 @@
 //! `forces`, `assemble_residual`), the convergence test (`newton_judge`) and drops the members
 //! that are done from the next iteration's list and dispatch counts (`newton_compact`), several
 //! iterations per submission. The host reads back the members' states, displacements and
-//! residuals, and their strain energies, once per submission. In the first round of a step the
+//! internal forces (it computes the residuals from them), and their strain energies, once per
+//! submission. In the first round of a step the
 //! members come unevaluated, and the device evaluates and judges them first, in the same
 //! submission.
 
@@ -538,8 +539,8 @@ impl GpuWorld {
         }
     }
 
-    /// Queues each call's state, failure flags, displacements, residuals and element energies;
-    /// returns per call where they land and how many elements it has.
+    /// Queues each call's state, failure flags, displacements, internal forces and strain energy;
+    /// returns per call where they land.
     fn queue_states(&self, readback: &mut ReadBack, work: &[BatchCalls], calls: usize) -> Vec<[usize; 5]> {
         let real = self.gpu.precision.size();
         let mut landing = vec![[0usize; 5]; calls];
@@ -554,11 +555,10 @@ impl GpuWorld {
                 let dofs = super::dof_span(&b.members, &[m]);
                 (dofs.start * per_dof) as u64..(dofs.end * per_dof) as u64
             };
-            let u_span = |m: usize| bytes_of(m, real);
-            let force_span = |m: usize| bytes_of(m, real);
+            let per_dof = |m: usize| bytes_of(m, real);
             let states = readback.queue_runs(*batch, Source::NewtonState, &members, &state_span);
-            let us = readback.queue_runs(*batch, Source::Displacement, &members, &u_span);
-            let outs = readback.queue_runs(*batch, Source::NewtonForces, &members, &force_span);
+            let us = readback.queue_runs(*batch, Source::Displacement, &members, &per_dof);
+            let outs = readback.queue_runs(*batch, Source::NewtonForces, &members, &per_dof);
             let energy_span = |m: usize| (m * real) as u64..((m + 1) * real) as u64;
             let energies = readback.queue_runs(*batch, Source::MemberEnergy, &members, &energy_span);
             for (k, &(i, _)) in mine.iter().enumerate() {

@@ -48,6 +48,28 @@ impl StepPipelines {
     pub(super) fn new(gpu: &Gpu) -> Result<Self, GpuError> {
         Ok(Self { begin: gpu.pipeline_at("step_begin", "main", None)?, commit: gpu.pipeline_at("step_commit", "main", None)? })
     }
+
+    /// `step_begin` and `step_commit` bound to `b`, by the names the kernels give their
+    /// resources.
+    fn passes(&self, gpu: &Gpu, b: &StepBindings) -> [Pass; 2] {
+        let common = [("committed", b.committed), ("u", b.u), ("members", b.members)];
+        let begin = [&common[..], &[("motion", b.motions[0]), ("jobs", b.jobs[0]), ("step", b.step), ("u_start", b.u_start)]].concat();
+        let commit = [&common[..], &[("motion", b.motions[1]), ("jobs", b.jobs[1]), ("dof_out", b.dof_out)]].concat();
+        [Pass::bound(gpu, self.begin.clone(), ("step_begin", "main"), None, &begin), Pass::bound(gpu, self.commit.clone(), ("step_commit", "main"), None, &commit)]
+    }
+}
+
+/// The buffers the step kernels bind: the motions and job lists of the begin (`[0]`) and of the
+/// commit (`[1]`), and the per-dof and per-member buffers they share.
+struct StepBindings<'a> {
+    motions: [&'a Buffer; 2],
+    jobs: [&'a Buffer; 2],
+    committed: &'a Buffer,
+    step: &'a Buffer,
+    u: &'a Buffer,
+    u_start: &'a Buffer,
+    dof_out: &'a Buffer,
+    members: &'a Buffer,
 }
 
 /// A batch's committed states on the device and what the host knows of them, per member.
@@ -55,8 +77,8 @@ pub(super) struct Resident {
     committed: Buffer,
     motions: [Buffer; 2],
     jobs: [Buffer; 2],
-    begin: Pass,
-    commit: Pass,
+    /// `step_begin` (`[0]`) and `step_commit` (`[1]`), as `motions` and `jobs`.
+    passes: [Pass; 2],
     /// The device's committed state is the host's committed state (bit for bit, but for the
     /// velocity, which `step_commit` computes as the host does).
     valid: Vec<bool>,
@@ -82,10 +104,9 @@ impl Resident {
         let motion = || buffer(gpu, "step motion", 4 * real, BufferUsages::UNIFORM | BufferUsages::COPY_DST);
         let jobs = || buffer(gpu, "step jobs", members * 8, BufferUsages::STORAGE | BufferUsages::COPY_DST);
         let (motions, jobs) = ([motion(), motion()], [jobs(), jobs()]);
-        let begin =
-            Pass::bound(gpu, pipelines.begin.clone(), ("step_begin", "main"), None, &[("motion", &motions[0]), ("committed", &committed), ("step", &b.step), ("u", &b.u), ("u_start", u_start), ("members", &b.member_buffer), ("jobs", &jobs[0])]);
-        let commit = Pass::bound(gpu, pipelines.commit.clone(), ("step_commit", "main"), None, &[("motion", &motions[1]), ("committed", &committed), ("u", &b.u), ("dof_out", &b.dof_out), ("members", &b.member_buffer), ("jobs", &jobs[1])]);
-        Self { committed, motions, jobs, begin, commit, valid: vec![false; members], current: vec![false; members], predicted: vec![false; members], pending: None, lists: [Vec::new(), Vec::new()], involved: vec![false; members] }
+        let bindings = StepBindings { motions: [&motions[0], &motions[1]], jobs: [&jobs[0], &jobs[1]], committed: &committed, step: &b.step, u: &b.u, u_start, dof_out: &b.dof_out, members: &b.member_buffer };
+        let passes = pipelines.passes(gpu, &bindings);
+        Self { committed, motions, jobs, passes, valid: vec![false; members], current: vec![false; members], predicted: vec![false; members], pending: None, lists: [Vec::new(), Vec::new()], involved: vec![false; members] }
     }
 
     /// A member's `u` or `dof_out` changed on the device by other means than a Newton call the
@@ -151,15 +172,16 @@ impl GpuWorld {
                 continue;
             }
             for (k, (list, motion)) in [(1, commit), (0, (!members.is_empty()).then_some((members, motion)))].into_iter().filter_map(|(k, w)| Some((k, w?))) {
+                let r = &self.batches[batch].newton.as_ref().expect("a batch with committed states").resident;
+                let (motion_buffer, jobs) = (r.motions[k].clone(), r.jobs[k].clone());
+                let jobs_list: Vec<Active> = list.iter().map(|&m| Active { member: m as u32, mode: MODE_FORCES }).collect();
+                // Committed states are kept in f64 only (device Newton iterations are).
+                self.upload(&motion_buffer, 0, bytemuck::bytes_of(&motion));
+                self.upload(&jobs, 0, bytemuck::cast_slice(&jobs_list));
                 let r = &mut self.batches[batch].newton.as_mut().expect("a batch with committed states").resident;
                 for &m in &list {
                     r.involved[m] = true;
                 }
-                let (motion_buffer, jobs) = (r.motions[k].clone(), r.jobs[k].clone());
-                let jobs_list: Vec<Active> = list.iter().map(|&m| Active { member: m as u32, mode: MODE_FORCES }).collect();
-                self.upload(&motion_buffer, 0, &super::to_device(self.gpu.precision, &[motion.dt, motion.dt_explicit, motion.theta_dt, motion.pad]));
-                self.upload(&jobs, 0, bytemuck::cast_slice(&jobs_list));
-                let r = &mut self.batches[batch].newton.as_mut().expect("a batch with committed states").resident;
                 r.lists[k] = list;
             }
         }
@@ -175,7 +197,7 @@ impl GpuWorld {
             for k in [1, 0] {
                 let list = std::mem::take(&mut r.lists[k]);
                 let most = list.iter().map(|&m| b.members[m].dofs as usize).max().unwrap_or(0);
-                (if k == 0 { &r.begin } else { &r.commit }).record(&self.gpu, encoder, WORKGROUP, most, list.len());
+                r.passes[k].record(&self.gpu, encoder, WORKGROUP, most, list.len());
             }
         }
     }
@@ -295,8 +317,8 @@ pub fn run_step_kernels(
     let motion = |m: StepMotion<Real>| init("motion", bytemuck::cast_slice(&[m]), uniform);
     let jobs = |list: &[usize]| init("jobs", bytemuck::cast_slice(&list.iter().map(|&m| Active { member: m as u32, mode: MODE_FORCES }).collect::<Vec<_>>()), BufferUsages::STORAGE);
     let (commit_motion, begin_motion, commit_jobs, begin_jobs) = (motion(commit_motion), motion(begin_motion), jobs(commit), jobs(begin));
-    let commit_pass = Pass::bound(gpu, pipelines.commit, ("step_commit", "main"), None, &[("motion", &commit_motion), ("committed", &committed_b), ("u", &u_b), ("dof_out", &dof_out_b), ("members", &members_b), ("jobs", &commit_jobs)]);
-    let begin_pass = Pass::bound(gpu, pipelines.begin, ("step_begin", "main"), None, &[("motion", &begin_motion), ("committed", &committed_b), ("step", &step_b), ("u", &u_b), ("u_start", &u_start_b), ("members", &members_b), ("jobs", &begin_jobs)]);
+    let bindings = StepBindings { motions: [&begin_motion, &commit_motion], jobs: [&begin_jobs, &commit_jobs], committed: &committed_b, step: &step_b, u: &u_b, u_start: &u_start_b, dof_out: &dof_out_b, members: &members_b };
+    let [begin_pass, commit_pass] = pipelines.passes(gpu, &bindings);
     let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("step kernels") });
     let most = |list: &[usize]| list.iter().map(|&m| members[m].dofs as usize).max().unwrap_or(0);
     commit_pass.record(gpu, &mut encoder, WORKGROUP, most(commit), commit.len());
