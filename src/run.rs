@@ -47,6 +47,9 @@ pub enum Stop {
     Panicked(String),
     #[error("interrupted")]
     Interrupted,
+    /// The states the device kept could not be read back for the outputs.
+    #[error("the device's state could not be read back: {0}")]
+    Device(String),
 }
 
 impl Stop {
@@ -84,6 +87,11 @@ pub trait Monitor {
     /// The state at the start and after every finished step (the known-answer measures of
     /// `bifirst accuracy` read it).
     fn state(&mut self, _sim: &Simulation) {}
+    /// Whether [`Monitor::state`] reads the bodies' states (they are then brought back from a
+    /// device that keeps them every step).
+    fn reads_states(&self) -> bool {
+        false
+    }
     fn warning(&mut self, _message: &str) {}
 }
 
@@ -254,6 +262,16 @@ impl Logger {
             }
         }
         Ok(())
+    }
+
+    /// Whether this step's outputs read the bodies' states (`last`: the run's last step): probes,
+    /// frames, `/contacts` and `/state` when due. A device that keeps the states then sends
+    /// them back first ([`Simulation::sync_states`]).
+    fn reads_states(&self, sim: &Simulation, logged: bool, last: bool) -> bool {
+        let due = |every: usize| every > 0 && (last || sim.step.is_multiple_of(every));
+        let frames = (self.view.is_some() && due(self.scene_every)) || (self.vtu.is_some() && due(self.vtu_every));
+        let saved = last || (self.saved_every > 0 && sim.step.is_multiple_of(self.saved_every));
+        (logged && !sim.probes.is_empty()) || frames || due(self.contacts_every) || saved
     }
 
     /// `/state`, the full state a run can continue from: at the scene's cadence, and (`last`)
@@ -445,16 +463,20 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
             Ok(summary)
         }
         Some((stop, report)) => {
-            // The last finished step goes into every output, then the reason for stopping.
+            // The last finished step goes into every output, then the reason for stopping (the
+            // states only if the device that kept them gives them back).
+            let synced = sim.sync_states().is_ok();
             logger.state(&sim, sim.energies())?;
-            logger.frames(&sim, true)?;
-            logger.contacts(&sim, true)?;
-            logger.saved(&sim, true)?;
+            if synced {
+                logger.frames(&sim, true)?;
+                logger.contacts(&sim, true)?;
+                logger.saved(&sim, true)?;
+            }
             let level = if matches!(stop, Stop::Interrupted) { Level::Warning } else { Level::Error };
             let message = stop.to_string();
             logger.line(sim.t, level, &format!("the run stopped at t = {:.6e}: {message}", sim.t))?;
             logger.solver(&report, report.t, stop.status(), Some(message))?;
-            if let Err(e) = contour(&sim) {
+            if let Some(Err(e)) = synced.then(|| contour(&sim)) {
                 monitor.warning(&e.to_string());
             }
             let summary = summary(&sim, Some(&stop));
@@ -478,6 +500,8 @@ fn set_up(loaded: &LoadedScene, options: &RunOptions, monitor: &mut dyn Monitor)
     monitor.backend(&resolved.backend.describe());
     let bodies: Vec<_> = sim.bodies.iter().map(|b| b.world_body()).collect();
     sim.world = resolved.backend.device_world(&bodies).map_err(BackendError::from)?;
+    // The outputs bring the states back where they read them (`Logger::reads_states`).
+    sim.hold_states = sim.world.is_some();
     if let (Some(path), 3) = (&options.contour, sim.dim) {
         return Err(PlotError::Draw { path: path.clone(), message: "contour plots are drawn for 2D scenes; use --vtu and ParaView for 3D".into() }.into());
     }
@@ -565,7 +589,13 @@ fn step_until_stopped(loaded: &LoadedScene, sim: &mut Simulation, logger: &mut L
                 logger.line(sim.t, Level::Warning, &message)?;
             }
         }
-        if report.step % every == 0 || sim.finished() {
+        let logged = report.step % every == 0 || sim.finished();
+        if logger.reads_states(sim, logged, sim.finished()) || monitor.reads_states() {
+            if let Err(e) = sim.sync_states() {
+                return Ok(Some((Stop::Device(e.to_string()), report)));
+            }
+        }
+        if logged {
             logger.solver(&report, sim.t, "converged", None)?;
             logger.contact(sim, &report)?;
             logger.state(sim, energies)?;

@@ -9,7 +9,9 @@ use bifirst::contact::Status;
 use bifirst::cpu;
 use bifirst::element::{ElementOutput, Formulation, Patches, ReferenceGeometry};
 use bifirst::gpu::shaders::{is_element_kernel, validate, ElementVariant, DECOUPLED, SHADERS};
-use bifirst::gpu::types::{Active, Coefficients, ContactCall, ContactGroup, ContactState, DofOut, DofState, DofStep, MaterialParams, MemberRange, NewtonMember, NewtonState, StepMotion, MODE_TANGENT, NEWTON_CONVERGED, NEWTON_HOST, NEWTON_ITERATING};
+use bifirst::gpu::types::{
+    summary_len, Active, Coefficients, ContactCall, ContactGroup, ContactState, DofOut, DofState, DofStep, MaterialParams, MemberRange, NewtonMember, NewtonState, StepMotion, MODE_TANGENT, NEWTON_CONVERGED, NEWTON_HOST, NEWTON_ITERATING,
+};
 use bifirst::gpu::uzawa_step::{UzawaPoint, UzawaStepKernel};
 use bifirst::gpu::{ElementFailure, Evaluation, GpuWorld, NewtonCall, WorldBody};
 use bifirst::material::{ArrudaBoyce, BlatzKo, Decoupled, Gent, Lvf, Model, MooneyRivlin, NeoHookean, Ogden, Relaxation, Yeoh};
@@ -146,7 +148,7 @@ fn kernel_structs_match_the_shader_layouts() {
     check_all_real_struct("assemble_residual", None, "DofStep", &["mass", "u_pred", "f_int_t", "f_ext"], [size_of::<DofStep<f32>>(), size_of::<DofStep<f64>>()]);
     for kernel in ["step_begin", "step_commit"] {
         check_all_real_struct(kernel, None, "DofState", &["u", "v", "f_int"], [size_of::<DofState<f32>>(), size_of::<DofState<f64>>()]);
-        check_all_real_struct(kernel, None, "StepMotion", &["dt", "dt_explicit", "theta_dt", "pad"], [size_of::<StepMotion<f32>>(), size_of::<StepMotion<f64>>()]);
+        check_all_real_struct(kernel, None, "StepMotion", &["dt", "dt_explicit", "theta_dt", "dim"], [size_of::<StepMotion<f32>>(), size_of::<StepMotion<f64>>()]);
     }
     assert_eq!(bytemuck::cast::<_, [f64; 3]>(DofState::<f64> { u: 1.0, v: 2.0, f_int: 3.0 }), [1.0, 2.0, 3.0], "field order");
     let d = DofStep::<f64> { mass: 1.0, u_pred: 2.0, f_int_t: 3.0, f_ext: 4.0 };
@@ -577,7 +579,7 @@ fn step_kernels_match_their_cpu_twins() {
     let u: Vec<f64> = (0..n).map(|_| value()).collect();
     let dof_out: Vec<DofOut<f64>> = (0..n).map(|_| DofOut { f_int: value(), g: value() }).collect();
     let (commit, begin) = ([0usize, 2], [0usize, 1, 2]);
-    let (commit_motion, begin_motion) = (StepMotion::of(1e-3, 0.55), StepMotion::of(5e-4, 1.0));
+    let (commit_motion, begin_motion) = (StepMotion::of(1e-3, 0.55, 2), StepMotion::of(5e-4, 1.0, 2));
     let got = bifirst::gpu::world::run_step_kernels(&gpu, &members, (&commit, commit_motion), (&begin, begin_motion), &committed, &step, &u, &dof_out).expect("the step kernels run");
     let (mut c, mut s, mut x, mut x0) = (committed.clone(), step.clone(), u.clone(), vec![0.0; n]);
     for &m in &commit {
@@ -596,6 +598,52 @@ fn step_kernels_match_their_cpu_twins() {
     assert_eq!(got.2[last.clone()], u[last.clone()], "and its displacements");
     let moved = members[1].dof_start as usize..members[2].dof_start as usize;
     assert_eq!(flat(&got.0[moved.clone()]), flat(&committed[moved]), "a member begun but not committed keeps its committed state");
+}
+
+#[test]
+fn newton_summary_kernel_matches_its_cpu_twin() {
+    // Members of 3, 35 and 64 nodes in 2D and 3D, the middle one left out of the call: its
+    // summary stays zero. Every reduction of the twin within 1e-12 of its scale.
+    let Some(gpu) = gpu_or_skip("newton_summary_kernel_matches_its_cpu_twin", Precision::F64) else { return };
+    let mut rng = random::rng(591);
+    for dim in [2usize, 3] {
+        let nodes = [3u32, 35, 64];
+        let members: Vec<MemberRange> = nodes
+            .iter()
+            .scan(0, |start, &k| {
+                let m = MemberRange { dof_start: *start, dofs: k * dim as u32, ..Default::default() };
+                *start += k * dim as u32;
+                Some(m)
+            })
+            .collect();
+        let n = nodes.iter().sum::<u32>() as usize * dim;
+        let mut value = || rng.random_range(-2.0..2.0);
+        let committed: Vec<DofState<f64>> = (0..n).map(|_| DofState { u: value(), v: value(), f_int: value() }).collect();
+        // Lumped masses: one per node.
+        let masses: Vec<f64> = (0..n / dim).map(|_| 0.1 + value().abs()).collect();
+        let step: Vec<DofStep<f64>> = (0..n).map(|d| DofStep { mass: masses[d / dim], u_pred: value(), f_int_t: value(), f_ext: value() }).collect();
+        let reference: Vec<f64> = (0..n).map(|_| 10.0 * value()).collect();
+        let u: Vec<f64> = (0..n).map(|_| value()).collect();
+        let dof_out: Vec<DofOut<f64>> = (0..n).map(|_| DofOut { f_int: value(), g: value() }).collect();
+        let (motion, coefficients) = (StepMotion::of(1e-3, 0.55, dim), Coefficients { factor: 0.7, c1: 3.0 });
+        let call = [0usize, 2];
+        let got = bifirst::gpu::world::run_newton_summary(&gpu, &members, &call, (motion, coefficients, &committed, &step, &reference, &u, &dof_out)).expect("the summary kernel runs");
+        let mut twin = vec![0.0; got.len()];
+        let inputs = cpu::SummaryInputs { motion, coefficients, committed: &committed, step: &step, reference: &reference, u: &u, dof_out: &dof_out };
+        let jobs: Vec<Active> = call.iter().map(|&m| Active { member: m as u32, mode: 0 }).collect();
+        cpu::newton_summary(&inputs, &members, &jobs, &mut twin);
+        let len = summary_len(dim);
+        for m in 0..members.len() {
+            let (g, t) = (&got[m * len..(m + 1) * len], &twin[m * len..(m + 1) * len]);
+            if call.contains(&m) {
+                let error = g.iter().zip(t).map(|(a, b)| (a - b).abs() / b.abs().max(1e-300)).fold(0.0, f64::max);
+                eprintln!("dim {dim} member {m}: relative error {error:.2e}");
+                assert!(error <= 1e-12, "dim {dim} member {m}: {g:?} against {t:?}");
+            } else {
+                assert!(g.iter().all(|&x| x == 0.0), "a member outside the call is not written");
+            }
+        }
+    }
 }
 
 fn relative_error(a: &[f64], b: &[f64]) -> f64 {
@@ -1030,6 +1078,8 @@ fn newton_kernels_match_their_cpu_twins() {
                     u_start: &starts[b],
                     inputs: &steps[b],
                     contact_force: Some(&pushes[b]),
+                    keep: false,
+                    summary: None,
                     outcome: NewtonState::default(),
                     strain_energy: None,
                     failure: None,
@@ -1108,6 +1158,8 @@ fn a_device_newton_call_for_one_body_of_a_large_batch_reads_back_only_its_own() 
         u_start: &start,
         inputs: &step,
         contact_force: None,
+        keep: false,
+        summary: None,
         outcome: NewtonState::default(),
         strain_energy: None,
         failure: None,
@@ -1159,6 +1211,8 @@ fn a_device_newton_increment_that_inverts_an_element_fails_the_body() {
         u_start: &start,
         inputs: &step,
         contact_force: None,
+        keep: false,
+        summary: None,
         outcome: NewtonState::default(),
         strain_energy: None,
         failure: None,
@@ -1356,6 +1410,8 @@ fn newton_contact_kernels_match_their_cpu_twins() {
                     u_start: &starts[b],
                     inputs: &steps[b],
                     contact_force: Some(&zeros[b]),
+                    keep: false,
+                    summary: None,
                     outcome: NewtonState::default(),
                     strain_energy: None,
                     failure: None,

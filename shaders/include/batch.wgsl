@@ -67,5 +67,6 @@ struct StepMotion {
     dt: real,
     dt_explicit: real,
     theta_dt: real,
-    pad: real,
+    // The scene's dimension (2 or 3).
+    dim: real,
 }

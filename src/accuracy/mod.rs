@@ -73,6 +73,9 @@ pub struct Row {
 struct Observer<'a>(&'a mut dyn KnownAnswer);
 
 impl Monitor for Observer<'_> {
+    fn reads_states(&self) -> bool {
+        true
+    }
     fn state(&mut self, sim: &Simulation) {
         self.0.observe(sim);
     }

@@ -86,6 +86,8 @@ pub(super) fn newton_rows(options: &BenchOptions, gpus: &[Arc<Gpu>], peaks: &[Pe
                         u_start: &start,
                         inputs: &case.step,
                         contact_force: None,
+                        keep: false,
+                        summary: None,
                         outcome: NewtonState::default(),
                         strain_energy: None,
                         failure: None,

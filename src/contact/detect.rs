@@ -91,24 +91,45 @@ impl Candidate {
 /// calls (a default one to start afresh): the points are the same either way.
 #[allow(clippy::too_many_arguments)]
 pub fn detect(model: &ContactModel, config: &mut Configuration, fill: &Fill<'_>, dim: usize, t: Real, dt: Real, margin: Real, kept: &mut broad::KeptPairs) -> Vec<ContactPoint> {
-    // The boxes tell, without visiting any node, that most bodies of a packing are far from
-    // every wall and every other body: only the others' nodes are placed and searched.
-    let walls = ObstacleSearch::new(model, &config.boxes, t, dt, margin);
-    let pairs = PairSearch::new(model, &config.boxes, &config.largest, margin, kept);
-    let mut needed = vec![false; config.boxes.len()];
-    for &(_, b) in &walls.candidates {
-        needed[b as usize] = true;
-    }
-    for (s, masters) in pairs.masters.iter().enumerate() {
-        needed[s] |= !masters.is_empty();
-        for &m in masters {
-            needed[m as usize] = true;
+    Detection::new(model, config, t, dt, margin, kept).points(model, config, fill, dim, margin)
+}
+
+/// A detection's broad phase, done: which bodies' nodes its narrow phase places
+/// ([`Detection::needed`]), so that a caller whose positions lie elsewhere (on a device) can
+/// fetch them before [`Detection::points`].
+pub struct Detection {
+    walls: ObstacleSearch,
+    pairs: PairSearch,
+    pub needed: Vec<bool>,
+}
+
+impl Detection {
+    pub fn new(model: &ContactModel, config: &Configuration, t: Real, dt: Real, margin: Real, kept: &mut broad::KeptPairs) -> Self {
+        // The boxes tell, without visiting any node, that most bodies of a packing are far from
+        // every wall and every other body: only the others' nodes are placed and searched.
+        let walls = ObstacleSearch::new(model, &config.boxes, t, dt, margin);
+        let pairs = PairSearch::new(model, &config.boxes, &config.largest, margin, kept);
+        let mut needed = vec![false; config.boxes.len()];
+        for &(_, b) in &walls.candidates {
+            needed[b as usize] = true;
         }
+        for (s, masters) in pairs.masters.iter().enumerate() {
+            needed[s] |= !masters.is_empty();
+            for &m in masters {
+                needed[m as usize] = true;
+            }
+        }
+        Self { walls, pairs, needed }
     }
-    config.nodes.place(|b| needed[b], fill);
-    let mut points = walls.points(model, &config.nodes.positions, dim, margin);
-    points.extend(pairs.points(model, &config.nodes.positions, dim, margin));
-    points
+
+    /// The narrow phase: the needed bodies placed with `fill`, their contact points.
+    pub fn points(self, model: &ContactModel, config: &mut Configuration, fill: &Fill<'_>, dim: usize, margin: Real) -> Vec<ContactPoint> {
+        let needed = self.needed;
+        config.nodes.place(|b| needed[b], fill);
+        let mut points = self.walls.points(model, &config.nodes.positions, dim, margin);
+        points.extend(self.pairs.points(model, &config.nodes.positions, dim, margin));
+        points
+    }
 }
 
 /// A facet lies flat on a master facet when their normals are this close to opposite (cosine,

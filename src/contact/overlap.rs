@@ -64,96 +64,123 @@ impl Worst {
 /// by `fill` where a body's box meets another's or an obstacle, its nodes; `kept` holds the body
 /// pairs whose boxes meet between calls (a default one to start afresh).
 pub fn overlaps(model: &ContactModel, meshes: &[&Mesh], config: &mut Configuration, fill: &Fill<'_>, t: Real, kept: &mut broad::KeptPairs) -> Vec<Overlap> {
-    let bodies = meshes.len();
-    let can_touch = |a: usize, b: usize| model.pairs.mu(a, b).is_some();
-    // Only a node inside another body's box can be inside that body, and only elements in the
-    // box of a body that can touch theirs can hold such a node: in a packing that leaves the
-    // rims of the grains (the search cost a quarter of a step with every element).
-    let body_boxes = &config.boxes;
-    // A skin of a quarter of the smallest body keeps the pairs while the bodies move less.
-    let skin = 0.25 * body_boxes.iter().map(|(lo, hi)| (0..3).map(|i| hi[i] - lo[i]).fold(0.0, Real::max)).fold(Real::INFINITY, Real::min);
-    // A superset of the pairs whose boxes meet: every test below is against the boxes themselves.
-    let neighbours = kept.near(body_boxes, if skin.is_finite() { skin } else { 0.0 }, can_touch);
-    // Whether a body's box meets another's: only then can it hold or put a node in another body.
-    let meets_another: Vec<bool> = neighbours.par_iter().enumerate().map(|(b, list)| list.iter().any(|&o| intersect(body_boxes[b], body_boxes[o as usize]))).collect();
-    let offsets: &[Vec3] = &model.obstacles.iter().map(|o| o.motion.displacement(t)).collect::<Vec<_>>();
-    // The obstacles each body's box reaches (few: the walls next to it).
-    let near_obstacles = |s: usize| model.obstacles.iter().enumerate().filter(move |(o, obstacle)| obstacle.bodies[s] && obstacle.may_touch(body_boxes[s], offsets[*o], 0.0));
-    let near_an_obstacle: Vec<bool> = (0..bodies).into_par_iter().map(|b| near_obstacles(b).next().is_some()).collect();
-    config.nodes.place(|b| meets_another[b] || near_an_obstacle[b], fill);
-    let positions = &config.nodes.positions;
-    // The elements in reach of another body, the bodies in parallel, in body order.
-    let neighbours = &neighbours;
-    let (ids, boxes): (Vec<(u32, u32)>, Vec<Aabb>) = meshes
-        .par_iter()
-        .enumerate()
-        .filter(|(m, _)| meets_another[*m])
-        .flat_map_iter(|(m, mesh)| {
-            (0..mesh.element_count()).filter_map(move |e| {
-                let (lo, hi) = bounds(mesh.element(e).iter().map(|&n| positions[m][n as usize]));
-                neighbours[m].iter().any(|&s| intersect((lo, hi), body_boxes[s as usize])).then_some(((m as u32, e as u32), (lo, hi)))
+    OverlapSearch::new(model, config, t, kept).overlaps(model, meshes, config, fill)
+}
+
+/// An overlap search's broad phase, done: which bodies' nodes it places ([`OverlapSearch::needed`]),
+/// so that a caller whose positions lie elsewhere (on a device) can fetch them first.
+pub struct OverlapSearch<'k> {
+    neighbours: &'k [Vec<u32>],
+    meets_another: Vec<bool>,
+    near_an_obstacle: Vec<bool>,
+    offsets: Vec<Vec3>,
+    pub needed: Vec<bool>,
+}
+
+impl<'k> OverlapSearch<'k> {
+    pub fn new(model: &ContactModel, config: &Configuration, t: Real, kept: &'k mut broad::KeptPairs) -> Self {
+        let bodies = config.boxes.len();
+        let can_touch = |a: usize, b: usize| model.pairs.mu(a, b).is_some();
+        // Only a node inside another body's box can be inside that body, and only elements in the
+        // box of a body that can touch theirs can hold such a node: in a packing that leaves the
+        // rims of the grains (the search cost a quarter of a step with every element).
+        let body_boxes = &config.boxes;
+        // A skin of a quarter of the smallest body keeps the pairs while the bodies move less.
+        let skin = 0.25 * body_boxes.iter().map(|(lo, hi)| (0..3).map(|i| hi[i] - lo[i]).fold(0.0, Real::max)).fold(Real::INFINITY, Real::min);
+        // A superset of the pairs whose boxes meet: every test below is against the boxes themselves.
+        let neighbours = kept.near(body_boxes, if skin.is_finite() { skin } else { 0.0 }, can_touch);
+        // Whether a body's box meets another's: only then can it hold or put a node in another body.
+        let meets_another: Vec<bool> = neighbours.par_iter().enumerate().map(|(b, list)| list.iter().any(|&o| intersect(body_boxes[b], body_boxes[o as usize]))).collect();
+        let offsets: Vec<Vec3> = model.obstacles.iter().map(|o| o.motion.displacement(t)).collect();
+        // The obstacles each body's box reaches (few: the walls next to it).
+        let near_an_obstacle: Vec<bool> = (0..bodies).into_par_iter().map(|s| model.obstacles.iter().enumerate().any(|(o, obstacle)| obstacle.bodies[s] && obstacle.may_touch(body_boxes[s], offsets[o], 0.0))).collect();
+        let needed = meets_another.iter().zip(&near_an_obstacle).map(|(&a, &b)| a || b).collect();
+        Self { neighbours, meets_another, near_an_obstacle, offsets, needed }
+    }
+
+    /// The search: the needed bodies placed with `fill`, their overlaps.
+    pub fn overlaps(self, model: &ContactModel, meshes: &[&Mesh], config: &mut Configuration, fill: &Fill<'_>) -> Vec<Overlap> {
+        let Self { neighbours, meets_another, near_an_obstacle, offsets, needed } = self;
+        let bodies = meshes.len();
+        let can_touch = |a: usize, b: usize| model.pairs.mu(a, b).is_some();
+        config.nodes.place(|b| needed[b], fill);
+        let body_boxes = &config.boxes;
+        let offsets = &offsets[..];
+        let near_obstacles = |s: usize| model.obstacles.iter().enumerate().filter(move |(o, obstacle)| obstacle.bodies[s] && obstacle.may_touch(body_boxes[s], offsets[*o], 0.0));
+        let positions = &config.nodes.positions;
+        // The elements in reach of another body, the bodies in parallel, in body order.
+        let neighbours = &neighbours;
+        let (ids, boxes): (Vec<(u32, u32)>, Vec<Aabb>) = meshes
+            .par_iter()
+            .enumerate()
+            .filter(|(m, _)| meets_another[*m])
+            .flat_map_iter(|(m, mesh)| {
+                (0..mesh.element_count()).filter_map(move |e| {
+                    let (lo, hi) = bounds(mesh.element(e).iter().map(|&n| positions[m][n as usize]));
+                    neighbours[m].iter().any(|&s| intersect((lo, hi), body_boxes[s as usize])).then_some(((m as u32, e as u32), (lo, hi)))
+                })
             })
-        })
-        .unzip();
-    let grid = (!ids.is_empty()).then(|| {
-        let cell = boxes.iter().map(|(lo, hi)| (0..3).map(|i| hi[i] - lo[i]).fold(0.0, Real::max)).sum::<Real>() / boxes.len() as Real;
-        Grid::new(boxes.iter().enumerate().map(|(i, &(lo, hi))| (i as u32, lo, hi)), cell.max(Real::MIN_POSITIVE))
-    });
-    let dim = meshes.first().map_or(2, |m| m.dim());
-    (0..bodies)
-        .into_par_iter()
-        .flat_map_iter(|s| {
-            let surface = &model.surfaces[s];
-            // Computed for the bodies that have a node to measure (few, in a packing).
-            let mut sizes: Option<Vec<Real>> = None;
-            let mut found = Vec::new();
-            let mut touches: Vec<Touch> = Vec::new();
-            if !near_an_obstacle[s] && !meets_another[s] {
-                return found;
-            }
-            let near: Vec<(usize, &super::Obstacle)> = near_obstacles(s).collect();
-            for &node in &surface.nodes {
-                let x = positions[s][node as usize];
-                let mut own = || sizes.get_or_insert_with(|| node_sizes(surface, &positions[s]))[node as usize];
-                for &(o, obstacle) in &near {
-                    obstacle.touches(x, offsets[o], 0.0, &mut touches);
-                    if let Some(deepest) = touches.iter().min_by(|a, b| a.gap.total_cmp(&b.gap)) {
-                        let (depth, size) = (-deepest.gap, own());
-                        if depth > 1e-9 * size {
-                            found.push(Overlap { body: s as u32, node, host: Host::Obstacle(o as u32), depth, out: deepest.normal, size });
+            .unzip();
+        let grid = (!ids.is_empty()).then(|| {
+            let cell = boxes.iter().map(|(lo, hi)| (0..3).map(|i| hi[i] - lo[i]).fold(0.0, Real::max)).sum::<Real>() / boxes.len() as Real;
+            Grid::new(boxes.iter().enumerate().map(|(i, &(lo, hi))| (i as u32, lo, hi)), cell.max(Real::MIN_POSITIVE))
+        });
+        let dim = meshes.first().map_or(2, |m| m.dim());
+        (0..bodies)
+            .into_par_iter()
+            .flat_map_iter(|s| {
+                let surface = &model.surfaces[s];
+                // Computed for the bodies that have a node to measure (few, in a packing).
+                let mut sizes: Option<Vec<Real>> = None;
+                let mut found = Vec::new();
+                let mut touches: Vec<Touch> = Vec::new();
+                if !near_an_obstacle[s] && !meets_another[s] {
+                    return found;
+                }
+                let near: Vec<(usize, &super::Obstacle)> = near_obstacles(s).collect();
+                for &node in &surface.nodes {
+                    let x = positions[s][node as usize];
+                    let mut own = || sizes.get_or_insert_with(|| node_sizes(surface, &positions[s]))[node as usize];
+                    for &(o, obstacle) in &near {
+                        obstacle.touches(x, offsets[o], 0.0, &mut touches);
+                        if let Some(deepest) = touches.iter().min_by(|a, b| a.gap.total_cmp(&b.gap)) {
+                            let (depth, size) = (-deepest.gap, own());
+                            if depth > 1e-9 * size {
+                                found.push(Overlap { body: s as u32, node, host: Host::Obstacle(o as u32), depth, out: deepest.normal, size });
+                            }
                         }
                     }
-                }
-                let Some(grid) = &grid else { continue };
-                if !neighbours[s].iter().any(|&m| intersect((x, x), body_boxes[m as usize])) {
-                    continue;
-                }
-                let mut best: Option<Overlap> = None;
-                for &id in grid.query(x) {
-                    let (m, e) = ids[id as usize];
-                    let (lo, hi) = boxes[id as usize];
-                    if !can_touch(s, m as usize) || (0..dim).any(|i| x[i] < lo[i] || x[i] > hi[i]) {
+                    let Some(grid) = &grid else { continue };
+                    if !neighbours[s].iter().any(|&m| intersect((x, x), body_boxes[m as usize])) {
                         continue;
                     }
-                    if best.is_some_and(|b| b.host == Host::Body(m)) {
-                        continue;
+                    let mut best: Option<Overlap> = None;
+                    for &id in grid.query(x) {
+                        let (m, e) = ids[id as usize];
+                        let (lo, hi) = boxes[id as usize];
+                        if !can_touch(s, m as usize) || (0..dim).any(|i| x[i] < lo[i] || x[i] > hi[i]) {
+                            continue;
+                        }
+                        if best.is_some_and(|b| b.host == Host::Body(m)) {
+                            continue;
+                        }
+                        let mesh = meshes[m as usize];
+                        let element: Vec<Vec3> = mesh.element(e as usize).iter().map(|&n| positions[m as usize][n as usize]).collect();
+                        if !inside(mesh.kind, &element, x) {
+                            continue;
+                        }
+                        let (depth, out) = to_surface(&model.surfaces[m as usize], &positions[m as usize], x);
+                        let size = own().min(edge_range(&element).0);
+                        if depth > 1e-9 * size && best.is_none_or(|b| depth / size > b.ratio()) {
+                            best = Some(Overlap { body: s as u32, node, host: Host::Body(m), depth, out, size });
+                        }
                     }
-                    let mesh = meshes[m as usize];
-                    let element: Vec<Vec3> = mesh.element(e as usize).iter().map(|&n| positions[m as usize][n as usize]).collect();
-                    if !inside(mesh.kind, &element, x) {
-                        continue;
-                    }
-                    let (depth, out) = to_surface(&model.surfaces[m as usize], &positions[m as usize], x);
-                    let size = own().min(edge_range(&element).0);
-                    if depth > 1e-9 * size && best.is_none_or(|b| depth / size > b.ratio()) {
-                        best = Some(Overlap { body: s as u32, node, host: Host::Body(m), depth, out, size });
-                    }
+                    found.extend(best);
                 }
-                found.extend(best);
-            }
-            found
-        })
-        .collect()
+                found
+            })
+            .collect()
+    }
 }
 
 /// Per node, the shortest edge of the boundary facets around it (infinite off the boundary).

@@ -5,7 +5,7 @@
 
 use super::uzawa::{global, triple};
 use crate::contact::uzawa::SETTLE;
-use crate::gpu::types::{Active, Coefficients, DofOut, DofStep, MemberRange, NewtonMember, NewtonState, NEWTON_CONVERGED, NEWTON_FAILED, NEWTON_HOST, NEWTON_ITERATING, NEWTON_WORKGROUP, NO_FAILURE};
+use crate::gpu::types::{summary_len, Active, Coefficients, DofOut, DofState, DofStep, MemberRange, NewtonMember, NewtonState, StepMotion, NEWTON_CONVERGED, NEWTON_FAILED, NEWTON_HOST, NEWTON_ITERATING, NEWTON_WORKGROUP, NO_FAILURE};
 use crate::gpu::uzawa_sweep::{NodeGather, UzawaJudgeState, UzawaLocal, UzawaProblem, JUDGE_CONVERGED, JUDGE_LIVE};
 use crate::gpu::ContactLayout;
 use crate::policy::{REFACTOR_CONTRACTION, TIGHTEN_AFTER, TIGHTEST_INNER, UZAWA_STALLS};
@@ -143,6 +143,80 @@ pub fn newton_finish(energy: &[Real], dof_out: &[DofOut<Real>], members: &[Membe
         member_energy[m] = total;
         for d in range.dof_start..range.dof_start + range.dofs {
             forces[d as usize] = dof_out[d as usize].f_int;
+        }
+    }
+}
+
+/// What `newton_summary` reads: the step's motion and coefficients, the committed states (the
+/// step's start), the step inputs (masses), the reference position of every dof, the iterate
+/// and its forces.
+pub struct SummaryInputs<'a> {
+    pub motion: StepMotion<Real>,
+    pub coefficients: Coefficients<Real>,
+    pub committed: &'a [DofState<Real>],
+    pub step: &'a [DofStep<Real>],
+    pub reference: &'a [Real],
+    pub u: &'a [Real],
+    pub dof_out: &'a [DofOut<Real>],
+}
+
+/// `newton_summary`: per listed member, at `m * summary_len(dim)` of `summary`, what the host
+/// books at the end of its step ([`crate::gpu::types::summary_len`] says the layout).
+pub fn newton_summary(inputs: &SummaryInputs, members: &[MemberRange], call: &[Active], summary: &mut [Real]) {
+    let SummaryInputs { motion, coefficients, committed, step, reference, u, dof_out } = *inputs;
+    let dim = (motion.dim as usize).clamp(2, 3);
+    let angular = if dim == 2 { 1 } else { 3 };
+    let xi = coefficients.factor;
+    for job in call {
+        let m = job.member as usize;
+        let range = members[m];
+        let (mut kinetic, mut theta_term, mut force_work, mut speed2) = (0.0, 0.0, 0.0, 0.0);
+        let (mut mx, mut p, mut l, mut lo, mut hi) = ([0.0; 3], [0.0; 3], [0.0; 3], [0.0; 3], [0.0; 3]);
+        for n in 0..range.dofs as usize / dim {
+            let first = range.dof_start as usize + n * dim;
+            let node_mass = step[first].mass;
+            let (mut x, mut v, mut s2) = ([0.0; 3], [0.0; 3], 0.0);
+            for i in 0..dim {
+                let d = first + i;
+                let c = committed[d];
+                let mass = step[d].mass;
+                let vi = (u[d] - c.u - motion.dt_explicit * c.v) / motion.theta_dt;
+                kinetic += mass * vi * vi;
+                theta_term += mass * (vi - c.v) * (vi - c.v);
+                force_work += (u[d] - c.u) * ((1.0 - xi) * c.f_int + xi * dof_out[d].f_int);
+                s2 += vi * vi;
+                x[i] = reference[d] + u[d];
+                v[i] = vi;
+                mx[i] += mass * x[i];
+                p[i] += mass * vi;
+                if n == 0 || x[i] < lo[i] {
+                    lo[i] = x[i];
+                }
+                if n == 0 || x[i] > hi[i] {
+                    hi[i] = x[i];
+                }
+            }
+            speed2 = Real::max(speed2, s2);
+            let cross = [x[1] * v[2] - x[2] * v[1], x[2] * v[0] - x[0] * v[2], x[0] * v[1] - x[1] * v[0]];
+            for i in 0..3 {
+                l[i] += node_mass * cross[i];
+            }
+        }
+        let at = m * summary_len(dim);
+        summary[at] = 0.5 * kinetic;
+        summary[at + 1] = theta_term;
+        summary[at + 2] = force_work;
+        summary[at + 3] = speed2;
+        for i in 0..dim {
+            summary[at + 4 + i] = mx[i];
+            summary[at + 4 + dim + i] = p[i];
+            summary[at + 4 + 2 * dim + angular + i] = lo[i];
+            summary[at + 4 + 3 * dim + angular + i] = hi[i];
+        }
+        if dim == 2 {
+            summary[at + 4 + 2 * dim] = l[2];
+        } else {
+            summary[at + 4 + 2 * dim..at + 4 + 2 * dim + 3].copy_from_slice(&l);
         }
     }
 }

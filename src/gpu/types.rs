@@ -75,12 +75,61 @@ pub struct StepMotion<R> {
     pub dt_explicit: R,
     /// `θ dt`.
     pub theta_dt: R,
-    pub pad: R,
+    /// The scene's dimension, 2 or 3 (a real, as the uniform's other fields).
+    pub dim: R,
 }
 
 impl StepMotion<f64> {
-    pub fn of(dt: f64, theta: f64) -> Self {
-        Self { dt, dt_explicit: dt * (1.0 - theta), theta_dt: theta * dt, pad: 0.0 }
+    pub fn of(dt: f64, theta: f64, dim: usize) -> Self {
+        Self { dt, dt_explicit: dt * (1.0 - theta), theta_dt: theta * dt, dim: dim as f64 }
+    }
+}
+
+/// The reals `step_summary` writes per member in a scene of dimension `dim`: kinetic energy, the
+/// theta and force terms of the step's dissipation, the largest squared nodal speed, then
+/// `Σ m x`, `Σ m v`, the angular momentum (1 component in 2D, 3 in 3D) and the box of the
+/// nodes (low, high), `dim` each but the angular momentum.
+pub const fn summary_len(dim: usize) -> usize {
+    4 + 4 * dim + if dim == 2 { 1 } else { 3 }
+}
+
+/// A body's step end as the device reduced it (`newton_summary`, with the strain energy of
+/// `newton_finish` and the residual where its iterations ended), for a body whose displacements
+/// and forces stay on the device. Components beyond the scene's dimension are zero.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct StepSummary {
+    pub kinetic: f64,
+    /// `Σ m (v - v_t)²`: times `θ - 1/2`, the theta rule's dissipation.
+    pub theta_term: f64,
+    /// `Σ Δu ((1 - ξ) f_int,t + ξ f_int)`: the internal forces' work over the step.
+    pub force_work: f64,
+    pub max_speed: f64,
+    /// `Σ m x`: the centre of mass times the mass, and the gravity potential.
+    pub mass_moment: [f64; 3],
+    pub momentum: [f64; 3],
+    pub angular_momentum: [f64; 3],
+    /// The box of the body's nodes.
+    pub low: [f64; 3],
+    pub high: [f64; 3],
+    pub strain: f64,
+    pub residual: f64,
+}
+
+impl StepSummary {
+    /// From `newton_summary`'s `summary_len(dim)` reals.
+    pub fn of(dim: usize, reals: &[f64], strain: f64, residual: f64) -> Self {
+        let angular = if dim == 2 { 1 } else { 3 };
+        let mut s = Self { kinetic: reals[0], theta_term: reals[1], force_work: reals[2], max_speed: reals[3].sqrt(), strain, residual, ..Self::default() };
+        s.mass_moment[..dim].copy_from_slice(&reals[4..4 + dim]);
+        s.momentum[..dim].copy_from_slice(&reals[4 + dim..4 + 2 * dim]);
+        if dim == 2 {
+            s.angular_momentum[2] = reals[4 + 2 * dim];
+        } else {
+            s.angular_momentum.copy_from_slice(&reals[4 + 2 * dim..4 + 2 * dim + 3]);
+        }
+        s.low[..dim].copy_from_slice(&reals[4 + 2 * dim + angular..4 + 3 * dim + angular]);
+        s.high[..dim].copy_from_slice(&reals[4 + 3 * dim + angular..4 + 4 * dim + angular]);
+        s
     }
 }
 

@@ -15,7 +15,7 @@ mod step;
 
 pub use contact::{ContactLayout, GroupContact};
 pub use newton::NewtonCall;
-pub use step::{run_step_kernels, StepEnd, StepKernelsOut, StepStart};
+pub use step::{run_newton_summary, run_step_kernels, StepEnd, StepKernelsOut, StepStart, SummaryBuffers};
 
 use super::types::{Active, Coefficients, DofOut, MaterialParams, MemberRange, MODE_FORCES, MODE_TANGENT, NEWTON_MAX_FREE, NO_FAILURE, NO_HISTORY};
 use super::uzawa_sweep::UzawaSweeps;
@@ -165,6 +165,7 @@ struct Batch {
     /// The step inputs (`DofStep`, 4 reals) of every dof, as last uploaded.
     step_host: Vec<Real>,
     u: Buffer,
+    reference: Buffer,
     step: Buffer,
     failure: Buffer,
     active: Buffer,
@@ -260,6 +261,10 @@ enum Source {
     MemberEnergy,
     /// A device Newton call's internal forces, packed per dof (`newton_finish`).
     NewtonForces,
+    /// A device Newton call's end-of-step summary per member (`newton_summary`).
+    Summary,
+    /// The committed states of steps begun on the device.
+    Committed,
 }
 
 /// The copies of one pass into the read-back buffer, each landing 8-byte aligned after the last.
@@ -743,6 +748,8 @@ impl GpuWorld {
                 Source::NewtonState => &b.newton.as_ref().expect("a batch whose Newton states are read has them").state,
                 Source::MemberEnergy => &b.newton.as_ref().expect("a batch whose Newton energies are read has them").member_energy,
                 Source::NewtonForces => &b.newton.as_ref().expect("a batch whose Newton forces are read has them").packed_forces,
+                Source::Summary => &b.newton.as_ref().expect("a batch whose summaries are read has them").summary,
+                Source::Committed => b.newton.as_ref().expect("a batch whose committed states are read has them").resident.committed(),
             };
             encoder.copy_buffer_to_buffer(source, c.source.start, target, c.target, c.source.end - c.source.start);
         }
@@ -958,6 +965,10 @@ impl Batch {
         let dof_start = uploaded("dof gather start", bytemuck::cast_slice(&dof_start));
         let dof = uploaded("dof gather", bytemuck::cast_slice(&dof));
         let u = buffer(gpu, "u", dofs * real, write | BufferUsages::COPY_SRC);
+        // Every dof's reference coordinate, in member order: where `newton_summary` places nodes.
+        let reference: Vec<Real> = members.iter().flat_map(|&i| bodies[i].mesh.nodes.iter().flat_map(move |x| x[..dim].iter().copied())).collect();
+        assert_eq!(reference.len(), dofs, "a batch's dofs are its members' nodes");
+        let reference = uploaded("reference", &to_device(precision, &reference));
         let step = buffer(gpu, "step", dofs * 4 * real, write);
         let failure = buffer(gpu, "failure", members.len() * 8, write | BufferUsages::COPY_SRC);
         let active = buffer(gpu, "active", members.len() * 8, write);
@@ -994,6 +1005,7 @@ impl Batch {
             u_host: vec![0.0; dofs],
             step_host: vec![0.0; 4 * dofs],
             u,
+            reference,
             step,
             failure,
             active,

@@ -7,7 +7,7 @@ use crate::assembly::{element_out_stride, DofMap, GatherMap, StiffnessPattern};
 use crate::cpu::{assemble_csr, assemble_residual, dispatch_element_force_tangent, element_energy, element_force_tangent};
 use crate::element::{element_cell_fields, element_point_fields, element_von_mises, point_gradients, CellFields, ElementError, ElementOutput, Formulation, Patches, ReferenceGeometry};
 use crate::gpu::types::{Coefficients, DofOut, DofStep};
-use crate::gpu::types::{NewtonMember, NewtonState};
+use crate::gpu::types::{DofState, NewtonMember, NewtonState, StepSummary};
 use crate::gpu::{ElementFailure, Evaluation, GpuError, NewtonCall, StepEnd, StepStart, WorldBody};
 use crate::material::tensor::green_lagrange;
 use crate::material::viscous::HISTORY;
@@ -240,6 +240,13 @@ pub struct Body {
     /// Residual norm of the previous evaluation in this step, and the ratio of the last one to it.
     previous_residual: Option<Real>,
     contraction: Option<Real>,
+    /// The committed state is the device's ([`crate::gpu::StepEnd::held`]): `state`'s vectors
+    /// are stale, and what the host books of it comes from this summary, until
+    /// [`Body::take_committed`] brings it back.
+    pub(super) state_held: Option<StepSummary>,
+    /// The step being solved ended on the device and stays there ([`crate::gpu::NewtonCall::keep`]):
+    /// `trial`'s vectors are stale until [`Body::take_iterate`].
+    pub(super) trial_held: Option<StepSummary>,
 }
 
 /// The inputs of a CPU evaluation whose results `Body::dof_out` still holds, and the strain
@@ -358,6 +365,8 @@ impl Body {
             device_tangent: None,
             previous_residual: None,
             contraction: None,
+            state_held: None,
+            trial_held: None,
         }
     }
 
@@ -415,6 +424,18 @@ impl Body {
     pub fn begin_step(&mut self, p: &StepParams, gravity: &[Real; 3], t: Real) {
         let dim = self.dim;
         self.step_end = t + p.dt;
+        self.trial_held = None;
+        self.last_increment = None;
+        self.previous_residual = None;
+        self.contraction = None;
+        self.device_tangent = None;
+        if self.state_held.is_some() {
+            // The device begins the step from the state it holds (`step_begin`): the host's
+            // vectors are stale, and it only marks the body as moving.
+            self.still = false;
+            self.evaluated.valid = false;
+            return;
+        }
         // The load of a step at the time the scheme weighs the step's end forces by (exact for
         // a linear ramp: (1 - ξ) λ_t + ξ λ_{t+dt}).
         let load_time = t + p.xi * p.dt;
@@ -452,11 +473,6 @@ impl Body {
                 viscoelastic.history(p.dt, k, h);
             }
         }
-        self.last_increment = None;
-        self.previous_residual = None;
-        self.contraction = None;
-        // A tangent of another step (its coefficients, its relaxation) is not this one's.
-        self.device_tangent = None;
     }
 
     /// Assembles force (and, without factorisation reuse, `ξ K`) at the trial displacement and
@@ -555,6 +571,9 @@ impl Body {
 
     /// Norm of the residual with contact, `g - f_c`, over the free dofs.
     pub fn residual_norm(&self) -> Real {
+        if let Some(held) = &self.trial_held {
+            return held.residual;
+        }
         self.dofs.free_pairs().map(|(d, _)| (self.g[d] - self.contact_force[d]).powi(2)).sum::<Real>().sqrt()
     }
 
@@ -567,6 +586,11 @@ impl Body {
     /// Also records how much the residual fell since the previous evaluation, which decides
     /// whether the factorisation is kept ([`Body::refresh_factor`]).
     pub fn converged(&mut self, p: &StepParams, motion_scale: Real) -> Result<bool, StepFailure> {
+        if self.trial_held.is_some() {
+            // The device judged it converged (`newton_judge`, this test's twin) and kept it.
+            self.unmet.clear();
+            return Ok(true);
+        }
         let residual = self.residual_norm();
         if !residual.is_finite() {
             return Err(StepFailure::NotFinite { body: self.name.clone() });
@@ -702,6 +726,11 @@ impl Body {
     /// velocities, support reactions `g - f_c` at the prescribed dofs, and the step's energy
     /// terms.
     pub fn finish_step(&mut self, p: &StepParams, strain: Real) -> StepEnergy {
+        if let Some(held) = &self.trial_held {
+            // Neither loads, nor supports, nor Prony series: a body the device steps has none.
+            let start_strain = self.state_held.as_ref().map_or(self.state.strain, |s| s.strain);
+            return StepEnergy { theta_dissipation: (p.theta - 0.5) * held.theta_term, force_dissipation: held.force_work - (held.strain - start_strain), ..StepEnergy::default() };
+        }
         let ndof = self.mass.len();
         let v: Vec<Real> = (0..ndof).map(|d| self.trial_velocity(p, d)).collect();
         self.trial.v = v;
@@ -912,15 +941,63 @@ impl Body {
     }
 
     pub fn commit(&mut self) {
-        std::mem::swap(&mut self.state, &mut self.trial);
+        match self.trial_held.take() {
+            Some(held) => self.state_held = Some(held),
+            None => {
+                std::mem::swap(&mut self.state, &mut self.trial);
+                self.state_held = None;
+            }
+        }
+    }
+
+    /// The step's end, if the device keeps it ([`Body::trial_held`]).
+    pub fn held_end(&self) -> Option<&StepSummary> {
+        self.trial_held.as_ref()
+    }
+
+    /// The committed state, if the device keeps it ([`Body::state_held`]).
+    pub fn held_state(&self) -> Option<&StepSummary> {
+        self.state_held.as_ref()
+    }
+
+    /// Takes back the committed state the device kept (`states`: one per dof, from
+    /// [`crate::gpu::GpuWorld::read_kept`]) with its strain energy.
+    pub fn take_committed(&mut self, states: &[DofState<Real>]) {
+        let held = self.state_held.take().expect("a committed state the device keeps");
+        for (d, s) in states.iter().enumerate() {
+            (self.state.u[d], self.state.v[d], self.state.f_int[d]) = (s.u, s.v, s.f_int);
+        }
+        self.state.strain = held.strain;
+        self.state.strain_at_u = true;
+    }
+
+    /// Takes back the step's end the device kept: its iterate `u` and internal forces `f_int`
+    /// ([`crate::gpu::GpuWorld::read_kept`]), evaluated as if the host had taken them. The
+    /// step's inputs must be the host's ([`Body::begin_step`] from a committed state it holds).
+    pub fn take_iterate(&mut self, p: &StepParams, u: &[Real], f_int: &[Real]) {
+        let held = self.trial_held.take().expect("a step end the device keeps");
+        self.trial.u.copy_from_slice(u);
+        let c = coefficients(p);
+        for (d, out) in self.dof_out.iter_mut().enumerate() {
+            *out = DofOut { f_int: f_int[d], g: self.step_inputs[d].residual(c, u[d], f_int[d]) };
+        }
+        self.evaluated.record(&self.trial.u, &self.step_inputs, c);
+        self.evaluated.strain = Some(held.strain);
+        self.absorb_residual(p);
     }
 
     pub fn kinetic_energy(&self) -> Real {
+        if let Some(held) = &self.state_held {
+            return held.kinetic;
+        }
         0.5 * self.mass.iter().zip(&self.state.v).map(|(m, v)| m * v * v).sum::<Real>()
     }
 
     /// The model's strain energy and what the Prony branches hold beyond it.
     pub fn strain_energy(&self) -> Real {
+        if let Some(held) = &self.state_held {
+            return held.strain;
+        }
         self.state.strain + self.state.branch_energy
     }
 
@@ -942,11 +1019,15 @@ impl Body {
 
     /// Current position of a node.
     pub fn position(&self, node: usize) -> [Real; 3] {
+        debug_assert!(self.state_held.is_none(), "the committed state is on the device");
         super::displaced(self.mesh.nodes[node], &self.state.u, node, self.dim)
     }
 
     /// Gravity potential `-Σ m g·x`.
     pub fn potential_energy(&self, gravity: &[Real; 3]) -> Real {
+        if let Some(held) = &self.state_held {
+            return -(0..self.dim).map(|i| gravity[i] * held.mass_moment[i]).sum::<Real>();
+        }
         (0..self.mesh.nodes.len())
             .map(|n| {
                 let x = self.position(n);

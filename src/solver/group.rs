@@ -130,6 +130,7 @@ pub fn solve_groups(
     velocity_scale: Real,
     world: Option<&mut GpuWorld>,
     interrupt: Option<&AtomicBool>,
+    hold: Option<&[bool]>,
     times: &mut PhaseTimes,
 ) -> (Vec<ContactPoint>, Vec<Result<GroupReport, StepFailure>>) {
     let started = std::time::Instant::now();
@@ -173,7 +174,7 @@ pub fn solve_groups(
         g.contact = Some(Box::new(ContactStep::new(points, g.bodies, p, warm, velocity_scale)));
     });
     times.contact += started.elapsed().as_secs_f64();
-    let context = Context { p, settings, velocity_scale, interrupt };
+    let context = Context { p, settings, velocity_scale, interrupt, hold };
     let reports = match world {
         None => groups.par_iter_mut().map(|g| g.newton_on_cpu(&context)).collect(),
         Some(world) => super::lockstep::newton_in_lockstep(&mut groups, world, &context, times),
@@ -197,6 +198,9 @@ pub(super) struct Context<'a> {
     pub(super) velocity_scale: Real,
     /// The run's interrupt flag, checked before every increment.
     pub(super) interrupt: Option<&'a AtomicBool>,
+    /// Per body, whether a device Newton call may keep its step's end on the device (nothing
+    /// is near it, and the host does not need its state after the step); `None`: none may.
+    pub(super) hold: Option<&'a [bool]>,
 }
 
 /// Where a group's Newton loop stands between two evaluations.

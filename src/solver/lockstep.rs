@@ -8,7 +8,7 @@ use super::group::{Context, Group, GroupReport};
 use crate::contact::uzawa::{Outcome, Problem};
 use crate::contact::Settings;
 use crate::gpu::types::ContactState;
-use crate::gpu::types::NewtonState;
+use crate::gpu::types::{NewtonState, StepSummary};
 use crate::gpu::{ElementFailure, Evaluation, GpuError, GpuWorld, GroupContact, NewtonCall};
 use crate::mesh::ElementKind;
 use crate::policy::PhaseTimes;
@@ -325,8 +325,9 @@ struct PassLayout<'a> {
     evaluations_start: Vec<usize>,
 }
 
-/// A call's state, strain energy, element failure and the tangent it handed back.
-type CallEnd = (NewtonState<Real>, Option<Real>, Option<ElementFailure>, Option<Vec<Real>>);
+/// A call's state, strain energy, element failure, the tangent it handed back and its summary
+/// if the device kept its end.
+type CallEnd = (NewtonState<Real>, Option<Real>, Option<ElementFailure>, Option<Vec<Real>>, Option<StepSummary>);
 
 /// What a pass leaves a group that iterated on the device: per call its state, strain energy,
 /// element failure and the tangent it handed back; per contact its outcome.
@@ -362,8 +363,13 @@ fn device_pass(groups: &mut [Group], live: &[bool], kind: PassKind, world: &mut 
     let PassLayout { list, calls, problems, contacts, .. } = &mut layout;
     let passed = if calls.is_empty() { world.evaluate(list, coefficients(p), times) } else { world.newton(calls, problems, contacts, list, coefficients(p), (dim, p.theta * p.dt), c.interrupt, times) };
     let failures: Vec<Option<ElementFailure>> = list.iter().map(|e| e.failure).collect();
-    let ends = IterationEnds { calls: calls.iter_mut().map(|call| (call.outcome, call.strain_energy, call.failure, call.tangent.take())).collect(), contacts: contacts.iter().map(|g| g.outcome).collect() };
+    let ends = IterationEnds { calls: calls.iter_mut().map(|call| (call.outcome, call.strain_energy, call.failure, call.tangent.take(), call.summary)).collect(), contacts: contacts.iter().map(|g| g.outcome).collect() };
+    let bodies_of_calls: Vec<usize> = calls.iter().map(|call| call.body).collect();
     let PassLayout { call_ranges, evaluations_start, .. } = layout;
+    let passed = match passed {
+        Ok(()) => take_back_unconverged(groups, &bodies_of_calls, &ends, world, c, times),
+        Err(e) => Err(e),
+    };
     let passed = &passed;
     groups.par_iter_mut().zip(&chosen).zip(results.par_iter_mut()).enumerate().for_each(|(k, ((g, chosen), result))| {
         *result = match passed {
@@ -373,6 +379,33 @@ fn device_pass(groups: &mut [Group], live: &[bool], kind: PassKind, world: &mut 
         };
     });
     results
+}
+
+/// The bodies whose committed state the device holds and whose device Newton call did not
+/// converge there (it was to keep the step's end on the device): their calls' iterates came
+/// back, with residuals from stale step inputs; their committed states come back now and the
+/// residuals follow from them ([`Body::take_committed_mid_step`]).
+fn take_back_unconverged(groups: &mut [Group], bodies_of_calls: &[usize], ends: &IterationEnds, world: &mut GpuWorld, c: &Context, times: &mut PhaseTimes) -> Result<(), GpuError> {
+    let unkept: Vec<usize> = bodies_of_calls.iter().zip(&ends.calls).filter(|(_, end)| end.4.is_none()).map(|(&b, _)| b).collect();
+    if unkept.is_empty() {
+        return Ok(());
+    }
+    let mut at: std::collections::HashMap<usize, (usize, usize)> = std::collections::HashMap::new();
+    for (k, g) in groups.iter().enumerate() {
+        for (j, &id) in g.ids.iter().enumerate() {
+            at.insert(id, (k, j));
+        }
+    }
+    let held: Vec<usize> = unkept.into_iter().filter(|id| groups[at[id].0].bodies[at[id].1].held_state().is_some()).collect();
+    if held.is_empty() {
+        return Ok(());
+    }
+    let (states, _) = world.read_kept(&held, &[], times)?;
+    for (id, states) in held.iter().zip(states) {
+        let (k, j) = at[id];
+        groups[k].bodies[j].take_committed_mid_step(c.p, &states);
+    }
+    Ok(())
 }
 
 /// Per group, the bodies of a pass's evaluations: those of the `live` groups that `wanted`
@@ -429,7 +462,20 @@ fn iterations_share<'a>(g: &'a mut Group, inverses: Vec<Option<Vec<Real>>>, kind
     let budget = p.max_iterations - g.newton.report.iterations;
     let Group { ids, bodies, contact, newton, .. } = g;
     let u_base: Vec<Vec<Real>> = if contact.is_some() { bodies.iter().map(|b| b.trial_velocity_base(p)).collect() } else { Vec::new() };
-    let calls: Vec<NewtonCall> = bodies.iter_mut().zip(ids.iter()).zip(inverses).map(|((body, &id), inverse)| body.newton_call(id, p, motion_scale, budget, inverse, !kind.unevaluated)).collect();
+    // A free body that nothing is near may leave its step's end on the device.
+    let alone = contact.is_none() && bodies.len() == 1;
+    let keep = |id: usize| alone && c.hold.is_some_and(|hold| hold[id]);
+    let calls: Vec<NewtonCall> = bodies
+        .iter_mut()
+        .zip(ids.iter())
+        .zip(inverses)
+        .map(|((body, &id), inverse)| {
+            let kept = keep(id) && body.may_step_on_device();
+            let mut call = body.newton_call(id, p, motion_scale, budget, inverse, !kind.unevaluated);
+            call.keep = kept;
+            call
+        })
+        .collect();
     let contact = contact.as_mut().map(|contact| {
         let settings = c.settings.expect("contact points need contact settings");
         let obstacle = contact.obstacle_velocities();
@@ -475,8 +521,8 @@ fn finish_iterations(g: &mut Group, (range, index): (std::ops::Range<usize>, Opt
     state.report.device_iterations += iterations;
     state.report.bodies_iterated += if kind.unevaluated { iterations } else { iterations.saturating_sub(1) } * g.bodies.len();
     let mut result = Ok(());
-    for (body, (end, strain, failure, tangent)) in g.bodies.iter_mut().zip(&ends.calls[range]) {
-        if let (Ok(()), Err(e)) = (&result, body.finish_device_newton(c.p, end, *strain, *failure, tangent.as_deref())) {
+    for (body, (end, strain, failure, tangent, summary)) in g.bodies.iter_mut().zip(&ends.calls[range]) {
+        if let (Ok(()), Err(e)) = (&result, body.finish_device_newton(c.p, end, *strain, *failure, tangent.as_deref(), summary.as_ref())) {
             result = Err(e);
         }
     }

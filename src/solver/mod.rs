@@ -18,10 +18,10 @@ pub use setup::{build_mesh, build_simulation};
 
 use crate::contact::broad::KeptPairs;
 use crate::contact::configuration::extent;
-use crate::contact::detect::{detect, thin_second_pass};
-use crate::contact::overlap::{overlaps, Overlap, Worst};
+use crate::contact::detect::{thin_second_pass, Detection};
+use crate::contact::overlap::{Overlap, OverlapSearch, Worst};
 use crate::contact::{Configuration, ContactModel, ContactPoint, ContactStats, Master};
-use crate::gpu::types::StepMotion;
+use crate::gpu::types::{StepMotion, StepSummary};
 use crate::gpu::{GpuWorld, StepEnd, StepStart};
 use crate::precision::{Precision, Real};
 pub use body::StepParams;
@@ -176,19 +176,15 @@ impl Energies {
 }
 
 /// The boundary nodes of `bodies` displaced by their committed state that are inside another
-/// body or behind an obstacle (at time `t`), searched afresh.
+/// body or behind an obstacle (at time `t`), searched afresh. The bodies' states must be the
+/// host's ([`Simulation::sync_states`]).
 pub(crate) fn state_overlaps(bodies: &[Body], model: &ContactModel, t: Real) -> Vec<Overlap> {
-    body_overlaps(bodies, model, |b| &b.state.u, None, t, &mut Configuration::default(), &mut KeptPairs::default())
-}
-
-/// The overlaps of `bodies` at the displacements `u` (the obstacles where they are at time `t`),
-/// the configuration written over `config` ([`configure`], with `committed`), the body pairs
-/// from `kept`.
-#[allow(clippy::too_many_arguments)]
-fn body_overlaps(bodies: &[Body], model: &ContactModel, u: impl Fn(&Body) -> &[Real] + Sync + Copy, committed: Option<&Configuration>, t: Real, config: &mut Configuration, kept: &mut KeptPairs) -> Vec<Overlap> {
-    configure(bodies, model, u, committed, config);
+    assert!(bodies.iter().all(|b| b.held_state().is_none()), "the states are the host's");
+    let mut config = configuration(bodies, model, |b| &b.state.u);
+    let mut kept = KeptPairs::default();
+    let search = OverlapSearch::new(model, &config, t, &mut kept);
     let meshes: Vec<&crate::mesh::Mesh> = bodies.iter().map(|b| &b.mesh).collect();
-    overlaps(model, &meshes, config, &placer(bodies, u), t, kept)
+    search.overlaps(model, &meshes, &mut config, &placer(bodies, |b| &b.state.u))
 }
 
 /// The configuration of `bodies` at the displacements `u`: boundary boxes and largest facets,
@@ -198,15 +194,19 @@ fn body_overlaps(bodies: &[Body], model: &ContactModel, u: impl Fn(&Body) -> &[R
 /// `committed`, when given, is the configuration of the committed state, and `u` are the trial
 /// displacements: a body that did not move in the step ([`Body::still`]) keeps its box and
 /// largest facet from it. In a packing at rest that is nearly every body, and the pass over
-/// every boundary node cost a third of the contact phase.
-pub(crate) fn configure(bodies: &[Body], model: &ContactModel, u: impl Fn(&Body) -> &[Real] + Sync, committed: Option<&Configuration>, config: &mut Configuration) {
+/// every boundary node cost a third of the contact phase. A body whose displacements the device
+/// keeps (`held`) takes the box of its nodes the device computed and the largest facet it had
+/// in `committed` (a body nothing is near, moving nearly as a rigid body in one step).
+pub(crate) fn configure(bodies: &[Body], model: &ContactModel, u: impl Fn(&Body) -> &[Real] + Sync, held: impl Fn(&Body) -> Option<&StepSummary> + Sync, committed: Option<&Configuration>, config: &mut Configuration) {
     let committed = committed.filter(|c| c.boxes.len() == bodies.len());
     (config.boxes, config.largest) = bodies
         .par_iter()
         .zip(&model.surfaces)
         .enumerate()
-        .map_init(Vec::new, |scratch, (i, (b, surface))| match committed {
-            Some(c) if b.still() => (c.boxes[i], c.largest[i]),
+        .map_init(Vec::new, |scratch, (i, (b, surface))| match (committed, held(b)) {
+            (Some(c), Some(h)) => ((h.low, h.high), c.largest[i]),
+            (None, Some(_)) => unreachable!("a body the device keeps has a committed configuration"),
+            (Some(c), None) if b.still() => (c.boxes[i], c.largest[i]),
             _ => {
                 let u = u(b);
                 extent(surface, |k| displaced(surface.reference[k], u, surface.nodes[k] as usize, b.dim), scratch)
@@ -219,7 +219,7 @@ pub(crate) fn configure(bodies: &[Body], model: &ContactModel, u: impl Fn(&Body)
 /// [`configure`] into a new configuration.
 pub(crate) fn configuration(bodies: &[Body], model: &ContactModel, u: impl Fn(&Body) -> &[Real] + Sync) -> Configuration {
     let mut config = Configuration::default();
-    configure(bodies, model, u, None, &mut config);
+    configure(bodies, model, u, |_| None, None, &mut config);
     config
 }
 
@@ -251,6 +251,40 @@ fn placer<'a>(bodies: &'a [Body], u: impl Fn(&Body) -> &[Real] + Sync + 'a) -> i
         x.clear();
         x.extend((0..body.mesh.nodes.len()).map(|n| position(body, u, n)));
     }
+}
+
+/// The committed states the device keeps of the `needed` bodies, back into the host's.
+fn take_committed(bodies: &mut [Body], world: Option<&mut GpuWorld>, needed: &[bool], times: &mut PhaseTimes) -> Result<(), StepFailure> {
+    let held: Vec<usize> = (0..bodies.len()).filter(|&b| needed[b] && bodies[b].held_state().is_some()).collect();
+    if held.is_empty() {
+        return Ok(());
+    }
+    let world = world.expect("a state kept on a device");
+    let (states, _) = world.read_kept(&held, &[], times).map_err(|e| bodies[held[0]].device_failure(&e))?;
+    for (&b, states) in held.iter().zip(states) {
+        bodies[b].take_committed(&states);
+    }
+    Ok(())
+}
+
+/// The step's ends the device keeps of the `needed` bodies, back into the host's (and their
+/// committed states first, where the device keeps those too).
+fn take_step_ends(bodies: &mut [Body], world: Option<&mut GpuWorld>, needed: &[bool], p: &StepParams, times: &mut PhaseTimes) -> Result<(), StepFailure> {
+    let held: Vec<usize> = (0..bodies.len()).filter(|&b| needed[b] && bodies[b].held_end().is_some()).collect();
+    if held.is_empty() {
+        return Ok(());
+    }
+    let world = world.expect("a step's end kept on a device");
+    let failure = |e: crate::gpu::GpuError| bodies[held[0]].device_failure(&e);
+    let starts: Vec<usize> = held.iter().copied().filter(|&b| bodies[b].held_state().is_some()).collect();
+    let (states, ends) = world.read_kept(&starts, &held, times).map_err(failure)?;
+    for (&b, states) in starts.iter().zip(states) {
+        bodies[b].take_committed_mid_step(p, &states);
+    }
+    for (&b, (u, f_int)) in held.iter().zip(ends) {
+        bodies[b].take_iterate(p, &u, &f_int);
+    }
+    Ok(())
 }
 
 /// The largest nodal speed of a body's velocities `v`.
@@ -351,6 +385,11 @@ pub struct Simulation {
     committed: Option<(Configuration, Real)>,
     /// The buffers the next step's configuration is written over (the one before the committed).
     spare_configuration: Configuration,
+    /// Bodies that nothing is near may keep their state on the device between steps (a GPU
+    /// world with device Newton iterations): the host's copy of such a body's state is stale
+    /// until [`Simulation::sync_states`], and its energies, momenta and box come from the
+    /// device's summary. Off, every step's end state comes back.
+    pub hold_states: bool,
 }
 
 impl Simulation {
@@ -473,7 +512,7 @@ impl Simulation {
         let Attempt { thin, raised, last, energy_scale } = attempt;
         let p = StepParams { dt, xi: if raised { 1.0 } else { self.xi }, theta: if raised { 1.0 } else { self.theta }, residual_tolerance: self.residual_tolerance, increment_tolerance: self.increment_tolerance, max_iterations: self.max_iterations };
         let started = std::time::Instant::now();
-        let (mut points, velocity_scale) = self.detect(dt);
+        let (mut points, velocity_scale) = self.detect(dt, &mut report.wall)?;
         if let (true, Some(model), Some((config, _))) = (thin, &self.contact, &self.committed) {
             // The slaves of second-pass points, which the detection placed.
             thin_second_pass(model, &config.nodes.positions, &mut points);
@@ -492,13 +531,14 @@ impl Simulation {
                 touching[t.body as usize] = true;
             }
             let starts: Vec<StepStart> = self.bodies.iter().enumerate().map(|(b, body)| body.step_start(b, !touching[b])).collect();
-            world.begin_step(&starts, StepMotion::of(p.dt, p.theta)).map_err(|e| self.bodies[0].device_failure(&e))?;
+            world.begin_step(&starts, StepMotion::of(p.dt, p.theta, self.dim)).map_err(|e| self.bodies[0].device_failure(&e))?;
             for (b, relaxation) in self.bodies.iter().enumerate().filter_map(|(b, body)| Some((b, body.relaxation()?))) {
                 world.set_relaxation(b, relaxation);
             }
         }
         let stop = self.interrupt.as_deref();
-        let (points, groups) = solve_groups(&mut self.bodies, points, &p, settings.as_ref(), &warm, velocity_scale, self.world.as_mut(), stop, &mut report.wall);
+        let hold = self.hold(&points);
+        let (points, groups) = solve_groups(&mut self.bodies, points, &p, settings.as_ref(), &warm, velocity_scale, self.world.as_mut(), stop, hold.as_deref(), &mut report.wall);
         report.add_groups(groups)?;
         // The step's overlaps, measured once on its end state (the state `commit` keeps).
         let started = std::time::Instant::now();
@@ -506,7 +546,11 @@ impl Simulation {
         let overlap = match &self.contact {
             Some(model) => {
                 let committed = self.committed.as_ref().map(|c| &c.0);
-                Worst::of(&body_overlaps(&self.bodies, model, |b| &b.trial.u, committed, self.t + dt, &mut config, &mut self.kept_pairs))
+                configure(&self.bodies, model, |b| &b.trial.u, Body::held_end, committed, &mut config);
+                let search = OverlapSearch::new(model, &config, self.t + dt, &mut self.kept_pairs);
+                take_step_ends(&mut self.bodies, self.world.as_mut(), &search.needed, &p, &mut report.wall)?;
+                let meshes: Vec<&crate::mesh::Mesh> = self.bodies.iter().map(|b| &b.mesh).collect();
+                Worst::of(&search.overlaps(model, &meshes, &mut config, &placer(&self.bodies, |b| &b.trial.u)))
             }
             None => Worst::default(),
         };
@@ -559,7 +603,7 @@ impl Simulation {
         }
         if let Some(world) = &mut self.world {
             let ends: Vec<StepEnd> = self.bodies.iter().enumerate().map(|(b, body)| body.step_end(b)).collect();
-            world.commit_step(&ends, StepMotion::of(p.dt, p.theta));
+            world.commit_step(&ends, StepMotion::of(p.dt, p.theta, self.dim));
         }
         if let Some((old, _)) = self.committed.replace((config, speed)) {
             self.spare_configuration = old;
@@ -569,6 +613,23 @@ impl Simulation {
         report.contact.max_overlap = report.contact.max_overlap.max(overlap.depth);
         report.contact.max_overlap_ratio = report.contact.max_overlap_ratio.max(overlap.ratio);
         Ok(())
+    }
+
+    /// Per body, whether its step's end may stay on the device ([`Simulation::hold_states`]):
+    /// a body without contact points whose nodes the detection did not place (nothing is
+    /// near it). `None` when no body may.
+    fn hold(&self, points: &[ContactPoint]) -> Option<Vec<bool>> {
+        self.world.as_ref().filter(|w| self.hold_states && w.precision() == Precision::F64)?;
+        let mut hold: Vec<bool> = self.bodies.iter().map(Body::may_step_on_device).collect();
+        for t in points.iter().flat_map(|c| c.terms()) {
+            hold[t.body as usize] = false;
+        }
+        if let (Some(_), Some((config, _))) = (&self.contact, &self.committed) {
+            for (h, &placed) in hold.iter_mut().zip(&config.nodes.placed) {
+                *h &= !placed;
+            }
+        }
+        Some(hold)
     }
 
     /// The boundary nodes of the committed state that are inside another body or behind an
@@ -582,7 +643,7 @@ impl Simulation {
     ///
     /// The velocity scale is what matters in a step: the fastest body or obstacle, or what
     /// gravity adds in one step, but not below round-off of the smallest element per step.
-    fn detect(&mut self, dt: Real) -> (Vec<ContactPoint>, Real) {
+    fn detect(&mut self, dt: Real, times: &mut PhaseTimes) -> Result<(Vec<ContactPoint>, Real), StepFailure> {
         let dim = self.dim;
         if self.committed.is_none() {
             let config = self.contact.as_ref().map(|model| configuration(&self.bodies, model, |b| &b.state.u)).unwrap_or_default();
@@ -595,10 +656,21 @@ impl Simulation {
         let h = self.bodies.iter().map(|b| b.length_scale()).fold(Real::INFINITY, Real::min);
         let gravity = self.gravity.iter().map(|g| g * g).sum::<Real>().sqrt();
         let velocity_scale = body_speed.max(obstacle_speed).max(gravity * dt).max(1e-9 * h / dt);
-        let Some(model) = &self.contact else { return (Vec::new(), velocity_scale) };
+        let Some(model) = &self.contact else { return Ok((Vec::new(), velocity_scale)) };
         // The search reaches as far as anything can travel in two steps, plus a little.
         let margin = 2.0 * dt * (2.0 * body_speed + obstacle_speed) + 0.01 * h;
-        (detect(model, config, &placer(&self.bodies, |b| &b.state.u), dim, self.t, dt, margin, &mut self.kept_pairs), velocity_scale)
+        let detection = Detection::new(model, config, self.t, dt, margin, &mut self.kept_pairs);
+        // A body something is near is the host's from here on.
+        take_committed(&mut self.bodies, self.world.as_mut(), &detection.needed, times)?;
+        Ok((detection.points(model, config, &placer(&self.bodies, |b| &b.state.u), dim, margin), velocity_scale))
+    }
+
+    /// Brings back the committed states the device keeps of the bodies the caller needs, then
+    /// all of them: the host's copies are current after this (logged states, VTU frames,
+    /// probes, restarts, the end of a run).
+    pub fn sync_states(&mut self) -> Result<(), StepFailure> {
+        let all = vec![true; self.bodies.len()];
+        take_committed(&mut self.bodies, self.world.as_mut(), &all, &mut PhaseTimes::default())
     }
 
     /// Energy bookkeeping of a converged step (before commit): external work, friction (as
@@ -611,7 +683,7 @@ impl Simulation {
             Some(world) => {
                 // A body that has not moved keeps its state's energy, as on the CPU; one whose
                 // device Newton call left its energy at the trial displacement takes that.
-                let mut strains: Vec<Option<Real>> = self.bodies.par_iter().map(|b| b.unmoved_strain_energy().or_else(|| b.evaluated_strain_energy())).collect();
+                let mut strains: Vec<Option<Real>> = self.bodies.par_iter().map(|b| b.held_end().map(|h| h.strain).or_else(|| b.unmoved_strain_energy()).or_else(|| b.evaluated_strain_energy())).collect();
                 let list: Vec<(usize, &[Real])> = self.bodies.iter().enumerate().filter(|(b, _)| strains[*b].is_none()).map(|(b, body)| (b, &body.trial.u[..])).collect();
                 if !list.is_empty() {
                     let energies = world.element_energies(&list, times).map_err(|e| self.bodies[0].device_failure(&e))?;
@@ -623,7 +695,15 @@ impl Simulation {
             }
         };
         let dim = self.dim;
-        let finished: Vec<_> = self.bodies.par_iter_mut().zip(strains).map(|(body, strain)| (body.finish_step(p, strain), max_speed(&body.trial.v, dim))).collect();
+        let finished: Vec<_> = self
+            .bodies
+            .par_iter_mut()
+            .zip(strains)
+            .map(|(body, strain)| {
+                let energy = body.finish_step(p, strain);
+                (energy, body.held_end().map_or_else(|| max_speed(&body.trial.v, dim), |h| h.max_speed))
+            })
+            .collect();
         let speed = finished.iter().map(|f| f.1).fold(0.0, Real::max);
         for (e, _) in finished {
             self.external_work += e.support_work + e.load_work;
@@ -733,6 +813,10 @@ pub struct BodyMetrics {
 impl Body {
     pub fn metrics(&self) -> BodyMetrics {
         let dim = self.dim;
+        if let Some(h) = self.held_state() {
+            let mass: Real = (0..self.mesh.nodes.len()).map(|n| self.mass[n * dim]).sum();
+            return BodyMetrics { mass, center_of_mass: h.mass_moment.map(|c| c / mass), linear_momentum: h.momentum, angular_momentum: h.angular_momentum, kinetic: h.kinetic };
+        }
         let (mut mass, mut mx, mut p, mut l) = (0.0, [0.0; 3], [0.0; 3], [0.0; 3]);
         for n in 0..self.mesh.nodes.len() {
             let m = self.mass[n * dim];

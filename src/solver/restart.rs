@@ -155,6 +155,7 @@ pub enum RestoreError {
 impl Simulation {
     /// The state after the last finished step.
     pub fn saved_state(&self) -> SavedState {
+        assert!(self.bodies.iter().all(|b| b.held_state().is_none()), "the states are the host's (Simulation::sync_states)");
         SavedState {
             t: self.t,
             step: self.step,
@@ -239,6 +240,7 @@ impl Simulation {
             world.forget_committed();
         }
         for (b, s) in self.bodies.iter_mut().zip(&saved.bodies) {
+            (b.state_held, b.trial_held) = (None, None);
             b.state.u.clone_from(&s.u);
             b.state.v.clone_from(&s.v);
             b.state.f_int.clone_from(&s.f_int);

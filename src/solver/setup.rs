@@ -270,6 +270,7 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
         kept_pairs: Default::default(),
         committed: None,
         spare_configuration: Default::default(),
+        hold_states: false,
     })
 }
 

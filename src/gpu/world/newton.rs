@@ -14,7 +14,9 @@
 use super::contact::{ContactLayout, ContactPasses, ContactPipelines, GroupContact};
 use super::{buffer, to_device, Batch, Evaluation, GpuWorld, Pass, ReadBack, Source, WORKGROUP};
 use crate::contact::uzawa::Problem;
-use crate::gpu::types::{Active, Coefficients, ContactState, DofOut, DofStep, NewtonMember, NewtonState, MODE_FORCES, MODE_TANGENT, NEWTON_FAILED, NEWTON_HOST, NEWTON_ITERATING, NEWTON_MAX_FREE, NO_FAILURE};
+use crate::gpu::types::{
+    summary_len, Active, Coefficients, ContactState, DofOut, DofStep, NewtonMember, NewtonState, StepSummary, MODE_FORCES, MODE_TANGENT, NEWTON_CONVERGED, NEWTON_FAILED, NEWTON_HOST, NEWTON_ITERATING, NEWTON_MAX_FREE, NO_FAILURE,
+};
 use crate::gpu::uzawa_sweep::UzawaSweeps;
 use crate::gpu::{ElementFailure, Gpu, GpuError};
 use crate::policy::PhaseTimes;
@@ -34,7 +36,7 @@ const ITERATIONS_PER_SUBMIT: u32 = 12;
 
 /// The indirect dispatches (x, y, z) of update, forces, residual and judge, then the length of
 /// the call's list (`DISPATCHES` and `CALL_COUNT` of `newton.wgsl`).
-const DISPATCH_WORDS: usize = 13;
+pub(super) const DISPATCH_WORDS: usize = 13;
 const DISPATCHES: usize = 4;
 
 /// A batch's share of a [`GpuWorld::newton`] call: the batch, its `(call, member)` pairs in
@@ -51,29 +53,53 @@ struct CallPlan<'a> {
     contacts: usize,
 }
 
+/// Where a call's results land in a read-back: its state, then (absent for a kept call) its
+/// failure flags, displacements and internal forces, its strain energy, and (a kept call's) its
+/// summary.
+#[derive(Clone, Copy, Default)]
+struct Landing {
+    state: usize,
+    iterate: Option<[usize; 3]>,
+    energy: usize,
+    summary: Option<usize>,
+}
+
 /// Takes every call's state, displacements, residuals and strain energy from a submission's
 /// read-back (`landing` from `GpuWorld::queue_states`), in parallel (100 000 grains a call), and
 /// the stiffness values of the members in contact handed back (`tangents`: call, where,
-/// entries).
-fn unpack_calls(precision: Precision, calls: &mut [NewtonCall], (landing, coefficients): (&[[usize; 5]], Coefficients<Real>), tangents: &[(usize, usize, usize)], bytes: &[u8]) {
+/// entries). A kept call takes its state, energy and summary only.
+fn unpack_calls(precision: Precision, calls: &mut [NewtonCall], (landing, coefficients, dim): (&[Landing], Coefficients<Real>, usize), tangents: &[(usize, usize, usize)], bytes: &[u8]) {
     let real = precision.size();
-    calls.par_iter_mut().zip(landing).for_each(|(call, [state_at, flags_at, u_at, out_at, energy_at])| {
-        call.outcome = bytemuck::pod_read_unaligned(&bytes[*state_at..state_at + std::mem::size_of::<NewtonState<Real>>()]);
-        let flags: [u32; 2] = bytemuck::pod_read_unaligned(&bytes[*flags_at..flags_at + 8]);
-        call.failure = (call.outcome.status == NEWTON_FAILED).then(|| super::failure_of(flags)).flatten();
-        let n = call.u.len();
-        super::copy_from_device(precision, &bytes[*u_at..u_at + n * real], call.u);
-        // The forces alone: the residual follows from them, as `assemble_residual` computes it,
-        // with the step inputs the host holds.
-        let forces = super::from_device(precision, &bytes[*out_at..out_at + n * real]);
-        for (d, (out, f)) in call.dof_out.iter_mut().zip(forces).enumerate() {
-            *out = DofOut { f_int: f, g: call.inputs[d].residual(coefficients, call.u[d], f) };
+    calls.par_iter_mut().zip(landing).for_each(|(call, at)| {
+        call.outcome = bytemuck::pod_read_unaligned(&bytes[at.state..at.state + std::mem::size_of::<NewtonState<Real>>()]);
+        let strain = super::from_device(precision, &bytes[at.energy..at.energy + real])[0];
+        call.strain_energy = Some(strain);
+        if let Some(s) = at.summary {
+            let reals = super::from_device(precision, &bytes[s..s + summary_len(dim) * real]);
+            call.summary = (call.outcome.status == NEWTON_CONVERGED).then(|| StepSummary::of(dim, &reals, strain, call.outcome.residual));
         }
-        call.strain_energy = Some(super::from_device(precision, &bytes[*energy_at..energy_at + real])[0]);
+        if let Some(iterate) = at.iterate {
+            unpack_iterate(precision, call, iterate, coefficients, bytes);
+        }
     });
     for &(i, at, entries) in tangents {
         let call = &mut calls[i];
         call.tangent = (call.outcome.status == NEWTON_HOST).then(|| super::from_device(precision, &bytes[at..at + entries * real]));
+    }
+}
+
+/// Takes a call's failure flags, displacements and internal forces (`[flags, u, forces]`: where
+/// they land), and computes its residuals from the forces as `assemble_residual` does, with
+/// the step inputs the host holds.
+fn unpack_iterate(precision: Precision, call: &mut NewtonCall, [flags_at, u_at, out_at]: [usize; 3], coefficients: Coefficients<Real>, bytes: &[u8]) {
+    let real = precision.size();
+    let flags: [u32; 2] = bytemuck::pod_read_unaligned(&bytes[flags_at..flags_at + 8]);
+    call.failure = (call.outcome.status == NEWTON_FAILED).then(|| super::failure_of(flags)).flatten();
+    let n = call.u.len();
+    super::copy_from_device(precision, &bytes[u_at..u_at + n * real], call.u);
+    let forces = super::from_device(precision, &bytes[out_at..out_at + n * real]);
+    for (d, (out, f)) in call.dof_out.iter_mut().zip(forces).enumerate() {
+        *out = DofOut { f_int: f, g: call.inputs[d].residual(coefficients, call.u[d], f) };
     }
 }
 
@@ -121,6 +147,13 @@ pub struct NewtonCall<'a> {
     pub inputs: &'a [DofStep<Real>],
     /// The contact forces per dof (`None`: zero, a body without contact points).
     pub contact_force: Option<&'a [Real]>,
+    /// The host leaves the body's step end on the device if it converges there: only its
+    /// summary comes back ([`NewtonCall::summary`]), not its displacements and forces (those of
+    /// a call that ends otherwise come back after it). Only for a call whose step the device
+    /// began ([`GpuWorld::begin_step`]).
+    pub keep: bool,
+    /// Out, for a kept call that converged: its step end, reduced on the device.
+    pub summary: Option<StepSummary>,
     /// Out: where the iterations ended.
     pub outcome: NewtonState<Real>,
     /// Out: the strain energy at the `u` returned (`element_energy` after the iterations, in
@@ -190,6 +223,11 @@ pub(super) struct NewtonBuffers {
     finish: Pass,
     pub(super) member_energy: Buffer,
     pub(super) packed_forces: Buffer,
+    /// `newton_summary` over the call's list, after `newton_finish`: per member what the host
+    /// books at the end of its step, so that a member the host leaves on the device sends back
+    /// these few reals instead of its displacements and forces.
+    summarise: Pass,
+    pub(super) summary: Buffer,
     update: Pass,
     judge: Pass,
     compact: Pass,
@@ -231,6 +269,7 @@ pub(super) struct NewtonPipelines {
     compact: ComputePipeline,
     compact_host: ComputePipeline,
     finish: ComputePipeline,
+    summary: ComputePipeline,
     step: super::step::StepPipelines,
 }
 
@@ -242,6 +281,7 @@ impl NewtonPipelines {
             compact: gpu.pipeline_at("newton_compact", "main", None)?,
             compact_host: gpu.pipeline_at("newton_compact", "host", None)?,
             finish: gpu.pipeline_at("newton_finish", "main", None)?,
+            summary: gpu.pipeline_at("newton_summary", "main", None)?,
             step: super::step::StepPipelines::new(gpu)?,
         })
     }
@@ -281,7 +321,29 @@ impl NewtonBuffers {
             None,
             &[("energy", &b.energy), ("dof_out", &b.dof_out), ("members", &b.member_buffer), ("jobs", &call), ("dispatch", &dispatch), ("member_energy", &member_energy), ("forces", &packed_forces)],
         );
+        let summary = buffer(gpu, "summary", members * crate::gpu::types::summary_len(3) * real, storage | BufferUsages::COPY_SRC);
+        let summarise = Pass::bound(
+            gpu,
+            pipelines.summary.clone(),
+            ("newton_summary", "main"),
+            None,
+            &[
+                ("motion", resident.begin_motion()),
+                ("coefficients", coefficients),
+                ("committed", resident.committed()),
+                ("step", &b.step),
+                ("reference", &b.reference),
+                ("u", &b.u),
+                ("dof_out", &b.dof_out),
+                ("members", &b.member_buffer),
+                ("jobs", &call),
+                ("dispatch", &dispatch),
+                ("summary", &summary),
+            ],
+        );
         Ok(Self {
+            summarise,
+            summary,
             inverse,
             free,
             newton,
@@ -388,7 +450,7 @@ impl GpuWorld {
             let evaluated = if first { Some(self.record_evaluation(list, &mut encoder, &mut readback)?) } else { None };
             let mut encoder = encoder.unwrap_or_else(|| self.encoder("newton"));
             self.record_iterations(&mut encoder, &plan, first && evaluate_first, iterations);
-            let landing = self.queue_states(&mut readback, &work, calls.len());
+            let landing = self.queue_states(&mut readback, &work, calls, dim);
             // The stiffness values of the members in contact, `(call, where, entries)`: taken
             // for those handed back.
             let tangent_landing: Vec<(usize, usize, usize)> = match &contact {
@@ -410,7 +472,7 @@ impl GpuWorld {
                 if let Some(landing) = &evaluated {
                     super::unpack_evaluation(precision, list, landing, bytes);
                 }
-                unpack_calls(precision, calls, (&landing, coefficients), &tangent_landing, bytes);
+                unpack_calls(precision, calls, (&landing, coefficients, dim), &tangent_landing, bytes);
                 iterating = calls.iter().any(|call| call.outcome.status == NEWTON_ITERATING);
                 if let Some(at) = contact_landing {
                     unpack_contact(precision, problems, contacts, at, bytes);
@@ -423,6 +485,7 @@ impl GpuWorld {
             iterations = calls.iter().filter(|c| c.outcome.status == NEWTON_ITERATING).map(|c| c.member.budget - c.outcome.iterations).max().unwrap_or(1);
             t0 = Instant::now();
         }
+        self.take_unconverged(&work, calls, coefficients, times)?;
         self.after_newton(&work, calls, contacts);
         Ok(())
     }
@@ -437,6 +500,10 @@ impl GpuWorld {
             c.residual.is_none() && self.batches[b].newton.as_ref().is_some_and(|n| n.resident.predicted[m])
         };
         let kept: Vec<bool> = calls.iter().map(predicted).collect();
+        // Only a step the device began can end there: the summary reads its committed state.
+        for (call, &predicted) in calls.iter_mut().zip(&kept) {
+            call.keep &= predicted;
+        }
         let by_batch = self.stage_displacements_but(&calls.iter().map(|c| (c.body, &*c.u)).collect::<Vec<_>>(), &|i| kept[i]);
         let mut work: Vec<BatchCalls> = Vec::with_capacity(by_batch.len());
         for (batch, mine) in by_batch {
@@ -469,7 +536,13 @@ impl GpuWorld {
             let entries: usize = members.iter().map(|&(_, m)| self.batches[batch].members[m].nonzeros as usize).sum();
             (points * 3 * real + groups * std::mem::size_of::<ContactState<Real>>() + 16 + entries * real) as u64
         });
-        let bytes = (total_members * (16 + std::mem::size_of::<NewtonState<Real>>()) + total_dofs * 2 * real) as u64 + if list.is_empty() { 0 } else { self.readback.size() } + contact_bytes;
+        let per_member = 16 + std::mem::size_of::<NewtonState<Real>>() + summary_len(3) * real;
+        let bytes = (total_members * per_member + total_dofs * 2 * real) as u64 + if list.is_empty() { 0 } else { self.readback.size() } + contact_bytes;
+        self.newton_target_of(bytes)
+    }
+
+    /// The read-back buffer of device Newton calls, grown to at least `bytes`.
+    pub(super) fn newton_target_of(&mut self, bytes: u64) -> Buffer {
         if self.newton_readback.as_ref().is_none_or(|(_, size)| *size < bytes) {
             self.newton_readback = Some((buffer(&self.gpu, "newton readback", bytes as usize, BufferUsages::MAP_READ | BufferUsages::COPY_DST), bytes));
         }
@@ -536,36 +609,82 @@ impl GpuWorld {
             let n = self.batches[*batch].newton.as_ref().expect("staged");
             n.energy.dispatch_xyz(&self.gpu, &mut pass, *energy);
             n.finish.dispatch(&self.gpu, &mut pass, mine.len().div_ceil(WORKGROUP) as u32);
+            n.summarise.dispatch(&self.gpu, &mut pass, mine.len().div_ceil(WORKGROUP) as u32);
         }
     }
 
-    /// Queues each call's state, failure flags, displacements, internal forces and strain energy;
-    /// returns per call where they land.
-    fn queue_states(&self, readback: &mut ReadBack, work: &[BatchCalls], calls: usize) -> Vec<[usize; 5]> {
+    /// Queues each call's state and strain energy, and its failure flags, displacements and
+    /// internal forces, or (a kept call, `dim` the scene's) its summary; returns per call where
+    /// they land.
+    fn queue_states(&self, readback: &mut ReadBack, work: &[BatchCalls], calls: &[NewtonCall], dim: usize) -> Vec<Landing> {
         let real = self.gpu.precision.size();
-        let mut landing = vec![[0usize; 5]; calls];
+        let mut landing = vec![Landing::default(); calls.len()];
         for (batch, mine, _) in work {
-            let b = &self.batches[*batch];
             let members: Vec<usize> = mine.iter().map(|&(_, m)| m).collect();
             let state_size = std::mem::size_of::<NewtonState<Real>>() as u64;
-            let flag_span = |m: usize| 8 * m as u64..8 * (m as u64 + 1);
-            let flags = readback.queue_runs(*batch, Source::Failure, &members, &flag_span);
             let state_span = |m: usize| m as u64 * state_size..(m as u64 + 1) * state_size;
-            let bytes_of = |m: usize, per_dof: usize| {
-                let dofs = super::dof_span(&b.members, &[m]);
-                (dofs.start * per_dof) as u64..(dofs.end * per_dof) as u64
-            };
-            let per_dof = |m: usize| bytes_of(m, real);
             let states = readback.queue_runs(*batch, Source::NewtonState, &members, &state_span);
-            let us = readback.queue_runs(*batch, Source::Displacement, &members, &per_dof);
-            let outs = readback.queue_runs(*batch, Source::NewtonForces, &members, &per_dof);
             let energy_span = |m: usize| (m * real) as u64..((m + 1) * real) as u64;
             let energies = readback.queue_runs(*batch, Source::MemberEnergy, &members, &energy_span);
+            let (kept, others): (Vec<_>, Vec<_>) = mine.iter().partition(|&&(i, _)| calls[i].keep);
+            let iterates = self.queue_iterates(readback, *batch, &others);
+            let summary_span = |m: usize| (m * summary_len(dim) * real) as u64..((m + 1) * summary_len(dim) * real) as u64;
+            let summaries = readback.queue_runs(*batch, Source::Summary, &kept.iter().map(|&(_, m)| m).collect::<Vec<_>>(), &summary_span);
             for (k, &(i, _)) in mine.iter().enumerate() {
-                landing[i] = [states[k], flags[k], us[k], outs[k], energies[k]];
+                landing[i].state = states[k];
+                landing[i].energy = energies[k];
+            }
+            for (&(i, _), at) in others.iter().zip(iterates) {
+                landing[i].iterate = Some(at);
+            }
+            for (&(i, _), at) in kept.iter().zip(summaries) {
+                landing[i].summary = Some(at);
             }
         }
         landing
+    }
+
+    /// Queues the failure flags, displacements and internal forces of the listed calls `(call,
+    /// member)` of a batch (in member order); returns where each call's land.
+    fn queue_iterates(&self, readback: &mut ReadBack, batch: usize, mine: &[(usize, usize)]) -> Vec<[usize; 3]> {
+        let real = self.gpu.precision.size();
+        let b = &self.batches[batch];
+        let members: Vec<usize> = mine.iter().map(|&(_, m)| m).collect();
+        let flag_span = |m: usize| 8 * m as u64..8 * (m as u64 + 1);
+        let flags = readback.queue_runs(batch, Source::Failure, &members, &flag_span);
+        let per_dof = |m: usize| {
+            let dofs = super::dof_span(&b.members, &[m]);
+            (dofs.start * real) as u64..(dofs.end * real) as u64
+        };
+        let us = readback.queue_runs(batch, Source::Displacement, &members, &per_dof);
+        let outs = readback.queue_runs(batch, Source::NewtonForces, &members, &per_dof);
+        (0..mine.len()).map(|k| [flags[k], us[k], outs[k]]).collect()
+    }
+
+    /// The displacements and forces of the kept calls that did not converge on the device (the
+    /// host goes on with them), in one submission after the call's; each such call is no
+    /// longer kept.
+    fn take_unconverged(&mut self, work: &[BatchCalls], calls: &mut [NewtonCall], coefficients: Coefficients<Real>, times: &mut PhaseTimes) -> Result<(), GpuError> {
+        let wanted = |c: &NewtonCall| c.keep && c.outcome.status != NEWTON_CONVERGED;
+        if !calls.iter().any(wanted) {
+            return Ok(());
+        }
+        let mut readback = ReadBack::default();
+        let mut landing: Vec<(usize, [usize; 3])> = Vec::new();
+        for (batch, mine, _) in work {
+            let theirs: Vec<(usize, usize)> = mine.iter().copied().filter(|&(i, _)| wanted(&calls[i])).collect();
+            let at = self.queue_iterates(&mut readback, *batch, &theirs);
+            landing.extend(theirs.iter().map(|&(i, _)| i).zip(at));
+        }
+        let target = self.newton_target_of(readback.end);
+        let encoder = self.encoder("newton iterates");
+        let precision = self.gpu.precision;
+        self.read_back_into(&target, encoder, &readback, "newton_update", times, Instant::now(), |bytes| {
+            for &(i, at) in &landing {
+                calls[i].keep = false;
+                unpack_iterate(precision, &mut calls[i], at, coefficients, bytes);
+            }
+        })
     }
 
     /// After a call: the device's displacements are the host's now, and the mirror follows, so
@@ -574,8 +693,13 @@ impl GpuWorld {
     fn after_newton(&mut self, work: &[BatchCalls], calls: &[NewtonCall], contacts: &[GroupContact]) {
         for (batch, mine, _) in work {
             let b = &mut self.batches[*batch];
-            let spans = mine.iter().map(|&(i, m)| (b.members[m].dof_start as usize, &*calls[i].u)).collect();
+            let spans = mine.iter().filter(|&&(i, _)| !calls[i].keep).map(|&(i, m)| (b.members[m].dof_start as usize, &*calls[i].u)).collect();
             super::update_mirrors(&mut b.u_host, spans);
+            // A kept call's iterate is the device's alone.
+            for &(_, m) in mine.iter().filter(|&&(i, _)| calls[i].keep) {
+                let dofs = super::dof_span(&b.members, &[m]);
+                b.u_host[dofs].fill(Real::NAN);
+            }
             let n = b.newton.as_mut().expect("staged");
             for &(i, m) in mine {
                 match calls[i].failure {

@@ -12,8 +12,9 @@
 //! again.
 
 use super::{buffer, Batch, GpuWorld, Mirror, Pass, WORKGROUP};
-use crate::gpu::types::{Active, DofOut, DofState, DofStep, MemberRange, StepMotion, MODE_FORCES};
+use crate::gpu::types::{summary_len, Active, Coefficients, DofOut, DofState, DofStep, MemberRange, StepMotion, MODE_FORCES};
 use crate::gpu::{Gpu, GpuError};
+use crate::policy::PhaseTimes;
 use crate::precision::{same_bits, Precision, Real};
 use wgpu::{Buffer, BufferUsages, ComputePipeline};
 
@@ -36,6 +37,9 @@ pub struct StepEnd<'a> {
     pub v: &'a [Real],
     pub f_int: &'a [Real],
     pub on_device: bool,
+    /// The step ended with a kept device Newton call ([`crate::gpu::NewtonCall::keep`]): the
+    /// host's `u`, `v` and `f_int` are not the step's, the device's iterate is.
+    pub held: bool,
 }
 
 /// The pipelines of `step_begin` and `step_commit`.
@@ -100,13 +104,23 @@ impl Resident {
     pub(super) fn new(gpu: &Gpu, pipelines: &StepPipelines, b: &Batch, u_start: &Buffer) -> Self {
         let real = gpu.precision.size();
         let (dofs, members) = (b.u_host.len(), b.members.len());
-        let committed = buffer(gpu, "committed state", dofs * 3 * real, BufferUsages::STORAGE | BufferUsages::COPY_DST);
+        let committed = buffer(gpu, "committed state", dofs * 3 * real, BufferUsages::STORAGE | BufferUsages::COPY_DST | BufferUsages::COPY_SRC);
         let motion = || buffer(gpu, "step motion", 4 * real, BufferUsages::UNIFORM | BufferUsages::COPY_DST);
         let jobs = || buffer(gpu, "step jobs", members * 8, BufferUsages::STORAGE | BufferUsages::COPY_DST);
         let (motions, jobs) = ([motion(), motion()], [jobs(), jobs()]);
         let bindings = StepBindings { motions: [&motions[0], &motions[1]], jobs: [&jobs[0], &jobs[1]], committed: &committed, step: &b.step, u: &b.u, u_start, dof_out: &b.dof_out, members: &b.member_buffer };
         let passes = pipelines.passes(gpu, &bindings);
         Self { committed, motions, jobs, passes, valid: vec![false; members], current: vec![false; members], predicted: vec![false; members], pending: None, lists: [Vec::new(), Vec::new()], involved: vec![false; members] }
+    }
+
+    /// The committed states (one `DofState` per dof).
+    pub(super) fn committed(&self) -> &Buffer {
+        &self.committed
+    }
+
+    /// The motion of the step `step_begin` begins (the step the Newton calls solve).
+    pub(super) fn begin_motion(&self) -> &Buffer {
+        &self.motions[0]
     }
 
     /// A member's `u` or `dof_out` changed on the device by other means than a Newton call the
@@ -172,20 +186,84 @@ impl GpuWorld {
                 continue;
             }
             for (k, (list, motion)) in [(1, commit), (0, (!members.is_empty()).then_some((members, motion)))].into_iter().filter_map(|(k, w)| Some((k, w?))) {
-                let r = &self.batches[batch].newton.as_ref().expect("a batch with committed states").resident;
-                let (motion_buffer, jobs) = (r.motions[k].clone(), r.jobs[k].clone());
-                let jobs_list: Vec<Active> = list.iter().map(|&m| Active { member: m as u32, mode: MODE_FORCES }).collect();
-                // Committed states are kept in f64 only (device Newton iterations are).
-                self.upload(&motion_buffer, 0, bytemuck::bytes_of(&motion));
-                self.upload(&jobs, 0, bytemuck::cast_slice(&jobs_list));
-                let r = &mut self.batches[batch].newton.as_mut().expect("a batch with committed states").resident;
-                for &m in &list {
-                    r.involved[m] = true;
-                }
-                r.lists[k] = list;
+                self.queue_step_pass(batch, k, list, motion);
             }
         }
         Ok(())
+    }
+
+    /// Queues `step_begin` (`k` = 0) or `step_commit` (1) over the listed members of a batch for
+    /// the head of the next submission: its motion and list go up.
+    fn queue_step_pass(&mut self, batch: usize, k: usize, list: Vec<usize>, motion: StepMotion<Real>) {
+        let r = &self.batches[batch].newton.as_ref().expect("a batch with committed states").resident;
+        let (motion_buffer, jobs) = (r.motions[k].clone(), r.jobs[k].clone());
+        let jobs_list: Vec<Active> = list.iter().map(|&m| Active { member: m as u32, mode: MODE_FORCES }).collect();
+        // Committed states are kept in f64 only (device Newton iterations are).
+        self.upload(&motion_buffer, 0, bytemuck::bytes_of(&motion));
+        self.upload(&jobs, 0, bytemuck::cast_slice(&jobs_list));
+        let r = &mut self.batches[batch].newton.as_mut().expect("a batch with committed states").resident;
+        for &m in &list {
+            r.involved[m] = true;
+        }
+        r.lists[k] = list;
+    }
+
+    /// The committed states of the listed bodies `committed` (each kept on the device: a step of
+    /// its ended there, [`StepEnd::held`]), one `DofState` per dof, after the commit that is
+    /// waiting (recorded at the head of the same submission); and the last device Newton
+    /// iterates and internal forces of the bodies `iterates` (kept calls:
+    /// [`crate::gpu::NewtonCall::keep`]), as their calls left them. One submission.
+    #[allow(clippy::type_complexity)]
+    pub fn read_kept(&mut self, committed: &[usize], iterates: &[usize], times: &mut PhaseTimes) -> Result<(Vec<Vec<DofState<Real>>>, Vec<(Vec<Real>, Vec<Real>)>), GpuError> {
+        if !committed.is_empty() {
+            for batch in 0..self.batches.len() {
+                if let Some((list, motion)) = self.batches[batch].newton.as_mut().and_then(|n| n.resident.pending.take()) {
+                    self.queue_step_pass(batch, 1, list, motion);
+                }
+            }
+        }
+        let (state, real) = (std::mem::size_of::<DofState<Real>>(), self.gpu.precision.size());
+        let per_dof = |size: usize| {
+            move |b: &Batch, m: usize| {
+                let dofs = super::dof_span(&b.members, &[m]);
+                (dofs.start * size) as u64..(dofs.end * size) as u64
+            }
+        };
+        let (states, reals) = (per_dof(state), per_dof(real));
+        let requests: [(&[usize], super::Source, &dyn Fn(&Batch, usize) -> std::ops::Range<u64>); 3] = [(committed, super::Source::Committed, &states), (iterates, super::Source::Displacement, &reals), (iterates, super::Source::NewtonForces, &reals)];
+        let mut bytes = self.read_member_spans(&requests, times)?.into_iter();
+        let (states, u, f) = (bytes.next().expect("three requests"), bytes.next().expect("three requests"), bytes.next().expect("three requests"));
+        Ok((states.iter().map(|b| bytemuck::pod_collect_to_vec(b)).collect(), u.iter().zip(&f).map(|(u, f)| (bytemuck::pod_collect_to_vec(u), bytemuck::pod_collect_to_vec(f))).collect()))
+    }
+
+    /// Per request, each listed body's span (`span` of its batch and member) of a batch buffer,
+    /// all in one submission (none without a span).
+    #[allow(clippy::type_complexity)]
+    fn read_member_spans(&mut self, requests: &[(&[usize], super::Source, &dyn Fn(&Batch, usize) -> std::ops::Range<u64>)], times: &mut PhaseTimes) -> Result<Vec<Vec<Vec<u8>>>, GpuError> {
+        let mut readback = super::ReadBack::default();
+        let landing: Vec<Vec<(u64, u64)>> = requests
+            .iter()
+            .map(|(bodies, what, span)| {
+                bodies
+                    .iter()
+                    .map(|&body| {
+                        let (batch, m) = self.place[body];
+                        let range = span(&self.batches[batch], m);
+                        (readback.queue(batch, *what, range.clone()), range.end - range.start)
+                    })
+                    .collect()
+            })
+            .collect();
+        if readback.copies.is_empty() {
+            return Ok(landing.iter().map(|_| Vec::new()).collect());
+        }
+        let target = self.newton_target_of(readback.end);
+        let encoder = self.encoder("read kept");
+        let mut out = Vec::new();
+        self.read_back_into(&target, encoder, &readback, "step_commit", times, std::time::Instant::now(), |bytes| {
+            out = landing.iter().map(|l| l.iter().map(|&(at, n)| bytes[at as usize..(at + n) as usize].to_vec()).collect()).collect();
+        })?;
+        Ok(out)
     }
 
     /// Records the step's start where it is waiting (`step_commit`, then `step_begin`, per
@@ -255,7 +333,8 @@ impl GpuWorld {
             for e in mine {
                 let m = self.place[e.body].1;
                 let dofs = super::dof_span(&b.members, &[m]);
-                let current = e.on_device && r.current[m] && same_bits(&b.u_host[dofs], e.u);
+                let current = e.on_device && r.current[m] && (e.held || same_bits(&b.u_host[dofs], e.u));
+                assert!(!e.held || (current && r.valid[m]), "a body whose step end the device keeps commits there");
                 match (current, r.valid[m]) {
                     (true, true) => commits.push(m),
                     (true, false) => uploads.push((m, e)),
@@ -333,6 +412,50 @@ pub fn run_step_kernels(
     gpu.submit(encoder)?;
     let bytes: Vec<Vec<u8>> = staged.iter().zip(sizes).map(|(b, size)| gpu.read_range("step_begin", b, size as u64)).collect::<Result<_, _>>()?;
     Ok((bytemuck::pod_collect_to_vec(&bytes[0]), bytemuck::pod_collect_to_vec(&bytes[1]), bytemuck::pod_collect_to_vec(&bytes[2]), bytemuck::pod_collect_to_vec(&bytes[3])))
+}
+
+/// What `newton_summary` reads besides the members and the call's list: the step's motion and
+/// coefficients, the committed states, the step inputs, every dof's reference coordinate, the
+/// iterate and its forces.
+pub type SummaryBuffers<'a> = (StepMotion<Real>, Coefficients<Real>, &'a [DofState<Real>], &'a [DofStep<Real>], &'a [Real], &'a [Real], &'a [DofOut<Real>]);
+
+/// `newton_summary` over the members `call` lists, alone on an f64 device from the given
+/// buffers; the summaries it writes (`summary_len(dim)` reals per member, zero for the others),
+/// for the parity tests with the CPU twin.
+pub fn run_newton_summary(gpu: &Gpu, members: &[MemberRange], call: &[usize], (motion, coefficients, committed, step, reference, u, dof_out): SummaryBuffers) -> Result<Vec<Real>, GpuError> {
+    assert_eq!(gpu.precision, Precision::F64, "the device keeps committed states in f64 only");
+    let pipeline = gpu.pipeline_at("newton_summary", "main", None)?;
+    let read = BufferUsages::STORAGE;
+    let init = |label: &str, bytes: &[u8], usage: BufferUsages| super::buffer_init(gpu, label, bytes, usage);
+    let size = members.len() * summary_len(motion.dim as usize);
+    let summary = init("summary", bytemuck::cast_slice(&vec![0.0 as Real; size]), read | BufferUsages::COPY_SRC);
+    let mut dispatch = [0u32; super::newton::DISPATCH_WORDS];
+    dispatch[super::newton::DISPATCH_WORDS - 1] = call.len() as u32;
+    let jobs: Vec<Active> = call.iter().map(|&m| Active { member: m as u32, mode: MODE_FORCES }).collect();
+    let buffers = [
+        ("motion", init("motion", bytemuck::bytes_of(&motion), BufferUsages::UNIFORM)),
+        ("coefficients", init("coefficients", bytemuck::cast_slice(&[coefficients.factor, coefficients.c1]), BufferUsages::UNIFORM)),
+        ("committed", init("committed", bytemuck::cast_slice(committed), read)),
+        ("step", init("step", bytemuck::cast_slice(step), read)),
+        ("reference", init("reference", bytemuck::cast_slice(reference), read)),
+        ("u", init("u", bytemuck::cast_slice(u), read)),
+        ("dof_out", init("dof out", bytemuck::cast_slice(dof_out), read)),
+        ("members", init("members", bytemuck::cast_slice(members), read)),
+        ("jobs", init("jobs", bytemuck::cast_slice(&jobs), read)),
+        ("dispatch", init("dispatch", bytemuck::cast_slice(&dispatch), read)),
+    ];
+    let mut bindings: Vec<(&str, &Buffer)> = buffers.iter().map(|(name, b)| (*name, b)).collect();
+    bindings.push(("summary", &summary));
+    let pass = Pass::bound(gpu, pipeline, ("newton_summary", "main"), None, &bindings);
+    let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("newton summary") });
+    {
+        let mut compute = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("newton summary"), timestamp_writes: None });
+        pass.dispatch(gpu, &mut compute, call.len().div_ceil(WORKGROUP).max(1) as u32);
+    }
+    let staging = buffer_of(gpu, size * 8);
+    encoder.copy_buffer_to_buffer(&summary, 0, &staging, 0, (size * 8) as u64);
+    gpu.submit(encoder)?;
+    Ok(bytemuck::pod_collect_to_vec(&gpu.read_range("newton_summary", &staging, (size * 8) as u64)?))
 }
 
 /// A mappable buffer of `bytes` for a read-back.

@@ -24,19 +24,20 @@ impl Body {
     /// What the device takes at the start of the body's step ([`crate::gpu::GpuWorld::begin_step`]);
     /// `free`: the step has no contact point on the body.
     pub fn step_start(&self, body: usize, free: bool) -> StepStart<'_> {
+        assert!(self.state_held.is_none() || (free && self.may_step_on_device()), "a body with contact points starts from the host's state");
         StepStart { body, inputs: &self.step_inputs, u: &self.state.u, on_device: free && self.may_step_on_device() }
     }
 
     /// The committed state the device follows after a kept step ([`crate::gpu::GpuWorld::commit_step`]).
     pub fn step_end(&self, body: usize) -> StepEnd<'_> {
-        StepEnd { body, u: &self.state.u, v: &self.state.v, f_int: &self.state.f_int, on_device: self.may_step_on_device() }
+        StepEnd { body, u: &self.state.u, v: &self.state.v, f_int: &self.state.f_int, on_device: self.may_step_on_device(), held: self.state_held.is_some() }
     }
 
     /// Whether the device may begin and commit the body's steps from the state it keeps: its
     /// step inputs then follow from that state alone (no surface loads, whose forces change
     /// with time; no prescribed dofs, which move by their own rule; no Prony series, whose
     /// history the host advances).
-    fn may_step_on_device(&self) -> bool {
+    pub fn may_step_on_device(&self) -> bool {
         self.loads.is_empty() && self.prescribed.is_empty() && self.viscoelastic.is_none()
     }
 
@@ -148,6 +149,8 @@ impl Body {
             u_start: &self.state.u,
             inputs: &self.step_inputs,
             contact_force: Some(&self.contact_force),
+            keep: false,
+            summary: None,
             outcome: NewtonState::default(),
             strain_energy: None,
             failure: None,
@@ -162,7 +165,16 @@ impl Body {
     /// the test then sees a first evaluation.
     /// A `tangent` that came back ([`NewtonCall::tangent`]) is kept for a refactorisation at
     /// this iterate.
-    pub fn finish_device_newton(&mut self, p: &StepParams, outcome: &NewtonState<Real>, strain_energy: Option<Real>, failure: Option<ElementFailure>, tangent: Option<&[Real]>) -> Result<(), StepFailure> {
+    pub fn finish_device_newton(&mut self, p: &StepParams, outcome: &NewtonState<Real>, strain_energy: Option<Real>, failure: Option<ElementFailure>, tangent: Option<&[Real]>, summary: Option<&StepSummary>) -> Result<(), StepFailure> {
+        if let Some(summary) = summary {
+            // Converged and kept on the device: the host's vectors are not the step's.
+            self.trial_held = Some(*summary);
+            self.still = false;
+            self.tangent_current = false;
+            self.evaluated.valid = false;
+            self.last_increment = Some(outcome.increment);
+            return Ok(());
+        }
         self.device_tangent = tangent.map(|values| (self.trial.u.clone(), values.to_vec()));
         if let Some(failure) = failure {
             return Err(self.element_failure(&self.trial.u, failure));
@@ -177,6 +189,21 @@ impl Body {
         self.evaluated.strain = strain_energy;
         self.absorb_residual(p);
         Ok(())
+    }
+
+    /// After a kept device Newton call that did not converge (its iterate came back, its
+    /// residuals computed from the host's stale step inputs): the committed state the device
+    /// held (`states`, [`crate::gpu::GpuWorld::read_kept`]) is the host's again, the step's
+    /// inputs follow from it as `step_begin` computed them, and the residuals from those.
+    pub fn take_committed_mid_step(&mut self, p: &StepParams, states: &[DofState<Real>]) {
+        self.take_committed(states);
+        for (d, s) in self.step_inputs.iter_mut().enumerate() {
+            *s = DofStep { mass: self.mass[d], u_pred: self.state.u[d] + p.dt * self.state.v[d], f_int_t: self.state.f_int[d], f_ext: self.f_ext[d] };
+        }
+        let c = coefficients(p);
+        for (d, out) in self.dof_out.iter_mut().enumerate() {
+            out.g = self.step_inputs[d].residual(c, self.trial.u[d], out.f_int);
+        }
     }
 
     /// The strain energy at the trial displacement when a device Newton call left it there

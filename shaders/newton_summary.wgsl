@@ -1,0 +1,95 @@
+// What the host books at the end of a step for each member of a device Newton call whose step
+// the device began (its committed state is the step's start), at the iterate where its
+// iterations ended: per member, `summary_len(dim)` reals at `m * stride`,
+//   [Σ m v² / 2, Σ m (v - v_t)², Σ Δu ((1 - ξ) f_int,t + ξ f_int), max over nodes of |v|²,
+//    Σ m x (dim), Σ m v (dim), Σ m_node x × v (1 in 2D, 3 in 3D), box of x: low (dim), high (dim)]
+// with v the theta rule's velocity (eq. 15, as `step_commit` computes it), x = X + u. The host
+// then needs neither the member's displacements nor its forces: its energies, momenta, centre
+// of mass and contact box come from these (`Body::take_summary`). One member per invocation.
+// CPU twin: `cpu::newton_summary`.
+
+const WORKGROUP = 64u;
+
+@group(0) @binding(0) var<uniform> motion: StepMotion;
+@group(0) @binding(1) var<uniform> coefficients: Coefficients;
+@group(0) @binding(2) var<storage, read> committed: array<DofState>;
+@group(0) @binding(3) var<storage, read> step: array<DofStep>;
+@group(0) @binding(4) var<storage, read> reference: array<real>;
+@group(0) @binding(5) var<storage, read> u: array<real>;
+@group(0) @binding(6) var<storage, read> dof_out: array<DofOut>;
+@group(0) @binding(7) var<storage, read> members: array<MemberRange>;
+@group(0) @binding(8) var<storage, read> jobs: array<Active>;
+@group(0) @binding(9) var<storage, read> dispatch: array<u32>;
+@group(0) @binding(10) var<storage, read_write> summary: array<real>;
+
+@compute @workgroup_size(WORKGROUP)
+fn main(@builtin(global_invocation_id) id: vec3<u32>) {
+    if id.x >= dispatch[CALL_COUNT] {
+        return;
+    }
+    let m = jobs[id.x].member;
+    let range = members[m];
+    // A motion not written yet (no step begun on the device: nothing reads these summaries)
+    // still gives a dimension the loop steps by.
+    let dim = clamp(u32(motion.dim), 2u, 3u);
+    let angular = select(3u, 1u, dim == 2u);
+    let xi = coefficients.factor;
+    var kinetic = real(0.0);
+    var theta_term = real(0.0);
+    var force_work = real(0.0);
+    var speed2 = real(0.0);
+    var mx = vec3<real>(real(0.0));
+    var p = vec3<real>(real(0.0));
+    var l = vec3<real>(real(0.0));
+    var lo = vec3<real>(real(0.0));
+    var hi = vec3<real>(real(0.0));
+    let nodes = select(range.dofs / 3u, range.dofs / 2u, dim == 2u);
+    for (var n = 0u; n < nodes; n++) {
+        let first = range.dof_start + n * dim;
+        let node_mass = step[first].mass;
+        var x = vec3<real>(real(0.0));
+        var v = vec3<real>(real(0.0));
+        var s2 = real(0.0);
+        for (var i = 0u; i < dim; i++) {
+            let d = first + i;
+            let c = committed[d];
+            let mass = step[d].mass;
+            let vi = (u[d] - c.u - motion.dt_explicit * c.v) / motion.theta_dt;
+            kinetic += mass * vi * vi;
+            theta_term += mass * (vi - c.v) * (vi - c.v);
+            force_work += (u[d] - c.u) * ((real(1.0) - xi) * c.f_int + xi * dof_out[d].f_int);
+            s2 += vi * vi;
+            x[i] = reference[d] + u[d];
+            v[i] = vi;
+            mx[i] += mass * x[i];
+            p[i] += mass * vi;
+            if n == 0u || x[i] < lo[i] {
+                lo[i] = x[i];
+            }
+            if n == 0u || x[i] > hi[i] {
+                hi[i] = x[i];
+            }
+        }
+        speed2 = max(speed2, s2);
+        l += node_mass * cross(x, v);
+    }
+    let stride = 4u + 4u * dim + angular;
+    let at = m * stride;
+    summary[at] = real(0.5) * kinetic;
+    summary[at + 1u] = theta_term;
+    summary[at + 2u] = force_work;
+    summary[at + 3u] = speed2;
+    for (var i = 0u; i < dim; i++) {
+        summary[at + 4u + i] = mx[i];
+        summary[at + 4u + dim + i] = p[i];
+        summary[at + 4u + 2u * dim + angular + i] = lo[i];
+        summary[at + 4u + 3u * dim + angular + i] = hi[i];
+    }
+    if dim == 2u {
+        summary[at + 4u + 2u * dim] = l.z;
+    } else {
+        for (var i = 0u; i < 3u; i++) {
+            summary[at + 4u + 2u * dim + i] = l[i];
+        }
+    }
+}
