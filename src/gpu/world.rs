@@ -165,7 +165,7 @@ struct Batch {
     /// The step inputs (`DofStep`, 4 reals) of every dof, as last uploaded.
     step_host: Vec<Real>,
     u: Buffer,
-    reference: Buffer,
+    reference: Vec<Real>,
     step: Buffer,
     failure: Buffer,
     active: Buffer,
@@ -592,11 +592,15 @@ impl GpuWorld {
                 mine.iter().for_each(|&(_, m)| n.resident.touched(m));
             }
             let active: Vec<Active> = mine.iter().map(|&(i, m)| Active { member: m as u32, mode: if list[i].tangent { MODE_TANGENT } else { MODE_FORCES } }).collect();
+            let members: Vec<usize> = mine.iter().map(|&(_, m)| m).collect();
             let b = &self.batches[batch];
             let (active_buffer, failure_buffer) = (b.active.clone(), b.failure.clone());
-            let failures = vec![NO_FAILURE; 2 * b.members.len()];
             self.upload(&active_buffer, 0, bytemuck::cast_slice(&active));
-            self.upload(&failure_buffer, 0, bytemuck::cast_slice(&failures));
+            // The flags of the evaluated members only (a pass over the few grains in contact
+            // of a packing of thousands).
+            for run in runs(&members) {
+                self.upload(&failure_buffer, 8 * run[0] as u64, bytemuck::cast_slice(&vec![NO_FAILURE; 2 * run.len()]));
+            }
             if active.iter().any(|a| a.mode == MODE_TANGENT) {
                 self.batches[batch].tangent.ready()?;
             }
@@ -608,9 +612,9 @@ impl GpuWorld {
             }
             b.residual.record(&self.gpu, encoder, WORKGROUP, extent(0, |m| m.dofs), active.len());
             b.csr.record(&self.gpu, encoder, WORKGROUP, extent(MODE_TANGENT, |m| m.nonzeros), active.len());
-            let flags = readback.queue(batch, Source::Failure, 0..(8 * b.members.len()) as u64);
-            for &(i, m) in &mine {
-                landing[i][0] = flags as usize + 8 * m;
+            let flag_span = |m: usize| 8 * m as u64..8 * (m as u64 + 1);
+            for (&(i, _), at) in mine.iter().zip(readback.queue_runs(batch, Source::Failure, &members, &flag_span)) {
+                landing[i][0] = at;
             }
             let dof_span = |m: usize| b.members[m].dof_start as u64 * 2 * real..(b.members[m].dof_start + b.members[m].dofs) as u64 * 2 * real;
             let value_span = |m: usize| b.members[m].nonzero_start as u64 * real..(b.members[m].nonzero_start + b.members[m].nonzeros) as u64 * real;
@@ -965,10 +969,10 @@ impl Batch {
         let dof_start = uploaded("dof gather start", bytemuck::cast_slice(&dof_start));
         let dof = uploaded("dof gather", bytemuck::cast_slice(&dof));
         let u = buffer(gpu, "u", dofs * real, write | BufferUsages::COPY_SRC);
-        // Every dof's reference coordinate, in member order: where `newton_summary` places nodes.
+        // Every dof's reference coordinate, in member order: where `newton_summary` places nodes
+        // (it goes up with the batch's Newton buffers, if a call needs them).
         let reference: Vec<Real> = members.iter().flat_map(|&i| bodies[i].mesh.nodes.iter().flat_map(move |x| x[..dim].iter().copied())).collect();
         assert_eq!(reference.len(), dofs, "a batch's dofs are its members' nodes");
-        let reference = uploaded("reference", &to_device(precision, &reference));
         let step = buffer(gpu, "step", dofs * 4 * real, write);
         let failure = buffer(gpu, "failure", members.len() * 8, write | BufferUsages::COPY_SRC);
         let active = buffer(gpu, "active", members.len() * 8, write);

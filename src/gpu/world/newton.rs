@@ -233,6 +233,14 @@ pub(super) struct NewtonBuffers {
     compact: Pass,
     /// Made by the first call with groups in contact.
     host_tangents: Option<HostTangents>,
+    /// Each member's state at the start of an unevaluated call and its flags without a failure,
+    /// which the device copies into `state` and the batch's `failure` for the call's runs of
+    /// members (`start_runs`: first member, count) at its first submission.
+    initial_state: Buffer,
+    no_failure: Buffer,
+    start_runs: Vec<(usize, usize)>,
+    /// The call's list as last uploaded.
+    call_host: Vec<Active>,
     /// Host copies: each member's parameters and start displacements as last uploaded, and the
     /// factorisation whose inverse its slot holds.
     newton_host: Vec<NewtonMember<Real>>,
@@ -302,7 +310,7 @@ impl NewtonBuffers {
         let contact = buffer(gpu, "contact forces", dofs * real, write);
         let x0 = buffer(gpu, "contact-free increments", dofs * real, write);
         let u_base = buffer(gpu, "u base", dofs * real, write);
-        let call = buffer(gpu, "newton call", members * 8, write);
+        let call = buffer(gpu, "newton call", members * 8, write | BufferUsages::COPY_SRC);
         let jobs = buffer(gpu, "newton jobs", members * 8, write);
         let dispatch = buffer(gpu, "newton dispatch", DISPATCH_WORDS * 4, write | BufferUsages::INDIRECT);
         let (forces, residual) = (b.forces.with_jobs(gpu, &jobs), b.residual.with_jobs(gpu, &jobs));
@@ -322,6 +330,7 @@ impl NewtonBuffers {
             &[("energy", &b.energy), ("dof_out", &b.dof_out), ("members", &b.member_buffer), ("jobs", &call), ("dispatch", &dispatch), ("member_energy", &member_energy), ("forces", &packed_forces)],
         );
         let summary = buffer(gpu, "summary", members * crate::gpu::types::summary_len(3) * real, storage | BufferUsages::COPY_SRC);
+        let reference = super::buffer_init(gpu, "reference", &super::to_device(gpu.precision, &b.reference), storage);
         let summarise = Pass::bound(
             gpu,
             pipelines.summary.clone(),
@@ -332,7 +341,7 @@ impl NewtonBuffers {
                 ("coefficients", coefficients),
                 ("committed", resident.committed()),
                 ("step", &b.step),
-                ("reference", &b.reference),
+                ("reference", &reference),
                 ("u", &b.u),
                 ("dof_out", &b.dof_out),
                 ("members", &b.member_buffer),
@@ -341,7 +350,14 @@ impl NewtonBuffers {
                 ("summary", &summary),
             ],
         );
+        let initial = NewtonState::<Real> { status: NEWTON_ITERATING, residual: Real::MAX, previous_residual: Real::MAX, ..NewtonState::default() };
+        let initial_state = super::buffer_init(gpu, "initial newton state", bytemuck::cast_slice(&vec![initial; members]), BufferUsages::COPY_SRC);
+        let no_failure = super::buffer_init(gpu, "no failure", bytemuck::cast_slice(&vec![NO_FAILURE; 2 * members]), BufferUsages::COPY_SRC);
         Ok(Self {
+            initial_state,
+            no_failure,
+            start_runs: Vec::new(),
+            call_host: Vec::new(),
             summarise,
             summary,
             inverse,
@@ -449,6 +465,9 @@ impl GpuWorld {
             let mut readback = ReadBack::default();
             let evaluated = if first { Some(self.record_evaluation(list, &mut encoder, &mut readback)?) } else { None };
             let mut encoder = encoder.unwrap_or_else(|| self.encoder("newton"));
+            if first {
+                self.record_call_start(&mut encoder, &work);
+            }
             self.record_iterations(&mut encoder, &plan, first && evaluate_first, iterations);
             let landing = self.queue_states(&mut readback, &work, calls, dim);
             // The stiffness values of the members in contact, `(call, where, entries)`: taken
@@ -513,6 +532,9 @@ impl GpuWorld {
                 }
                 let pipelines = self.newton_pipelines.as_ref().expect("made above");
                 let made = NewtonBuffers::new(&self.gpu, pipelines, &self.batches[batch], &self.coefficients)?;
+                // The templates of a call's start and the reference coordinates, once.
+                let b = &self.batches[batch];
+                self.traffic.up += (b.members.len() * (std::mem::size_of::<NewtonState<Real>>() + 8) + b.reference.len() * self.gpu.precision.size()) as u64;
                 self.batches[batch].newton = Some(made);
             }
             let mine: Vec<(usize, usize)> = mine.into_iter().map(|i| (i, self.place[calls[i].body].1)).collect();
@@ -547,6 +569,21 @@ impl GpuWorld {
             self.newton_readback = Some((buffer(&self.gpu, "newton readback", bytes as usize, BufferUsages::MAP_READ | BufferUsages::COPY_DST), bytes));
         }
         self.newton_readback.as_ref().expect("made above").0.clone()
+    }
+
+    /// Records a call's start on the device, before its first submission's passes: the list of
+    /// members the iterations run over, a copy of the call's; the initial states and cleared
+    /// failure flags of unevaluated members, copies of the templates.
+    fn record_call_start(&self, encoder: &mut wgpu::CommandEncoder, work: &[BatchCalls]) {
+        let state = std::mem::size_of::<NewtonState<Real>>() as u64;
+        for (batch, mine, _) in work {
+            let (b, n) = (&self.batches[*batch], self.batches[*batch].newton.as_ref().expect("staged"));
+            encoder.copy_buffer_to_buffer(&n.call, 0, &n.jobs, 0, 8 * mine.len() as u64);
+            for &(first, count) in &n.start_runs {
+                encoder.copy_buffer_to_buffer(&n.initial_state, first as u64 * state, &n.state, first as u64 * state, count as u64 * state);
+                encoder.copy_buffer_to_buffer(&n.no_failure, 8 * first as u64, &b.failure, 8 * first as u64, 8 * count as u64);
+            }
+        }
     }
 
     /// Records one submission's compute pass: the members' first evaluation and its test when
@@ -826,16 +863,27 @@ impl GpuWorld {
             let first = run[0] as u64;
             uploads.push((n.newton.clone(), first * member_size, bytemuck::cast_slice(&n.newton_host[run[0]..=*run.last().expect("a run has members")]).to_vec()));
         }
+        // Unevaluated calls start from the same state, which the device copies from its own
+        // template with the failure flags' (`record_call_start`); evaluated ones from the host's
+        // residuals.
+        n.start_runs.clear();
+        let unevaluated = mine.iter().all(|&(i, _)| calls[i].residual.is_none());
         for run in super::runs(&members) {
             let first = run[0] as u64;
-            uploads.push((n.state.clone(), first * state_size, bytemuck::cast_slice(&states[k..k + run.len()]).to_vec()));
+            if unevaluated {
+                n.start_runs.push((run[0], run.len()));
+            } else {
+                uploads.push((n.state.clone(), first * state_size, bytemuck::cast_slice(&states[k..k + run.len()]).to_vec()));
+                uploads.push((b.failure.clone(), 8 * first, bytemuck::cast_slice(&vec![NO_FAILURE; 2 * run.len()]).to_vec()));
+            }
             k += run.len();
         }
+        // The list goes up when it changed (a packing in flight calls the same grains step after
+        // step); the device copies it into the iterations' list.
         let list: Vec<Active> = members.iter().map(|&m| Active { member: m as u32, mode: MODE_FORCES }).collect();
-        uploads.push((n.call.clone(), 0, bytemuck::cast_slice(&list).to_vec()));
-        uploads.push((n.jobs.clone(), 0, bytemuck::cast_slice(&list).to_vec()));
-        for run in super::runs(&members) {
-            uploads.push((b.failure.clone(), 8 * run[0] as u64, bytemuck::cast_slice(&vec![NO_FAILURE; 2 * run.len()]).to_vec()));
+        if !same_bits(&list, &n.call_host) {
+            uploads.push((n.call.clone(), 0, bytemuck::cast_slice(&list).to_vec()));
+            n.call_host.clone_from(&list);
         }
         let count = list.len() as u32;
         let most = |f: fn(&crate::gpu::types::MemberRange) -> u32| members.iter().map(|&m| f(&b.members[m]) as usize).max().unwrap_or(0);

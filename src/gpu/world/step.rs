@@ -98,6 +98,9 @@ pub(super) struct Resident {
     /// each member is in either.
     lists: [Vec<usize>; 2],
     involved: Vec<bool>,
+    /// The motions and lists as last uploaded, per pass.
+    uploaded_motions: [Option<StepMotion<Real>>; 2],
+    uploaded_lists: [Vec<usize>; 2],
 }
 
 impl Resident {
@@ -110,7 +113,20 @@ impl Resident {
         let (motions, jobs) = ([motion(), motion()], [jobs(), jobs()]);
         let bindings = StepBindings { motions: [&motions[0], &motions[1]], jobs: [&jobs[0], &jobs[1]], committed: &committed, step: &b.step, u: &b.u, u_start, dof_out: &b.dof_out, members: &b.member_buffer };
         let passes = pipelines.passes(gpu, &bindings);
-        Self { committed, motions, jobs, passes, valid: vec![false; members], current: vec![false; members], predicted: vec![false; members], pending: None, lists: [Vec::new(), Vec::new()], involved: vec![false; members] }
+        Self {
+            committed,
+            motions,
+            jobs,
+            passes,
+            valid: vec![false; members],
+            current: vec![false; members],
+            predicted: vec![false; members],
+            pending: None,
+            lists: [Vec::new(), Vec::new()],
+            involved: vec![false; members],
+            uploaded_motions: [None, None],
+            uploaded_lists: [Vec::new(), Vec::new()],
+        }
     }
 
     /// The committed states (one `DofState` per dof).
@@ -195,12 +211,24 @@ impl GpuWorld {
     /// Queues `step_begin` (`k` = 0) or `step_commit` (1) over the listed members of a batch for
     /// the head of the next submission: its motion and list go up.
     fn queue_step_pass(&mut self, batch: usize, k: usize, list: Vec<usize>, motion: StepMotion<Real>) {
-        let r = &self.batches[batch].newton.as_ref().expect("a batch with committed states").resident;
+        let r = &mut self.batches[batch].newton.as_mut().expect("a batch with committed states").resident;
         let (motion_buffer, jobs) = (r.motions[k].clone(), r.jobs[k].clone());
-        let jobs_list: Vec<Active> = list.iter().map(|&m| Active { member: m as u32, mode: MODE_FORCES }).collect();
+        // What changed goes up: a packing in flight begins the same grains with the same motion
+        // step after step.
+        let motion_changed = r.uploaded_motions[k].is_none_or(|m| !same_bits(&[m], &[motion]));
+        let list_changed = r.uploaded_lists[k] != list;
+        r.uploaded_motions[k] = Some(motion);
+        if list_changed {
+            r.uploaded_lists[k].clone_from(&list);
+        }
         // Committed states are kept in f64 only (device Newton iterations are).
-        self.upload(&motion_buffer, 0, bytemuck::bytes_of(&motion));
-        self.upload(&jobs, 0, bytemuck::cast_slice(&jobs_list));
+        if motion_changed {
+            self.upload(&motion_buffer, 0, bytemuck::bytes_of(&motion));
+        }
+        if list_changed {
+            let jobs_list: Vec<Active> = list.iter().map(|&m| Active { member: m as u32, mode: MODE_FORCES }).collect();
+            self.upload(&jobs, 0, bytemuck::cast_slice(&jobs_list));
+        }
         let r = &mut self.batches[batch].newton.as_mut().expect("a batch with committed states").resident;
         for &m in &list {
             r.involved[m] = true;
