@@ -361,13 +361,15 @@ fn device_pass(groups: &mut [Group], live: &[bool], kind: PassKind, world: &mut 
         .collect();
     let mut layout = lay_out(shares, kind.iterating);
     let PassLayout { list, calls, problems, contacts, .. } = &mut layout;
+    let asked: Vec<bool> = calls.iter().map(|call| call.keep).collect();
     let passed = if calls.is_empty() { world.evaluate(list, coefficients(p), times) } else { world.newton(calls, problems, contacts, list, coefficients(p), (dim, p.theta * p.dt), c.interrupt, times) };
     let failures: Vec<Option<ElementFailure>> = list.iter().map(|e| e.failure).collect();
     let ends = IterationEnds { calls: calls.iter_mut().map(|call| (call.outcome, call.strain_energy, call.failure, call.tangent.take(), call.summary)).collect(), contacts: contacts.iter().map(|g| g.outcome).collect() };
-    let bodies_of_calls: Vec<usize> = calls.iter().map(|call| call.body).collect();
+    // The calls that were to keep their step's end on the device and did not converge there.
+    let unkept: Vec<usize> = calls.iter().zip(&asked).filter(|(call, &asked)| asked && call.summary.is_none()).map(|(call, _)| call.body).collect();
     let PassLayout { call_ranges, evaluations_start, .. } = layout;
     let passed = match passed {
-        Ok(()) => take_back_unconverged(groups, &bodies_of_calls, &ends, world, c, times),
+        Ok(()) => take_back_unconverged(groups, &unkept, world, c, times),
         Err(e) => Err(e),
     };
     let passed = &passed;
@@ -381,29 +383,24 @@ fn device_pass(groups: &mut [Group], live: &[bool], kind: PassKind, world: &mut 
     results
 }
 
-/// The bodies whose committed state the device holds and whose device Newton call did not
-/// converge there (it was to keep the step's end on the device): their calls' iterates came
-/// back, with residuals from stale step inputs; their committed states come back now and the
+/// The bodies of `unkept` (calls that were to keep their step's end on the device and did not
+/// converge there) whose committed state the device holds: their calls' iterates came back,
+/// with residuals from stale step inputs; their committed states come back now and the
 /// residuals follow from them ([`Body::take_committed_mid_step`]).
-fn take_back_unconverged(groups: &mut [Group], bodies_of_calls: &[usize], ends: &IterationEnds, world: &mut GpuWorld, c: &Context, times: &mut PhaseTimes) -> Result<(), GpuError> {
-    let unkept: Vec<usize> = bodies_of_calls.iter().zip(&ends.calls).filter(|(_, end)| end.4.is_none()).map(|(&b, _)| b).collect();
+fn take_back_unconverged(groups: &mut [Group], unkept: &[usize], world: &mut GpuWorld, c: &Context, times: &mut PhaseTimes) -> Result<(), GpuError> {
     if unkept.is_empty() {
         return Ok(());
     }
-    let mut at: std::collections::HashMap<usize, (usize, usize)> = std::collections::HashMap::new();
-    for (k, g) in groups.iter().enumerate() {
-        for (j, &id) in g.ids.iter().enumerate() {
-            at.insert(id, (k, j));
-        }
-    }
-    let held: Vec<usize> = unkept.into_iter().filter(|id| groups[at[id].0].bodies[at[id].1].held_state().is_some()).collect();
+    // Where each of them lies: (group, index in it). A kept call is a group of one body.
+    let place: Vec<(usize, usize)> = groups.iter().enumerate().filter(|(_, g)| g.ids.len() == 1 && unkept.contains(&g.ids[0])).map(|(k, _)| (k, 0)).collect();
+    let held: Vec<(usize, (usize, usize))> = place.into_iter().map(|(k, j)| (groups[k].ids[j], (k, j))).filter(|&(_, (k, j))| groups[k].bodies[j].held_state().is_some()).collect();
     if held.is_empty() {
         return Ok(());
     }
-    let (states, _) = world.read_kept(&held, &[], times)?;
-    for (id, states) in held.iter().zip(states) {
-        let (k, j) = at[id];
-        groups[k].bodies[j].take_committed_mid_step(c.p, &states);
+    let ids: Vec<usize> = held.iter().map(|&(id, _)| id).collect();
+    let (states, _) = world.read_kept(&ids, &[], times)?;
+    for ((_, (k, j)), states) in held.iter().zip(states) {
+        groups[*k].bodies[*j].take_committed_mid_step(c.p, &states);
     }
     Ok(())
 }

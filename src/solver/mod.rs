@@ -633,7 +633,7 @@ impl Simulation {
     }
 
     /// The boundary nodes of the committed state that are inside another body or behind an
-    /// obstacle (none without contact).
+    /// obstacle (none without contact). The states must be the host's ([`Simulation::sync_states`]).
     pub fn overlaps(&self) -> Vec<Overlap> {
         self.contact.as_ref().map_or_else(Vec::new, |model| state_overlaps(&self.bodies, model, self.t))
     }
