@@ -621,18 +621,9 @@ fn a_falling_grain_that_steps_on_the_device_sends_nothing_per_dof_up() {
     if !gpu_available(test) {
         return;
     }
-    let sets: Vec<String> = ["packing.count=12", "time.end=0.05", "gravity=[0.0,-9.81]"].iter().map(|s| s.to_string()).collect();
-    let loaded = bifirst::scene::load_scene(&scene_path("grains_many"), &sets).expect("scene");
-    let mut sim = bifirst::solver::build_simulation(&loaded).expect("simulation");
-    let gpu = std::sync::Arc::new(bifirst::gpu::open(None, Some(Precision::F64)).expect("an adapter"));
-    let bodies: Vec<_> = sim.bodies.iter().map(|b| b.world_body()).collect();
-    let mut world = bifirst::gpu::GpuWorld::new(gpu, &bodies).expect("world");
-    world.rounds = RoundPlacement::Gpu;
-    drop(bodies);
-    sim.world = Some(world);
-    sim.start();
+    // The host takes every grain's step end here (not `hold_states`).
+    let (sim, per_step) = falling_grains(12, 5, true, false);
     let dofs: usize = sim.bodies.iter().map(|b| b.state.u.len()).sum();
-    let per_step: Vec<u64> = (0..5).map(|_| sim.advance().expect("a step").bytes_moved).collect();
     eprintln!("{} grains, {dofs} dofs: bytes per step {per_step:?}", sim.bodies.len());
     // What still crosses: the trial displacements and internal forces down (16 bytes a dof),
     // and per grain its call's state, lists, flags and strain energy.
