@@ -87,6 +87,7 @@ pub(super) fn newton_rows(options: &BenchOptions, gpus: &[Arc<Gpu>], peaks: &[Pe
                         inputs: &case.step,
                         contact_force: None,
                         keep: false,
+                        positions: false,
                         summary: None,
                         outcome: NewtonState::default(),
                         strain_energy: None,

@@ -247,6 +247,10 @@ pub struct Body {
     /// The step being solved ended on the device and stays there ([`crate::gpu::NewtonCall::keep`]):
     /// `trial`'s vectors are stale until [`Body::take_iterate`].
     pub(super) trial_held: Option<StepSummary>,
+    /// While the state (the trial) is held: its displacements are the host's all the same
+    /// ([`crate::gpu::NewtonCall::positions`]).
+    state_positions: bool,
+    trial_positions: bool,
 }
 
 /// The inputs of a CPU evaluation whose results `Body::dof_out` still holds, and the strain
@@ -367,6 +371,8 @@ impl Body {
             contraction: None,
             state_held: None,
             trial_held: None,
+            state_positions: false,
+            trial_positions: false,
         }
     }
 
@@ -425,6 +431,7 @@ impl Body {
         let dim = self.dim;
         self.step_end = t + p.dt;
         self.trial_held = None;
+        self.trial_positions = false;
         self.last_increment = None;
         self.previous_residual = None;
         self.contraction = None;
@@ -942,7 +949,13 @@ impl Body {
 
     pub fn commit(&mut self) {
         match self.trial_held.take() {
-            Some(held) => self.state_held = Some(held),
+            Some(held) => {
+                self.state_held = Some(held);
+                self.state_positions = self.trial_positions;
+                if self.trial_positions {
+                    std::mem::swap(&mut self.state.u, &mut self.trial.u);
+                }
+            }
             None => {
                 std::mem::swap(&mut self.state, &mut self.trial);
                 self.state_held = None;
@@ -958,6 +971,18 @@ impl Body {
     /// The committed state, if the device keeps it ([`Body::state_held`]).
     pub fn held_state(&self) -> Option<&StepSummary> {
         self.state_held.as_ref()
+    }
+
+    /// Whether the host's committed displacements are current (the rest of the state may be
+    /// held on the device).
+    pub fn positions_current(&self) -> bool {
+        self.state_held.is_none() || self.state_positions
+    }
+
+    /// Whether the host's trial displacements are current (the rest of the step's end may be
+    /// held on the device).
+    pub fn trial_positions_current(&self) -> bool {
+        self.trial_held.is_none() || self.trial_positions
     }
 
     /// Takes back the committed state the device kept (`states`: one per dof, from

@@ -130,7 +130,7 @@ pub fn solve_groups(
     velocity_scale: Real,
     world: Option<&mut GpuWorld>,
     interrupt: Option<&AtomicBool>,
-    hold: Option<&[bool]>,
+    hold: Option<&[Hold]>,
     times: &mut PhaseTimes,
 ) -> (Vec<ContactPoint>, Vec<Result<GroupReport, StepFailure>>) {
     let started = std::time::Instant::now();
@@ -198,9 +198,21 @@ pub(super) struct Context<'a> {
     pub(super) velocity_scale: Real,
     /// The run's interrupt flag, checked before every increment.
     pub(super) interrupt: Option<&'a AtomicBool>,
-    /// Per body, whether a device Newton call may keep its step's end on the device (nothing
-    /// is near it, and the host does not need its state after the step); `None`: none may.
-    pub(super) hold: Option<&'a [bool]>,
+    /// Per body, what of its step's end a device Newton call may keep on the device; `None`:
+    /// nothing, for any body.
+    pub(super) hold: Option<&'a [Hold]>,
+}
+
+/// What of a body's step end may stay on the device ([`crate::gpu::NewtonCall::keep`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Hold {
+    /// Nothing: the body has contact points, or steps by rules of its own.
+    No,
+    /// All of it: nothing is near the body.
+    All,
+    /// All but its displacements, which the searches of the step read (something is near it,
+    /// but it has no contact point).
+    AllButPositions,
 }
 
 /// Where a group's Newton loop stands between two evaluations.

@@ -4,7 +4,7 @@
 //! The CPU's own loop is [`Group::newton_on_cpu`]; what the device does is `gpu::world`'s.
 
 use super::body::{coefficients, Body, StepFailure};
-use super::group::{Context, Group, GroupReport};
+use super::group::{Context, Group, GroupReport, Hold};
 use crate::contact::uzawa::{Outcome, Problem};
 use crate::contact::Settings;
 use crate::gpu::types::ContactState;
@@ -325,9 +325,9 @@ struct PassLayout<'a> {
     evaluations_start: Vec<usize>,
 }
 
-/// A call's state, strain energy, element failure, the tangent it handed back and its summary
-/// if the device kept its end.
-type CallEnd = (NewtonState<Real>, Option<Real>, Option<ElementFailure>, Option<Vec<Real>>, Option<StepSummary>);
+/// A call's state, strain energy, element failure, the tangent it handed back, and its summary
+/// if the device kept its end (with whether its displacements came back).
+type CallEnd = (NewtonState<Real>, Option<Real>, Option<ElementFailure>, Option<Vec<Real>>, Option<(StepSummary, bool)>);
 
 /// What a pass leaves a group that iterated on the device: per call its state, strain energy,
 /// element failure and the tangent it handed back; per contact its outcome.
@@ -364,7 +364,7 @@ fn device_pass(groups: &mut [Group], live: &[bool], kind: PassKind, world: &mut 
     let asked: Vec<bool> = calls.iter().map(|call| call.keep).collect();
     let passed = if calls.is_empty() { world.evaluate(list, coefficients(p), times) } else { world.newton(calls, problems, contacts, list, coefficients(p), (dim, p.theta * p.dt), c.interrupt, times) };
     let failures: Vec<Option<ElementFailure>> = list.iter().map(|e| e.failure).collect();
-    let ends = IterationEnds { calls: calls.iter_mut().map(|call| (call.outcome, call.strain_energy, call.failure, call.tangent.take(), call.summary)).collect(), contacts: contacts.iter().map(|g| g.outcome).collect() };
+    let ends = IterationEnds { calls: calls.iter_mut().map(|call| (call.outcome, call.strain_energy, call.failure, call.tangent.take(), call.summary.map(|s| (s, call.positions)))).collect(), contacts: contacts.iter().map(|g| g.outcome).collect() };
     // The calls that were to keep their step's end on the device and did not converge there.
     let unkept: Vec<usize> = calls.iter().zip(&asked).filter(|(call, &asked)| asked && call.summary.is_none()).map(|(call, _)| call.body).collect();
     let PassLayout { call_ranges, evaluations_start, .. } = layout;
@@ -461,15 +461,15 @@ fn iterations_share<'a>(g: &'a mut Group, inverses: Vec<Option<Vec<Real>>>, kind
     let u_base: Vec<Vec<Real>> = if contact.is_some() { bodies.iter().map(|b| b.trial_velocity_base(p)).collect() } else { Vec::new() };
     // A free body that nothing is near may leave its step's end on the device.
     let alone = contact.is_none() && bodies.len() == 1;
-    let keep = |id: usize| alone && c.hold.is_some_and(|hold| hold[id]);
+    let hold = |id: usize| if alone { c.hold.map_or(Hold::No, |hold| hold[id]) } else { Hold::No };
     let calls: Vec<NewtonCall> = bodies
         .iter_mut()
         .zip(ids.iter())
         .zip(inverses)
         .map(|((body, &id), inverse)| {
-            let kept = keep(id) && body.may_step_on_device();
+            let hold = if body.may_step_on_device() { hold(id) } else { Hold::No };
             let mut call = body.newton_call(id, p, motion_scale, budget, inverse, !kind.unevaluated);
-            call.keep = kept;
+            (call.keep, call.positions) = (hold != Hold::No, hold == Hold::AllButPositions);
             call
         })
         .collect();
@@ -519,7 +519,7 @@ fn finish_iterations(g: &mut Group, (range, index): (std::ops::Range<usize>, Opt
     state.report.bodies_iterated += if kind.unevaluated { iterations } else { iterations.saturating_sub(1) } * g.bodies.len();
     let mut result = Ok(());
     for (body, (end, strain, failure, tangent, summary)) in g.bodies.iter_mut().zip(&ends.calls[range]) {
-        if let (Ok(()), Err(e)) = (&result, body.finish_device_newton(c.p, end, *strain, *failure, tangent.as_deref(), summary.as_ref())) {
+        if let (Ok(()), Err(e)) = (&result, body.finish_device_newton(c.p, end, *strain, *failure, tangent.as_deref(), *summary)) {
             result = Err(e);
         }
     }

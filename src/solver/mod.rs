@@ -25,7 +25,7 @@ use crate::gpu::types::{StepMotion, StepSummary};
 use crate::gpu::{GpuWorld, StepEnd, StepStart};
 use crate::precision::{Precision, Real};
 pub use body::StepParams;
-use group::{solve_groups, GroupReport};
+use group::{solve_groups, GroupReport, Hold};
 use rayon::prelude::*;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -256,11 +256,16 @@ fn placer<'a>(bodies: &'a [Body], u: impl Fn(&Body) -> &[Real] + Sync + 'a) -> i
 /// The committed states the device keeps of the `needed` bodies, back into the host's.
 fn take_committed(bodies: &mut [Body], world: Option<&mut GpuWorld>, needed: &[bool], times: &mut PhaseTimes) -> Result<(), StepFailure> {
     let held: Vec<usize> = (0..bodies.len()).filter(|&b| needed[b] && bodies[b].held_state().is_some()).collect();
+    take_committed_of(bodies, world, &held, times)
+}
+
+/// The committed states the device keeps of the listed bodies (each held), back into the host's.
+fn take_committed_of(bodies: &mut [Body], world: Option<&mut GpuWorld>, held: &[usize], times: &mut PhaseTimes) -> Result<(), StepFailure> {
     if held.is_empty() {
         return Ok(());
     }
     let world = world.expect("a state kept on a device");
-    let (states, _) = world.read_kept(&held, &[], times).map_err(|e| bodies[held[0]].device_failure(&e))?;
+    let (states, _) = world.read_kept(held, &[], times).map_err(|e| bodies[held[0]].device_failure(&e))?;
     for (&b, states) in held.iter().zip(states) {
         bodies[b].take_committed(&states);
     }
@@ -270,7 +275,7 @@ fn take_committed(bodies: &mut [Body], world: Option<&mut GpuWorld>, needed: &[b
 /// The step's ends the device keeps of the `needed` bodies, back into the host's (and their
 /// committed states first, where the device keeps those too).
 fn take_step_ends(bodies: &mut [Body], world: Option<&mut GpuWorld>, needed: &[bool], p: &StepParams, times: &mut PhaseTimes) -> Result<(), StepFailure> {
-    let held: Vec<usize> = (0..bodies.len()).filter(|&b| needed[b] && bodies[b].held_end().is_some()).collect();
+    let held: Vec<usize> = (0..bodies.len()).filter(|&b| needed[b] && !bodies[b].trial_positions_current()).collect();
     if held.is_empty() {
         return Ok(());
     }
@@ -615,19 +620,22 @@ impl Simulation {
         Ok(())
     }
 
-    /// Per body, whether its step's end may stay on the device ([`Simulation::hold_states`]):
-    /// a body without contact points whose nodes the detection did not place (nothing is
-    /// near it). `None` when no body may.
-    fn hold(&self, points: &[ContactPoint]) -> Option<Vec<bool>> {
+    /// Per body, what of its step's end may stay on the device ([`Simulation::hold_states`]):
+    /// all of it for a body without contact points whose nodes the detection did not place
+    /// (nothing is near it), all but its displacements for one the detection placed (the
+    /// searches read them). `None` when no body may keep anything there.
+    fn hold(&self, points: &[ContactPoint]) -> Option<Vec<Hold>> {
         self.world.as_ref().filter(|w| self.hold_states && w.precision() == Precision::F64)?;
-        let mut hold: Vec<bool> = self.bodies.iter().map(Body::may_step_on_device).collect();
-        for t in points.iter().flat_map(|c| c.terms()) {
-            hold[t.body as usize] = false;
-        }
+        let mut hold: Vec<Hold> = self.bodies.iter().map(|b| if b.may_step_on_device() { Hold::All } else { Hold::No }).collect();
         if let (Some(_), Some((config, _))) = (&self.contact, &self.committed) {
             for (h, &placed) in hold.iter_mut().zip(&config.nodes.placed) {
-                *h &= !placed;
+                if placed && *h == Hold::All {
+                    *h = Hold::AllButPositions;
+                }
             }
+        }
+        for t in points.iter().flat_map(|c| c.terms()) {
+            hold[t.body as usize] = Hold::No;
         }
         Some(hold)
     }
@@ -660,9 +668,16 @@ impl Simulation {
         // The search reaches as far as anything can travel in two steps, plus a little.
         let margin = 2.0 * dt * (2.0 * body_speed + obstacle_speed) + 0.01 * h;
         let detection = Detection::new(model, config, self.t, dt, margin, &mut self.kept_pairs);
-        // A body something is near is the host's from here on.
-        take_committed(&mut self.bodies, self.world.as_mut(), &detection.needed, times)?;
-        Ok((detection.points(model, config, &placer(&self.bodies, |b| &b.state.u), dim, margin), velocity_scale))
+        // The searches place bodies at the host's displacements; a body with contact points is
+        // the host's from here on.
+        let unplaceable: Vec<usize> = (0..self.bodies.len()).filter(|&b| detection.needed[b] && !self.bodies[b].positions_current()).collect();
+        take_committed_of(&mut self.bodies, self.world.as_mut(), &unplaceable, times)?;
+        let points = detection.points(model, config, &placer(&self.bodies, |b| &b.state.u), dim, margin);
+        let mut touching: Vec<usize> = points.iter().flat_map(|c| c.terms()).map(|t| t.body as usize).filter(|&b| self.bodies[b].held_state().is_some()).collect();
+        touching.sort_unstable();
+        touching.dedup();
+        take_committed_of(&mut self.bodies, self.world.as_mut(), &touching, times)?;
+        Ok((points, velocity_scale))
     }
 
     /// Brings back the committed states the device keeps of the bodies the caller needs, then

@@ -62,6 +62,8 @@ struct Landing {
     iterate: Option<[usize; 3]>,
     energy: usize,
     summary: Option<usize>,
+    /// A kept call's displacements, when it sends them ([`NewtonCall::positions`]).
+    positions: Option<usize>,
 }
 
 /// Takes every call's state, displacements, residuals and strain energy from a submission's
@@ -80,6 +82,10 @@ fn unpack_calls(precision: Precision, calls: &mut [NewtonCall], (landing, coeffi
         }
         if let Some(iterate) = at.iterate {
             unpack_iterate(precision, call, iterate, coefficients, bytes);
+        }
+        if let Some(u_at) = at.positions {
+            let n = call.u.len();
+            super::copy_from_device(precision, &bytes[u_at..u_at + n * real], call.u);
         }
     });
     for &(i, at, entries) in tangents {
@@ -152,6 +158,8 @@ pub struct NewtonCall<'a> {
     /// a call that ends otherwise come back after it). Only for a call whose step the device
     /// began ([`GpuWorld::begin_step`]).
     pub keep: bool,
+    /// A kept call sends back its displacements too (into `u`): the host's searches read them.
+    pub positions: bool,
     /// Out, for a kept call that converged: its step end, reduced on the device.
     pub summary: Option<StepSummary>,
     /// Out: where the iterations ended.
@@ -559,6 +567,7 @@ impl GpuWorld {
             (points * 3 * real + groups * std::mem::size_of::<ContactState<Real>>() + 16 + entries * real) as u64
         });
         let per_member = 16 + std::mem::size_of::<NewtonState<Real>>() + summary_len(3) * real;
+        // (a kept call's displacements fit in the room of another's displacements and forces)
         let bytes = (total_members * per_member + total_dofs * 2 * real) as u64 + if list.is_empty() { 0 } else { self.readback.size() } + contact_bytes;
         self.newton_target_of(bytes)
     }
@@ -677,6 +686,15 @@ impl GpuWorld {
             for (&(i, _), at) in kept.iter().zip(summaries) {
                 landing[i].summary = Some(at);
             }
+            let placed: Vec<(usize, usize)> = kept.iter().copied().filter(|&(i, _)| calls[i].positions).collect();
+            let b = &self.batches[*batch];
+            let per_dof = |m: usize| {
+                let dofs = super::dof_span(&b.members, &[m]);
+                (dofs.start * real) as u64..(dofs.end * real) as u64
+            };
+            for (&(i, _), at) in placed.iter().zip(readback.queue_runs(*batch, Source::Displacement, &placed.iter().map(|&(_, m)| m).collect::<Vec<_>>(), &per_dof)) {
+                landing[i].positions = Some(at);
+            }
         }
         landing
     }
@@ -730,10 +748,11 @@ impl GpuWorld {
     fn after_newton(&mut self, work: &[BatchCalls], calls: &[NewtonCall], contacts: &[GroupContact]) {
         for (batch, mine, _) in work {
             let b = &mut self.batches[*batch];
-            let spans = mine.iter().filter(|&&(i, _)| !calls[i].keep).map(|&(i, m)| (b.members[m].dof_start as usize, &*calls[i].u)).collect();
+            let known = |c: &NewtonCall| !c.keep || c.positions;
+            let spans = mine.iter().filter(|&&(i, _)| known(&calls[i])).map(|&(i, m)| (b.members[m].dof_start as usize, &*calls[i].u)).collect();
             super::update_mirrors(&mut b.u_host, spans);
-            // A kept call's iterate is the device's alone.
-            for &(_, m) in mine.iter().filter(|&&(i, _)| calls[i].keep) {
+            // A kept call's iterate is the device's alone, unless its displacements came back.
+            for &(_, m) in mine.iter().filter(|&&(i, _)| !known(&calls[i])) {
                 let dofs = super::dof_span(&b.members, &[m]);
                 b.u_host[dofs].fill(Real::NAN);
             }

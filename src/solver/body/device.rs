@@ -150,6 +150,7 @@ impl Body {
             inputs: &self.step_inputs,
             contact_force: Some(&self.contact_force),
             keep: false,
+            positions: false,
             summary: None,
             outcome: NewtonState::default(),
             strain_energy: None,
@@ -165,10 +166,12 @@ impl Body {
     /// the test then sees a first evaluation.
     /// A `tangent` that came back ([`NewtonCall::tangent`]) is kept for a refactorisation at
     /// this iterate.
-    pub fn finish_device_newton(&mut self, p: &StepParams, outcome: &NewtonState<Real>, strain_energy: Option<Real>, failure: Option<ElementFailure>, tangent: Option<&[Real]>, summary: Option<&StepSummary>) -> Result<(), StepFailure> {
-        if let Some(summary) = summary {
-            // Converged and kept on the device: the host's vectors are not the step's.
-            self.trial_held = Some(*summary);
+    pub fn finish_device_newton(&mut self, p: &StepParams, outcome: &NewtonState<Real>, strain_energy: Option<Real>, failure: Option<ElementFailure>, tangent: Option<&[Real]>, summary: Option<(StepSummary, bool)>) -> Result<(), StepFailure> {
+        if let Some((summary, positions)) = summary {
+            // Converged and kept on the device: the host's vectors are not the step's (but for
+            // the displacements, when they came back).
+            self.trial_held = Some(summary);
+            self.trial_positions = positions;
             self.still = false;
             self.tangent_current = false;
             self.evaluated.valid = false;
