@@ -1044,7 +1044,7 @@ impl Body {
 
     /// Current position of a node.
     pub fn position(&self, node: usize) -> [Real; 3] {
-        debug_assert!(self.state_held.is_none(), "the committed state is on the device");
+        debug_assert!(self.positions_current(), "the committed displacements are on the device");
         super::displaced(self.mesh.nodes[node], &self.state.u, node, self.dim)
     }
 

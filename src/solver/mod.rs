@@ -196,7 +196,7 @@ pub(crate) fn state_overlaps(bodies: &[Body], model: &ContactModel, t: Real) -> 
 /// largest facet from it. In a packing at rest that is nearly every body, and the pass over
 /// every boundary node cost a third of the contact phase. A body whose displacements the device
 /// keeps (`held`) takes the box of its nodes the device computed and the largest facet it had
-/// in `committed` (a body nothing is near, moving nearly as a rigid body in one step).
+/// in `committed` (a body without contact points, moving nearly as a rigid body in one step).
 pub(crate) fn configure(bodies: &[Body], model: &ContactModel, u: impl Fn(&Body) -> &[Real] + Sync, held: impl Fn(&Body) -> Option<&StepSummary> + Sync, committed: Option<&Configuration>, config: &mut Configuration) {
     let committed = committed.filter(|c| c.boxes.len() == bodies.len());
     (config.boxes, config.largest) = bodies
@@ -390,10 +390,11 @@ pub struct Simulation {
     committed: Option<(Configuration, Real)>,
     /// The buffers the next step's configuration is written over (the one before the committed).
     spare_configuration: Configuration,
-    /// Bodies that nothing is near may keep their state on the device between steps (a GPU
+    /// Bodies without contact points may keep their state on the device between steps (a GPU
     /// world with device Newton iterations): the host's copy of such a body's state is stale
-    /// until [`Simulation::sync_states`], and its energies, momenta and box come from the
-    /// device's summary. Off, every step's end state comes back.
+    /// (but for its displacements, when something is near it) until
+    /// [`Simulation::sync_states`], and its energies, momenta and box come from the device's
+    /// summary. Off, every step's end state comes back.
     pub hold_states: bool,
 }
 
@@ -680,9 +681,8 @@ impl Simulation {
         Ok((points, velocity_scale))
     }
 
-    /// Brings back the committed states the device keeps of the bodies the caller needs, then
-    /// all of them: the host's copies are current after this (logged states, VTU frames,
-    /// probes, restarts, the end of a run).
+    /// Brings back every committed state the device keeps: the host's copies are current after
+    /// this (logged states, VTU frames, probes, restarts, the end of a run).
     pub fn sync_states(&mut self) -> Result<(), StepFailure> {
         let all = vec![true; self.bodies.len()];
         take_committed(&mut self.bodies, self.world.as_mut(), &all, &mut PhaseTimes::default())
