@@ -85,7 +85,7 @@ impl StepMotion<f64> {
     }
 }
 
-/// The reals `step_summary` writes per member in a scene of dimension `dim`: kinetic energy, the
+/// The reals `newton_summary` writes per member in a scene of dimension `dim`: kinetic energy, the
 /// theta and force terms of the step's dissipation, the largest squared nodal speed, then
 /// `Σ m x`, `Σ m v`, the angular momentum (1 component in 2D, 3 in 3D) and the box of the
 /// nodes (low, high), `dim` each but the angular momentum.

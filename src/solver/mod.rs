@@ -253,12 +253,6 @@ fn placer<'a>(bodies: &'a [Body], u: impl Fn(&Body) -> &[Real] + Sync + 'a) -> i
     }
 }
 
-/// The committed states the device keeps of the `needed` bodies, back into the host's.
-fn take_committed(bodies: &mut [Body], world: Option<&mut GpuWorld>, needed: &[bool], times: &mut PhaseTimes) -> Result<(), StepFailure> {
-    let held: Vec<usize> = (0..bodies.len()).filter(|&b| needed[b] && bodies[b].held_state().is_some()).collect();
-    take_committed_of(bodies, world, &held, times)
-}
-
 /// The committed states the device keeps of the listed bodies (each held), back into the host's.
 fn take_committed_of(bodies: &mut [Body], world: Option<&mut GpuWorld>, held: &[usize], times: &mut PhaseTimes) -> Result<(), StepFailure> {
     if held.is_empty() {
@@ -684,8 +678,8 @@ impl Simulation {
     /// Brings back every committed state the device keeps: the host's copies are current after
     /// this (logged states, VTU frames, probes, restarts, the end of a run).
     pub fn sync_states(&mut self) -> Result<(), StepFailure> {
-        let all = vec![true; self.bodies.len()];
-        take_committed(&mut self.bodies, self.world.as_mut(), &all, &mut PhaseTimes::default())
+        let held: Vec<usize> = (0..self.bodies.len()).filter(|&b| self.bodies[b].held_state().is_some()).collect();
+        take_committed_of(&mut self.bodies, self.world.as_mut(), &held, &mut PhaseTimes::default())
     }
 
     /// Energy bookkeeping of a converged step (before commit): external work, friction (as

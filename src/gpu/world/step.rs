@@ -269,19 +269,21 @@ impl GpuWorld {
     #[allow(clippy::type_complexity)]
     fn read_member_spans(&mut self, requests: &[(&[usize], super::Source, &dyn Fn(&Batch, usize) -> std::ops::Range<u64>)], times: &mut PhaseTimes) -> Result<Vec<Vec<Vec<u8>>>, GpuError> {
         let mut readback = super::ReadBack::default();
-        let landing: Vec<Vec<(u64, u64)>> = requests
-            .iter()
-            .map(|(bodies, what, span)| {
-                bodies
-                    .iter()
-                    .map(|&body| {
-                        let (batch, m) = self.place[body];
-                        let range = span(&self.batches[batch], m);
-                        (readback.queue(batch, *what, range.clone()), range.end - range.start)
-                    })
-                    .collect()
-            })
-            .collect();
+        let mut landing: Vec<Vec<(u64, u64)>> = requests.iter().map(|(bodies, _, _)| vec![(0, 0); bodies.len()]).collect();
+        for ((bodies, what, span), landing) in requests.iter().zip(&mut landing) {
+            // Per batch, one copy per run of consecutive members (every grain of a packing at
+            // the end of a run: one copy, not one per grain).
+            for (batch, b) in self.batches.iter().enumerate() {
+                let mut mine: Vec<(usize, usize)> = bodies.iter().enumerate().filter(|&(_, &body)| self.place[body].0 == batch).map(|(k, &body)| (k, self.place[body].1)).collect();
+                mine.sort_unstable_by_key(|&(_, m)| m);
+                let members: Vec<usize> = mine.iter().map(|&(_, m)| m).collect();
+                let member_span = |m: usize| span(b, m);
+                for (&(k, m), at) in mine.iter().zip(readback.queue_runs(batch, *what, &members, &member_span)) {
+                    let range = span(b, m);
+                    landing[k] = (at as u64, range.end - range.start);
+                }
+            }
+        }
         if readback.copies.is_empty() {
             return Ok(landing.iter().map(|_| Vec::new()).collect());
         }

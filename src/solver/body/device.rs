@@ -175,7 +175,6 @@ impl Body {
             self.still = false;
             self.tangent_current = false;
             self.evaluated.valid = false;
-            self.last_increment = Some(outcome.increment);
             return Ok(());
         }
         self.device_tangent = tangent.map(|values| (self.trial.u.clone(), values.to_vec()));
