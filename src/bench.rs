@@ -11,7 +11,7 @@ use crate::gpu::types::{Coefficients, DofOut, DofStep};
 use crate::gpu::uzawa_step::{UzawaPoint, UzawaStepKernel};
 use crate::gpu::uzawa_sweep::UzawaSweeps;
 use crate::gpu::{Evaluation, Gpu, GpuError, GpuWorld, WorldKernel};
-use crate::material::{ArrudaBoyce, BlatzKo, Decoupled, Gent, Lvf, Model, MooneyRivlin, NeoHookean, Ogden, Yeoh};
+use crate::material::Model;
 use crate::mesh::{generate, ElementKind, Mesh};
 use crate::precision::{Precision, Real};
 use crate::solver::PhaseTimes;
@@ -23,19 +23,9 @@ mod newton;
 
 pub use newton::dense_inverse;
 
-/// The element kinds and materials the kernels are built for, with the parameters benchmarks use.
-pub fn bench_models() -> [Model; 8] {
-    [
-        Model::BlatzKo(BlatzKo { g: 1000.0 }),
-        Model::Lvf(Lvf { g: 5000.0, k: 3333.0, a1: 50.0, a2: 50.0, a3: 0.0, a4: 2000.0, a5: 100.0 }),
-        Model::NeoHookean(NeoHookean { g: 1000.0, k: 3000.0 }),
-        Model::MooneyRivlin(Decoupled { law: MooneyRivlin { c10: 400.0, c01: 100.0 }, k: 3000.0 }),
-        Model::Yeoh(Decoupled { law: Yeoh { c10: 500.0, c20: -50.0, c30: 5.0 }, k: 3000.0 }),
-        Model::Gent(Decoupled { law: Gent { g: 1000.0, jm: 50.0 }, k: 3000.0 }),
-        Model::ArrudaBoyce(Decoupled { law: ArrudaBoyce { mu: 900.0, lambda_m: 3.0 }, k: 3000.0 }),
-        // Ogden's three-term fit of Treloar's data (1972), in kPa.
-        Model::Ogden(Ogden { mu: [630.0, 1.2, -10.0], alpha: [1.3, 5.0, -2.0], k: 3000.0 }),
-    ]
+/// Every material model with its example parameters (`material::Law::EXAMPLE`), as benchmarks use them.
+pub fn bench_models() -> Vec<Model> {
+    Model::ENTRIES.iter().filter_map(|e| Model::example(e.name)).collect()
 }
 
 pub const KINDS: [ElementKind; 4] = [ElementKind::Tri3, ElementKind::Quad4, ElementKind::Tet4, ElementKind::Hex8];
@@ -444,23 +434,6 @@ enum Costed {
     Energy,
 }
 
-/// Floating-point operations of a material call at one point, counted from the WGSL source
-/// (stress and tangent; stress alone; energy), to about 20 %.
-fn material_flops(model: &Model) -> (f64, f64, f64) {
-    match model {
-        // Stress alone: C, C⁻¹ by cofactors, √det C, C⁻², their combination.
-        Model::BlatzKo(_) => (600.0, 150.0, 80.0),
-        Model::Lvf(_) => (700.0, 120.0, 90.0),
-        Model::NeoHookean(_) => (350.0, 140.0, 110.0),
-        // The decoupled models share their kinematics (C, C², C⁻¹, a cube root, a logarithm and
-        // nine 6x6 outer products); their isochoric laws add a few dozen.
-        Model::MooneyRivlin(_) | Model::Yeoh(_) | Model::Gent(_) | Model::ArrudaBoyce(_) => (950.0, 250.0, 160.0),
-        // Jacobi rotations (about 6 sweeps of 3), an exponential per stretch and term, and the
-        // spectral tangent's 36 entries of 9 eigenvector products each.
-        Model::Ogden(_) => (4500.0, 2000.0, 1400.0),
-    }
-}
-
 /// Device-memory bytes (each input read once, each output written once) and floating-point
 /// operations (a multiply-add counts 2) of one call of a kernel on a case, counted from the
 /// shader loops: the inputs of the roofline columns.
@@ -469,7 +442,7 @@ fn kernel_cost(kernel: Costed, case: &BenchCase, real: usize) -> (f64, f64) {
     let (n, nen, dim) = (case.elements() as f64, kind.nodes() as f64, kind.dim() as f64);
     let nqp = crate::element::shape::quadrature(kind).len() as f64;
     let stride = element_out_stride(case.pattern.element_dofs) as f64;
-    let (tangent_flops, stress_flops, energy_flops) = material_flops(&case.model);
+    let (tangent_flops, stress_flops, energy_flops) = Model::entry(case.model.name()).map_or((0.0, 0.0, 0.0), |e| e.flops);
     let real = real as f64;
     let element_inputs = real * (nqp * (3.0 * nen + 1.0) + nen * dim) + 4.0 * nen;
     match kernel {

@@ -12,14 +12,14 @@ fn documented_keys_override_the_scene() {
     let loaded = load_scene(&common_run::scene_path("free_vibration_2d"), &sets).expect("overrides are valid");
     let s = &loaded.scene;
     assert_eq!((s.time.dt, s.time.end, s.time.xi, s.time.theta), (0.005, 0.5, 0.6, 0.7));
-    assert_eq!(s.material["rubber"].G, Some(4000.0), "integer literals are accepted for reals");
+    assert_eq!(s.material["rubber"].number("G"), Some(4000.0), "integer literals are accepted for reals");
     assert_eq!(s.material["rubber"].density, 2.5);
     assert_eq!(s.body["beam"].initial_velocity, Some(vec![1.0, 0.0]));
     assert_eq!(s.gravity, Some(vec![0.0, -9.81]));
     assert_eq!(s.solver.max_cutbacks, 3);
     // The resolved scene text carries the overrides and loads again to the same values.
     let again = bifirst::scene::parse_scene(&loaded.path, loaded.resolved_toml.clone(), &[]).expect("resolved scene is valid");
-    assert_eq!(again.scene.material["rubber"].G, Some(4000.0));
+    assert_eq!(again.scene.material["rubber"].number("G"), Some(4000.0));
     assert_eq!(again.scene.gravity, Some(vec![0.0, -9.81]));
 }
 

@@ -2,7 +2,7 @@
 //! (`gpu::context::SHADER_CHECKS`): every loop counts up to a bound (or is listed with why it
 //! ends), and every integer division or remainder is by a non-zero constant. No GPU needed.
 
-use bifirst::gpu::shaders::{is_element_kernel, source, tangent_workgroup, validated, ElementVariant, INCLUDES, LEAST_WORKGROUP_BYTES, SHADERS};
+use bifirst::gpu::shaders::{is_element_kernel, material_includes, source, tangent_workgroup, validated, ElementVariant, INCLUDES, LEAST_WORKGROUP_BYTES, SHADERS};
 use bifirst::precision::Precision;
 
 /// The source with its `//` comments blanked out.
@@ -63,7 +63,9 @@ fn loop_faults(name: &str, text: &str) -> Vec<String> {
 
 #[test]
 fn every_loop_counts_up_to_a_bound() {
-    let faults: Vec<String> = SHADERS.iter().chain(INCLUDES).flat_map(|(name, text)| loop_faults(name, text)).collect();
+    let materials: Vec<(String, &str)> = material_includes().collect();
+    let sources = SHADERS.iter().chain(INCLUDES).map(|&(name, text)| (name, text)).chain(materials.iter().map(|(name, text)| (name.as_str(), *text)));
+    let faults: Vec<String> = sources.flat_map(|(name, text)| loop_faults(name, text)).collect();
     assert!(faults.is_empty(), "{}", faults.join("\n"));
 }
 

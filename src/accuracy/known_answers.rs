@@ -52,7 +52,7 @@ pub fn known_answer(name: &str, loaded: &LoadedScene) -> Result<Box<dyn KnownAns
     let (body_name, body) = scene.body.iter().next().ok_or_else(|| missing("a body"))?;
     let material = scene.material.get(&body.material).ok_or_else(|| missing("the body's material"))?;
     let velocity = |axis: usize| body.initial_velocity.as_ref().and_then(|v| v.get(axis).copied()).ok_or_else(|| missing(&format!("body.{body_name}.initial_velocity")));
-    let moduli = |m: &MaterialSpec| Ok::<_, AccuracyError>((m.G.ok_or_else(|| missing("material G"))?, m.K.ok_or_else(|| missing("material K"))?));
+    let moduli = |m: &MaterialSpec| Ok::<_, AccuracyError>((m.number("G").ok_or_else(|| missing("material G"))?, m.number("K").ok_or_else(|| missing("material K"))?));
     // A closed form that is infinite, zero or NaN here (no friction, no speed) has no relative
     // error to offer: refused before anything runs.
     let expected = |quantity: &'static str, value: f64, hint: &'static str| {

@@ -8,6 +8,7 @@
 mod unroll;
 
 use crate::element::Formulation;
+use crate::material::Model;
 use crate::mesh::ElementKind;
 use crate::precision::Precision;
 
@@ -33,7 +34,7 @@ pub const SHADERS: &[(&str, &str)] = &[
     ("uzawa_sweep", include_str!("../../shaders/uzawa_sweep.wgsl")),
 ];
 
-/// The shared includes of `shaders/include/`.
+/// The shared includes of `shaders/include/`; the materials' come from their models ([`material_includes`]).
 pub const INCLUDES: &[(&str, &str)] = &[
     ("batch", include_str!("../../shaders/include/batch.wgsl")),
     ("contact_frame", include_str!("../../shaders/include/contact_frame.wgsl")),
@@ -44,14 +45,6 @@ pub const INCLUDES: &[(&str, &str)] = &[
     ("math_f32", include_str!("../../shaders/include/math_f32.wgsl")),
     ("math_f64", include_str!("../../shaders/include/math_f64.wgsl")),
     ("newton", include_str!("../../shaders/include/newton.wgsl")),
-    ("material_arruda_boyce", include_str!("../../shaders/include/material_arruda_boyce.wgsl")),
-    ("material_blatz_ko", include_str!("../../shaders/include/material_blatz_ko.wgsl")),
-    ("material_gent", include_str!("../../shaders/include/material_gent.wgsl")),
-    ("material_lvf", include_str!("../../shaders/include/material_lvf.wgsl")),
-    ("material_mooney_rivlin", include_str!("../../shaders/include/material_mooney_rivlin.wgsl")),
-    ("material_neo_hookean", include_str!("../../shaders/include/material_neo_hookean.wgsl")),
-    ("material_ogden", include_str!("../../shaders/include/material_ogden.wgsl")),
-    ("material_yeoh", include_str!("../../shaders/include/material_yeoh.wgsl")),
     ("tensor", include_str!("../../shaders/include/tensor.wgsl")),
     ("uzawa", include_str!("../../shaders/include/uzawa.wgsl")),
     ("uzawa_nodal", include_str!("../../shaders/include/uzawa_nodal.wgsl")),
@@ -59,12 +52,21 @@ pub const INCLUDES: &[(&str, &str)] = &[
     ("viscous", include_str!("../../shaders/include/viscous.wgsl")),
 ];
 
-/// The materials the element kernels can be built for (`Model::name`).
-pub const MATERIALS: [&str; 8] = ["blatz_ko", "lvf", "neo_hookean", "mooney_rivlin", "yeoh", "gent", "arruda_boyce", "ogden"];
+/// The materials the element kernels can be built for (`Model::name`), in the registry's order.
+pub fn materials() -> impl Iterator<Item = &'static str> {
+    Model::ENTRIES.iter().map(|e| e.name)
+}
 
-/// The materials written as `Ŵ(Ī₁, Ī₂) + U(J)`: their include gives `Ŵ` alone, and
+/// Whether a material is written as `Ŵ(Ī₁, Ī₂) + U(J)`: its include gives `Ŵ` alone, and
 /// `include/decoupled.wgsl` the stress and tangent.
-pub const DECOUPLED: [&str; 4] = ["mooney_rivlin", "yeoh", "gent", "arruda_boyce"];
+pub fn is_decoupled(material: &str) -> bool {
+    Model::entry(material).is_some_and(|e| e.decoupled)
+}
+
+/// Every material's include (`material_<name>`, the registry's `Law::WGSL`).
+pub fn material_includes() -> impl Iterator<Item = (String, &'static str)> {
+    Model::ENTRIES.iter().map(|e| (format!("material_{}", e.name), e.wgsl))
+}
 
 /// The element, formulation and material an element kernel is built for.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -82,7 +84,7 @@ impl ElementVariant {
             let fbar = Formulation::fbar_applies(kind).then_some((kind, Formulation::Fbar));
             std::iter::once((kind, Formulation::Displacement)).chain(fbar)
         });
-        elements.flat_map(|(kind, formulation)| MATERIALS.iter().map(move |&material| Self { kind, formulation, material })).collect()
+        elements.flat_map(|(kind, formulation)| materials().map(move |material| Self { kind, formulation, material })).collect()
     }
 }
 
@@ -182,10 +184,11 @@ pub fn source(kernel: &str, precision: Precision, variant: Option<ElementVariant
             module += include("tensor")?;
             module += include("element")?;
             module += include("fbar")?;
-            if DECOUPLED.contains(&v.material) {
+            let material = Model::entry(v.material).ok_or_else(|| format!("no material `{}`", v.material))?;
+            if material.decoupled {
                 module += include("decoupled")?;
             }
-            module += include(&format!("material_{}", v.material))?;
+            module += material.wgsl;
             if kernel == "element_force_tangent" {
                 module += include("viscous")?;
                 module += &format!("const TANGENT_WORKGROUP = {}u;\n", tangent_workgroup(precision, workgroup_bytes));

@@ -1,6 +1,7 @@
 //! Blatz-Ko foam rubber, paper eqs. (2)-(3):
 //! `W = G/2 (I2/I3 + 2 sqrt(I3) - 5)`, `S = G (sqrt(I3) C⁻¹ - C⁻²)`, `C = 2E + I`.
 
+use super::registry::{number, Law, Parameter, Parameters};
 use super::tensor::{odot, outer, right_cauchy_green, Mat3, Tangent};
 use super::Hyperelastic;
 use crate::precision::Real;
@@ -30,6 +31,26 @@ impl Hyperelastic for BlatzKo {
         let (j, ci, ci2) = inverse_powers(e);
         let d = (outer(&ci, &ci) * (0.5 * j) - odot(&ci, &ci) * j + odot(&ci, &ci2) + odot(&ci2, &ci)) * (2.0 * self.g);
         ((ci * j - ci2) * self.g, d)
+    }
+}
+
+impl Law for BlatzKo {
+    const NAME: &'static str = "blatz_ko";
+    const PARAMETERS: &'static [Parameter] = &[Parameter::modulus("G")];
+    const WGSL: &'static str = include_str!("../../shaders/include/material_blatz_ko.wgsl");
+    const EXAMPLE: &'static [(&'static str, &'static [Real])] = &[("G", &[1000.0])];
+    // Stress alone: C, C⁻¹ by cofactors, √det C, C⁻², their combination.
+    const FLOPS: (f64, f64, f64) = (600.0, 150.0, 80.0);
+
+    fn from_parameters(p: &Parameters) -> Self {
+        Self { g: number(p, "G") }
+    }
+    fn gpu_parameters(&self) -> [Real; 8] {
+        [self.g, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+    }
+    /// The Blatz-Ko foam's small-strain Poisson ratio is 1/4: K = 5G/3.
+    fn bulk_shear(&self) -> (Real, Real) {
+        (5.0 * self.g / 3.0, self.g)
     }
 }
 

@@ -8,6 +8,7 @@
 //! the a3 terms and halves the a5 term; that stress is not the derivative of the energy and would
 //! break energy conservation, so it is not used (see doc/ARCHITECTURE.md).
 
+use super::registry::{number, Law, Parameter, Parameters};
 use super::tensor::{dev, deviatoric_projector, odot, outer, Mat3, Tangent};
 use super::Hyperelastic;
 use crate::precision::Real;
@@ -21,6 +22,25 @@ pub struct Lvf {
     pub a3: Real,
     pub a4: Real,
     pub a5: Real,
+}
+
+impl Law for Lvf {
+    const NAME: &'static str = "lvf";
+    const PARAMETERS: &'static [Parameter] = &[Parameter::modulus("G"), Parameter::modulus("K"), Parameter::optional("a1"), Parameter::optional("a2"), Parameter::optional("a3"), Parameter::optional("a4"), Parameter::optional("a5")];
+    const WGSL: &'static str = include_str!("../../shaders/include/material_lvf.wgsl");
+    const EXAMPLE: &'static [(&'static str, &'static [Real])] = &[("G", &[5000.0]), ("K", &[3333.0]), ("a1", &[50.0]), ("a2", &[50.0]), ("a3", &[10.0]), ("a4", &[2000.0]), ("a5", &[100.0])];
+    const FLOPS: (f64, f64, f64) = (700.0, 120.0, 90.0);
+
+    fn from_parameters(p: &Parameters) -> Self {
+        let a = |name| number(p, name);
+        Self { g: a("G"), k: a("K"), a1: a("a1"), a2: a("a2"), a3: a("a3"), a4: a("a4"), a5: a("a5") }
+    }
+    fn gpu_parameters(&self) -> [Real; 8] {
+        [self.g, self.k, self.a1, self.a2, self.a3, self.a4, self.a5, 0.0]
+    }
+    fn bulk_shear(&self) -> (Real, Real) {
+        (self.k, self.g)
+    }
 }
 
 const SQRT3: Real = 1.732_050_807_568_877_2;

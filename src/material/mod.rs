@@ -1,12 +1,13 @@
 //! Hyperelastic materials in total Lagrangian form: energy W(E), stress S = dW/dE and the
-//! consistent tangent dS/dE. Adding a model is one file implementing [`Hyperelastic`] plus an
-//! entry in [`Model`].
+//! consistent tangent dS/dE. Adding a model is one file implementing [`Hyperelastic`] and
+//! [`Law`] (with its WGSL include in `shaders/include/`) plus one line in the table below.
 
 mod blatz_ko;
 pub mod decoupled;
 mod lvf;
 mod neo_hookean;
 pub mod ogden;
+pub mod registry;
 pub mod rubber;
 pub mod tensor;
 pub mod viscous;
@@ -16,10 +17,12 @@ pub use decoupled::{Decoupled, IsochoricLaw};
 pub use lvf::Lvf;
 pub use neo_hookean::NeoHookean;
 pub use ogden::Ogden;
+pub use registry::{Entry, Law, Parameter, Parameters, Rejected, Rule, Values};
 pub use rubber::{ArrudaBoyce, Gent, MooneyRivlin, Yeoh};
 pub use viscous::{BranchStep, Prony, Relaxation, Viscoelastic};
 
 use crate::precision::Real;
+use registry::parameters;
 use tensor::{Mat3, Tangent};
 
 /// A hyperelastic law written in the Green-Lagrange strain E (3x3, symmetric).
@@ -39,9 +42,70 @@ pub trait Hyperelastic {
     }
 }
 
-/// The material models a scene can name.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Model {
+/// The registry: one line per model, `Variant(law type)`. The `Model` enum, its dispatch and
+/// [`Model::ENTRIES`] (the scene's names and checks, the kernels' list) follow from it.
+macro_rules! models {
+    ($($variant:ident($law:ty)),* $(,)?) => {
+        /// The material models a scene can name.
+        #[derive(Debug, Clone, PartialEq)]
+        pub enum Model {
+            $($variant($law)),*
+        }
+
+        impl Model {
+            /// Every model's row, in the table's order.
+            pub const ENTRIES: &'static [Entry] = &[$(Entry::of::<$law>(|p| Model::$variant(<$law as Law>::from_parameters(p)))),*];
+
+            /// The name scenes use, and the material of the GPU kernels' variants.
+            pub fn name(&self) -> &'static str {
+                match self {
+                    $(Model::$variant(_) => <$law as Law>::NAME),*
+                }
+            }
+
+            /// Every parameter in the order of the kernels' `MaterialParams` ([`Law::gpu_parameters`]).
+            pub fn parameters(&self) -> [Real; 8] {
+                match self {
+                    $(Model::$variant(m) => m.gpu_parameters()),*
+                }
+            }
+
+            /// What a non-finite stress means for this model beyond a bad state: a limit of the law.
+            pub fn limit(&self) -> Option<&'static str> {
+                match self {
+                    $(Model::$variant(m) => m.limit()),*
+                }
+            }
+
+            /// Small-strain bulk and shear moduli `(K, G)`.
+            pub fn bulk_shear(&self) -> (Real, Real) {
+                match self {
+                    $(Model::$variant(m) => m.bulk_shear()),*
+                }
+            }
+        }
+
+        impl Hyperelastic for Model {
+            fn energy(&self, e: &Mat3) -> Real {
+                match self {
+                    $(Model::$variant(m) => m.energy(e)),*
+                }
+            }
+            fn stress(&self, e: &Mat3) -> Mat3 {
+                match self {
+                    $(Model::$variant(m) => m.stress(e)),*
+                }
+            }
+            fn stress_tangent(&self, e: &Mat3) -> (Mat3, Tangent) {
+                match self {
+                    $(Model::$variant(m) => m.stress_tangent(e)),*
+                }
+            }
+        }
+    };
+}
+
+models! {
     BlatzKo(BlatzKo),
     Lvf(Lvf),
     NeoHookean(NeoHookean),
@@ -52,74 +116,20 @@ pub enum Model {
     Ogden(Ogden),
 }
 
-/// `$body` with `$m` bound to the model inside whichever variant `$model` is.
-macro_rules! each_model {
-    ($model:expr, $m:ident => $body:expr) => {
-        match $model {
-            Model::BlatzKo($m) => $body,
-            Model::Lvf($m) => $body,
-            Model::NeoHookean($m) => $body,
-            Model::MooneyRivlin($m) => $body,
-            Model::Yeoh($m) => $body,
-            Model::Gent($m) => $body,
-            Model::ArrudaBoyce($m) => $body,
-            Model::Ogden($m) => $body,
-        }
-    };
-}
-
 impl Model {
-    /// The name scenes use, and the material include of the GPU kernels (`material_<name>.wgsl`).
-    pub fn name(&self) -> &'static str {
-        match self {
-            Model::BlatzKo(_) => "blatz_ko",
-            Model::Lvf(_) => "lvf",
-            Model::NeoHookean(_) => "neo_hookean",
-            Model::MooneyRivlin(_) => "mooney_rivlin",
-            Model::Yeoh(_) => "yeoh",
-            Model::Gent(_) => "gent",
-            Model::ArrudaBoyce(_) => "arruda_boyce",
-            Model::Ogden(_) => "ogden",
-        }
+    /// The row of the model scenes call `name`.
+    pub fn entry(name: &str) -> Option<&'static Entry> {
+        Self::ENTRIES.iter().find(|e| e.name == name)
     }
 
-    /// Every parameter in the order of the kernels' `MaterialParams`: G, K, a1..a6 (zero where
-    /// the model has none). The decoupled models put their small-strain G first and their own
-    /// parameters in a1.. (`shaders/include/material_<name>.wgsl` reads them there).
-    pub fn parameters(&self) -> [Real; 8] {
-        let g = self.bulk_shear().1;
-        match self {
-            Model::BlatzKo(m) => [m.g, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
-            Model::Lvf(m) => [m.g, m.k, m.a1, m.a2, m.a3, m.a4, m.a5, 0.0],
-            Model::NeoHookean(m) => [m.g, m.k, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
-            Model::MooneyRivlin(m) => [g, m.k, m.law.c10, m.law.c01, 0.0, 0.0, 0.0, 0.0],
-            Model::Yeoh(m) => [g, m.k, m.law.c10, m.law.c20, m.law.c30, 0.0, 0.0, 0.0],
-            Model::Gent(m) => [g, m.k, m.law.jm, 0.0, 0.0, 0.0, 0.0, 0.0],
-            Model::ArrudaBoyce(m) => [g, m.k, m.law.mu, m.law.lambda_m, 0.0, 0.0, 0.0, 0.0],
-            Model::Ogden(m) => [g, m.k, m.mu[0], m.mu[1], m.mu[2], m.alpha[0], m.alpha[1], m.alpha[2]],
-        }
+    /// The model scenes call `name`, from parameters that passed its checks.
+    pub fn from_parameters(name: &str, p: &Parameters) -> Option<Model> {
+        Self::entry(name).map(|e| (e.build)(p))
     }
 
-    /// What a non-finite stress means for this model beyond a bad state: a limit of the law.
-    pub fn limit(&self) -> Option<&'static str> {
-        match self {
-            Model::Gent(_) => Some("the Gent model's limit Ī₁ - 3 = Jm is reached there: the rubber's chains are fully stretched (raise `Jm`, or load it less)"),
-            _ => None,
-        }
-    }
-
-    /// Small-strain bulk and shear moduli `(K, G)`.
-    pub fn bulk_shear(&self) -> (Real, Real) {
-        match self {
-            Model::BlatzKo(m) => (5.0 * m.g / 3.0, m.g),
-            Model::Lvf(m) => (m.k, m.g),
-            Model::NeoHookean(m) => (m.k, m.g),
-            Model::MooneyRivlin(m) => (m.k, m.law.shear_modulus()),
-            Model::Yeoh(m) => (m.k, m.law.shear_modulus()),
-            Model::Gent(m) => (m.k, m.law.shear_modulus()),
-            Model::ArrudaBoyce(m) => (m.k, m.law.shear_modulus()),
-            Model::Ogden(m) => (m.k, m.shear_modulus()),
-        }
+    /// The model `name` with its example parameters ([`Law::EXAMPLE`]).
+    pub fn example(name: &str) -> Option<Model> {
+        Self::entry(name).map(|e| (e.build)(&parameters(e.example)))
     }
 
     /// Small-strain (Young's modulus, Poisson ratio), used for wave speeds and time-step hints.
@@ -128,17 +138,5 @@ impl Model {
         let e = 9.0 * k * g / (3.0 * k + g);
         let nu = (3.0 * k - 2.0 * g) / (2.0 * (3.0 * k + g));
         (e, nu)
-    }
-}
-
-impl Hyperelastic for Model {
-    fn energy(&self, e: &Mat3) -> Real {
-        each_model!(self, m => m.energy(e))
-    }
-    fn stress(&self, e: &Mat3) -> Mat3 {
-        each_model!(self, m => m.stress(e))
-    }
-    fn stress_tangent(&self, e: &Mat3) -> (Mat3, Tangent) {
-        each_model!(self, m => m.stress_tangent(e))
     }
 }

@@ -1,6 +1,7 @@
 //! Compressible Neo-Hookean:
 //! `W = G/2 (tr C - 3) - G ln J + λ/2 (ln J)²`, `λ = K - 2G/3`.
 
+use super::registry::{number, Law, Parameter, Parameters};
 use super::tensor::{odot, outer, right_cauchy_green, Mat3, Tangent};
 use super::Hyperelastic;
 use crate::precision::Real;
@@ -36,6 +37,24 @@ impl Hyperelastic for NeoHookean {
         let (ln_j, ci) = log_volume_and_inverse(e);
         let d = outer(&ci, &ci) * self.lambda() + odot(&ci, &ci) * (2.0 * (self.g - self.lambda() * ln_j));
         ((Mat3::identity() - ci) * self.g + ci * (self.lambda() * ln_j), d)
+    }
+}
+
+impl Law for NeoHookean {
+    const NAME: &'static str = "neo_hookean";
+    const PARAMETERS: &'static [Parameter] = &[Parameter::modulus("G"), Parameter::modulus("K")];
+    const WGSL: &'static str = include_str!("../../shaders/include/material_neo_hookean.wgsl");
+    const EXAMPLE: &'static [(&'static str, &'static [Real])] = &[("G", &[1000.0]), ("K", &[3000.0])];
+    const FLOPS: (f64, f64, f64) = (350.0, 140.0, 110.0);
+
+    fn from_parameters(p: &Parameters) -> Self {
+        Self { g: number(p, "G"), k: number(p, "K") }
+    }
+    fn gpu_parameters(&self) -> [Real; 8] {
+        [self.g, self.k, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]
+    }
+    fn bulk_shear(&self) -> (Real, Real) {
+        (self.k, self.g)
     }
 }
 

@@ -11,6 +11,7 @@
 //! eigenvectors come from cyclic Jacobi rotations, which need only square roots (the WGSL twin
 //! `shaders/include/material_ogden.wgsl` has no f64 eigen-solver or `pow` to call).
 
+use super::registry::{number, terms, Law, Parameter, Parameters, Rejected};
 use super::tensor::{right_cauchy_green, Mat3, Tangent, VOIGT};
 use super::Hyperelastic;
 use crate::precision::Real;
@@ -24,6 +25,46 @@ pub struct Ogden {
     pub mu: [Real; 3],
     pub alpha: [Real; 3],
     pub k: Real,
+}
+
+impl Law for Ogden {
+    const NAME: &'static str = "ogden";
+    const PARAMETERS: &'static [Parameter] = &[Parameter::modulus("K"), Parameter::terms("mu"), Parameter::terms("alpha")];
+    const WGSL: &'static str = include_str!("../../shaders/include/material_ogden.wgsl");
+    // Ogden's three-term fit of Treloar's data (1972), in kPa.
+    const EXAMPLE: &'static [(&'static str, &'static [Real])] = &[("mu", &[630.0, 1.2, -10.0]), ("alpha", &[1.3, 5.0, -2.0]), ("K", &[3000.0])];
+    // Jacobi rotations (about 6 sweeps of 3), an exponential per stretch and term, and the
+    // spectral tangent's 36 entries of 9 eigenvector products each.
+    const FLOPS: (f64, f64, f64) = (4500.0, 2000.0, 1400.0);
+
+    fn from_parameters(p: &Parameters) -> Self {
+        Self { mu: terms(p, "mu"), alpha: terms(p, "alpha"), k: number(p, "K") }
+    }
+    /// As many exponents as moduli, none zero, and a positive small-strain shear modulus.
+    fn check(p: &Parameters) -> Result<(), Rejected> {
+        let len = |name| p.get(name).map_or(0, |v| v.as_slice().len());
+        let reject = |parameter: &str, message: String| Err(Rejected { parameter: parameter.into(), message });
+        if len("mu") != len("alpha") {
+            return reject("alpha", format!("one exponent per term: `mu` has {} terms, `alpha` {}.", len("mu"), len("alpha")));
+        }
+        let m = Self::from_parameters(p);
+        if let Some(t) = m.alpha[..len("alpha")].iter().position(|&a| a == 0.0) {
+            return reject("alpha", format!("term {} has the exponent 0 (its energy μ/α (λ^α - 1) is undefined).", t + 1));
+        }
+        let g = m.shear_modulus();
+        if g.is_nan() || g <= 0.0 {
+            return reject("mu", format!("the small-strain shear modulus G = ½ Σ μₚ αₚ must be above zero (got {g})."));
+        }
+        Ok(())
+    }
+    /// G, K, then μ₁..₃ in a1..a3 and α₁..₃ in a4..a6.
+    fn gpu_parameters(&self) -> [Real; 8] {
+        let (m, a) = (self.mu, self.alpha);
+        [self.shear_modulus(), self.k, m[0], m[1], m[2], a[0], a[1], a[2]]
+    }
+    fn bulk_shear(&self) -> (Real, Real) {
+        (self.k, self.shear_modulus())
+    }
 }
 
 /// Eigenvalues and eigenvectors (columns) of a symmetric 3x3 matrix by cyclic Jacobi rotations

@@ -2,7 +2,8 @@
 //! with its parameters and a published set). Each is a [`Decoupled`](super::Decoupled) model with
 //! `U = K/2 (ln J)²`. GPU twins: `shaders/include/material_<name>.wgsl`.
 
-use super::decoupled::{Isochoric, IsochoricLaw};
+use super::decoupled::{Decoupled, Isochoric, IsochoricLaw};
+use super::registry::{number, Law, Parameter, Parameters, Rejected};
 use crate::precision::Real;
 
 /// Mooney-Rivlin: `Ŵ = C10 (Ī₁ - 3) + C01 (Ī₂ - 3)`, `G = 2 (C10 + C01)`.
@@ -119,5 +120,103 @@ impl IsochoricLaw for ArrudaBoyce {
             x *= i1;
         }
         Isochoric { d1, d11, ..Default::default() }
+    }
+}
+
+/// The decoupled models share their kinematics (C, C², C⁻¹, a cube root, a logarithm and nine
+/// 6x6 outer products); their isochoric laws add a few dozen.
+const DECOUPLED_FLOPS: (f64, f64, f64) = (950.0, 250.0, 160.0);
+
+impl Law for Decoupled<MooneyRivlin> {
+    const NAME: &'static str = "mooney_rivlin";
+    const PARAMETERS: &'static [Parameter] = &[Parameter::modulus("K"), Parameter::optional("C10"), Parameter::optional("C01")];
+    const WGSL: &'static str = include_str!("../../shaders/include/material_mooney_rivlin.wgsl");
+    const DECOUPLED: bool = true;
+    const EXAMPLE: &'static [(&'static str, &'static [Real])] = &[("C10", &[400.0]), ("C01", &[100.0]), ("K", &[3000.0])];
+    const FLOPS: (f64, f64, f64) = DECOUPLED_FLOPS;
+
+    fn from_parameters(p: &Parameters) -> Self {
+        Decoupled { law: MooneyRivlin { c10: number(p, "C10"), c01: number(p, "C01") }, k: number(p, "K") }
+    }
+    /// Drucker stability at small strain: a positive shear modulus.
+    fn check(p: &Parameters) -> Result<(), Rejected> {
+        let (c10, c01) = (number(p, "C10"), number(p, "C01"));
+        if (c10 + c01).is_nan() || c10 + c01 <= 0.0 {
+            return Err(Rejected { parameter: "C10".into(), message: format!("the small-strain shear modulus G = 2 (C10 + C01) must be above zero (C10 = {c10}, C01 = {c01}).") });
+        }
+        Ok(())
+    }
+    fn gpu_parameters(&self) -> [Real; 8] {
+        [self.law.shear_modulus(), self.k, self.law.c10, self.law.c01, 0.0, 0.0, 0.0, 0.0]
+    }
+    fn bulk_shear(&self) -> (Real, Real) {
+        (self.k, self.law.shear_modulus())
+    }
+}
+
+impl Law for Decoupled<Yeoh> {
+    const NAME: &'static str = "yeoh";
+    const PARAMETERS: &'static [Parameter] = &[Parameter::modulus("K"), Parameter::positive("C10"), Parameter::optional("C20"), Parameter::optional("C30")];
+    const WGSL: &'static str = include_str!("../../shaders/include/material_yeoh.wgsl");
+    const DECOUPLED: bool = true;
+    const EXAMPLE: &'static [(&'static str, &'static [Real])] = &[("C10", &[500.0]), ("C20", &[-50.0]), ("C30", &[5.0]), ("K", &[3000.0])];
+    const FLOPS: (f64, f64, f64) = DECOUPLED_FLOPS;
+
+    fn from_parameters(p: &Parameters) -> Self {
+        Decoupled { law: Yeoh { c10: number(p, "C10"), c20: number(p, "C20"), c30: number(p, "C30") }, k: number(p, "K") }
+    }
+    fn gpu_parameters(&self) -> [Real; 8] {
+        [self.law.shear_modulus(), self.k, self.law.c10, self.law.c20, self.law.c30, 0.0, 0.0, 0.0]
+    }
+    fn bulk_shear(&self) -> (Real, Real) {
+        (self.k, self.law.shear_modulus())
+    }
+}
+
+impl Law for Decoupled<Gent> {
+    const NAME: &'static str = "gent";
+    const PARAMETERS: &'static [Parameter] = &[Parameter::modulus("G"), Parameter::modulus("K"), Parameter::positive("Jm")];
+    const WGSL: &'static str = include_str!("../../shaders/include/material_gent.wgsl");
+    const DECOUPLED: bool = true;
+    const EXAMPLE: &'static [(&'static str, &'static [Real])] = &[("G", &[1000.0]), ("Jm", &[20.0]), ("K", &[3000.0])];
+    const FLOPS: (f64, f64, f64) = DECOUPLED_FLOPS;
+
+    fn from_parameters(p: &Parameters) -> Self {
+        Decoupled { law: Gent { g: number(p, "G"), jm: number(p, "Jm") }, k: number(p, "K") }
+    }
+    fn gpu_parameters(&self) -> [Real; 8] {
+        [self.law.shear_modulus(), self.k, self.law.jm, 0.0, 0.0, 0.0, 0.0, 0.0]
+    }
+    fn bulk_shear(&self) -> (Real, Real) {
+        (self.k, self.law.shear_modulus())
+    }
+    fn limit(&self) -> Option<&'static str> {
+        Some("the Gent model's limit Ī₁ - 3 = Jm is reached there: the rubber's chains are fully stretched (raise `Jm`, or load it less)")
+    }
+}
+
+impl Law for Decoupled<ArrudaBoyce> {
+    const NAME: &'static str = "arruda_boyce";
+    const PARAMETERS: &'static [Parameter] = &[Parameter::modulus("K"), Parameter::positive("mu"), Parameter::positive("lambda_m")];
+    const WGSL: &'static str = include_str!("../../shaders/include/material_arruda_boyce.wgsl");
+    const DECOUPLED: bool = true;
+    const EXAMPLE: &'static [(&'static str, &'static [Real])] = &[("mu", &[900.0]), ("lambda_m", &[2.5]), ("K", &[3000.0])];
+    const FLOPS: (f64, f64, f64) = DECOUPLED_FLOPS;
+
+    fn from_parameters(p: &Parameters) -> Self {
+        Decoupled { law: ArrudaBoyce { mu: number(p, "mu"), lambda_m: number(p, "lambda_m") }, k: number(p, "K") }
+    }
+    fn check(p: &Parameters) -> Result<(), Rejected> {
+        let lambda_m = number(p, "lambda_m");
+        if lambda_m <= 1.0 {
+            return Err(Rejected { parameter: "lambda_m".into(), message: format!("the locking stretch must be above 1 (got {lambda_m}).") });
+        }
+        Ok(())
+    }
+    fn gpu_parameters(&self) -> [Real; 8] {
+        [self.law.shear_modulus(), self.k, self.law.mu, self.law.lambda_m, 0.0, 0.0, 0.0, 0.0]
+    }
+    fn bulk_shear(&self) -> (Real, Real) {
+        (self.k, self.law.shear_modulus())
     }
 }

@@ -1,6 +1,8 @@
 //! The scene format. Unknown keys are rejected everywhere.
 
 pub use crate::contact::uzawa::{Acceleration, Fallback, Sweep};
+pub use crate::material::Values;
+use crate::material::{Model, Parameters};
 use crate::mesh::ElementKind;
 use crate::precision::Real;
 use serde::{Deserialize, Serialize};
@@ -118,105 +120,88 @@ impl Default for SolverSpec {
     }
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum ModelName {
-    BlatzKo,
-    Lvf,
-    NeoHookean,
-    MooneyRivlin,
-    Yeoh,
-    Gent,
-    ArrudaBoyce,
-    Ogden,
-}
+/// A material model's name (`model = "..."`): one of the registry's ([`Model::ENTRIES`]).
+#[derive(Debug, Clone, PartialEq, Eq, Serialize)]
+#[serde(transparent)]
+pub struct ModelName(pub String);
 
-/// A parameter given as one number or as a list (Ogden's terms).
-#[derive(Debug, Clone, PartialEq, Serialize)]
-#[serde(untagged)]
-pub enum Values {
-    One(Real),
-    Many(Vec<Real>),
-}
-
-/// By hand, not `untagged`: a wrong entry (`mu = ["630"]`) is named with its position and type,
-/// where the derived form said only that no variant matched.
-impl<'de> Deserialize<'de> for Values {
+/// Checked against the registry as it is read, so that a misspelt model is named with the
+/// models there are.
+impl<'de> Deserialize<'de> for ModelName {
     fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
-        struct NumberOrList;
-        impl<'de> serde::de::Visitor<'de> for NumberOrList {
-            type Value = Values;
+        struct Name;
+        impl<'de> serde::de::Visitor<'de> for Name {
+            type Value = ModelName;
             fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
-                f.write_str("a number or a list of numbers")
+                write!(f, "one of {}", model_names())
             }
-            fn visit_f64<E>(self, v: f64) -> Result<Values, E> {
-                Ok(Values::One(v))
-            }
-            fn visit_i64<E>(self, v: i64) -> Result<Values, E> {
-                Ok(Values::One(v as Real))
-            }
-            fn visit_u64<E>(self, v: u64) -> Result<Values, E> {
-                Ok(Values::One(v as Real))
-            }
-            fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<Values, A::Error> {
-                let mut values = Vec::new();
-                while let Some(v) = seq.next_element::<Real>()? {
-                    values.push(v);
+            fn visit_str<E: serde::de::Error>(self, v: &str) -> Result<ModelName, E> {
+                match Model::entry(v) {
+                    Some(e) => Ok(ModelName(e.name.to_string())),
+                    None => Err(E::custom(format!("unknown model `{v}`, expected one of {}", model_names()))),
                 }
-                Ok(Values::Many(values))
             }
         }
-        deserializer.deserialize_any(NumberOrList)
+        deserializer.deserialize_str(Name)
     }
 }
 
-impl Values {
-    pub fn as_slice(&self) -> &[Real] {
-        match self {
-            Values::One(v) => std::slice::from_ref(v),
-            Values::Many(v) => v,
-        }
-    }
-
-    /// The value when there is exactly one.
-    pub fn one(&self) -> Option<Real> {
-        match self.as_slice() {
-            [v] => Some(*v),
-            _ => None,
-        }
-    }
+fn model_names() -> String {
+    Model::ENTRIES.iter().map(|e| format!("`{}`", e.name)).collect::<Vec<_>>().join(", ")
 }
 
-/// A material: its model, density and the model's parameters (each model takes exactly its own).
-#[derive(Debug, Clone, Deserialize, Serialize)]
-#[serde(deny_unknown_fields)]
-#[allow(non_snake_case)]
+/// A material: its model, density and the model's parameters (each model takes exactly its
+/// own, `material::Law::PARAMETERS`; the checks name any other).
+#[derive(Debug, Clone, Serialize)]
 pub struct MaterialSpec {
     pub model: ModelName,
     pub density: Real,
-    pub G: Option<Real>,
-    pub K: Option<Real>,
-    pub a1: Option<Real>,
-    pub a2: Option<Real>,
-    pub a3: Option<Real>,
-    pub a4: Option<Real>,
-    pub a5: Option<Real>,
-    /// Mooney-Rivlin and Yeoh coefficients.
-    pub C10: Option<Real>,
-    pub C01: Option<Real>,
-    pub C20: Option<Real>,
-    pub C30: Option<Real>,
-    /// Gent's limit of `Ī₁ - 3`.
-    pub Jm: Option<Real>,
-    /// Arruda-Boyce's chain modulus (one number), or Ogden's moduli (one per term).
-    pub mu: Option<Values>,
-    /// Arruda-Boyce's locking stretch.
-    pub lambda_m: Option<Real>,
-    /// Ogden's exponents (one per term, as many as `mu`).
-    pub alpha: Option<Values>,
+    /// The model's parameters by name (`G`, `K`, Ogden's `mu` list, ...).
+    #[serde(flatten)]
+    pub parameters: Parameters,
     /// A Prony series on the isochoric stress, on any model (`material::viscous`): the model's
     /// parameters are then its instantaneous response.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub viscoelastic: Option<Vec<PronySpec>>,
+}
+
+impl MaterialSpec {
+    /// The number the scene gave parameter `name`, if it gave one.
+    pub fn number(&self, name: &str) -> Option<Real> {
+        self.parameters.get(name).and_then(Values::one)
+    }
+}
+
+/// By hand: every key but `model`, `density` and `viscoelastic` is a parameter of the model,
+/// read where it stands so that an error names its key and line (a derived `flatten` loses both).
+impl<'de> Deserialize<'de> for MaterialSpec {
+    fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        struct Spec;
+        impl<'de> serde::de::Visitor<'de> for Spec {
+            type Value = MaterialSpec;
+            fn expecting(&self, f: &mut std::fmt::Formatter) -> std::fmt::Result {
+                f.write_str("a material table: `model`, `density` and the model's parameters")
+            }
+            fn visit_map<A: serde::de::MapAccess<'de>>(self, mut map: A) -> Result<MaterialSpec, A::Error> {
+                let (mut model, mut density, mut viscoelastic, mut parameters) = (None, None, None, Parameters::new());
+                while let Some(key) = map.next_key::<String>()? {
+                    match key.as_str() {
+                        "model" => model = Some(map.next_value()?),
+                        "density" => density = Some(map.next_value()?),
+                        "viscoelastic" => viscoelastic = Some(map.next_value()?),
+                        _ => {
+                            let value = map.next_value()?;
+                            parameters.insert(key, value);
+                        }
+                    }
+                }
+                let model = model.ok_or_else(|| serde::de::Error::missing_field("model"))?;
+                let density = density.ok_or_else(|| serde::de::Error::missing_field("density"))?;
+                Ok(MaterialSpec { model, density, parameters, viscoelastic })
+            }
+        }
+        deserializer.deserialize_map(Spec)
+    }
 }
 
 /// One term of a Prony series: relative modulus `g` (the share of the isochoric stress that

@@ -3,6 +3,7 @@
 
 use super::error::SceneErrorKind::{self, Invalid, Reference};
 use super::types::*;
+use crate::material::{Model, Rule};
 use crate::precision::Real;
 
 pub(super) type Failure = (SceneErrorKind, String, String);
@@ -257,55 +258,39 @@ pub(super) fn names<'a>(it: impl Iterator<Item = &'a String>) -> String {
 
 fn validate_material(key: &str, m: &MaterialSpec) -> Result<(), Failure> {
     positive(format!("{key}.density"), "the density", m.density)?;
-    // Parameters that must be above zero (moduli, limits), and the others the model takes.
-    let (required, allowed): (&[&str], &[&str]) = match m.model {
-        ModelName::BlatzKo => (&["G"], &["G"]),
-        ModelName::NeoHookean => (&["G", "K"], &["G", "K"]),
-        ModelName::Lvf => (&["G", "K"], &["G", "K", "a1", "a2", "a3", "a4", "a5"]),
-        ModelName::MooneyRivlin => (&["K"], &["K", "C10", "C01"]),
-        ModelName::Yeoh => (&["K", "C10"], &["K", "C10", "C20", "C30"]),
-        ModelName::Gent => (&["G", "K", "Jm"], &["G", "K", "Jm"]),
-        ModelName::ArrudaBoyce => (&["K", "mu", "lambda_m"], &["K", "mu", "lambda_m"]),
-        ModelName::Ogden => (&["K"], &["K", "mu", "alpha"]),
-    };
-    // Arruda-Boyce's `mu` is one number; Ogden's `mu` and `alpha`, one per term (checked below).
-    let (mu, alpha) = match m.model {
-        ModelName::Ogden => (None, None),
-        _ => {
-            for (name, v) in [("mu", &m.mu), ("alpha", &m.alpha)] {
-                if v.as_ref().is_some_and(|v| v.one().is_none()) && allowed.contains(&name) {
-                    return fail(Invalid, format!("{key}.{name}"), format!("`{name}` of this model is one number (lists are Ogden's)."));
-                }
+    let model = &m.model.0;
+    let Some(entry) = Model::entry(model) else { return fail(Invalid, format!("{key}.model"), format!("there is no model `{model}`.")) };
+    let takes = || entry.parameters.iter().map(|p| p.name).collect::<Vec<_>>().join(", ");
+    if let Some(name) = m.parameters.keys().find(|name| !entry.parameters.iter().any(|p| p.name == name.as_str())) {
+        return fail(Invalid, format!("{key}.{name}"), format!("`{name}` is not a parameter of the {model} model (it takes {}).", takes()));
+    }
+    for parameter in entry.parameters {
+        let (name, at) = (parameter.name, format!("{key}.{}", parameter.name));
+        let Some(values) = m.parameters.get(name) else {
+            match parameter.rule {
+                Rule::Optional => continue,
+                Rule::Terms => return fail(Invalid, at, format!("the {model} model needs `{name}` (a list of one to three numbers, one per term).")),
+                _ => return fail(Invalid, at, format!("the {model} model needs `{name}`.")),
             }
-            let single = |v: &Option<Values>| v.as_ref().map(|v| v.one().unwrap_or(Real::NAN));
-            (single(&m.mu), single(&m.alpha))
+        };
+        if parameter.rule == Rule::Terms {
+            let v = values.as_slice();
+            if v.is_empty() || v.len() > 3 {
+                return fail(Invalid, at, format!("give one to three terms (got {}).", v.len()));
+            }
+            for (i, &x) in v.iter().enumerate() {
+                bounded(format!("{at}.{i}"), &format!("term {} of `{name}`", i + 1), x)?;
+            }
+            continue;
         }
-    };
-    let params = [("G", m.G), ("K", m.K), ("a1", m.a1), ("a2", m.a2), ("a3", m.a3), ("a4", m.a4), ("a5", m.a5), ("C10", m.C10), ("C01", m.C01), ("C20", m.C20), ("C30", m.C30), ("Jm", m.Jm), ("mu", mu), ("lambda_m", m.lambda_m), ("alpha", alpha)];
-    let model = serde_json::to_value(m.model).ok().and_then(|v| v.as_str().map(str::to_owned)).unwrap_or_default();
-    for (p, v) in params {
-        match v {
-            Some(_) if !allowed.contains(&p) => fail(Invalid, format!("{key}.{p}"), format!("`{p}` is not a parameter of the {model} model (it takes {}).", allowed.join(", ")))?,
-            None if required.contains(&p) => fail(Invalid, format!("{key}.{p}"), format!("the {model} model needs `{p}`."))?,
-            Some(v) if required.contains(&p) => positive(format!("{key}.{p}"), &format!("the {} {p}", if matches!(p, "G" | "K") { "modulus" } else { "parameter" }), v)?,
-            Some(v) => bounded(format!("{key}.{p}"), &format!("the parameter {p}"), v)?,
-            _ => {}
+        let Some(v) = values.one() else { return fail(Invalid, at, format!("`{name}` of the {model} model is one number (lists are for models with terms, such as Ogden's).")) };
+        match parameter.rule {
+            Rule::Modulus => positive(at, &format!("the modulus {name}"), v)?,
+            Rule::Positive => positive(at, &format!("the parameter {name}"), v)?,
+            _ => bounded(at, &format!("the parameter {name}"), v)?,
         }
     }
-    // Drucker stability at small strain: a positive shear modulus.
-    match m.model {
-        ModelName::MooneyRivlin => {
-            let (c10, c01) = (m.C10.unwrap_or(0.0), m.C01.unwrap_or(0.0));
-            if (c10 + c01).is_nan() || c10 + c01 <= 0.0 {
-                fail(Invalid, format!("{key}.C10"), format!("the small-strain shear modulus G = 2 (C10 + C01) must be above zero (C10 = {c10}, C01 = {c01})."))?;
-            }
-        }
-        ModelName::Ogden => validate_ogden(key, m)?,
-        ModelName::ArrudaBoyce if m.lambda_m.is_some_and(|l| l <= 1.0) => {
-            fail(Invalid, format!("{key}.lambda_m"), format!("the locking stretch must be above 1 (got {}).", m.lambda_m.unwrap_or_default()))?;
-        }
-        _ => {}
-    }
+    (entry.check)(&m.parameters).or_else(|r| fail(Invalid, format!("{key}.{}", r.parameter), r.message))?;
     if let Some(terms) = &m.viscoelastic {
         validate_prony(key, terms)?;
     }
@@ -325,34 +310,6 @@ fn validate_prony(key: &str, terms: &[PronySpec]) -> Result<(), Failure> {
     let sum: Real = terms.iter().map(|t| t.g).sum();
     if sum.is_nan() || sum >= 1.0 {
         return fail(Invalid, format!("{key}.viscoelastic"), format!("the relative moduli must sum to less than 1 (got Σ g = {sum}): 1 - Σ g is the share of the isochoric stress left after a long hold."));
-    }
-    Ok(())
-}
-
-/// Ogden's terms: `mu` and `alpha` lists of one to three numbers each, the same length, every
-/// exponent non-zero, and a positive small-strain shear modulus `½ Σ μₚ αₚ`.
-fn validate_ogden(key: &str, m: &MaterialSpec) -> Result<(), Failure> {
-    let list = |name: &str, v: &Option<Values>| -> Result<Vec<Real>, Failure> {
-        let Some(v) = v else { return Err((Invalid, format!("{key}.{name}"), format!("the ogden model needs `{name}` (a list of one to three numbers, one per term)."))) };
-        let v = v.as_slice().to_vec();
-        if v.is_empty() || v.len() > 3 {
-            return Err((Invalid, format!("{key}.{name}"), format!("give one to three terms (got {}).", v.len())));
-        }
-        for (i, &x) in v.iter().enumerate() {
-            bounded(format!("{key}.{name}.{i}"), &format!("term {} of `{name}`", i + 1), x)?;
-        }
-        Ok(v)
-    };
-    let (mu, alpha) = (list("mu", &m.mu)?, list("alpha", &m.alpha)?);
-    if mu.len() != alpha.len() {
-        return fail(Invalid, format!("{key}.alpha"), format!("one exponent per term: `mu` has {} terms, `alpha` {}.", mu.len(), alpha.len()));
-    }
-    if let Some(p) = alpha.iter().position(|&a| a == 0.0) {
-        return fail(Invalid, format!("{key}.alpha"), format!("term {} has the exponent 0 (its energy μ/α (λ^α - 1) is undefined).", p + 1));
-    }
-    let g: Real = 0.5 * mu.iter().zip(&alpha).map(|(m, a)| m * a).sum::<Real>();
-    if g.is_nan() || g <= 0.0 {
-        return fail(Invalid, format!("{key}.mu"), format!("the small-strain shear modulus G = ½ Σ μₚ αₚ must be above zero (got {g})."));
     }
     Ok(())
 }

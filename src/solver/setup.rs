@@ -10,12 +10,12 @@ use crate::contact::overlap::{Host, Overlap};
 use crate::contact::pairs::{BodyPairs, Rank};
 use crate::contact::{ContactModel, Motion, Obstacle, Settings, Surface};
 use crate::element::{Formulation, Patches, ReferenceGeometry, FBAR_ABOVE_K_OVER_G};
-use crate::material::{ArrudaBoyce, BlatzKo, Decoupled, Gent, Lvf, Model, MooneyRivlin, NeoHookean, Ogden, Prony, Viscoelastic, Yeoh};
+use crate::material::{Model, Prony, Viscoelastic};
 use crate::mesh::{generate, gmsh, ElementKind, Mesh};
 use crate::precision::Real;
 use crate::scene::SceneErrorKind::{Invalid, Mesh as MeshError, Reference};
 use crate::scene::LARGEST_INPUT;
-use crate::scene::{AngularVelocity, Axis, FormulationChoice, Generator, Interpolation, LoadSpec, LoadedScene, MaterialSpec, MeshSpec, ModelName, ObstacleShape, SceneError, Values};
+use crate::scene::{AngularVelocity, Axis, FormulationChoice, Generator, Interpolation, LoadSpec, LoadedScene, MaterialSpec, MeshSpec, ObstacleShape, SceneError};
 use rayon::prelude::*;
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -64,28 +64,9 @@ pub fn viscoelastic_of(m: &MaterialSpec) -> Option<Viscoelastic> {
     Some(Viscoelastic { terms: terms.iter().map(|t| Prony { g: t.g, tau: t.tau }).collect() })
 }
 
+/// The model of a material the scene's checks passed (its name is the registry's).
 pub fn model_of(m: &MaterialSpec) -> Model {
-    let g = m.G.unwrap_or_default();
-    let k = m.K.unwrap_or_default();
-    match m.model {
-        ModelName::BlatzKo => Model::BlatzKo(BlatzKo { g }),
-        ModelName::NeoHookean => Model::NeoHookean(NeoHookean { g, k }),
-        ModelName::Lvf => Model::Lvf(Lvf { g, k, a1: m.a1.unwrap_or(0.0), a2: m.a2.unwrap_or(0.0), a3: m.a3.unwrap_or(0.0), a4: m.a4.unwrap_or(0.0), a5: m.a5.unwrap_or(0.0) }),
-        ModelName::MooneyRivlin => Model::MooneyRivlin(Decoupled { law: MooneyRivlin { c10: m.C10.unwrap_or(0.0), c01: m.C01.unwrap_or(0.0) }, k }),
-        ModelName::Yeoh => Model::Yeoh(Decoupled { law: Yeoh { c10: m.C10.unwrap_or(0.0), c20: m.C20.unwrap_or(0.0), c30: m.C30.unwrap_or(0.0) }, k }),
-        ModelName::Gent => Model::Gent(Decoupled { law: Gent { g, jm: m.Jm.unwrap_or_default() }, k }),
-        ModelName::ArrudaBoyce => Model::ArrudaBoyce(Decoupled { law: ArrudaBoyce { mu: m.mu.as_ref().and_then(Values::one).unwrap_or_default(), lambda_m: m.lambda_m.unwrap_or_default() }, k }),
-        ModelName::Ogden => {
-            let terms = |v: &Option<Values>| {
-                let mut out = [0.0; 3];
-                for (o, x) in out.iter_mut().zip(v.as_ref().map(Values::as_slice).unwrap_or_default()) {
-                    *o = *x;
-                }
-                out
-            };
-            Model::Ogden(Ogden { mu: terms(&m.mu), alpha: terms(&m.alpha), k })
-        }
-    }
+    Model::from_parameters(&m.model.0, &m.parameters).expect("a model name is checked as the scene is read")
 }
 
 /// The mesh a body's `mesh` table describes (generated, or read from its file).
@@ -280,7 +261,8 @@ fn check_materials(loaded: &LoadedScene) -> Result<(), SceneError> {
         let (k, g) = model_of(material).bulk_shear();
         if k / g > MAX_K_OVER_G {
             let message = format!("K/G = {:.3e} is beyond {MAX_K_OVER_G:.0e}: the shear stresses would be below the round-off of the volumetric ones in f64 (rubber is 1e3 to 1e5).", k / g);
-            return Err(loaded.error(Invalid, &format!("material.{name}.K"), message));
+            let bulk = Model::entry(&material.model.0).map_or("K", |e| e.bulk);
+            return Err(loaded.error(Invalid, &format!("material.{name}.{bulk}"), message));
         }
     }
     Ok(())
