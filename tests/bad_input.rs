@@ -471,6 +471,19 @@ fn outputs_that_cannot_be_written_are_refused_before_the_run() {
     assert_eq!(std::fs::read_to_string(&file).unwrap(), "x", "the file is left as it was");
 }
 
+/// Saint Venant-Kirchhoff's parameters: E and ν, ν within (-1, 1/2), and a ν so near 1/2 that
+/// K/G is beyond f64 named as the bulk parameter.
+#[test]
+fn svk_takes_young_and_poisson_within_their_range() {
+    let svk = |params: &str| GOOD.replace("model = \"blatz_ko\"\nG = 1000.0", &format!("model = \"svk\"\n{params}"));
+    let (code, stderr, _) = check("svk_good", &svk("E = 2600.0\nnu = 0.3"), &[]);
+    assert_eq!(code, 0, "{stderr}");
+    assert_error("svk_nu_half", &svk("E = 2600.0\nnu = 0.5"), &[], "material.rubber.nu", Some(9), "(-1, 1/2)");
+    assert_error("svk_no_nu", &svk("E = 2600.0"), &[], "material.rubber.nu", None, "needs `nu`");
+    assert_error("svk_g", &svk("E = 2600.0\nnu = 0.3\nG = 1.0"), &[], "material.rubber.G", Some(10), "not a parameter of the svk model (it takes E, nu)");
+    assert_error("svk_incompressible", &svk("E = 2600.0\nnu = 0.49999999999999"), &[], "material.rubber.nu", None, "round-off");
+}
+
 /// Caught by the issue: messages a user could not act on. Ogden `mu = ["630"]` said "did not
 /// match any variant of untagged enum Values", `formulation = 1` "unit variant", a seed beyond
 /// TOML's integers "strings need quotes"; `packing.polygons` in 3D and `packing.polyhedra` in 2D

@@ -6,7 +6,7 @@
 mod common_random;
 
 use bifirst::material::tensor::{green_lagrange, to_voigt, Mat3, Tangent, VOIGT};
-use bifirst::material::{ArrudaBoyce, BlatzKo, Decoupled, Gent, Hyperelastic, Lvf, Model, MooneyRivlin, NeoHookean, Ogden, Yeoh};
+use bifirst::material::{ArrudaBoyce, BlatzKo, Decoupled, Gent, Hyperelastic, Lvf, Model, MooneyRivlin, NeoHookean, Ogden, Svk, Yeoh};
 use common_random::{random_f, rng};
 
 fn models() -> Vec<(&'static str, Model)> {
@@ -22,6 +22,7 @@ fn models() -> Vec<(&'static str, Model)> {
         ("arruda_boyce", Model::ArrudaBoyce(Decoupled { law: ArrudaBoyce { mu: 2.5, lambda_m: 1.8 }, k: 9.0 })),
         // Three terms, of both signs of α.
         ("ogden", Model::Ogden(Ogden { mu: [1.5, 0.02, -0.1], alpha: [1.3, 5.0, -2.0], k: 9.0 })),
+        ("svk", Model::Svk(Svk { e: 7.0, nu: 0.3 })),
     ]
 }
 
@@ -178,5 +179,23 @@ fn ogden_tangent_holds_where_stretches_coincide() {
             let fd_s = nalgebra::Vector6::from_fn(|j, _| (m.energy(&perturb(&e, j, h)) - m.energy(&perturb(&e, j, -h))) / (2.0 * h));
             assert!((fd_s - to_voigt(&s)).norm() < 1e-7 * to_voigt(&s).norm(), "gap {gap:e}: stress");
         }
+    }
+}
+
+/// Saint Venant-Kirchhoff is Hooke's law in E: its small-strain moduli are the scene's E and ν,
+/// and at any strain its stress is linear in E (uniaxial strain: S₁₁ = (λ + 2μ) ε, S₂₂ = λ ε),
+/// which the rubber models are not.
+#[test]
+fn svk_is_hookes_law_on_the_green_lagrange_strain() {
+    let m = Svk { e: 2600.0, nu: 0.3 };
+    let (young, poisson) = Model::Svk(m.clone()).small_strain_moduli();
+    assert!((young - 2600.0).abs() < 1e-9 && (poisson - 0.3).abs() < 1e-12, "E = {young}, ν = {poisson}");
+    let (lambda, mu) = (2600.0 * 0.3 / (1.3 * 0.4), 2600.0 / 2.6);
+    for eps in [1e-6, 0.1, 0.5, -0.3] {
+        let e = Mat3::from_diagonal(&nalgebra::Vector3::new(eps, 0.0, 0.0));
+        let s = m.stress(&e);
+        assert!((s[(0, 0)] - (lambda + 2.0 * mu) * eps).abs() <= 1e-12 * lambda, "ε = {eps}: S11 = {}", s[(0, 0)]);
+        assert!((s[(1, 1)] - lambda * eps).abs() <= 1e-12 * lambda && (s[(2, 2)] - lambda * eps).abs() <= 1e-12 * lambda, "ε = {eps}: S22 = {}", s[(1, 1)]);
+        assert!((m.energy(&e) - 0.5 * (lambda + 2.0 * mu) * eps * eps).abs() <= 1e-12 * lambda, "ε = {eps}: W = {}", m.energy(&e));
     }
 }

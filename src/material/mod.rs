@@ -9,6 +9,7 @@ mod neo_hookean;
 pub mod ogden;
 pub mod registry;
 pub mod rubber;
+mod svk;
 pub mod tensor;
 pub mod viscous;
 
@@ -19,6 +20,7 @@ pub use neo_hookean::NeoHookean;
 pub use ogden::Ogden;
 pub use registry::{Entry, Law, Parameter, Parameters, Rejected, Rule, Values};
 pub use rubber::{ArrudaBoyce, Gent, MooneyRivlin, Yeoh};
+pub use svk::Svk;
 pub use viscous::{BranchStep, Prony, Relaxation, Viscoelastic};
 
 use crate::precision::Real;
@@ -114,6 +116,7 @@ models! {
     Gent(Decoupled<Gent>),
     ArrudaBoyce(Decoupled<ArrudaBoyce>),
     Ogden(Ogden),
+    Svk(Svk),
 }
 
 impl Model {
