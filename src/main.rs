@@ -246,6 +246,11 @@ enum Command {
         /// before this time (default: the last).
         #[arg(long, value_name = "T")]
         at: Option<f64>,
+        /// Also the means of the Love-Weber stress, the walls' pressures and Z over the logged
+        /// steps of this time before the chosen step (and at it): a driven packing's inertia
+        /// stands between the two stresses at any one step, and falls off in the mean.
+        #[arg(long, value_name = "T", value_parser = parse_positive)]
+        window: Option<f64>,
         /// Print the report (the chosen step's measures and distributions) as JSON.
         #[arg(long)]
         json: bool,
@@ -312,7 +317,7 @@ fn main() -> ExitCode {
             Ok(ExitCode::SUCCESS)
         }),
         Command::Bench { elements, kernel, element, material, backend, adapter, time, all, json } => bench_command(BenchOptions { elements, kernel, element, material, min_time: time, all }, backend, adapter, json),
-        Command::Grains { run, out, at, json } => grains_command(&run, out, at, json),
+        Command::Grains { run, out, at, window, json } => grains_command(&run, out, at, window, json),
         Command::Info => {
             println!("bifirst {} (git {})", env!("CARGO_PKG_VERSION"), bifirst::run::GIT_REVISION.unwrap_or("unknown"));
             println!("build: {} profile, rustc target {}-{}", if cfg!(debug_assertions) { "debug" } else { "release" }, std::env::consts::ARCH, std::env::consts::OS);

@@ -9,15 +9,18 @@ fn rows(args: &[&str]) -> Vec<Value> {
     String::from_utf8(out.stdout).unwrap().lines().map(|l| serde_json::from_str(l).expect("a JSON row per line")).collect()
 }
 
+/// The material models the bench measures: every one of the registry.
+const MATERIALS: usize = bifirst::material::Model::ENTRIES.len();
+
 #[test]
 fn bench_reports_every_kernel_on_the_cpu() {
     let rows = rows(&["--backend", "cpu", "--all"]);
-    // 6 elements (4 kinds, and F-bar on quad4 and hex8) x 8 materials x 4 kernel groups (the
-    // force and tangent, the forces alone, the assembly, the energy), newton_iteration,
-    // uzawa_step, uzawa_sweep, uzawa_solve, and the two peak kernels.
-    assert_eq!(rows.len(), 6 * 8 * 4 + 1 + 3 + 2);
+    // 6 elements (4 kinds, and F-bar on quad4 and hex8) x every material of the registry x 4
+    // kernel groups (the force and tangent, the forces alone, the assembly, the energy),
+    // newton_iteration, uzawa_step, uzawa_sweep, uzawa_solve, and the two peak kernels.
+    assert_eq!(rows.len(), 6 * MATERIALS * 4 + 1 + 3 + 2);
     let materials: std::collections::BTreeSet<&str> = rows.iter().filter_map(|r| r["material"].as_str()).filter(|m| *m != "-").collect();
-    assert_eq!(materials.len(), 8, "{materials:?}");
+    assert_eq!(materials.len(), MATERIALS, "{materials:?}");
     let elements: std::collections::BTreeSet<&str> = rows.iter().filter_map(|r| r["element"].as_str()).collect();
     assert!(elements.contains("quad4+fbar") && elements.contains("hex8+fbar"), "{elements:?}");
     for r in &rows {
@@ -35,7 +38,7 @@ fn bench_reports_every_kernel_on_the_cpu() {
 /// ("energy"), so a row's full name selected none of its rows.
 #[test]
 fn bench_kernel_filter_takes_a_rows_full_name() {
-    for (filter, rows_expected) in [("element_energy", 6 * 8), ("assemble_csr+assemble_residual", 6 * 8), ("element_force_tangent/forces", 6 * 8), ("peak_fma", 1), ("peak_copy", 1)] {
+    for (filter, rows_expected) in [("element_energy", 6 * MATERIALS), ("assemble_csr+assemble_residual", 6 * MATERIALS), ("element_force_tangent/forces", 6 * MATERIALS), ("peak_fma", 1), ("peak_copy", 1)] {
         let rows = self::rows(&["--backend", "cpu", "--all", "--kernel", filter]);
         assert_eq!(rows.len(), rows_expected, "--kernel {filter}");
         assert!(rows.iter().all(|r| r["kernel"] == filter), "--kernel {filter}: {rows:?}");
@@ -43,7 +46,7 @@ fn bench_kernel_filter_takes_a_rows_full_name() {
     // A kernel's name selects its entry points' rows too.
     let rows = self::rows(&["--backend", "cpu", "--all", "--kernel", "element_force_tangent"]);
     let kernels: std::collections::BTreeSet<&str> = rows.iter().map(|r| r["kernel"].as_str().unwrap()).collect();
-    assert_eq!((rows.len(), kernels.into_iter().collect::<Vec<_>>()), (6 * 8 * 2, vec!["element_force_tangent", "element_force_tangent/forces"]));
+    assert_eq!((rows.len(), kernels.into_iter().collect::<Vec<_>>()), (6 * MATERIALS * 2, vec!["element_force_tangent", "element_force_tangent/forces"]));
 }
 
 /// A device call has minutes, not the half hour of every element and material at a million
@@ -54,7 +57,7 @@ fn bench_element_and_material_filters_pick_the_cases() {
     let cases: Vec<(&str, &str)> = rows.iter().map(|r| (r["element"].as_str().unwrap(), r["material"].as_str().unwrap())).collect();
     assert_eq!(cases, [("hex8", "blatz_ko"), ("hex8", "blatz_ko"), ("hex8+fbar", "blatz_ko"), ("hex8+fbar", "blatz_ko")]);
     let rows = self::rows(&["--backend", "cpu", "--all", "--kernel", "element_energy", "--element", "quad4+fbar"]);
-    assert_eq!(rows.len(), 8);
+    assert_eq!(rows.len(), MATERIALS);
     assert!(rows.iter().all(|r| r["element"] == "quad4+fbar"), "{rows:?}");
 }
 

@@ -5,7 +5,7 @@
 #[path = "common/run.rs"]
 mod common_run;
 
-use bifirst::grains::{force_distribution, measure, orientation_rose, Contact, Network, Other, Wall, ROSE_SECTORS};
+use bifirst::grains::{force_distribution, measure, orientation_rose, window_means, Contact, Network, Other, Wall, ROSE_SECTORS};
 use common_run::{run, temp_path};
 use std::f64::consts::PI;
 
@@ -78,6 +78,29 @@ fn a_square_lattice_under_uniform_pressure_has_z_4_an_isotropic_fabric_and_the_w
     // Half of the normals along x, half along y.
     let rose = orientation_rose(&simple_lattice(2, 6, 0.5, p));
     assert!(close(rose[0], 0.5, 1e-12) && close(rose[ROSE_SECTORS / 2], 0.5, 1e-12), "{rose:?}");
+}
+
+/// `--window`: the means over the logged steps within the window before the chosen step, the
+/// step at its start included (the times are rounded, as logged times are), each wall by name.
+#[test]
+fn window_means_take_the_steps_of_the_window_and_no_other() {
+    let rows: Vec<_> = (0..=10)
+        .map(|k| {
+            let mut net = simple_lattice(2, 4, 0.5, k as f64);
+            net.t = 0.1 * k as f64;
+            measure(&net, &names(2))
+        })
+        .collect();
+    let w = window_means(&rows, 10, 0.3);
+    assert_eq!(w.steps, 4, "t = 0.7, 0.8, 0.9 and 1.0");
+    assert!(close(w.from, 0.7, 1e-12) && close(w.to, 1.0, 1e-12));
+    assert!(close(w.wall_pressure, 8.5, 1e-12) && close(w.pressure, 8.5, 0.01), "{w:?}");
+    assert!(w.walls.iter().all(|wall| close(wall.pressure, 8.5, 1e-12)) && w.walls.len() == 4, "{:?}", w.walls);
+    assert!(close(w.coordination, rows[10].coordination, 1e-12) && w.deviator < 1e-9);
+    let before = window_means(&rows, 5, 0.15);
+    assert_eq!((before.steps, before.to), (2, rows[5].t), "the window ends at the chosen step");
+    let all = window_means(&rows, 10, 100.0);
+    assert!(all.steps == 11 && close(all.wall_pressure, 5.0, 1e-12));
 }
 
 #[test]

@@ -71,7 +71,7 @@ pub(crate) fn plot_command(runs: Vec<PathBuf>, out: Option<PathBuf>, trace: Opti
     Ok(read_status(failed))
 }
 
-pub(crate) fn grains_command(run: &Path, out: Option<PathBuf>, at: Option<f64>, json: bool) -> Result<ExitCode> {
+pub(crate) fn grains_command(run: &Path, out: Option<PathBuf>, at: Option<f64>, window: Option<f64>, json: bool) -> Result<ExitCode> {
     use bifirst::grains::{analyze, read_networks};
     let out = out.unwrap_or_else(|| run.with_file_name(format!("{}_grains", run.file_stem().map_or("run".into(), |s| s.to_string_lossy()))));
     check_output_dir(&out, "the output directory")?;
@@ -86,7 +86,7 @@ pub(crate) fn grains_command(run: &Path, out: Option<PathBuf>, at: Option<f64>, 
     };
     let networks = read_networks(run, tenths("parsed"))?;
     let started = Instant::now();
-    let report = analyze(&networks, at, &out, tenths("measured"))?;
+    let report = analyze(&networks, at, window, &out, tenths("measured"))?;
     if json {
         println!("{}", serde_json::to_string_pretty(&report)?);
     } else {
@@ -99,6 +99,22 @@ pub(crate) fn grains_command(run: &Path, out: Option<PathBuf>, at: Option<f64>, 
         println!("  Love-Weber stress {:?}: p = {:.4e}, q = {:.4e}; mean wall pressure {:.4e}", m.stress, m.pressure, m.deviator, m.wall_pressure);
         for w in &m.walls {
             println!("    wall `{}`: {:.4e}", w.name, w.pressure);
+        }
+        if let Some(w) = &report.window {
+            let off = 100.0 * (w.pressure / w.wall_pressure - 1.0);
+            println!(
+                "  means over {} from t = {:.6e}: Love-Weber stress {:?}, p = {:.4e} ({off:+.1} % of the mean wall pressure {:.4e}), q = {:.4e}, Z = {:.3}",
+                n(w.steps, "logged step", "logged steps"),
+                w.from,
+                w.stress,
+                w.pressure,
+                w.wall_pressure,
+                w.deviator,
+                w.coordination
+            );
+            for wall in &w.walls {
+                println!("    wall `{}`: {:.4e}", wall.name, wall.pressure);
+            }
         }
         let d = &report.force_distribution;
         println!("  normal forces: mean {:.4e}, exponential tail decay {}", d.mean_normal_force, d.tail_decay.map_or("n/a (too few forces above the mean)".into(), |b| format!("{b:.3}")));

@@ -9,7 +9,7 @@
 
 use super::kernel::{checked_determinant, deformation_gradient, finish, point_stress_tangent, ElementError, ElementOutput};
 use super::GaussPoint;
-use crate::material::tensor::{green_lagrange, Mat3, VOIGT};
+use crate::material::tensor::{green_lagrange, Mat3, Tangent, VOIGT};
 use crate::material::{Hyperelastic, Relaxation};
 use crate::precision::Real;
 use nalgebra::{Vector3, Vector6};
@@ -66,38 +66,8 @@ pub(super) fn fbar_force_tangent<M: Hyperelastic>(material: &M, points: &[GaussP
         out.tangent.resize(ndof * ndof, 0.0);
     }
     let (fs, js, theta, big_theta) = dilatation(points, u)?;
-    // h_a = F⁻ᵀ dN_a/dX (the spatial gradient, δJ/J = Σ_a δu_a · h_a) at every point, per dof.
-    let h: Vec<Vec<Real>> = points
-        .iter()
-        .zip(&fs)
-        .map(|(gp, f)| {
-            let inv_t = f.try_inverse().expect("det F > 0").transpose();
-            let h: Vec<Vector3<Real>> = gp.dn_dx.iter().map(|g| inv_t * Vector3::new(g[0], g[1], g[2])).collect();
-            (0..ndof).map(|r| h[r / dim][r % dim]).collect()
-        })
-        .collect();
-    // θ̂ = (dθ/du) / θ.
-    let mut theta_hat = vec![0.0; ndof];
-    for ((gp, j), hq) in points.iter().zip(&js).zip(&h) {
-        for (t, hr) in theta_hat.iter_mut().zip(hq) {
-            *t += gp.dv * j * hr / big_theta;
-        }
-    }
-    // (d²θ/du²) / θ, with the entries of node pairs whose components differ.
-    let mut theta_hess = Vec::new();
-    if with_tangent {
-        theta_hess.resize(ndof * ndof, 0.0);
-        for ((gp, j), hq) in points.iter().zip(&js).zip(&h) {
-            let w = gp.dv * j / big_theta;
-            for r in 0..ndof {
-                let (a, i) = (r / dim, r % dim);
-                for c in 0..ndof {
-                    let (b, jj) = (c / dim, c % dim);
-                    theta_hess[r * ndof + c] += w * (hq[r] * hq[c] - hq[a * dim + jj] * hq[b * dim + i]);
-                }
-            }
-        }
-    }
+    let h = spatial_gradients(points, &fs, ndof, dim);
+    let (theta_hat, theta_hess) = theta_derivatives(points, &js, &h, big_theta, ndof, dim, with_tangent);
     let mut beta = vec![0.0; ndof];
     let mut r_vec = vec![0.0; ndof];
     let mut bbar = vec![Vector6::<Real>::zeros(); ndof];
@@ -127,50 +97,117 @@ pub(super) fn fbar_force_tangent<M: Hyperelastic>(material: &M, points: &[GaussP
         if !d.iter().all(|v| v.is_finite()) {
             return Err(ElementError::NonFinite);
         }
-        // B̄ = dĒ/du = α² (B + c βᵀ), c = C in engineering Voigt form over the scaled block.
-        let c_voigt = Vector6::from_fn(|k, _| {
-            let (p, m) = VOIGT[k];
-            if p >= dim || m >= dim {
-                0.0
-            } else if p == m {
-                c[(p, m)]
-            } else {
-                2.0 * c[(p, m)]
-            }
-        });
-        for r in 0..ndof {
-            let (a, i) = (r / dim, r % dim);
-            let g = &gp.dn_dx[a];
-            let b = Vector6::from_fn(|k, _| {
-                let (p, m) = VOIGT[k];
-                if p == m {
-                    f[(i, p)] * g[p]
-                } else {
-                    f[(i, p)] * g[m] + f[(i, m)] * g[p]
-                }
-            });
-            bbar[r] = (b + c_voigt * beta[r]) * alpha2;
+        let point = PointTerms { gp, f, c: &c, s: &s, d: &d, alpha2, t, beta: &beta, r_vec: &r_vec, h: hq, theta_hat: &theta_hat, theta_hess: &theta_hess };
+        add_point_tangent(&point, dim, &mut bbar, &mut db, &mut out.tangent);
+    }
+    finish(out, ndof, with_tangent)
+}
+
+/// `h_a = F⁻ᵀ dN_a/dX` at every point, per dof: the spatial gradients, `δJ/J = Σ_a δu_a · h_a`.
+fn spatial_gradients(points: &[GaussPoint], fs: &[Mat3], ndof: usize, dim: usize) -> Vec<Vec<Real>> {
+    points
+        .iter()
+        .zip(fs)
+        .map(|(gp, f)| {
+            let inv_t = f.try_inverse().expect("det F > 0").transpose();
+            let h: Vec<Vector3<Real>> = gp.dn_dx.iter().map(|g| inv_t * Vector3::new(g[0], g[1], g[2])).collect();
+            (0..ndof).map(|r| h[r / dim][r % dim]).collect()
+        })
+        .collect()
+}
+
+/// `θ̂ = (dθ/du) / θ` and, with the tangent, `(d²θ/du²) / θ` (row-major), with the entries of
+/// node pairs whose components differ.
+fn theta_derivatives(points: &[GaussPoint], js: &[Real], h: &[Vec<Real>], big_theta: Real, ndof: usize, dim: usize, with_tangent: bool) -> (Vec<Real>, Vec<Real>) {
+    let mut theta_hat = vec![0.0; ndof];
+    for ((gp, j), hq) in points.iter().zip(js).zip(h) {
+        for (t, hr) in theta_hat.iter_mut().zip(hq) {
+            *t += gp.dv * j * hr / big_theta;
         }
-        for (dbr, br) in db.iter_mut().zip(&bbar) {
-            *dbr = d * br * gp.dv;
-        }
-        let w = gp.dv * alpha2;
-        for col in 0..ndof {
-            let (bn, jj) = (col / dim, col % dim);
-            let gb = &gp.dn_dx[bn];
-            let sgb = s * Vector3::new(gb[0], gb[1], gb[2]);
-            for row in 0..=col {
-                let (a, i) = (row / dim, row % dim);
-                // d²(ln α)/du², from ln θ and ln J.
-                let beta2 = (theta_hess[row * ndof + col] - theta_hat[row] * theta_hat[col] + hq[a * dim + jj] * hq[bn * dim + i]) / n;
-                let mut k = bbar[row].dot(&db[col]) + w * (t * (2.0 * beta[row] * beta[col] + beta2) + 2.0 * (beta[row] * r_vec[col] + r_vec[row] * beta[col]));
-                if i == jj {
-                    let ga = &gp.dn_dx[a];
-                    k += w * (sgb[0] * ga[0] + sgb[1] * ga[1] + sgb[2] * ga[2]);
+    }
+    let mut theta_hess = Vec::new();
+    if with_tangent {
+        theta_hess.resize(ndof * ndof, 0.0);
+        for ((gp, j), hq) in points.iter().zip(js).zip(h) {
+            let w = gp.dv * j / big_theta;
+            for r in 0..ndof {
+                let (a, i) = (r / dim, r % dim);
+                for c in 0..ndof {
+                    let (b, jj) = (c / dim, c % dim);
+                    theta_hess[r * ndof + c] += w * (hq[r] * hq[c] - hq[a * dim + jj] * hq[b * dim + i]);
                 }
-                out.tangent[row * ndof + col] += k;
             }
         }
     }
-    finish(out, ndof, with_tangent)
+    (theta_hat, theta_hess)
+}
+
+/// What one point adds to the tangent: its `F`, `C`, stress `S̄` and tangent `D`, `α²`,
+/// `t = S̄ : C`, `β = d ln α / du`, `r = S̄ : dE/du`, its spatial gradients, and the element's
+/// `θ̂` and `(d²θ/du²) / θ`.
+struct PointTerms<'a> {
+    gp: &'a GaussPoint,
+    f: &'a Mat3,
+    c: &'a Mat3,
+    s: &'a Mat3,
+    d: &'a Tangent,
+    alpha2: Real,
+    t: Real,
+    beta: &'a [Real],
+    r_vec: &'a [Real],
+    h: &'a [Real],
+    theta_hat: &'a [Real],
+    theta_hess: &'a [Real],
+}
+
+/// Adds one point's share to the upper triangle of `tangent`; `bbar` and `db` are workspace of
+/// one `Vector6` per dof.
+fn add_point_tangent(p: &PointTerms, dim: usize, bbar: &mut [Vector6<Real>], db: &mut [Vector6<Real>], tangent: &mut [Real]) {
+    let PointTerms { gp, f, c, s, d, alpha2, t, beta, r_vec, h: hq, theta_hat, theta_hess } = *p;
+    let ndof = beta.len();
+    let n = dim as Real;
+    // B̄ = dĒ/du = α² (B + c βᵀ), c = C in engineering Voigt form over the scaled block.
+    let c_voigt = Vector6::from_fn(|k, _| {
+        let (p, m) = VOIGT[k];
+        if p >= dim || m >= dim {
+            0.0
+        } else if p == m {
+            c[(p, m)]
+        } else {
+            2.0 * c[(p, m)]
+        }
+    });
+    for r in 0..ndof {
+        let (a, i) = (r / dim, r % dim);
+        let g = &gp.dn_dx[a];
+        let b = Vector6::from_fn(|k, _| {
+            let (p, m) = VOIGT[k];
+            if p == m {
+                f[(i, p)] * g[p]
+            } else {
+                f[(i, p)] * g[m] + f[(i, m)] * g[p]
+            }
+        });
+        bbar[r] = (b + c_voigt * beta[r]) * alpha2;
+    }
+    for (dbr, br) in db.iter_mut().zip(bbar.iter()) {
+        *dbr = d * br * gp.dv;
+    }
+    let w = gp.dv * alpha2;
+    for col in 0..ndof {
+        let (bn, jj) = (col / dim, col % dim);
+        let gb = &gp.dn_dx[bn];
+        let sgb = s * Vector3::new(gb[0], gb[1], gb[2]);
+        for row in 0..=col {
+            let (a, i) = (row / dim, row % dim);
+            // d²(ln α)/du², from ln θ and ln J.
+            let beta2 = (theta_hess[row * ndof + col] - theta_hat[row] * theta_hat[col] + hq[a * dim + jj] * hq[bn * dim + i]) / n;
+            let mut k = bbar[row].dot(&db[col]) + w * (t * (2.0 * beta[row] * beta[col] + beta2) + 2.0 * (beta[row] * r_vec[col] + r_vec[row] * beta[col]));
+            if i == jj {
+                let ga = &gp.dn_dx[a];
+                k += w * (sgb[0] * ga[0] + sgb[1] * ga[1] + sgb[2] * ga[2]);
+            }
+            tangent[row * ndof + col] += k;
+        }
+    }
 }

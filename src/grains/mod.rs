@@ -252,12 +252,8 @@ pub fn measure(net: &Network, obstacle_names: &[String]) -> Measures {
     let square = |m: &[[f64; 3]; 3], scale: f64| -> Vec<Vec<f64>> { (0..d).map(|i| (0..d).map(|j| 0.5 * (m[i][j] + m[j][i]) * scale).collect()).collect() };
     let fabric = square(&fabric, if between > 0 { 1.0 / between as f64 } else { 0.0 });
     let stress = square(&stress, 1.0 / container_volume);
-    let deviatoric_norm2 = |m: &Vec<Vec<f64>>| {
-        let mean = (0..d).map(|i| m[i][i]).sum::<f64>() / d as f64;
-        (0..d).flat_map(|i| (0..d).map(move |j| (i, j))).map(|(i, j)| (m[i][j] - if i == j { mean } else { 0.0 }).powi(2)).sum::<f64>()
-    };
     let pressure = (0..d).map(|i| stress[i][i]).sum::<f64>() / d as f64;
-    let (deviator, fabric_anisotropy) = if d == 2 { ((0.5 * deviatoric_norm2(&stress)).sqrt(), 2.0 * (2.0 * deviatoric_norm2(&fabric)).sqrt()) } else { ((1.5 * deviatoric_norm2(&stress)).sqrt(), 5.0 * (1.5 * deviatoric_norm2(&fabric)).sqrt()) };
+    let fabric_anisotropy = if d == 2 { 2.0 * (2.0 * deviatoric_norm2(&fabric)).sqrt() } else { 5.0 * (1.5 * deviatoric_norm2(&fabric)).sqrt() };
     let walls: Vec<WallPressure> = net
         .walls
         .iter()
@@ -284,11 +280,67 @@ pub fn measure(net: &Network, obstacle_names: &[String]) -> Measures {
         sliding_fraction: per(sliding, contacts),
         fabric,
         fabric_anisotropy,
-        stress,
         pressure,
-        deviator,
+        deviator: deviator(&stress),
+        stress,
         walls,
         wall_pressure,
+    }
+}
+
+/// `s:s` of a `d x d` tensor's deviator `s`.
+fn deviatoric_norm2(m: &[Vec<f64>]) -> f64 {
+    let d = m.len();
+    let mean = (0..d).map(|i| m[i][i]).sum::<f64>() / d as f64;
+    (0..d).flat_map(|i| (0..d).map(move |j| (i, j))).map(|(i, j)| (m[i][j] - if i == j { mean } else { 0.0 }).powi(2)).sum::<f64>()
+}
+
+/// The deviator of a stress: `√(½ s:s)` in 2D, `√(3/2 s:s)` in 3D.
+fn deviator(stress: &[Vec<f64>]) -> f64 {
+    let factor = if stress.len() == 2 { 0.5 } else { 1.5 };
+    (factor * deviatoric_norm2(stress)).sqrt()
+}
+
+/// The means of the stress measures over the logged steps of a time window that ends at the
+/// chosen step. While a packing is driven, its grains' inertia (`Σ m x ⊗ a`) stands between the
+/// Love-Weber stress and the walls' pressures at any one step; over a window its time mean
+/// falls off, and the two means compare as the static balance says (doc/grains.md).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct WindowMeans {
+    /// The first and last logged step's times, and how many steps the means take.
+    pub from: f64,
+    pub to: f64,
+    pub steps: usize,
+    pub coordination: f64,
+    /// The mean Love-Weber stress, its mean stress and deviator.
+    pub stress: Vec<Vec<f64>>,
+    pub pressure: f64,
+    pub deviator: f64,
+    pub walls: Vec<WallPressure>,
+    pub wall_pressure: f64,
+}
+
+/// The means over the rows at times within `window` before row `index`'s, that row included.
+pub fn window_means(rows: &[Measures], index: usize, window: f64) -> WindowMeans {
+    let to = rows[index].t;
+    let reach = to - window - 1e-9 * window.abs().max(to.abs()).max(1.0);
+    let first = rows[..=index].iter().rposition(|r| r.t < reach).map_or(0, |k| k + 1);
+    let chosen = &rows[first..=index];
+    let n = chosen.len() as f64;
+    let mean = |f: &dyn Fn(&Measures) -> f64| chosen.iter().map(f).sum::<f64>() / n;
+    let d = rows[index].stress.len();
+    let stress: Vec<Vec<f64>> = (0..d).map(|i| (0..d).map(|j| mean(&|r| r.stress[i][j])).collect()).collect();
+    let walls = rows[index].walls.iter().map(|w| WallPressure { name: w.name.clone(), pressure: mean(&|r| r.walls.iter().find(|v| v.name == w.name).map_or(0.0, |v| v.pressure)) }).collect();
+    WindowMeans {
+        from: chosen[0].t,
+        to,
+        steps: chosen.len(),
+        coordination: mean(&|r| r.coordination),
+        pressure: (0..d).map(|i| stress[i][i]).sum::<f64>() / d as f64,
+        deviator: deviator(&stress),
+        stress,
+        walls,
+        wall_pressure: mean(&|r| r.wall_pressure),
     }
 }
 
@@ -432,6 +484,10 @@ pub struct Report {
     pub steps: usize,
     /// The measures of the chosen step (`--at`, else the last).
     pub at: Measures,
+    /// With `--window T`: the stress measures' means over the logged steps of the `T` before
+    /// the chosen step and at it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub window: Option<WindowMeans>,
     pub force_distribution: ForceDistribution,
     /// Shares of the contact orientations per sector of `180 / ROSE_SECTORS` degrees.
     pub orientation_rose: Vec<f64>,
@@ -439,8 +495,9 @@ pub struct Report {
 }
 
 /// Measures every step of `networks` and writes the CSV, the JSON report and the pictures
-/// into `out`; `progress` sees each step measured.
-pub fn analyze(networks: &Networks, at: Option<f64>, out: &Path, mut progress: impl FnMut(usize, usize)) -> Result<Report, GrainsError> {
+/// into `out`, with the stress measures' means over `window` before the chosen step if asked;
+/// `progress` sees each step measured.
+pub fn analyze(networks: &Networks, at: Option<f64>, window: Option<f64>, out: &Path, mut progress: impl FnMut(usize, usize)) -> Result<Report, GrainsError> {
     use rayon::prelude::*;
     std::fs::create_dir_all(out).map_err(|source| GrainsError::Write { path: out.into(), source })?;
     let n = networks.steps.len();
@@ -463,7 +520,8 @@ pub fn analyze(networks: &Networks, at: Option<f64>, out: &Path, mut progress: i
     files.extend(plot::pictures(networks, chosen, &rows, &distribution, &rose, out)?);
     let json_path = out.join("grains.json");
     files.push(json_path.clone());
-    let report = Report { log: networks.path.clone(), scene: networks.scene.clone(), dim: networks.dim, steps: n, at: rows[index].clone(), force_distribution: distribution, orientation_rose: rose, files };
+    let window = window.map(|w| window_means(&rows, index, w));
+    let report = Report { log: networks.path.clone(), scene: networks.scene.clone(), dim: networks.dim, steps: n, at: rows[index].clone(), window, force_distribution: distribution, orientation_rose: rose, files };
     write("grains.json", serde_json::to_string_pretty(&report).expect("a report serializes"))?;
     Ok(report)
 }
