@@ -295,17 +295,17 @@ fn main() -> ExitCode {
         Command::Summary { runs, json } => summary_command(runs, json),
         Command::Check { scene, sets } => load_scene(&scene, &sets).map_err(anyhow::Error::from).and_then(|loaded| {
             let sim = bifirst::solver::build_simulation(&loaded)?;
-            let elements: usize = sim.bodies.iter().map(|b| b.mesh.element_count()).sum();
-            let dofs: usize = sim.bodies.iter().map(|b| b.dofs.free_count).sum();
+            let elements: usize = sim.bodies().iter().map(|b| b.mesh().element_count()).sum();
+            let dofs: usize = sim.bodies().iter().map(|b| b.dofs().free_count).sum();
             let n = |count: usize, one: &str, many: &str| bifirst::output::counted(count, one, many);
-            println!("{}: valid, {}D, {}, {}, {} free dofs, {}", loaded.name, sim.dim, n(sim.bodies.len(), "body", "bodies"), n(elements, "element", "elements"), dofs, n(sim.step_count(), "step", "steps"));
+            println!("{}: valid, {}D, {}, {}, {} free dofs, {}", loaded.name, sim.dim(), n(sim.bodies().len(), "body", "bodies"), n(elements, "element", "elements"), dofs, n(sim.step_count(), "step", "steps"));
             // The largest bodies' factorisations: the fill decides the cost of a Newton iteration.
-            let mut bodies: Vec<_> = sim.bodies.iter().collect();
-            bodies.sort_by_key(|b| std::cmp::Reverse(b.dofs.free_count));
+            let mut bodies: Vec<_> = sim.bodies().iter().collect();
+            bodies.sort_by_key(|b| std::cmp::Reverse(b.dofs().free_count));
             for b in bodies.iter().take(3) {
                 let (ordering, entries) = b.factor_report();
-                println!("  body `{}`: {} free dofs, factor with {} ordering: {} entries", b.name, b.dofs.free_count, ordering.name(), entries);
-                let sets: Vec<String> = b.mesh.node_sets.iter().map(|(name, nodes)| format!("{name} ({})", nodes.len())).collect();
+                println!("  body `{}`: {} free dofs, factor with {} ordering: {} entries", b.name(), b.dofs().free_count, ordering.name(), entries);
+                let sets: Vec<String> = b.mesh().node_sets.iter().map(|(name, nodes)| format!("{name} ({})", nodes.len())).collect();
                 println!("    node sets: {}", if sets.is_empty() { "none".to_string() } else { sets.join(", ") });
             }
             if bodies.len() > 3 {

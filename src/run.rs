@@ -105,7 +105,7 @@ pub const GIT_REVISION: Option<&str> = option_env!("BIFIRST_GIT_REVISION");
 /// Per body of `sim`: logged on `/bodies` rather than a channel of its own (`output.bodies`).
 fn batched_bodies(loaded: &LoadedScene, sim: &Simulation) -> Vec<bool> {
     let grains: std::collections::HashSet<String> = loaded.scene.packing.iter().flat_map(|p| (0..p.count).map(|i| crate::scene::grain_name(i, p.count))).collect();
-    let grain: Vec<bool> = sim.bodies.iter().map(|b| grains.contains(&b.name)).collect();
+    let grain: Vec<bool> = sim.bodies().iter().map(|b| grains.contains(b.name())).collect();
     loaded.scene.output.bodies.batched(&grain)
 }
 
@@ -132,7 +132,7 @@ struct Logger {
 impl Logger {
     fn new(path: &Path, loaded: &LoadedScene, sim: &Simulation, options: &RunOptions, backend: &Backend) -> Result<Self, OutputError> {
         let mut log = RunLog::create(path)?;
-        let dim = sim.dim;
+        let dim = sim.dim();
         let output = &loaded.scene.output;
         let total = sim.step_count();
         let scene_every = OutputSpec::frame_interval(output.scene_every, total);
@@ -149,20 +149,20 @@ impl Logger {
         let batched = batched_bodies(loaded, sim);
         // One schema for thousands of bodies (it is derived, not a constant).
         let body_schema = schemas::body(dim);
-        for (b, _) in sim.bodies.iter().zip(&batched).filter(|(_, batched)| !**batched) {
-            log.add_channel(&format!("/body/{}", b.name), "bifirst.Body", &body_schema)?;
+        for (b, _) in sim.bodies().iter().zip(&batched).filter(|(_, batched)| !**batched) {
+            log.add_channel(&format!("/body/{}", b.name()), "bifirst.Body", &body_schema)?;
         }
         if batched.contains(&true) {
             log.add_channel("/bodies", "bifirst.Bodies", &schemas::bodies(dim))?;
         }
-        for p in &sim.probes {
+        for p in sim.probes() {
             log.add_channel(&format!("/probe/{}", p.name), "bifirst.Probe", &schemas::probe(dim))?;
         }
         let reaction_schema = schemas::reaction(dim);
-        for s in &sim.sets {
+        for s in sim.sets() {
             log.add_channel(&format!("/reaction/{}", s.name), "bifirst.Reaction", &reaction_schema)?;
         }
-        if let Some(c) = &sim.contact {
+        if let Some(c) = &sim.contact() {
             log.add_channel("/contact", "bifirst.Contact", &schemas::contact())?;
             for o in &c.obstacles {
                 log.add_channel(&format!("/reaction/{}", o.name), "bifirst.Reaction", &reaction_schema)?;
@@ -177,15 +177,15 @@ impl Logger {
             backend: backend.name().to_string(),
             precision: backend.precision().to_string(),
             adapter: backend.adapter(),
-            first_step: sim.first_step.1,
+            first_step: sim.first_step().1,
             batched_bodies: batched.contains(&true).then(|| {
-                let (names, mass) = sim.bodies.iter().zip(&batched).filter(|(_, batched)| **batched).map(|(b, _)| (b.name.clone(), b.metrics().mass)).unzip();
+                let (names, mass) = sim.bodies().iter().zip(&batched).filter(|(_, batched)| **batched).map(|(b, _)| (b.name().to_string(), b.metrics().mass)).unzip();
                 BatchedBodies { names, mass }
             }),
-            body_names: sim.bodies.iter().map(|b| b.name.clone()).collect(),
-            obstacle_names: sim.contact.as_ref().map_or(Vec::new(), |c| c.obstacles.iter().map(|o| o.name.clone()).collect()),
+            body_names: sim.bodies().iter().map(|b| b.name().to_string()).collect(),
+            obstacle_names: sim.contact().as_ref().map_or(Vec::new(), |c| c.obstacles.iter().map(|o| o.name.clone()).collect()),
         };
-        log.write("/run", sim.t, &run)?;
+        log.write("/run", sim.t(), &run)?;
         log.attach("scene.toml", "application/toml", loaded.resolved_toml.as_bytes())?;
         let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
         let meta: BTreeMap<String, String> = [
@@ -207,7 +207,7 @@ impl Logger {
         let view = (scene_every > 0).then(|| View::new(sim));
         let vtu_every = OutputSpec::frame_interval(output.vtu_every, total);
         log.add_channel("/state", "bifirst.SavedState", &schemas::saved_state())?;
-        let contacts_every = if sim.contact.is_some() { output.contacts_every.unwrap_or(scene_every) } else { 0 };
+        let contacts_every = if sim.contact().is_some() { output.contacts_every.unwrap_or(scene_every) } else { 0 };
         if contacts_every > 0 {
             log.add_channel("/contacts", "bifirst.Contacts", &schemas::contacts())?;
         }
@@ -217,14 +217,14 @@ impl Logger {
     /// State channels: energy (`energies`, the simulation's at this time), bodies, probes,
     /// reactions at the current time.
     fn state(&mut self, sim: &Simulation, energies: Energies) -> Result<(), OutputError> {
-        if self.state_step == Some(sim.step) {
+        if self.state_step == Some(sim.step()) {
             return Ok(());
         }
-        self.state_step = Some(sim.step);
-        let (t, dim) = (sim.t, self.dim);
+        self.state_step = Some(sim.step());
+        let (t, dim) = (sim.t(), self.dim);
         self.log.write("/energy", t, &EnergyMessage { t, energies })?;
         let angular = |l: [Real; 3]| if dim == 2 { AngularMomentum::Plane(l[2]) } else { AngularMomentum::Space(l) };
-        let metrics: Vec<_> = sim.bodies.par_iter().map(|b| b.metrics()).collect();
+        let metrics: Vec<_> = sim.bodies().par_iter().map(|b| b.metrics()).collect();
         let own: Vec<(usize, Vec<u8>)> = (0..metrics.len())
             .into_par_iter()
             .filter(|&b| !self.batched[b])
@@ -234,7 +234,7 @@ impl Logger {
             })
             .collect();
         for (b, data) in own {
-            self.log.write_encoded(&format!("/body/{}", sim.bodies[b].name), t, &data)?;
+            self.log.write_encoded(&format!("/body/{}", sim.bodies()[b].name()), t, &data)?;
         }
         if self.batched.contains(&true) {
             let batch: Vec<_> = metrics.iter().zip(&self.batched).filter(|(_, batched)| **batched).map(|(m, _)| m).collect();
@@ -247,17 +247,17 @@ impl Logger {
             };
             self.log.write("/bodies", t, &message)?;
         }
-        for p in &sim.probes {
-            let b = &sim.bodies[p.body];
+        for p in sim.probes() {
+            let b = &sim.bodies()[p.body];
             let n = p.node;
-            let msg = ProbeMessage { t, position: b.position(n)[..dim].to_vec(), displacement: b.state.u[n * dim..(n + 1) * dim].to_vec(), velocity: b.state.v[n * dim..(n + 1) * dim].to_vec(), von_mises: b.von_mises(&p.elements) };
+            let msg = ProbeMessage { t, position: b.position(n)[..dim].to_vec(), displacement: b.state().u[n * dim..(n + 1) * dim].to_vec(), velocity: b.state().v[n * dim..(n + 1) * dim].to_vec(), von_mises: b.von_mises(&p.elements) };
             self.log.write(&format!("/probe/{}", p.name), t, &msg)?;
         }
-        for (s, r) in sim.sets.iter().zip(sim.reactions()) {
+        for (s, r) in sim.sets().iter().zip(sim.reactions()) {
             self.log.write(&format!("/reaction/{}", s.name), t, &ReactionMessage { t, force: r[..dim].to_vec() })?;
         }
-        if let Some(c) = &sim.contact {
-            for (o, r) in c.obstacles.iter().zip(&sim.obstacle_reactions) {
+        if let Some(c) = &sim.contact() {
+            for (o, r) in c.obstacles.iter().zip(sim.obstacle_reactions()) {
                 self.log.write(&format!("/reaction/{}", o.name), t, &ReactionMessage { t, force: r[..dim].to_vec() })?;
             }
         }
@@ -268,40 +268,40 @@ impl Logger {
     /// frames, `/contacts` and `/state` when due. A device that keeps the states then sends
     /// them back first ([`Simulation::sync_states`]).
     fn reads_states(&self, sim: &Simulation, logged: bool, last: bool) -> bool {
-        let due = |every: usize| every > 0 && (last || sim.step.is_multiple_of(every));
+        let due = |every: usize| every > 0 && (last || sim.step().is_multiple_of(every));
         let frames = (self.view.is_some() && due(self.scene_every)) || (self.vtu.is_some() && due(self.vtu_every));
-        let saved = last || (self.saved_every > 0 && sim.step.is_multiple_of(self.saved_every));
-        (logged && !sim.probes.is_empty()) || frames || due(self.contacts_every) || saved
+        let saved = last || (self.saved_every > 0 && sim.step().is_multiple_of(self.saved_every));
+        (logged && !sim.probes().is_empty()) || frames || due(self.contacts_every) || saved
     }
 
     /// `/state`, the full state a run can continue from: at the scene's cadence, and (`last`)
     /// at the last finished step of the run, however it ends.
     fn saved(&mut self, sim: &Simulation, last: bool) -> Result<(), OutputError> {
         // With a cadence, the initial state too (a restarted run's is in the log it came from).
-        let due = self.saved_every > 0 && sim.step.is_multiple_of(self.saved_every) && (sim.step > sim.first_step.1 || sim.step == 0);
-        if self.saved_step == Some(sim.step) || !(last || due) {
+        let due = self.saved_every > 0 && sim.step().is_multiple_of(self.saved_every) && (sim.step() > sim.first_step().1 || sim.step() == 0);
+        if self.saved_step == Some(sim.step()) || !(last || due) {
             return Ok(());
         }
-        self.saved_step = Some(sim.step);
-        self.log.write("/state", sim.t, &sim.saved_state())
+        self.saved_step = Some(sim.step());
+        self.log.write("/state", sim.t(), &sim.saved_state())
     }
 
     /// The 3D view and the VTU frame when their cadence says so, or when `last`.
     fn frames(&mut self, sim: &Simulation, last: bool) -> Result<(), OutputError> {
-        if self.frame_step == Some(sim.step) {
+        if self.frame_step == Some(sim.step()) {
             return Ok(());
         }
-        let due = |every: usize| every > 0 && (last || sim.step.is_multiple_of(every));
+        let due = |every: usize| every > 0 && (last || sim.step().is_multiple_of(every));
         let scene = self.view.is_some() && due(self.scene_every);
         let vtu = self.vtu.is_some() && due(self.vtu_every);
         if !scene && !vtu {
             return Ok(());
         }
-        self.frame_step = Some(sim.step);
-        let fields: Vec<Vec<CellFields>> = sim.bodies.par_iter().map(|b| b.cell_fields()).collect();
+        self.frame_step = Some(sim.step());
+        let fields: Vec<Vec<CellFields>> = sim.bodies().par_iter().map(|b| b.cell_fields()).collect();
         if let (true, Some(view)) = (scene, &mut self.view) {
             let update = view.scene_update(sim, &fields);
-            self.log.write_encoded("/scene", sim.t, &update)?;
+            self.log.write_encoded("/scene", sim.t(), &update)?;
         }
         if let (true, Some(series)) = (vtu, &mut self.vtu) {
             series.write_frame(sim, &fields)?;
@@ -311,20 +311,20 @@ impl Logger {
 
     /// The contact network (`/contacts`) when its cadence says so, or when `last`.
     fn contacts(&mut self, sim: &Simulation, last: bool) -> Result<(), OutputError> {
-        let due = self.contacts_every > 0 && (last || sim.step.is_multiple_of(self.contacts_every));
-        if !due || self.contacts_step == Some(sim.step) {
+        let due = self.contacts_every > 0 && (last || sim.step().is_multiple_of(self.contacts_every));
+        if !due || self.contacts_step == Some(sim.step()) {
             return Ok(());
         }
-        self.contacts_step = Some(sim.step);
-        self.log.write("/contacts", sim.t, &crate::output::contacts::network(sim))
+        self.contacts_step = Some(sim.step());
+        self.log.write("/contacts", sim.t(), &crate::output::contacts::network(sim))
     }
 
     /// The `/contact` channel of a step (only in scenes with contact).
     fn contact(&mut self, sim: &Simulation, r: &StepReport) -> Result<(), OutputError> {
-        if sim.contact.is_none() {
+        if sim.contact().is_none() {
             return Ok(());
         }
-        self.log.write("/contact", sim.t, &ContactMessage { t: sim.t, stats: r.contact })
+        self.log.write("/contact", sim.t(), &ContactMessage { t: sim.t(), stats: r.contact })
     }
 
     fn solver(&mut self, r: &StepReport, t: Real, status: &str, message: Option<String>) -> Result<(), OutputError> {
@@ -445,7 +445,7 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
     let mut totals = Totals::default();
     let stop = step_until_stopped(loaded, &mut sim, &mut logger, monitor, &mut totals)?;
     let contour = |sim: &Simulation| match &options.contour {
-        Some(path) => contour_png(sim, &sim.bodies.iter().map(|b| b.cell_fields()).collect::<Vec<_>>(), &format!("{}: von Mises stress at t = {:.4}", loaded.name, sim.t), path),
+        Some(path) => contour_png(sim, &sim.bodies().iter().map(|b| b.cell_fields()).collect::<Vec<_>>(), &format!("{}: von Mises stress at t = {:.4}", loaded.name, sim.t()), path),
         None => Ok(()),
     };
     let summary = |sim: &Simulation, stop: Option<&Stop>| run_summary(loaded, backend, sim, &totals, stop, started, out);
@@ -457,8 +457,8 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
                 "finished: {} steps to t = {:.6e}, {} Newton iterations, {} cut-backs, {:.2} s wall; energy balance error {:.1e}",
                 summary.steps, summary.t_end, summary.newton_iterations, summary.cutbacks, summary.wall_s, summary.energy.energy_balance_error
             );
-            logger.line(sim.t, Level::Info, &end)?;
-            logger.summary(&summary, sim.t)?;
+            logger.line(sim.t(), Level::Info, &end)?;
+            logger.summary(&summary, sim.t())?;
             logger.log.finish()?;
             Ok(summary)
         }
@@ -474,13 +474,13 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
             }
             let level = if matches!(stop, Stop::Interrupted) { Level::Warning } else { Level::Error };
             let message = stop.to_string();
-            logger.line(sim.t, level, &format!("the run stopped at t = {:.6e}: {message}", sim.t))?;
+            logger.line(sim.t(), level, &format!("the run stopped at t = {:.6e}: {message}", sim.t()))?;
             logger.solver(&report, report.t, stop.status(), Some(message))?;
             if let Some(Err(e)) = synced.then(|| contour(&sim)) {
                 monitor.warning(&e.to_string());
             }
             let summary = summary(&sim, Some(&stop));
-            logger.summary(&summary, sim.t)?;
+            logger.summary(&summary, sim.t())?;
             logger.log.finish()?;
             Err(RunError::Stopped { reason: stop, summary: Box::new(summary) })
         }
@@ -492,52 +492,51 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
 fn set_up(loaded: &LoadedScene, options: &RunOptions, monitor: &mut dyn Monitor) -> Result<(Simulation, crate::backend::Resolved, Vec<String>), RunError> {
     let mut sim = build_simulation(loaded)?;
     let resolved = Backend::resolve(&options.backend)?;
-    let uzawa_notice = resolved.backend.uzawa_notice(sim.contact.as_ref().map(|c| c.settings.sweep));
-    let notices: Vec<String> = resolved.notice.iter().chain(&uzawa_notice).chain(&sim.notices).cloned().collect();
+    let uzawa_notice = resolved.backend.uzawa_notice(sim.contact().as_ref().map(|c| c.settings.sweep));
+    let notices: Vec<String> = resolved.notice.iter().chain(&uzawa_notice).chain(sim.notices()).cloned().collect();
     for notice in &notices {
         monitor.warning(notice);
     }
     monitor.backend(&resolved.backend.describe());
-    let bodies: Vec<_> = sim.bodies.iter().map(|b| b.world_body()).collect();
-    sim.world = resolved.backend.device_world(&bodies).map_err(BackendError::from)?;
+    let bodies: Vec<_> = sim.bodies().iter().map(|b| b.world_body()).collect();
     // The outputs bring the states back where they read them (`Logger::reads_states`).
-    sim.hold_states = sim.world.is_some();
-    if let (Some(path), 3) = (&options.contour, sim.dim) {
+    sim.set_world(resolved.backend.device_world(&bodies).map_err(BackendError::from)?);
+    if let (Some(path), 3) = (&options.contour, sim.dim()) {
         return Err(PlotError::Draw { path: path.clone(), message: "contour plots are drawn for 2D scenes; use --vtu and ParaView for 3D".into() }.into());
     }
     match &options.restart {
         Some(state) => sim.restore(state)?,
         None => sim.start(),
     }
-    sim.interrupt = options.interrupt.clone();
+    sim.set_interrupt(options.interrupt.clone());
     Ok((sim, resolved, notices))
 }
 
 /// The log's first lines: what runs where, the notices, why `auto` chose, where a restart
 /// continues from.
 fn log_start(logger: &mut Logger, loaded: &LoadedScene, sim: &Simulation, resolved: &crate::backend::Resolved, notices: &[String], options: &RunOptions) -> Result<(), RunError> {
-    let free_dofs: usize = sim.bodies.iter().map(|b| b.dofs.free_count).sum();
+    let free_dofs: usize = sim.bodies().iter().map(|b| b.dofs().free_count).sum();
     let start = format!(
         "bifirst {}: scene `{}` ({}), {}, {free_dofs} free dofs, {} of dt = {:e}, backend {}, {}",
         env!("CARGO_PKG_VERSION"),
         loaded.name,
         loaded.path.display(),
-        crate::output::counted(sim.bodies.len(), "body", "bodies"),
-        crate::output::counted(sim.step_count() - sim.first_step.1, "step", "steps"),
-        sim.dt,
+        crate::output::counted(sim.bodies().len(), "body", "bodies"),
+        crate::output::counted(sim.step_count() - sim.first_step().1, "step", "steps"),
+        sim.dt(),
         resolved.backend.describe(),
         crate::output::counted(rayon::current_num_threads(), "thread", "threads")
     );
     // A restarted run's log begins at its state's time.
-    logger.line(sim.t, Level::Info, &start)?;
+    logger.line(sim.t(), Level::Info, &start)?;
     for notice in notices {
-        logger.line(sim.t, Level::Warning, notice)?;
+        logger.line(sim.t(), Level::Warning, notice)?;
     }
     if let Some(reason) = &resolved.reason {
-        logger.line(sim.t, Level::Info, reason)?;
+        logger.line(sim.t(), Level::Info, reason)?;
     }
     if let Some(state) = &options.restart {
-        logger.line(sim.t, Level::Info, &format!("continued from a saved state at t = {:.6e} (step {})", state.t, state.step))?;
+        logger.line(sim.t(), Level::Info, &format!("continued from a saved state at t = {:.6e} (step {})", state.t, state.step))?;
     }
     Ok(())
 }
@@ -552,9 +551,9 @@ fn step_until_stopped(loaded: &LoadedScene, sim: &mut Simulation, logger: &mut L
             return Ok(None);
         }
         if sim.interrupted() {
-            return Ok(Some((Stop::Interrupted, StepReport { step: sim.step, t: sim.t, ..Default::default() })));
+            return Ok(Some((Stop::Interrupted, StepReport { step: sim.step(), t: sim.t(), ..Default::default() })));
         }
-        let dissipated = sim.numerical_dissipation;
+        let dissipated = sim.numerical_dissipation();
         let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| sim.advance()));
         let report = match result {
             Ok(Ok(report)) => report,
@@ -562,7 +561,7 @@ fn step_until_stopped(loaded: &LoadedScene, sim: &mut Simulation, logger: &mut L
                 // The abandoned step leaves the state at the last finished one.
                 totals.cutbacks += failure.cutbacks;
                 logger.events(monitor, failure.t, &failure.report.events)?;
-                return Ok(Some((Stop::Interrupted, StepReport { step: sim.step, t: sim.t, ..Default::default() })));
+                return Ok(Some((Stop::Interrupted, StepReport { step: sim.step(), t: sim.t(), ..Default::default() })));
             }
             Ok(Err(failure)) => {
                 totals.cutbacks += failure.cutbacks;
@@ -571,22 +570,22 @@ fn step_until_stopped(loaded: &LoadedScene, sim: &mut Simulation, logger: &mut L
                 report.t = failure.t;
                 return Ok(Some((Stop::Failed(failure), report)));
             }
-            Err(payload) => return Ok(Some((Stop::Panicked(panic_message(payload.as_ref())), StepReport { step: sim.step + 1, t: sim.t, ..Default::default() }))),
+            Err(payload) => return Ok(Some((Stop::Panicked(panic_message(payload.as_ref())), StepReport { step: sim.step() + 1, t: sim.t(), ..Default::default() }))),
         };
-        logger.events(monitor, sim.t, &report.events)?;
+        logger.events(monitor, sim.t(), &report.events)?;
         totals.add(&report);
         let energies = sim.energies();
         if !energies.total.is_finite() {
-            return Ok(Some((Stop::NotFinite { step: sim.step, t: sim.t }, report)));
+            return Ok(Some((Stop::NotFinite { step: sim.step(), t: sim.t() }, report)));
         }
-        if let Some(gain) = energy_gain(sim.initial_energy, &energies, dissipated) {
+        if let Some(gain) = energy_gain(sim.initial_energy(), &energies, dissipated) {
             totals.energy_gain_steps += 1;
             totals.max_energy_gain = totals.max_energy_gain.max(gain);
             if totals.energy_gain_steps <= ENERGY_GAIN_LINES {
                 let more = if totals.energy_gain_steps == ENERGY_GAIN_LINES { " (further such steps are counted in the summary only)" } else { "" };
-                let message = format!("step {} at t = {:.6e} created energy: numerical dissipation {:.3e} of the energy scale (a time step too large for the impact speeds?){more}", report.step, sim.t, -gain);
+                let message = format!("step {} at t = {:.6e} created energy: numerical dissipation {:.3e} of the energy scale (a time step too large for the impact speeds?){more}", report.step, sim.t(), -gain);
                 monitor.warning(&message);
-                logger.line(sim.t, Level::Warning, &message)?;
+                logger.line(sim.t(), Level::Warning, &message)?;
             }
         }
         let logged = report.step % every == 0 || sim.finished();
@@ -596,7 +595,7 @@ fn step_until_stopped(loaded: &LoadedScene, sim: &mut Simulation, logger: &mut L
             }
         }
         if logged {
-            logger.solver(&report, sim.t, "converged", None)?;
+            logger.solver(&report, sim.t(), "converged", None)?;
             logger.contact(sim, &report)?;
             logger.state(sim, energies)?;
         }
@@ -627,9 +626,9 @@ fn run_summary(loaded: &LoadedScene, backend: &Backend, sim: &Simulation, totals
         backend: backend.name().to_string(),
         precision: backend.precision().to_string(),
         adapter: backend.adapter(),
-        steps: sim.step - sim.first_step.1,
-        last_step: sim.step,
-        t_end: sim.t,
+        steps: sim.step() - sim.first_step().1,
+        last_step: sim.step(),
+        t_end: sim.t(),
         cutbacks: totals.cutbacks,
         newton_iterations: totals.newton,
         uzawa_iterations: totals.uzawa,

@@ -529,7 +529,7 @@ fn filters_and_probes_that_match_nothing_are_refused_before_any_work() {
 fn a_failed_factorisation_names_the_material_and_the_reasons() {
     let loaded = bifirst::scene::load_scene(&common_scene_path("bar_impact"), &[]).unwrap();
     let mut sim = bifirst::solver::build_simulation(&loaded).unwrap();
-    let body = &mut sim.bodies[0];
+    let body = sim.body_mut(0);
     let error = body.factorize_effective(-1e9, &mut Default::default()).expect_err("a negative mass term is no positive definite K̄").to_string();
     for words in ["body `bar`", "not positive definite", "material model neo_hookean", "K/G = 2.000e0", "lower K/G"] {
         assert!(error.contains(words), "says `{words}`: {error}");

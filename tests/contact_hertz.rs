@@ -22,10 +22,10 @@ fn hertz(sets: &[&str], tag: &str, g: f64, k: f64) {
     while !sim.finished() {
         sim.advance().expect("step converges");
     }
-    let floor = sim.contact.as_ref().unwrap().obstacles.iter().position(|o| o.name == "floor").unwrap() as u32;
-    let body = &sim.bodies[0];
+    let floor = sim.contact().as_ref().unwrap().obstacles.iter().position(|o| o.name == "floor").unwrap() as u32;
+    let body = &sim.bodies()[0];
     // (x, normal force) of every floor contact point, by x.
-    let mut points: Vec<(f64, f64)> = sim.contact_points.iter().filter(|c| matches!(c.master, Master::Obstacle { obstacle, .. } if obstacle == floor)).map(|c| (body.position(c.slave_node as usize)[0], c.r[0])).collect();
+    let mut points: Vec<(f64, f64)> = sim.contact_points().iter().filter(|c| matches!(c.master, Master::Obstacle { obstacle, .. } if obstacle == floor)).map(|c| (body.position(c.slave_node as usize)[0], c.r[0])).collect();
     points.sort_by(|a, b| a.0.total_cmp(&b.0));
     let load: f64 = points.iter().map(|p| p.1).sum();
     let center = points.iter().map(|p| p.0 * p.1).sum::<f64>() / load;
@@ -37,9 +37,9 @@ fn hertz(sets: &[&str], tag: &str, g: f64, k: f64) {
     let a = (4.0 * load / (std::f64::consts::PI * e_star)).sqrt();
     let p0 = 2.0 * load / (std::f64::consts::PI * a);
     let active = points.iter().filter(|p| p.1 > 0.0).count();
-    let penetration = sim.contact_points.iter().map(|c| -c.end_gap).fold(0.0, f64::max);
+    let penetration = sim.contact_points().iter().map(|c| -c.end_gap).fold(0.0, f64::max);
     let h = body.length_scale();
-    let reaction = sim.obstacle_reactions[floor as usize][1];
+    let reaction = sim.obstacle_reactions()[floor as usize][1];
     println!(
         "{tag}: load {load:.3} (floor reaction {reaction:.3}), half-width {half_width:.4} vs Hertz {a:.4} ({:+.2} %), peak pressure {peak_pressure:.2} vs {p0:.2} ({:+.2} %), {active} nodes in contact, penetration/h {:.1e}",
         100.0 * (half_width / a - 1.0),

@@ -99,7 +99,7 @@ fn converged_contact_points_satisfy_coulomb_law() {
     let (mut sliding, mut sticking) = (0, 0);
     while !sim.finished() {
         sim.advance().unwrap();
-        for c in &sim.contact_points {
+        for c in sim.contact_points() {
             let (r, v, mu) = (c.r, c.v, c.friction);
             let rt = tangential(&r);
             assert!(r[0] >= 0.0);

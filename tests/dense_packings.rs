@@ -18,7 +18,7 @@ fn simulation(scene: &str, sets: &[&str]) -> Simulation {
 }
 
 fn smallest_element(sim: &Simulation) -> f64 {
-    sim.bodies.iter().map(|b| b.length_scale()).fold(f64::INFINITY, f64::min)
+    sim.bodies().iter().map(|b| b.length_scale()).fold(f64::INFINITY, f64::min)
 }
 
 /// Runs to the end, failing on a failed step; returns the largest `/contact.max_overlap`.
@@ -36,26 +36,26 @@ fn run_to_end(sim: &mut Simulation) -> f64 {
 /// brute force, independently of the engine's overlap search: the distance from such a node to
 /// the other grain's boundary.
 fn deepest_node_inside_another_grain(sim: &Simulation) -> f64 {
-    let positions: Vec<Vec<[f64; 3]>> = sim.bodies.iter().map(|b| (0..b.mesh.nodes.len()).map(|n| b.position(n)).collect()).collect();
+    let positions: Vec<Vec<[f64; 3]>> = sim.bodies().iter().map(|b| (0..b.mesh().nodes.len()).map(|n| b.position(n)).collect()).collect();
     let boxes: Vec<[f64; 4]> = positions.iter().map(|p| p.iter().fold([f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY], |a, x| [a[0].min(x[0]), a[1].max(x[0]), a[2].min(x[1]), a[3].max(x[1])])).collect();
     let mut deepest: f64 = 0.0;
     for (a, xs) in positions.iter().enumerate() {
         for x in xs {
-            for (b, body) in sim.bodies.iter().enumerate() {
+            for (b, body) in sim.bodies().iter().enumerate() {
                 let r = boxes[b];
                 if b == a || x[0] < r[0] || x[0] > r[1] || x[1] < r[2] || x[1] > r[3] {
                     continue;
                 }
                 let p = &positions[b];
-                let inside = (0..body.mesh.element_count()).any(|e| {
-                    let t: Vec<[f64; 3]> = body.mesh.element(e).iter().map(|&n| p[n as usize]).collect();
+                let inside = (0..body.mesh().element_count()).any(|e| {
+                    let t: Vec<[f64; 3]> = body.mesh().element(e).iter().map(|&n| p[n as usize]).collect();
                     let side = |u: [f64; 3], v: [f64; 3]| (v[0] - u[0]) * (x[1] - u[1]) - (v[1] - u[1]) * (x[0] - u[0]);
                     (0..3).all(|i| side(t[i], t[(i + 1) % 3]) > 0.0)
                 });
                 if !inside {
                     continue;
                 }
-                let surface = Surface::of(&body.mesh);
+                let surface = Surface::of(body.mesh());
                 let depth = (0..surface.facet_count())
                     .map(|f| {
                         let [u, v] = [0, 1].map(|k| p[surface.facet(f)[k] as usize]);
@@ -120,7 +120,7 @@ fn a_grain_pressed_into_a_dented_neighbour_stays_out_of_it() {
         let report = sim.advance().unwrap_or_else(|f| panic!("step {} at t = {:.4} failed: {}", f.step, f.t, f.failure));
         ratio = ratio.max(report.contact.max_overlap_ratio);
     }
-    let corners = sim.contact_points.iter().filter(|c| c.corner).count();
+    let corners = sim.contact_points().iter().filter(|c| c.corner).count();
     println!("30 grains at 10x the wall speed to t = 0.06: deepest overlap {ratio:.3e} of an element; {corners} corner points at the end");
     assert!(ratio < 0.01, "a node went {ratio:.3e} of an element into another grain");
 }
@@ -252,7 +252,7 @@ fn overlapping_bodies_are_pushed_apart_on_request() {
         let deepest = run_to_end(&mut sim);
         assert!(deepest < 0.01 * h, "{tag}: {deepest:e} after the first steps");
         // Rigid translations: the bodies start unstrained.
-        let strain: f64 = sim.bodies.iter().map(|b| b.strain_energy()).sum();
+        let strain: f64 = sim.bodies().iter().map(|b| b.strain_energy()).sum();
         assert!(strain.is_finite());
     }
 }
@@ -265,7 +265,7 @@ fn a_pair_can_name_its_slave() {
         let text = format!("{TWO_BLOCKS}\n[contact.pair.blocks]\nbodies = [\"lower\", \"upper\"]\nslave = \"{slave}\"\n");
         let sets = ["body.upper.mesh.origin=[0.2, 0.5]".to_string()];
         let sim = build_simulation(&load_scene(&scene_file(&format!("pair_{slave}"), &text), &sets).unwrap()).unwrap();
-        let pairs = sim.contact.expect("contact").pairs;
+        let pairs = &sim.contact().as_ref().expect("contact").pairs;
         (pairs.friction(0, 1).is_some(), pairs.friction(1, 0).is_some())
     };
     assert_eq!(with_pair("lower"), (true, false));
@@ -300,26 +300,26 @@ fn deepest_node_inside_another_grain_3d(sim: &Simulation) -> f64 {
             (0..3).map(|i| segment(x, t[i], t[(i + 1) % 3])).fold(f64::INFINITY, f64::min)
         }
     };
-    let positions: Vec<Vec<V>> = sim.bodies.iter().map(|b| (0..b.mesh.nodes.len()).map(|n| b.position(n)).collect()).collect();
+    let positions: Vec<Vec<V>> = sim.bodies().iter().map(|b| (0..b.mesh().nodes.len()).map(|n| b.position(n)).collect()).collect();
     let boxes: Vec<(V, V)> = positions.iter().map(|p| p.iter().fold(([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]), |(lo, hi), x| ([0, 1, 2].map(|i| lo[i].min(x[i])), [0, 1, 2].map(|i| hi[i].max(x[i]))))).collect();
     let mut deepest: f64 = 0.0;
     for (a, xs) in positions.iter().enumerate() {
         for &x in xs {
-            for (b, body) in sim.bodies.iter().enumerate() {
+            for (b, body) in sim.bodies().iter().enumerate() {
                 let (lo, hi) = boxes[b];
                 if b == a || (0..3).any(|i| x[i] < lo[i] || x[i] > hi[i]) {
                     continue;
                 }
                 let p = &positions[b];
-                let inside = (0..body.mesh.element_count()).any(|e| {
-                    let t: Vec<V> = body.mesh.element(e).iter().map(|&n| p[n as usize]).collect();
+                let inside = (0..body.mesh().element_count()).any(|e| {
+                    let t: Vec<V> = body.mesh().element(e).iter().map(|&n| p[n as usize]).collect();
                     let total = volume(t[0], t[1], t[2], t[3]);
                     [volume(x, t[1], t[2], t[3]), volume(t[0], x, t[2], t[3]), volume(t[0], t[1], x, t[3]), volume(t[0], t[1], t[2], x)].iter().all(|w| w / total > 0.0)
                 });
                 if !inside {
                     continue;
                 }
-                let surface = Surface::of(&body.mesh);
+                let surface = Surface::of(body.mesh());
                 let depth = (0..surface.facet_count()).map(|f| triangle(x, [0, 1, 2].map(|k| p[surface.facet(f)[k] as usize]))).fold(f64::INFINITY, f64::min);
                 deepest = deepest.max(depth);
             }
@@ -334,14 +334,14 @@ fn deepest_node_inside_another_grain_3d(sim: &Simulation) -> f64 {
 #[test]
 fn grains_3d_keeps_every_node_out_of_other_grains() {
     let mut sim = simulation("grains_3d", &[]);
-    assert!(sim.bodies.iter().all(|b| b.mesh.kind == bifirst::mesh::ElementKind::Tet4) && sim.bodies.len() == 216);
+    assert!(sim.bodies().iter().all(|b| b.mesh().kind == bifirst::mesh::ElementKind::Tet4) && sim.bodies().len() == 216);
     let h = smallest_element(&sim);
     sim.start();
     let (mut deepest, mut grain_points): (f64, usize) = (0.0, 0);
     while !sim.finished() {
         let report = sim.advance().unwrap_or_else(|f| panic!("step {} at t = {:.4} failed: {}", f.step, f.t, f.failure));
         deepest = deepest.max(report.contact.max_overlap);
-        grain_points = grain_points.max(sim.contact_points.iter().filter(|c| matches!(c.master, bifirst::contact::Master::Body(_)) && c.r[0] > 0.0).count());
+        grain_points = grain_points.max(sim.contact_points().iter().filter(|c| matches!(c.master, bifirst::contact::Master::Body(_)) && c.r[0] > 0.0).count());
     }
     let at_end = deepest_node_inside_another_grain_3d(&sim);
     let balance = sim.energies().energy_balance_error;

@@ -111,9 +111,9 @@ fn five_grains_of_one_gmsh_file_are_five_bodies_that_land_on_each_other() {
     std::fs::write(&path, five_grains_scene()).unwrap();
     let loaded = bifirst::scene::load_scene(&path, &[]).unwrap();
     let mut sim = bifirst::solver::build_simulation(&loaded).unwrap();
-    assert_eq!(sim.bodies.len(), 5);
-    assert!(sim.bodies.iter().all(|b| b.mesh.element_count() == 4 && b.mesh.nodes.len() == 9), "each body holds its own group");
-    let h = sim.bodies.iter().map(|b| b.length_scale()).fold(f64::INFINITY, f64::min);
+    assert_eq!(sim.bodies().len(), 5);
+    assert!(sim.bodies().iter().all(|b| b.mesh().element_count() == 4 && b.mesh().nodes.len() == 9), "each body holds its own group");
+    let h = sim.bodies().iter().map(|b| b.length_scale()).fold(f64::INFINITY, f64::min);
     sim.start();
     let mut deepest: f64 = 0.0;
     while !sim.finished() {
@@ -122,7 +122,7 @@ fn five_grains_of_one_gmsh_file_are_five_bodies_that_land_on_each_other() {
     }
     // Each grain rests on the one below: four body pairs carry a reaction.
     let mut pairs: Vec<(u32, u32)> = sim
-        .contact_points
+        .contact_points()
         .iter()
         .filter(|c| c.r[0] > 0.0)
         .filter_map(|c| match c.master {
@@ -134,7 +134,7 @@ fn five_grains_of_one_gmsh_file_are_five_bodies_that_land_on_each_other() {
     pairs.dedup();
     assert_eq!(pairs, [(0, 1), (1, 2), (2, 3), (3, 4)], "grains in contact at the end");
     assert!(deepest < 0.01 * h, "a node went {deepest:e} into another grain");
-    let tops: Vec<f64> = sim.bodies.iter().map(|b| (0..b.mesh.nodes.len()).map(|n| b.position(n)[1]).fold(f64::NEG_INFINITY, f64::max)).collect();
+    let tops: Vec<f64> = sim.bodies().iter().map(|b| (0..b.mesh().nodes.len()).map(|n| b.position(n)[1]).fold(f64::NEG_INFINITY, f64::max)).collect();
     assert!(tops.windows(2).all(|w| w[1] > w[0] + 0.3), "the stack keeps its order: {tops:?}");
 }
 

@@ -624,12 +624,12 @@ fn a_falling_grain_that_steps_on_the_device_sends_nothing_per_dof_up() {
     }
     // The host takes every grain's step end here (not `hold_states`).
     let (sim, per_step) = falling_grains(12, 5, true, false);
-    let dofs: usize = sim.bodies.iter().map(|b| b.state.u.len()).sum();
-    eprintln!("{} grains, {dofs} dofs: bytes per step {per_step:?}", sim.bodies.len());
+    let dofs: usize = sim.bodies().iter().map(|b| b.state().u.len()).sum();
+    eprintln!("{} grains, {dofs} dofs: bytes per step {per_step:?}", sim.bodies().len());
     // What still crosses: the trial displacements and internal forces down (16 bytes a dof),
     // and per grain its call's state, lists, flags and strain energy.
     for (s, &bytes) in per_step.iter().enumerate().skip(1) {
-        assert!(bytes <= 16 * dofs as u64 + 250 * sim.bodies.len() as u64, "step {s}: {bytes} bytes for {dofs} dofs");
+        assert!(bytes <= 16 * dofs as u64 + 250 * sim.bodies().len() as u64, "step {s}: {bytes} bytes for {dofs} dofs");
     }
 }
 
@@ -642,12 +642,12 @@ fn falling_grains(count: usize, steps: usize, device: bool, hold: bool) -> (bifi
     let mut sim = bifirst::solver::build_simulation(&loaded).expect("simulation");
     if device {
         let gpu = std::sync::Arc::new(bifirst::gpu::open(None, Some(Precision::F64)).expect("an adapter"));
-        let bodies: Vec<_> = sim.bodies.iter().map(|b| b.world_body()).collect();
+        let bodies: Vec<_> = sim.bodies().iter().map(|b| b.world_body()).collect();
         let mut world = bifirst::gpu::GpuWorld::new(gpu, &bodies).expect("world");
         world.rounds = RoundPlacement::Gpu;
         drop(bodies);
-        sim.world = Some(world);
-        sim.hold_states = hold;
+        sim.set_world(Some(world));
+        sim.set_hold_states(hold);
     }
     sim.start();
     let bytes = (0..steps).map(|_| sim.advance().expect("a step").bytes_moved).collect();
@@ -678,8 +678,8 @@ fn falling_grains_that_nothing_is_near_leave_their_step_ends_on_the_device() {
         later[later.len() / 2]
     };
     let (small, large) = (per_grain(&bytes, 400), per_grain(&larger_bytes, 3600));
-    let dofs_per_grain = held.bodies.iter().map(|b| b.state.u.len()).sum::<usize>() as f64 / 400.0;
-    let kept = held.bodies.iter().filter(|b| b.held_state().is_some()).count();
+    let dofs_per_grain = held.bodies().iter().map(|b| b.state().u.len()).sum::<usize>() as f64 / 400.0;
+    let kept = held.bodies().iter().filter(|b| b.held_state().is_some()).count();
     eprintln!("bytes a grain moves per step after the first (median): {small:.0} at N = 400, {large:.0} at N = 3600; {dofs_per_grain:.0} dofs a grain, {kept} of 400 kept on the device");
     assert!(kept > 300, "most grains keep their states on the device: {kept}");
     assert!(large <= small, "the bytes a grain moves do not grow with the packing: {small:.0} -> {large:.0}");
@@ -689,15 +689,15 @@ fn falling_grains_that_nothing_is_near_leave_their_step_ends_on_the_device() {
     for (name, a, b) in [("kinetic", e_held.kinetic, e_cpu.kinetic), ("strain", e_held.strain, e_cpu.strain), ("potential", e_held.potential, e_cpu.potential), ("numerical dissipation", e_held.numerical_dissipation, e_cpu.numerical_dissipation)] {
         assert!((a - b).abs() <= 1e-9 * scale, "{name}: {a} against {b}");
     }
-    let (b_held, b_cpu) = (held.bodies[200].metrics(), cpu.bodies[200].metrics());
+    let (b_held, b_cpu) = (held.bodies()[200].metrics(), cpu.bodies()[200].metrics());
     for i in 0..2 {
         assert!((b_held.center_of_mass[i] - b_cpu.center_of_mass[i]).abs() <= 1e-12 * (1.0 + b_cpu.center_of_mass[i].abs()), "centre of mass {i}");
         assert!((b_held.linear_momentum[i] - b_cpu.linear_momentum[i]).abs() <= 1e-9 * (1.0 + b_cpu.linear_momentum[i].abs()), "momentum {i}");
     }
     held.sync_states().expect("the states come back");
     larger.sync_states().expect("the states come back");
-    assert!(held.bodies.iter().all(|b| b.held_state().is_none()));
-    let worst = held.bodies.iter().zip(&cpu.bodies).flat_map(|(a, b)| a.state.u.iter().zip(&b.state.u).chain(a.state.v.iter().zip(&b.state.v))).map(|(a, b)| (a - b).abs() / (1e-3 + b.abs())).fold(0.0, f64::max);
+    assert!(held.bodies().iter().all(|b| b.held_state().is_none()));
+    let worst = held.bodies().iter().zip(cpu.bodies()).flat_map(|(a, b)| a.state().u.iter().zip(&b.state().u).chain(a.state().v.iter().zip(&b.state().v))).map(|(a, b)| (a - b).abs() / (1e-3 + b.abs())).fold(0.0, f64::max);
     assert!(worst <= 1e-9, "the states brought back are the CPU backend's: {worst:.3e}");
 }
 

@@ -62,8 +62,8 @@ fn vtu_frames_of_a_2d_and_a_3d_scene_read_back_with_their_arrays() {
         let (out, dir) = run_with_vtu(scene, sets, &format!("vtu_{scene}"));
         let loaded = load_scene(&scene_path(scene), &sets.iter().map(|s| s.to_string()).collect::<Vec<_>>()).unwrap();
         let sim = bifirst::solver::build_simulation(&loaded).unwrap();
-        let b = sim.bodies.iter().find(|b| b.name == body).expect("body");
-        let (nodes, elements) = (b.mesh.nodes.len(), b.mesh.element_count());
+        let b = sim.bodies().iter().find(|b| b.name() == body).expect("body");
+        let (nodes, elements) = (b.mesh().nodes.len(), b.mesh().element_count());
         let files = pvd_files(&dir.join(format!("{body}.pvd")));
         let frames = sim.step_count().div_ceil(every) + 1;
         assert_eq!(files.len(), frames, "{scene}: one frame per cadence plus the start");
@@ -77,7 +77,7 @@ fn vtu_frames_of_a_2d_and_a_3d_scene_read_back_with_their_arrays() {
         let u = &last.point_data[0].2;
         for n in 0..nodes {
             for i in 0..3 {
-                assert!((last.points[3 * n + i] - u[3 * n + i] - b.mesh.nodes[n][i]).abs() < 1e-12);
+                assert!((last.points[3 * n + i] - u[3 * n + i] - b.mesh().nodes[n][i]).abs() < 1e-12);
             }
         }
         let (vm, sigma, j) = (&last.cell_data[0].2, &last.cell_data[1].2, &last.cell_data[2].2);

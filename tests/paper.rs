@@ -57,14 +57,14 @@ fn love_laursen_sweep_conserves_without_friction_and_dissipates_with_it() {
 /// Depth of `x` inside body `b` of `sim` (its deformed triangles), as the distance to the
 /// body's outline; `None` when `x` is outside.
 fn depth_inside(sim: &bifirst::solver::Simulation, b: usize, x: [f64; 3]) -> Option<f64> {
-    let body = &sim.bodies[b];
-    let inside = (0..body.mesh.element_count()).any(|e| {
-        let p: Vec<[f64; 3]> = body.mesh.element(e).iter().map(|&n| body.position(n as usize)).collect();
+    let body = &sim.bodies()[b];
+    let inside = (0..body.mesh().element_count()).any(|e| {
+        let p: Vec<[f64; 3]> = body.mesh().element(e).iter().map(|&n| body.position(n as usize)).collect();
         let cross = |a: [f64; 3], c: [f64; 3]| (c[0] - a[0]) * (x[1] - a[1]) - (c[1] - a[1]) * (x[0] - a[0]);
         (0..3).all(|i| cross(p[i], p[(i + 1) % 3]) > 0.0)
     });
     inside.then(|| {
-        let surface = &sim.contact.as_ref().expect("contact scene").surfaces[b];
+        let surface = &sim.contact().as_ref().expect("contact scene").surfaces[b];
         (0..surface.facet_count())
             .map(|f| {
                 let [a, c] = [0, 1].map(|k| body.position(surface.facet(f)[k] as usize));
@@ -80,8 +80,8 @@ fn depth_inside(sim: &bifirst::solver::Simulation, b: usize, x: [f64; 3]) -> Opt
 fn grains_box_compresses_without_failure_penetration_or_pass_through() {
     let loaded = bifirst::scene::load_scene(&common::scene_path("grains_box"), &[]).unwrap();
     let mut sim = bifirst::solver::build_simulation(&loaded).unwrap();
-    assert!(sim.bodies.len() >= 7, "at least seven grains");
-    let h_min = sim.bodies.iter().map(|b| b.length_scale()).fold(f64::INFINITY, f64::min);
+    assert!(sim.bodies().len() >= 7, "at least seven grains");
+    let h_min = sim.bodies().iter().map(|b| b.length_scale()).fold(f64::INFINITY, f64::min);
     let tolerance = 0.01 * h_min;
     sim.start();
     let (mut max_penetration, mut cutbacks, mut deepest) = (0.0f64, 0, 0.0f64);
@@ -95,18 +95,18 @@ fn grains_box_compresses_without_failure_penetration_or_pass_through() {
             continue;
         }
         // The box: the left wall has moved by 1.2 t.
-        let (left, right, bottom, top) = (1.2 * sim.t, 6.0, 0.0, 4.0);
-        for (a, body) in sim.bodies.iter().enumerate() {
-            for n in 0..body.mesh.nodes.len() {
+        let (left, right, bottom, top) = (1.2 * sim.t(), 6.0, 0.0, 4.0);
+        for (a, body) in sim.bodies().iter().enumerate() {
+            for n in 0..body.mesh().nodes.len() {
                 let x = body.position(n);
-                assert!(x[0] > left - tolerance && x[0] < right + tolerance && x[1] > bottom - tolerance && x[1] < top + tolerance, "t = {}: {} node {n} at {x:?} is out of the box", sim.t, body.name);
-                for b in (0..sim.bodies.len()).filter(|&b| b != a) {
+                assert!(x[0] > left - tolerance && x[0] < right + tolerance && x[1] > bottom - tolerance && x[1] < top + tolerance, "t = {}: {} node {n} at {x:?} is out of the box", sim.t(), body.name());
+                for b in (0..sim.bodies().len()).filter(|&b| b != a) {
                     if let Some(depth) = depth_inside(&sim, b, x) {
                         // Single-pass node-to-segment contact holds the slave's nodes out of the
                         // master (the logged penetration); a master's corner can still sit
                         // between two slave nodes, by the sagitta of the slave's facets. A
                         // grain passing through another would be a whole element deep.
-                        assert!(depth < 0.25 * h_min, "t = {}: {} node {n} is {depth:.3e} inside {}", sim.t, body.name, sim.bodies[b].name);
+                        assert!(depth < 0.25 * h_min, "t = {}: {} node {n} is {depth:.3e} inside {}", sim.t(), body.name(), sim.bodies()[b].name());
                         deepest = deepest.max(depth);
                     }
                 }
@@ -117,7 +117,7 @@ fn grains_box_compresses_without_failure_penetration_or_pass_through() {
     assert!(max_penetration < tolerance, "max penetration {max_penetration:.3e} vs 1 % of the smallest element {h_min:.3e}");
     assert_eq!(cutbacks, 0, "no step failed");
     // The loading compresses the grains: the bottom row carries a stress of the order of G.
-    let peak = sim.bodies.iter().flat_map(|b| b.cell_fields()).map(|f| f.von_mises).fold(0.0, f64::max);
+    let peak = sim.bodies().iter().flat_map(|b| b.cell_fields()).map(|f| f.von_mises).fold(0.0, f64::max);
     assert!(peak > 100.0, "the grains are loaded (peak von Mises {peak:.3e})");
 }
 
@@ -130,7 +130,7 @@ fn grains_many_packing_is_reproducible_and_runs() {
     let grains = |sets: &[&str]| {
         let loaded = load(sets);
         let sim = bifirst::solver::build_simulation(&loaded).unwrap();
-        sim.bodies.iter().map(|b| b.mesh.nodes.clone()).collect::<Vec<_>>()
+        sim.bodies().iter().map(|b| b.mesh().nodes.clone()).collect::<Vec<_>>()
     };
     assert_eq!(grains(&["packing.count=30"]).len(), 30);
     assert_eq!(grains(&["packing.count=30"]), grains(&["packing.count=30"]), "a seed gives one packing");
@@ -143,7 +143,7 @@ fn grains_many_packing_is_reproducible_and_runs() {
 
     // No two grains overlap at t = 0, and none touches a wall.
     let sim = bifirst::solver::build_simulation(&loaded).unwrap();
-    let bounds: Vec<[f64; 4]> = sim.bodies.iter().map(|b| b.mesh.nodes.iter().fold([f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY], |a, x| [a[0].min(x[0]), a[1].max(x[0]), a[2].min(x[1]), a[3].max(x[1])])).collect();
+    let bounds: Vec<[f64; 4]> = sim.bodies().iter().map(|b| b.mesh().nodes.iter().fold([f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY], |a, x| [a[0].min(x[0]), a[1].max(x[0]), a[2].min(x[1]), a[3].max(x[1])])).collect();
     let width = bounds.iter().map(|b| b[1]).fold(0.0, f64::max);
     for (i, a) in bounds.iter().enumerate() {
         assert!(a[0] > 0.0 && a[2] > 0.0, "grain {i} is clear of the left and bottom walls");
@@ -165,10 +165,10 @@ fn grains_many_packing_is_reproducible_and_runs() {
 fn grains_of_one_shape_share_their_topology() {
     let loaded = bifirst::scene::load_scene(&common::scene_path("grains_many"), &["packing.count=60".to_string()]).unwrap();
     let sim = bifirst::solver::build_simulation(&loaded).unwrap();
-    let mut shapes: Vec<&Vec<u32>> = sim.bodies.iter().map(|b| &b.mesh.connectivity).collect();
+    let mut shapes: Vec<&Vec<u32>> = sim.bodies().iter().map(|b| &b.mesh().connectivity).collect();
     shapes.sort();
     shapes.dedup();
-    let mut patterns: Vec<*const bifirst::assembly::StiffnessPattern> = sim.bodies.iter().map(|b| std::sync::Arc::as_ptr(&b.pattern)).collect();
+    let mut patterns: Vec<*const bifirst::assembly::StiffnessPattern> = sim.bodies().iter().map(|b| b.pattern() as *const _).collect();
     patterns.sort();
     patterns.dedup();
     assert_eq!(patterns.len(), shapes.len(), "one pattern per distinct connectivity");
@@ -183,7 +183,7 @@ fn grains_3d_packing_is_reproducible_and_starts_apart() {
     };
     let grains = |sets: &[&str]| {
         let sim = bifirst::solver::build_simulation(&load(sets)).unwrap();
-        sim.bodies.iter().map(|b| b.mesh.nodes.clone()).collect::<Vec<_>>()
+        sim.bodies().iter().map(|b| b.mesh().nodes.clone()).collect::<Vec<_>>()
     };
     let small = ["packing.count=64"];
     assert_eq!(grains(&small).len(), 64);
@@ -196,18 +196,18 @@ fn grains_3d_packing_is_reproducible_and_starts_apart() {
     assert!(loaded.scene.body.values().any(|b| b.mesh.rotation.as_ref().is_some_and(|w| w.iter().any(|c| *c != 0.0))));
     assert!(loaded.resolved_toml.contains("[packing]") && !loaded.resolved_toml.contains("grain_0001"));
     let hex = bifirst::solver::build_simulation(&load(&["packing.count=8", "packing.element=\"hex8\""])).unwrap();
-    assert!(hex.bodies.iter().all(|b| b.mesh.kind == bifirst::mesh::ElementKind::Hex8));
+    assert!(hex.bodies().iter().all(|b| b.mesh().kind == bifirst::mesh::ElementKind::Hex8));
 
     // No two grains overlap at t = 0 and none touches a wall: each grain lies in the ball of its
     // radius about its lattice cell's point, and two such balls are apart.
     let sim = bifirst::solver::build_simulation(&loaded).unwrap();
     let spheres: Vec<([f64; 3], f64)> = sim
-        .bodies
+        .bodies()
         .iter()
         .map(|b| {
-            let n = b.mesh.nodes.len() as f64;
-            let c = [0, 1, 2].map(|i| b.mesh.nodes.iter().map(|x| x[i]).sum::<f64>() / n);
-            let r = b.mesh.nodes.iter().map(|x| (0..3).map(|i| (x[i] - c[i]).powi(2)).sum::<f64>().sqrt()).fold(0.0, f64::max);
+            let n = b.mesh().nodes.len() as f64;
+            let c = [0, 1, 2].map(|i| b.mesh().nodes.iter().map(|x| x[i]).sum::<f64>() / n);
+            let r = b.mesh().nodes.iter().map(|x| (0..3).map(|i| (x[i] - c[i]).powi(2)).sum::<f64>().sqrt()).fold(0.0, f64::max);
             (c, r)
         })
         .collect();

@@ -128,7 +128,7 @@ mesh = { generator = "box", element = "hex8", size = [1.0, 1.0, 1.0], divisions 
     let report = |ordering: &str| {
         let loaded = bifirst::scene::load_scene(&path, &[format!("solver.ordering=\"{ordering}\"")]).unwrap();
         let sim = bifirst::solver::build_simulation(&loaded).unwrap();
-        sim.bodies[0].factor_report()
+        sim.bodies()[0].factor_report()
     };
     let (amd, nd, auto) = (report("amd"), report("nested_dissection"), report("auto"));
     println!("factor entries: AMD {}, nested dissection {}", amd.1, nd.1);

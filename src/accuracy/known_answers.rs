@@ -148,11 +148,11 @@ struct BarImpact {
 
 impl KnownAnswer for BarImpact {
     fn observe(&mut self, sim: &Simulation) {
-        if sim.contact_points.iter().any(|p| !matches!(p.status, Status::Separated)) {
-            let first = self.touching.map_or(sim.t, |(first, _, _)| first);
-            self.touching = Some((first, sim.t, sim.dt));
+        if sim.contact_points().iter().any(|p| !matches!(p.status, Status::Separated)) {
+            let first = self.touching.map_or(sim.t(), |(first, _, _)| first);
+            self.touching = Some((first, sim.t(), sim.dt()));
         }
-        let m = sim.bodies[0].metrics();
+        let m = sim.bodies()[0].metrics();
         self.rebound = m.linear_momentum[0] / m.mass;
     }
     fn errors(&self) -> Vec<ErrorTerm> {
@@ -176,9 +176,9 @@ struct SlidingBlock {
 
 impl KnownAnswer for SlidingBlock {
     fn observe(&mut self, sim: &Simulation) {
-        let m = sim.bodies[0].metrics();
+        let m = sim.bodies()[0].metrics();
         self.start.get_or_insert((m.center_of_mass[0], m.mass));
-        self.end = Some((m.center_of_mass[0], sim.friction_dissipation));
+        self.end = Some((m.center_of_mass[0], sim.friction_dissipation()));
     }
     fn errors(&self) -> Vec<ErrorTerm> {
         let ((x0, mass), (x1, dissipated)) = (self.start.unwrap_or((f64::NAN, f64::NAN)), self.end.unwrap_or((f64::NAN, f64::NAN)));
@@ -196,9 +196,9 @@ struct Hertz {
 
 impl KnownAnswer for Hertz {
     fn observe(&mut self, sim: &Simulation) {
-        let floor = sim.contact.as_ref().and_then(|c| c.obstacles.iter().position(|o| o.name == "floor")).map(|i| i as u32);
+        let floor = sim.contact().as_ref().and_then(|c| c.obstacles.iter().position(|o| o.name == "floor")).map(|i| i as u32);
         let mut points: Vec<(f64, f64)> =
-            sim.contact_points.iter().filter(|c| matches!(c.master, Master::Obstacle { obstacle, .. } if Some(obstacle) == floor)).map(|c| (sim.bodies[c.slave_body as usize].position(c.slave_node as usize)[0], c.r[0])).collect();
+            sim.contact_points().iter().filter(|c| matches!(c.master, Master::Obstacle { obstacle, .. } if Some(obstacle) == floor)).map(|c| (sim.bodies()[c.slave_body as usize].position(c.slave_node as usize)[0], c.r[0])).collect();
         points.sort_by(|a, b| a.0.total_cmp(&b.0));
         self.end = Some(points);
     }
@@ -252,15 +252,15 @@ struct Vibration {
 impl KnownAnswer for Vibration {
     fn observe(&mut self, sim: &Simulation) {
         self.drift.observe(sim);
-        let Some(probe) = sim.probes.first() else { return };
-        let u = sim.bodies[probe.body].state.u[probe.node * sim.dim + self.axis];
+        let Some(probe) = sim.probes().first() else { return };
+        let u = sim.bodies()[probe.body].state().u[probe.node * sim.dim() + self.axis];
         if u == 0.0 {
             return;
         }
         if let Some((t0, u0)) = self.last.filter(|(_, u0)| u0.signum() != u.signum()) {
-            self.crossings.push(t0 + (sim.t - t0) * u0 / (u0 - u));
+            self.crossings.push(t0 + (sim.t() - t0) * u0 / (u0 - u));
         }
-        self.last = Some((sim.t, u));
+        self.last = Some((sim.t(), u));
     }
     fn errors(&self) -> Vec<ErrorTerm> {
         let n = self.crossings.len();
@@ -281,12 +281,12 @@ struct Tube {
 
 impl KnownAnswer for Tube {
     fn observe(&mut self, sim: &Simulation) {
-        let body = &sim.bodies[0];
+        let body = &sim.bodies()[0];
         for (k, r) in self.radii.iter().enumerate() {
             let at = [self.center[0] + r, self.center[1]];
             let distance = |x: &[f64; 3]| (x[0] - at[0]).powi(2) + (x[1] - at[1]).powi(2);
-            let node = (0..body.mesh.nodes.len()).min_by(|&i, &j| distance(&body.mesh.nodes[i]).total_cmp(&distance(&body.mesh.nodes[j]))).expect("a mesh has nodes");
-            self.computed[k] = body.state.u[node * body.dim];
+            let node = (0..body.mesh().nodes.len()).min_by(|&i, &j| distance(&body.mesh().nodes[i]).total_cmp(&distance(&body.mesh().nodes[j]))).expect("a mesh has nodes");
+            self.computed[k] = body.state().u[node * body.dim()];
         }
     }
     fn errors(&self) -> Vec<ErrorTerm> {
@@ -304,7 +304,7 @@ struct MomentumDrift {
 impl KnownAnswer for MomentumDrift {
     fn observe(&mut self, sim: &Simulation) {
         let (mut p, mut l) = ([0.0; 3], [0.0; 3]);
-        for b in &sim.bodies {
+        for b in sim.bodies() {
             let m = b.metrics();
             (0..3).for_each(|i| {
                 p[i] += m.linear_momentum[i];

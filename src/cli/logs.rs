@@ -43,16 +43,16 @@ pub(crate) fn state_command(run: PathBuf, at: Option<f64>, contour: Option<PathB
     println!(
         "{}: state at t = {:.6e} (step {}), {}; energy: kinetic {:.6e}, strain {:.6e}, total {:.6e}",
         run.display(),
-        sim.t,
-        sim.step,
-        bifirst::output::counted(sim.bodies.len(), "body", "bodies"),
+        sim.t(),
+        sim.step(),
+        bifirst::output::counted(sim.bodies().len(), "body", "bodies"),
         energies.kinetic,
         energies.strain,
         energies.total
     );
-    let fields: Vec<_> = sim.bodies.iter().map(|b| b.cell_fields()).collect();
+    let fields: Vec<_> = sim.bodies().iter().map(|b| b.cell_fields()).collect();
     if let Some(path) = contour {
-        plot::contour_png(&sim, &fields, &format!("{}: von Mises stress at t = {:.4}", loaded.name, sim.t), &path)?;
+        plot::contour_png(&sim, &fields, &format!("{}: von Mises stress at t = {:.4}", loaded.name, sim.t()), &path)?;
         println!("{}", path.display());
     }
     if let Some(dir) = vtu {

@@ -37,13 +37,13 @@ fn key(c: &ContactPoint) -> ((u32, i64), Real) {
 
 /// The `/contacts` message of the simulation's last step.
 pub fn network(sim: &Simulation) -> ContactsMessage {
-    let dim = sim.dim;
+    let dim = sim.dim();
     let mut sums: HashMap<(u32, i64), Sum> = HashMap::new();
-    for c in sim.contact_points.iter().filter(|c| c.r[0] > 0.0) {
+    for c in sim.contact_points().iter().filter(|c| c.r[0] > 0.0) {
         let (key, sign) = key(c);
         let [n, t1, t2] = c.frame;
         let force: [Real; 3] = std::array::from_fn(|i| sign * (c.r[0] * n[i] + c.r[1] * t1[i] + c.r[2] * t2[i]));
-        let x = sim.bodies[c.slave_body as usize].position(c.slave_node as usize);
+        let x = sim.bodies()[c.slave_body as usize].position(c.slave_node as usize);
         let sum = sums.entry(key).or_insert_with(|| Sum { sliding: true, ..Sum::default() });
         for i in 0..3 {
             sum.force[i] += force[i];
@@ -56,7 +56,7 @@ pub fn network(sim: &Simulation) -> ContactsMessage {
     }
     let mut contacts: Vec<((u32, i64), Sum)> = sums.into_iter().collect();
     contacts.sort_by_key(|(k, _)| *k);
-    let mut m = ContactsMessage { t: sim.t, ..Default::default() };
+    let mut m = ContactsMessage { t: sim.t(), ..Default::default() };
     for ((body, other), s) in contacts {
         let length = s.normal.iter().map(|x| x * x).sum::<Real>().sqrt();
         let normal = s.normal.map(|x| x / length);
@@ -72,15 +72,15 @@ pub fn network(sim: &Simulation) -> ContactsMessage {
         m.sliding.push(s.sliding);
         m.points.push(s.points);
     }
-    let centers_volumes: Vec<([Real; 3], Real)> = sim.bodies.par_iter().enumerate().map(|(b, body)| (body.metrics().center_of_mass, volume(sim, b))).collect();
+    let centers_volumes: Vec<([Real; 3], Real)> = sim.bodies().par_iter().enumerate().map(|(b, body)| (body.metrics().center_of_mass, volume(sim, b))).collect();
     for (c, v) in centers_volumes {
         m.body_center.extend_from_slice(&c[..dim]);
         m.body_volume.push(v);
     }
-    if let Some(model) = &sim.contact {
+    if let Some(model) = &sim.contact() {
         for (k, o) in model.obstacles.iter().enumerate() {
             if let Shape::Plane { point, normal } = o.shape {
-                let shift = o.motion.displacement(sim.t);
+                let shift = o.motion.displacement(sim.t());
                 m.wall.push(k as u32);
                 m.wall_point.extend((0..dim).map(|i| point[i] + shift[i]));
                 m.wall_normal.extend_from_slice(&normal[..dim]);
@@ -93,10 +93,10 @@ pub fn network(sim: &Simulation) -> ContactsMessage {
 /// A body's current volume (area in 2D) from its deformed boundary: `(1/d) Σ x_f · N_f` over
 /// its boundary facets, `N_f` a facet's outward area vector, `x_f` its centroid.
 fn volume(sim: &Simulation, b: usize) -> Real {
-    let Some(model) = &sim.contact else { return 0.0 };
-    let body = &sim.bodies[b];
+    let Some(model) = &sim.contact() else { return 0.0 };
+    let body = &sim.bodies()[b];
     let surface = &model.surfaces[b];
-    let x: Vec<[Real; 3]> = (0..body.mesh.nodes.len()).map(|n| body.position(n)).collect();
+    let x: Vec<[Real; 3]> = (0..body.mesh().nodes.len()).map(|n| body.position(n)).collect();
     let sum: Real = (0..surface.facet_count())
         .map(|f| {
             let (p, count) = surface.facet_points(&x, f);
@@ -105,5 +105,5 @@ fn volume(sim: &Simulation, b: usize) -> Real {
             (0..3).map(|i| centroid[i] * normal[i]).sum::<Real>()
         })
         .sum();
-    sum / sim.dim as Real
+    sum / sim.dim() as Real
 }

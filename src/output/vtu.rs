@@ -60,8 +60,8 @@ impl VtuSeries {
     /// Creates (or reuses) `dir` for the bodies (and contact points) of `sim`.
     pub fn create(dir: &Path, sim: &Simulation) -> Result<Self, OutputError> {
         std::fs::create_dir_all(dir).map_err(|source| OutputError::Create { path: dir.into(), source })?;
-        let mut series: Vec<String> = sim.bodies.iter().map(|b| b.name.clone()).collect();
-        if sim.contact.is_some() {
+        let mut series: Vec<String> = sim.bodies().iter().map(|b| b.name().to_string()).collect();
+        if sim.contact().is_some() {
             series.push(CONTACT_SERIES.into());
         }
         Ok(Self { dir: dir.into(), series, times: Vec::new() })
@@ -84,21 +84,21 @@ impl VtuSeries {
     /// fields. The `.pvd` files are rewritten so that they list every frame written so far.
     pub fn write_frame(&mut self, sim: &Simulation, fields: &[Vec<CellFields>]) -> Result<(), OutputError> {
         let frame = self.times.len();
-        let dim = sim.dim;
-        for (b, f) in sim.bodies.iter().zip(fields) {
-            let points: Vec<Real> = (0..b.mesh.nodes.len()).flat_map(|n| b.position(n)).collect();
-            let nen = b.mesh.kind.nodes() as u64;
-            let count = b.mesh.element_count();
-            let cells = Cells { cell_verts: VertexNumbers::XML { connectivity: b.mesh.connectivity.iter().map(|&n| n as u64).collect(), offsets: (1..=count as u64).map(|e| e * nen).collect() }, types: vec![cell_type(b.mesh.kind); count] };
+        let dim = sim.dim();
+        for (b, f) in sim.bodies().iter().zip(fields) {
+            let points: Vec<Real> = (0..b.mesh().nodes.len()).flat_map(|n| b.position(n)).collect();
+            let nen = b.mesh().kind.nodes() as u64;
+            let count = b.mesh().element_count();
+            let cells = Cells { cell_verts: VertexNumbers::XML { connectivity: b.mesh().connectivity.iter().map(|&n| n as u64).collect(), offsets: (1..=count as u64).map(|e| e * nen).collect() }, types: vec![cell_type(b.mesh().kind); count] };
             let data = Attributes {
-                point: vec![array("displacement", ElementType::Vectors, padded(&b.state.u, dim)), array("velocity", ElementType::Vectors, padded(&b.state.v, dim))],
+                point: vec![array("displacement", ElementType::Vectors, padded(&b.state().u, dim)), array("velocity", ElementType::Vectors, padded(&b.state().v, dim))],
                 cell: vec![scalars("von_mises", f.iter().map(|c| c.von_mises).collect()), array("cauchy_stress", ElementType::Generic(9), f.iter().flat_map(|c| c.cauchy).collect()), scalars("J", f.iter().map(|c| c.jacobian).collect())],
             };
-            self.export(grid(points, cells, data), &self.frame_path(&b.name, frame))?;
+            self.export(grid(points, cells, data), &self.frame_path(b.name(), frame))?;
         }
-        if sim.contact.is_some() {
-            let c = &sim.contact_points;
-            let points: Vec<Real> = c.iter().flat_map(|p| sim.bodies[p.slave_body as usize].position(p.slave_node as usize)).collect();
+        if sim.contact().is_some() {
+            let c = sim.contact_points();
+            let points: Vec<Real> = c.iter().flat_map(|p| sim.bodies()[p.slave_body as usize].position(p.slave_node as usize)).collect();
             let cells = Cells { cell_verts: VertexNumbers::XML { connectivity: (0..c.len() as u64).collect(), offsets: (1..=c.len() as u64).collect() }, types: vec![CellType::Vertex; c.len()] };
             let data = Attributes {
                 point: vec![
@@ -112,7 +112,7 @@ impl VtuSeries {
             };
             self.export(grid(points, cells, data), &self.frame_path(CONTACT_SERIES, frame))?;
         }
-        self.times.push(sim.t);
+        self.times.push(sim.t());
         for s in &self.series {
             self.write_pvd(s)?;
         }

@@ -77,10 +77,10 @@ const KEPT_COLUMNS: usize = 1 << 20;
 impl ContactStep {
     /// Sets up a step's contact points: their gap shift and the block pattern of `W`.
     pub fn new(mut points: Vec<ContactPoint>, bodies: &[&mut Body], p: &StepParams, warm: &WarmStart, velocity_scale: Real) -> Self {
-        let dim = bodies[0].dim;
+        let dim = bodies[0].def.dim;
         let (dt, theta) = (p.dt, p.theta);
         for c in &mut points {
-            let vn_start = local_velocity(c, dim, |b, d| bodies[b].state.v[d], 0)[0];
+            let vn_start = local_velocity(c, dim, |b, d| bodies[b].committed.state.v[d], 0)[0];
             c.predicted_gap = c.gap + (1.0 - theta) * dt * vn_start;
             // The first term is the slave node (its body index is local to the group).
             c.shift = shift(c.gap, c.predicted_gap, bodies[c.terms[0].body as usize].length_scale(), theta * dt);
@@ -120,7 +120,7 @@ impl ContactStep {
                         if a < dim {
                             for t in c.terms().iter().filter(|t| t.body as usize == b) {
                                 for comp in 0..dim {
-                                    if let Some(f) = body.dofs.free[t.node as usize * dim + comp] {
+                                    if let Some(f) = body.def.dofs.free[t.node as usize * dim + comp] {
                                         e.push((f, t.coef * c.frame[a][comp]));
                                     }
                                 }
@@ -202,14 +202,14 @@ impl ContactStep {
     pub fn apply_forces(&self, bodies: &mut [&mut Body]) {
         let dim = self.dim;
         for b in bodies.iter_mut() {
-            b.contact_force.iter_mut().for_each(|f| *f = 0.0);
+            b.work.contact_force.iter_mut().for_each(|f| *f = 0.0);
         }
         for (c, r) in self.points.iter().zip(&self.r) {
             let f = c.to_global(r);
             for t in c.terms() {
                 let body = &mut bodies[t.body as usize];
                 for i in 0..dim {
-                    body.contact_force[t.node as usize * dim + i] += t.coef * f[i];
+                    body.work.contact_force[t.node as usize * dim + i] += t.coef * f[i];
                 }
             }
         }
@@ -250,9 +250,9 @@ impl ContactStep {
         let solve_before = times.solve;
         let mut x0: Vec<Vec<Real>> = Vec::with_capacity(bodies.len());
         for body in bodies.iter_mut() {
-            let mut rhs = vec![0.0; body.dofs.free_count];
-            for (d, f) in body.dofs.free_pairs() {
-                rhs[f] = -body.g[d];
+            let mut rhs = vec![0.0; body.def.dofs.free_count];
+            for (d, f) in body.def.dofs.free_pairs() {
+                rhs[f] = -body.work.g[d];
             }
             if !rhs.is_empty() {
                 body.solve_effective(&mut rhs, times);
@@ -265,7 +265,7 @@ impl ContactStep {
                 dim,
                 |b, d| {
                     let body = &bodies[b];
-                    let dv = body.dofs.free[d].map_or(0.0, |f| x0[b][f as usize] / theta_dt);
+                    let dv = body.def.dofs.free[d].map_or(0.0, |f| x0[b][f as usize] / theta_dt);
                     body.trial_velocity(p, d) + dv
                 },
                 1,
@@ -330,11 +330,11 @@ impl ContactStep {
         let solve_before = times.solve;
         // The change is judged on the nodal forces H^T r: with redundant constraints (two passes
         // over matching nodes) r itself is not unique, but H^T r is.
-        let before: Vec<Vec<Real>> = bodies.iter().map(|b| b.contact_force.clone()).collect();
+        let before: Vec<Vec<Real>> = bodies.iter().map(|b| b.work.contact_force.clone()).collect();
         self.apply_forces(bodies);
         let (mut change, mut size): (Real, Real) = (0.0, 0.0);
         for (body, old) in bodies.iter().zip(&before) {
-            for (a, b) in body.contact_force.iter().zip(old) {
+            for (a, b) in body.work.contact_force.iter().zip(old) {
                 change = change.max((a - b).abs());
                 size = size.max(a.abs());
             }
@@ -342,7 +342,7 @@ impl ContactStep {
         for (b, body) in bodies.iter_mut().enumerate() {
             match &self.responses[b] {
                 Some(response) => {
-                    let n = body.dofs.free_count;
+                    let n = body.def.dofs.free_count;
                     let list = &self.per_body[b].0;
                     let mut du = std::mem::take(&mut self.free_increment[b]);
                     for (j, &(k, a)) in response.of.iter().enumerate() {
@@ -369,7 +369,7 @@ impl ContactStep {
         self.shares.resize_with(bodies.len(), Vec::new);
         for (b, body) in bodies.iter_mut().enumerate().filter(|(b, _)| changed(*b)) {
             let (list, blocks) = &self.per_body[b];
-            let n = body.dofs.free_count;
+            let n = body.def.dofs.free_count;
             let share = &mut self.shares[b];
             share.clear();
             if list.is_empty() || n == 0 {
@@ -478,7 +478,7 @@ fn local_velocity(c: &ContactPoint, dim: usize, vel: impl Fn(usize, usize) -> Re
 
 /// Relative velocity at the end of the step implied by the trial displacements.
 fn end_velocity(c: &ContactPoint, bodies: &[&mut Body], p: &StepParams) -> [Real; 3] {
-    local_velocity(c, bodies[0].dim, |b, d| bodies[b].trial_velocity(p, d), 1)
+    local_velocity(c, bodies[0].def.dim, |b, d| bodies[b].trial_velocity(p, d), 1)
 }
 
 #[cfg(test)]

@@ -336,7 +336,7 @@ impl Group<'_, '_> {
             }
         }
         if state.report.iterations == p.max_iterations || state.uzawa_stalls >= UZAWA_STALLS {
-            let names: Vec<String> = bodies.iter().map(|b| format!("`{}`", b.name)).collect();
+            let names: Vec<String> = bodies.iter().map(|b| format!("`{}`", b.def.name)).collect();
             let bodies_named = if names.len() == 1 { format!("body {}", names[0]) } else { format!("bodies {} (coupled by contact)", names.join(", ")) };
             let unmet: Vec<String> = bodies.iter().flat_map(|b| b.unmet()).chain(contact_unmet.iter().map(ContactUnmet::to_string)).collect();
             return Err(StepFailure::NotConverged { bodies: bodies_named, iterations: state.report.iterations, unmet: unmet.join("; ") });

@@ -267,7 +267,7 @@ fn solve_contact(groups: &mut [Group], waiting: &[bool], world: &mut GpuWorld, c
             }
             Err(e) => {
                 for k in owners {
-                    let names: Vec<&str> = groups[k].bodies.iter().map(|b| b.name.as_str()).collect();
+                    let names: Vec<&str> = groups[k].bodies.iter().map(|b| b.def.name.as_str()).collect();
                     results[k] = Err(StepFailure::Device { body: names.join("`, `"), error: e.to_string() });
                 }
                 return results;
@@ -350,7 +350,7 @@ fn device_pass(groups: &mut [Group], live: &[bool], kind: PassKind, world: &mut 
     }
     let mut inverses = missing_inverses(groups, kind.iterating, world);
     let motion_scale = c.velocity_scale * p.dt;
-    let dim = groups.first().and_then(|g| g.bodies.first()).map_or(2, |b| b.dim);
+    let dim = groups.first().and_then(|g| g.bodies.first()).map_or(2, |b| b.def.dim);
     // Each group's share, made in parallel, then laid end to end.
     let shares: Vec<PassShare> = groups
         .par_iter_mut()

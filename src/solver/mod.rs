@@ -180,11 +180,11 @@ impl Energies {
 /// host's ([`Simulation::sync_states`]).
 pub(crate) fn state_overlaps(bodies: &[Body], model: &ContactModel, t: Real) -> Vec<Overlap> {
     assert!(bodies.iter().all(|b| b.held_state().is_none()), "the states are the host's");
-    let mut config = configuration(bodies, model, |b| &b.state.u);
+    let mut config = configuration(bodies, model, |b| &b.committed.state.u);
     let mut kept = KeptPairs::default();
     let search = OverlapSearch::new(model, &config, t, &mut kept);
-    let meshes: Vec<&crate::mesh::Mesh> = bodies.iter().map(|b| &b.mesh).collect();
-    search.overlaps(model, &meshes, &mut config, &placer(bodies, |b| &b.state.u))
+    let meshes: Vec<&crate::mesh::Mesh> = bodies.iter().map(|b| &b.def.mesh).collect();
+    search.overlaps(model, &meshes, &mut config, &placer(bodies, |b| &b.committed.state.u))
 }
 
 /// The configuration of `bodies` at the displacements `u`: boundary boxes and largest facets,
@@ -209,7 +209,7 @@ pub(crate) fn configure(bodies: &[Body], model: &ContactModel, u: impl Fn(&Body)
             (Some(c), None) if b.still() => (c.boxes[i], c.largest[i]),
             _ => {
                 let u = u(b);
-                extent(surface, |k| displaced(surface.reference[k], u, surface.nodes[k] as usize, b.dim), scratch)
+                extent(surface, |k| displaced(surface.reference[k], u, surface.nodes[k] as usize, b.def.dim), scratch)
             }
         })
         .unzip();
@@ -240,7 +240,7 @@ fn displaced(x: [Real; 3], u: &[Real], n: usize, dim: usize) -> [Real; 3] {
 
 /// Node `n` of body `b` at the displacements `u`.
 fn position(b: &Body, u: &[Real], n: usize) -> [Real; 3] {
-    displaced(b.mesh.nodes[n], u, n, b.dim)
+    displaced(b.def.mesh.nodes[n], u, n, b.def.dim)
 }
 
 /// Places a body's nodes at the displacements `u` ([`Configuration`]'s `Fill`).
@@ -249,7 +249,7 @@ fn placer<'a>(bodies: &'a [Body], u: impl Fn(&Body) -> &[Real] + Sync + 'a) -> i
         let body = &bodies[b];
         let u = u(body);
         x.clear();
-        x.extend((0..body.mesh.nodes.len()).map(|n| position(body, u, n)));
+        x.extend((0..body.def.mesh.nodes.len()).map(|n| position(body, u, n)));
     }
 }
 
@@ -322,16 +322,16 @@ struct Attempt {
 pub struct Simulation {
     /// What set-up found worth a warning (a nearly incompressible material on displacement
     /// elements).
-    pub notices: Vec<String>,
-    pub dim: usize,
-    pub bodies: Vec<Body>,
-    pub sets: Vec<BoundarySet>,
-    pub probes: Vec<Probe>,
+    notices: Vec<String>,
+    dim: usize,
+    bodies: Vec<Body>,
+    sets: Vec<BoundarySet>,
+    probes: Vec<Probe>,
     gravity: [Real; 3],
-    pub t: Real,
-    pub step: usize,
+    t: Real,
+    step: usize,
     end: Real,
-    pub dt: Real,
+    dt: Real,
     xi: Real,
     theta: Real,
     residual_tolerance: Real,
@@ -351,26 +351,26 @@ pub struct Simulation {
     last_overlap: Real,
     /// Cumulative work of the reactions of prescribed sets and of moving obstacles.
     external_work: Real,
-    pub friction_dissipation: Real,
+    friction_dissipation: Real,
     /// Cumulative work of the viscoelastic overstress ([`Energies::viscous_dissipation`]).
     viscous_dissipation: Real,
-    pub numerical_dissipation: Real,
+    numerical_dissipation: Real,
     contact_correction: Real,
     /// Total energy at t = 0 (set by [`Simulation::start`]).
-    pub initial_energy: Real,
-    pub contact: Option<ContactModel>,
+    initial_energy: Real,
+    contact: Option<ContactModel>,
     /// Contact points of the last step, with their solution.
-    pub contact_points: Vec<ContactPoint>,
+    contact_points: Vec<ContactPoint>,
     /// Net force of each obstacle on the bodies over the last step (mean over the step).
-    pub obstacle_reactions: Vec<[Real; 3]>,
+    obstacle_reactions: Vec<[Real; 3]>,
     /// Every body's element and assembly kernels on a GPU; `None` runs their CPU twins.
-    pub world: Option<GpuWorld>,
+    world: Option<GpuWorld>,
     /// When set (by a signal handler), the step in progress is abandoned at its next Newton
     /// iteration or cut-back ([`StepFailure::Interrupted`]), so that a stop takes effect within
     /// one iteration, not after a step that may never finish.
-    pub interrupt: Option<Arc<AtomicBool>>,
+    interrupt: Option<Arc<AtomicBool>>,
     /// Time and step the run starts from: (0, 0), or a restored state's.
-    pub first_step: (Real, usize),
+    first_step: (Real, usize),
     /// The warm start of a restored state, until its first step is done.
     restored_warm_start: Option<crate::contact::WarmStart>,
     /// The broad phase's body pairs, kept between steps (they do not change the points or
@@ -389,10 +389,108 @@ pub struct Simulation {
     /// (but for its displacements, when something is near it) until
     /// [`Simulation::sync_states`], and its energies, momenta and box come from the device's
     /// summary. Off, every step's end state comes back.
-    pub hold_states: bool,
+    hold_states: bool,
 }
 
 impl Simulation {
+    /// What set-up found worth a warning (a nearly incompressible material on displacement elements).
+    pub fn notices(&self) -> &[String] {
+        &self.notices
+    }
+
+    pub fn dim(&self) -> usize {
+        self.dim
+    }
+
+    pub fn bodies(&self) -> &[Body] {
+        &self.bodies
+    }
+
+    /// The prescribed boundary sets.
+    pub fn sets(&self) -> &[BoundarySet] {
+        &self.sets
+    }
+
+    pub fn probes(&self) -> &[Probe] {
+        &self.probes
+    }
+
+    /// The time of the committed state.
+    pub fn t(&self) -> Real {
+        self.t
+    }
+
+    /// Steps committed, counted from the run's start (a restored state's step included).
+    pub fn step(&self) -> usize {
+        self.step
+    }
+
+    /// The scene's time step (a cut-back's sub-steps are shorter).
+    pub fn dt(&self) -> Real {
+        self.dt
+    }
+
+    pub fn friction_dissipation(&self) -> Real {
+        self.friction_dissipation
+    }
+
+    pub fn numerical_dissipation(&self) -> Real {
+        self.numerical_dissipation
+    }
+
+    /// Total energy at t = 0 (set by [`Simulation::start`]).
+    pub fn initial_energy(&self) -> Real {
+        self.initial_energy
+    }
+
+    pub fn contact(&self) -> &Option<ContactModel> {
+        &self.contact
+    }
+
+    /// Contact points of the last step, with their solution.
+    pub fn contact_points(&self) -> &[ContactPoint] {
+        &self.contact_points
+    }
+
+    /// Net force of each obstacle on the bodies over the last step (mean over the step).
+    pub fn obstacle_reactions(&self) -> &[[Real; 3]] {
+        &self.obstacle_reactions
+    }
+
+    /// Every body's element and assembly kernels on a GPU; `None` runs their CPU twins.
+    pub fn world(&self) -> &Option<GpuWorld> {
+        &self.world
+    }
+
+    /// Time and step the run starts from: (0, 0), or a restored state's.
+    pub fn first_step(&self) -> (Real, usize) {
+        self.first_step
+    }
+
+    /// One body, to change by hand (a test of a body's response).
+    pub fn body_mut(&mut self, index: usize) -> &mut Body {
+        &mut self.bodies[index]
+    }
+
+    /// Runs the element and assembly kernels of every body on `world` (`None`: their CPU
+    /// twins); with a world, bodies without contact points keep their states on the device
+    /// ([`Simulation::hold_states`]).
+    pub fn set_world(&mut self, world: Option<GpuWorld>) {
+        self.hold_states = world.is_some();
+        self.world = world;
+    }
+
+    /// Whether bodies without contact points keep their states on the device (on with a
+    /// world, by [`Simulation::set_world`]).
+    pub fn set_hold_states(&mut self, hold: bool) {
+        self.hold_states = hold;
+    }
+
+    /// The flag a signal handler sets to abandon the step in progress.
+    pub fn set_interrupt(&mut self, interrupt: Option<Arc<AtomicBool>>) {
+        self.interrupt = interrupt;
+    }
+
     /// Number of steps to reach `end` (the last one is shortened if `end` is not a multiple),
     /// counted from t = 0, or from a restored state with the steps before it.
     pub fn step_count(&self) -> usize {
@@ -546,11 +644,11 @@ impl Simulation {
         let overlap = match &self.contact {
             Some(model) => {
                 let committed = self.committed.as_ref().map(|c| &c.0);
-                configure(&self.bodies, model, |b| &b.trial.u, Body::held_end, committed, &mut config);
+                configure(&self.bodies, model, |b| &b.work.trial.u, Body::held_end, committed, &mut config);
                 let search = OverlapSearch::new(model, &config, self.t + dt, &mut self.kept_pairs);
                 take_step_ends(&mut self.bodies, self.world.as_mut(), &search.needed, &p, &mut report.wall)?;
-                let meshes: Vec<&crate::mesh::Mesh> = self.bodies.iter().map(|b| &b.mesh).collect();
-                Worst::of(&search.overlaps(model, &meshes, &mut config, &placer(&self.bodies, |b| &b.trial.u)))
+                let meshes: Vec<&crate::mesh::Mesh> = self.bodies.iter().map(|b| &b.def.mesh).collect();
+                Worst::of(&search.overlaps(model, &meshes, &mut config, &placer(&self.bodies, |b| &b.work.trial.u)))
             }
             None => Worst::default(),
         };
@@ -649,8 +747,8 @@ impl Simulation {
     fn detect(&mut self, dt: Real, times: &mut PhaseTimes) -> Result<(Vec<ContactPoint>, Real), StepFailure> {
         let dim = self.dim;
         if self.committed.is_none() {
-            let config = self.contact.as_ref().map(|model| configuration(&self.bodies, model, |b| &b.state.u)).unwrap_or_default();
-            let speed = self.bodies.par_iter().map(|b| max_speed(&b.state.v, dim)).reduce(|| 0.0, Real::max);
+            let config = self.contact.as_ref().map(|model| configuration(&self.bodies, model, |b| &b.committed.state.u)).unwrap_or_default();
+            let speed = self.bodies.par_iter().map(|b| max_speed(&b.committed.state.v, dim)).reduce(|| 0.0, Real::max);
             self.committed = Some((config, speed));
         }
         let (config, body_speed) = self.committed.as_mut().expect("configured above");
@@ -667,7 +765,7 @@ impl Simulation {
         // the host's from here on.
         let unplaceable: Vec<usize> = (0..self.bodies.len()).filter(|&b| detection.needed[b] && !self.bodies[b].positions_current()).collect();
         take_committed_of(&mut self.bodies, self.world.as_mut(), &unplaceable, times)?;
-        let points = detection.points(model, config, &placer(&self.bodies, |b| &b.state.u), dim, margin);
+        let points = detection.points(model, config, &placer(&self.bodies, |b| &b.committed.state.u), dim, margin);
         let mut touching: Vec<usize> = points.iter().flat_map(|c| c.terms()).map(|t| t.body as usize).filter(|&b| self.bodies[b].held_state().is_some()).collect();
         touching.sort_unstable();
         touching.dedup();
@@ -693,7 +791,7 @@ impl Simulation {
                 // A body that has not moved keeps its state's energy, as on the CPU; one whose
                 // device Newton call left its energy at the trial displacement takes that.
                 let mut strains: Vec<Option<Real>> = self.bodies.par_iter().map(|b| b.held_end().map(|h| h.strain).or_else(|| b.unmoved_strain_energy()).or_else(|| b.evaluated_strain_energy())).collect();
-                let list: Vec<(usize, &[Real])> = self.bodies.iter().enumerate().filter(|(b, _)| strains[*b].is_none()).map(|(b, body)| (b, &body.trial.u[..])).collect();
+                let list: Vec<(usize, &[Real])> = self.bodies.iter().enumerate().filter(|(b, _)| strains[*b].is_none()).map(|(b, body)| (b, &body.work.trial.u[..])).collect();
                 if !list.is_empty() {
                     let energies = world.element_energies(&list, times).map_err(|e| self.bodies[0].device_failure(&e))?;
                     for ((b, _), e) in list.iter().zip(energies) {
@@ -710,7 +808,7 @@ impl Simulation {
             .zip(strains)
             .map(|(body, strain)| {
                 let energy = body.finish_step(p, strain);
-                (energy, body.held_end().map_or_else(|| max_speed(&body.trial.v, dim), |h| h.max_speed))
+                (energy, body.held_end().map_or_else(|| max_speed(&body.work.trial.v, dim), |h| h.max_speed))
             })
             .collect();
         let speed = finished.iter().map(|f| f.1).fold(0.0, Real::max);
@@ -728,7 +826,7 @@ impl Simulation {
                 let b = &self.bodies[t.body as usize];
                 for i in 0..dim {
                     let d = t.node as usize * dim + i;
-                    du[i] += t.coef * (b.trial.u[d] - b.state.u[d]);
+                    du[i] += t.coef * (b.work.trial.u[d] - b.committed.state.u[d]);
                 }
             }
             relative_work += f[0] * du[0] + f[1] * du[1] + f[2] * du[2];
@@ -800,8 +898,8 @@ impl Simulation {
     pub fn reactions(&self) -> Vec<[Real; 3]> {
         let mut r = vec![[0.0; 3]; self.sets.len()];
         for b in &self.bodies {
-            for (p, f) in b.prescribed.iter().zip(&b.reactions) {
-                r[p.set][p.dof % b.dim] += f;
+            for (p, f) in b.def.prescribed.iter().zip(&b.work.reactions) {
+                r[p.set][p.dof % b.def.dim] += f;
             }
         }
         r
@@ -821,17 +919,17 @@ pub struct BodyMetrics {
 
 impl Body {
     pub fn metrics(&self) -> BodyMetrics {
-        let dim = self.dim;
+        let dim = self.def.dim;
         if let Some(h) = self.held_state() {
-            let mass: Real = (0..self.mesh.nodes.len()).map(|n| self.mass[n * dim]).sum();
+            let mass: Real = (0..self.def.mesh.nodes.len()).map(|n| self.def.mass[n * dim]).sum();
             return BodyMetrics { mass, center_of_mass: h.mass_moment.map(|c| c / mass), linear_momentum: h.momentum, angular_momentum: h.angular_momentum, kinetic: h.kinetic };
         }
         let (mut mass, mut mx, mut p, mut l) = (0.0, [0.0; 3], [0.0; 3], [0.0; 3]);
-        for n in 0..self.mesh.nodes.len() {
-            let m = self.mass[n * dim];
+        for n in 0..self.def.mesh.nodes.len() {
+            let m = self.def.mass[n * dim];
             let x = self.position(n);
             let mut v = [0.0; 3];
-            v[..dim].copy_from_slice(&self.state.v[n * dim..(n + 1) * dim]);
+            v[..dim].copy_from_slice(&self.committed.state.v[n * dim..(n + 1) * dim]);
             mass += m;
             for i in 0..3 {
                 mx[i] += m * x[i];
@@ -867,23 +965,23 @@ mod tests {
     fn a_configuration_is_each_bodys_own_and_places_what_is_asked() {
         let mut sim = grains_many(&["packing.count=12"]);
         for (b, body) in sim.bodies.iter_mut().enumerate() {
-            body.state.u.iter_mut().enumerate().for_each(|(d, u)| *u = 1e-3 * ((b * 31 + d) as Real).sin());
+            body.committed.state.u.iter_mut().enumerate().for_each(|(d, u)| *u = 1e-3 * ((b * 31 + d) as Real).sin());
         }
         let model = sim.contact.as_ref().expect("contact");
-        let mut config = configuration(&sim.bodies, model, |b| &b.state.u);
+        let mut config = configuration(&sim.bodies, model, |b| &b.committed.state.u);
         for (b, body) in sim.bodies.iter().enumerate() {
-            let x: Vec<[Real; 3]> = (0..body.mesh.nodes.len()).map(|n| position(body, &body.state.u, n)).collect();
+            let x: Vec<[Real; 3]> = (0..body.def.mesh.nodes.len()).map(|n| position(body, &body.committed.state.u, n)).collect();
             let surface = &model.surfaces[b];
             assert_eq!(config.boxes[b], bounds(surface.nodes.iter().map(|&n| x[n as usize])), "body {b}'s box");
             let largest = (0..surface.facet_count()).map(|f| edge_range(&surface.facet_points(&x, f).0[..surface.facet_nodes]).1).fold(0.0, Real::max);
             assert_eq!(config.largest[b], largest, "body {b}'s largest facet");
         }
         assert!(config.nodes.placed.iter().all(|&p| !p), "nothing placed before it is asked for");
-        config.nodes.place(|b| b % 5 == 0, &placer(&sim.bodies, |b| &b.state.u));
+        config.nodes.place(|b| b % 5 == 0, &placer(&sim.bodies, |b| &b.committed.state.u));
         for (b, body) in sim.bodies.iter().enumerate() {
             assert_eq!(config.nodes.placed[b], b % 5 == 0);
             if b % 5 == 0 {
-                let expected: Vec<[Real; 3]> = (0..body.mesh.nodes.len()).map(|n| position(body, &body.state.u, n)).collect();
+                let expected: Vec<[Real; 3]> = (0..body.def.mesh.nodes.len()).map(|n| position(body, &body.committed.state.u, n)).collect();
                 assert_eq!(config.nodes.positions[b], expected);
             }
         }
@@ -902,7 +1000,7 @@ mod tests {
             still += sim.bodies.iter().filter(|b| b.still()).count();
             moved += sim.bodies.iter().filter(|b| !b.still()).count();
             let model = sim.contact.as_ref().expect("contact");
-            let fresh = configuration(&sim.bodies, model, |b| &b.state.u);
+            let fresh = configuration(&sim.bodies, model, |b| &b.committed.state.u);
             let (kept, _) = sim.committed.as_ref().expect("a committed configuration");
             assert_eq!(kept.boxes, fresh.boxes, "t = {}", sim.t);
             assert_eq!(kept.largest, fresh.largest, "t = {}", sim.t);

@@ -76,14 +76,14 @@ impl Fingerprint {
     fn of(bodies: &[super::Body]) -> Self {
         let (mut mesh, mut material) = (Fnv::default(), Fnv::default());
         for body in bodies {
-            mesh.bytes(body.mesh.kind.name().as_bytes());
-            body.mesh.nodes.iter().flatten().for_each(|x| mesh.bytes(&x.to_le_bytes()));
-            body.mesh.connectivity.iter().for_each(|i| mesh.bytes(&i.to_le_bytes()));
-            material.bytes(format!("{:?} {:?}", body.model, body.formulation).as_bytes());
-            if let Some(v) = &body.viscoelastic {
+            mesh.bytes(body.def.mesh.kind.name().as_bytes());
+            body.def.mesh.nodes.iter().flatten().for_each(|x| mesh.bytes(&x.to_le_bytes()));
+            body.def.mesh.connectivity.iter().for_each(|i| mesh.bytes(&i.to_le_bytes()));
+            material.bytes(format!("{:?} {:?}", body.def.model, body.def.formulation).as_bytes());
+            if let Some(v) = &body.def.viscoelastic {
                 material.bytes(format!(" {v:?}").as_bytes());
             }
-            body.mass.iter().for_each(|m| material.bytes(&m.to_le_bytes()));
+            body.def.mass.iter().for_each(|m| material.bytes(&m.to_le_bytes()));
         }
         Self { mesh: mesh.hex(), material: material.hex() }
     }
@@ -173,15 +173,15 @@ impl Simulation {
                 .bodies
                 .iter()
                 .map(|b| SavedBody {
-                    name: b.name.clone(),
-                    u: b.state.u.clone(),
-                    v: b.state.v.clone(),
-                    f_int: b.state.f_int.clone(),
-                    strain: b.state.strain,
-                    reactions: b.reactions.clone(),
+                    name: b.def.name.clone(),
+                    u: b.committed.state.u.clone(),
+                    v: b.committed.state.v.clone(),
+                    f_int: b.committed.state.f_int.clone(),
+                    strain: b.committed.state.strain,
+                    reactions: b.work.reactions.clone(),
                     factor: b.kept_factor().map(|(c1, values)| SavedFactor { c1, values: values.to_vec() }),
-                    viscous: b.state.viscous.clone(),
-                    branch_energy: b.viscoelastic.is_some().then_some(b.state.branch_energy),
+                    viscous: b.committed.state.viscous.clone(),
+                    branch_energy: b.def.viscoelastic.is_some().then_some(b.committed.state.branch_energy),
                 })
                 .collect(),
             contact: {
@@ -202,7 +202,7 @@ impl Simulation {
         self.load_state(saved)?;
         for (b, s) in self.bodies.iter_mut().zip(&saved.bodies) {
             if let Some(f) = &s.factor {
-                b.restore_factor(f.c1, &f.values).map_err(|message| RestoreError::Factor { name: b.name.clone(), message })?;
+                b.restore_factor(f.c1, &f.values).map_err(|message| RestoreError::Factor { name: b.def.name.clone(), message })?;
             }
         }
         Ok(())
@@ -215,15 +215,15 @@ impl Simulation {
             return Err(RestoreError::BodyCount { saved: saved.bodies.len(), scene: self.bodies.len() });
         }
         for (index, (b, s)) in self.bodies.iter().zip(&saved.bodies).enumerate() {
-            if b.name != s.name {
-                return Err(RestoreError::Name { index, saved: s.name.clone(), scene: b.name.clone() });
+            if b.def.name != s.name {
+                return Err(RestoreError::Name { index, saved: s.name.clone(), scene: b.def.name.clone() });
             }
-            let n = b.state.u.len();
-            if [s.u.len(), s.v.len(), s.f_int.len()].iter().any(|&len| len != n) || s.reactions.len() != b.reactions.len() {
-                return Err(RestoreError::Dofs { name: b.name.clone(), saved: s.u.len(), scene: n });
+            let n = b.committed.state.u.len();
+            if [s.u.len(), s.v.len(), s.f_int.len()].iter().any(|&len| len != n) || s.reactions.len() != b.work.reactions.len() {
+                return Err(RestoreError::Dofs { name: b.def.name.clone(), saved: s.u.len(), scene: n });
             }
-            if s.viscous.len() != b.state.viscous.len() {
-                return Err(RestoreError::Viscous { name: b.name.clone(), saved: s.viscous.len(), scene: b.state.viscous.len() });
+            if s.viscous.len() != b.committed.state.viscous.len() {
+                return Err(RestoreError::Viscous { name: b.def.name.clone(), saved: s.viscous.len(), scene: b.committed.state.viscous.len() });
             }
         }
         if let Some(saved) = &saved.fingerprint {
@@ -240,18 +240,18 @@ impl Simulation {
             world.forget_committed();
         }
         for (b, s) in self.bodies.iter_mut().zip(&saved.bodies) {
-            (b.state_held, b.trial_held) = (None, None);
-            b.state.u.clone_from(&s.u);
-            b.state.v.clone_from(&s.v);
-            b.state.f_int.clone_from(&s.f_int);
-            b.state.strain = s.strain;
-            b.state.strain_at_u = false;
-            b.state.viscous.clone_from(&s.viscous);
+            (b.committed.state_held, b.work.trial_held) = (None, None);
+            b.committed.state.u.clone_from(&s.u);
+            b.committed.state.v.clone_from(&s.v);
+            b.committed.state.f_int.clone_from(&s.f_int);
+            b.committed.state.strain = s.strain;
+            b.committed.state.strain_at_u = false;
+            b.committed.state.viscous.clone_from(&s.viscous);
             match s.branch_energy {
-                Some(e) => b.state.branch_energy = e,
+                Some(e) => b.committed.state.branch_energy = e,
                 None => b.refresh_branch_energy(),
             }
-            b.reactions.clone_from(&s.reactions);
+            b.work.reactions.clone_from(&s.reactions);
         }
         self.committed = None;
         self.t = saved.t;

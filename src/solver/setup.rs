@@ -115,8 +115,8 @@ pub const MAX_FREE_BODY_COURANT: Real = 1e6;
 /// when `time.dt` is beyond [`MAX_FREE_BODY_COURANT`] times the time a pressure wave takes
 /// across its smallest element `h`.
 fn free_body_step(loaded: &LoadedScene, body: &Body, density: Real) -> Result<(), SceneError> {
-    let (k, g) = body.model.bulk_shear();
-    let (h, body) = (body.length_scale(), &body.name);
+    let (k, g) = body.def.model.bulk_shear();
+    let (h, body) = (body.length_scale(), &body.def.name);
     let wave_speed = ((k + 4.0 * g / 3.0) / density).sqrt();
     let dt = loaded.scene.time.dt;
     let courant = wave_speed * dt / h;
@@ -190,15 +190,15 @@ pub fn build_simulation(loaded: &LoadedScene) -> Result<Simulation, SceneError> 
     let mut bodies = build_bodies(loaded, meshes, prescribed, dim)?;
     for (name, spec) in &scene.load {
         let b = body_index[spec.body.as_str()];
-        let load = nodal_load(loaded, &format!("load.{name}"), spec, &bodies[b].mesh)?;
-        bodies[b].loads.push(load);
+        let load = nodal_load(loaded, &format!("load.{name}"), spec, &bodies[b].def.mesh)?;
+        bodies[b].def.loads.push(load);
     }
     let probes = scene
         .probe
         .iter()
         .map(|(name, p)| {
             let b = body_index[p.body.as_str()];
-            let mesh = &bodies[b].mesh;
+            let mesh = &bodies[b].def.mesh;
             let dist = |x: &[Real; 3]| (0..dim).map(|i| (x[i] - p.point[i]).powi(2)).sum::<Real>();
             let node = (0..mesh.nodes.len()).min_by(|&i, &j| dist(&mesh.nodes[i]).total_cmp(&dist(&mesh.nodes[j]))).expect("a mesh has nodes");
             let elements = (0..mesh.element_count()).filter(|&e| mesh.element(e).contains(&(node as u32))).collect();
@@ -434,10 +434,10 @@ fn build_body(loaded: &LoadedScene, (name, mesh, patches, geometry, formulation)
     };
     let topology = topology.as_ref().map_err(|e| loaded.error(MeshError, &format!("{key}.mesh"), e.clone()))?;
     let mut body = Body::new(name.clone(), mesh, patches, geometry, model_of(material), formulation, material.density, prescribed, initial, topology);
-    if body.prescribed.is_empty() {
+    if body.def.prescribed.is_empty() {
         free_body_step(loaded, &body, material.density)?;
     }
-    body.reuse_factorization = scene.solver.reuse_factorization;
+    body.def.reuse_factorization = scene.solver.reuse_factorization;
     if let Some(viscoelastic) = viscoelastic_of(material) {
         body.set_viscoelastic(viscoelastic);
     }
@@ -461,7 +461,7 @@ fn check_initial_state(loaded: &LoadedScene, bodies: &mut [Body], contact: Optio
         if ![kinetic, strain, potential].iter().all(|e| e.is_finite()) {
             return Err(loaded.error(
                 Invalid,
-                &format!("body.{}", b.name),
+                &format!("body.{}", b.def.name),
                 format!("the initial state has a non-finite energy (kinetic {kinetic:e}, strain {strain:e}, potential {potential:e}): its density, size, velocities and the gravity are too large together."),
             ));
         }
@@ -482,16 +482,16 @@ fn initial_overlaps(bodies: &[Body], model: &ContactModel) -> Vec<Overlap> {
 fn describe_overlap(bodies: &[Body], model: &ContactModel, o: &Overlap) -> (String, String) {
     let body = &bodies[o.body as usize];
     let x = body.position(o.node as usize);
-    let at: Vec<String> = x[..body.dim].iter().map(|c| format!("{c:.6}")).collect();
+    let at: Vec<String> = x[..body.def.dim].iter().map(|c| format!("{c:.6}")).collect();
     let into = match o.host {
-        Host::Body(m) => format!("inside body `{}`", bodies[m as usize].name),
+        Host::Body(m) => format!("inside body `{}`", bodies[m as usize].def.name),
         Host::Obstacle(k) => format!("behind obstacle `{}`", model.obstacles[k as usize].name),
     };
     let key = match o.host {
         Host::Obstacle(k) => format!("obstacle.{}", model.obstacles[k as usize].name),
-        Host::Body(_) => format!("body.{}", body.name),
+        Host::Body(_) => format!("body.{}", body.def.name),
     };
-    (key, format!("body `{}` overlaps at t = 0: its node {} at [{}] is {:.3e} {into} ({:.2} elements deep)", body.name, o.node, at.join(", "), o.depth, o.ratio()))
+    (key, format!("body `{}` overlaps at t = 0: its node {} at [{}] is {:.3e} {into} ({:.2} elements deep)", body.def.name, o.node, at.join(", "), o.depth, o.ratio()))
 }
 
 /// Pushes overlapping bodies apart by rigid translations of their meshes. Each round, every
@@ -502,10 +502,10 @@ fn describe_overlap(bodies: &[Body], model: &ContactModel, o: &Overlap) -> (Stri
 /// the other way. Rigid motions leave the bodies unstrained. An error names what could not be
 /// separated.
 fn separate_initial_overlaps(bodies: &mut [Body], model: &ContactModel) -> Result<(), (String, String)> {
-    let movable: Vec<bool> = bodies.iter().map(|b| b.prescribed.is_empty()).collect();
+    let movable: Vec<bool> = bodies.iter().map(|b| b.def.prescribed.is_empty()).collect();
     let centroid = |b: &Body| {
-        let n = b.mesh.nodes.len() as Real;
-        b.mesh.nodes.iter().fold([0.0; 3], |c, x| [c[0] + x[0] / n, c[1] + x[1] / n, c[2] + x[2] / n])
+        let n = b.def.mesh.nodes.len() as Real;
+        b.def.mesh.nodes.iter().fold([0.0; 3], |c, x| [c[0] + x[0] / n, c[1] + x[1] / n, c[2] + x[2] / n])
     };
     for _ in 0..SEPARATION_ROUNDS {
         let found = initial_overlaps(bodies, model);
@@ -544,7 +544,7 @@ fn separate_initial_overlaps(bodies: &mut [Body], model: &ContactModel) -> Resul
         }
         for (b, m) in moves.iter().enumerate() {
             if let Some(m) = m {
-                for x in &mut bodies[b].mesh.nodes {
+                for x in &mut bodies[b].def.mesh.nodes {
                     for i in 0..3 {
                         x[i] += m[i];
                     }
@@ -575,9 +575,9 @@ fn build_contact(loaded: &LoadedScene, bodies: &[Body], dim: usize) -> Result<Op
     // A surface depends on the connectivity only: bodies that share a topology (a packing's
     // grains of one shape) share the boundary search of one of them.
     let mut first_of: HashMap<*const crate::assembly::StiffnessPattern, usize> = HashMap::new();
-    let firsts: Vec<usize> = bodies.iter().enumerate().map(|(b, body)| *first_of.entry(Arc::as_ptr(&body.pattern)).or_insert(b)).collect();
-    let searched: HashMap<usize, Surface> = first_of.into_values().collect::<Vec<_>>().into_par_iter().map(|b| (b, Surface::of(&bodies[b].mesh))).collect();
-    let surfaces: Vec<Surface> = firsts.iter().zip(bodies).map(|(b, body)| searched[b].on(&body.mesh)).collect();
+    let firsts: Vec<usize> = bodies.iter().enumerate().map(|(b, body)| *first_of.entry(Arc::as_ptr(&body.def.pattern)).or_insert(b)).collect();
+    let searched: HashMap<usize, Surface> = first_of.into_values().collect::<Vec<_>>().into_par_iter().map(|b| (b, Surface::of(&bodies[b].def.mesh))).collect();
+    let surfaces: Vec<Surface> = firsts.iter().zip(bodies).map(|(b, body)| searched[b].on(&body.def.mesh)).collect();
     let ranks = bodies.iter().zip(&surfaces).map(|(b, s)| Rank { length_scale: b.length_scale(), boundary_nodes: s.nodes.len() }).collect();
     let mut pairs = BodyPairs::new(ranks, spec.all_pairs.then_some(spec.friction), spec.two_pass);
     for pair in spec.pair.values() {

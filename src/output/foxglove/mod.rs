@@ -139,8 +139,8 @@ pub struct View {
 impl View {
     pub fn new(sim: &Simulation) -> Self {
         let (mut lo, mut hi) = ([Real::INFINITY; 3], [Real::NEG_INFINITY; 3]);
-        for b in &sim.bodies {
-            for x in &b.mesh.nodes {
+        for b in sim.bodies() {
+            for x in &b.mesh().nodes {
                 for i in 0..3 {
                     lo[i] = lo[i].min(x[i]);
                     hi[i] = hi[i].max(x[i]);
@@ -149,23 +149,23 @@ impl View {
         }
         let extent = norm(sub(hi, lo)).max(Real::EPSILON);
         let centre = [0, 1, 2].map(|i| 0.5 * (lo[i] + hi[i]));
-        let surfaces = match &sim.contact {
+        let surfaces = match &sim.contact() {
             Some(c) => c.surfaces.clone(),
-            None => sim.bodies.iter().map(|b| Surface::of(&b.mesh)).collect(),
+            None => sim.bodies().iter().map(|b| Surface::of(b.mesh())).collect(),
         };
-        Self { dim: sim.dim, surfaces, extent, centre, von_mises_max: 0.0, force_max: 0.0 }
+        Self { dim: sim.dim(), surfaces, extent, centre, von_mises_max: 0.0, force_max: 0.0 }
     }
 
     /// The scene at the committed state, encoded for the log; `fields` are each body's
     /// [`CellFields`]. The bodies' entities are built and encoded in parallel (a packing has
     /// thousands of bodies) and the message holds them verbatim.
     pub fn scene_update(&mut self, sim: &Simulation, fields: &[Vec<CellFields>]) -> Vec<u8> {
-        let t = sim.t;
+        let t = sim.t();
         let frame_max = fields.iter().flatten().map(|f| f.von_mises).fold(0.0, Real::max);
         self.von_mises_max = self.von_mises_max.max(frame_max);
         let raw = |entity: Value| to_raw_value(&entity).expect("an entity serializes");
-        let mut entities: Vec<Box<RawValue>> = sim.bodies.par_iter().zip(&self.surfaces).zip(fields).map(|((body, surface), fields)| raw(self.body(t, body, surface, fields))).collect();
-        if let Some(contact) = &sim.contact {
+        let mut entities: Vec<Box<RawValue>> = sim.bodies().par_iter().zip(&self.surfaces).zip(fields).map(|((body, surface), fields)| raw(self.body(t, body, surface, fields))).collect();
+        if let Some(contact) = &sim.contact() {
             entities.extend(contact.obstacles.iter().map(|o| raw(self.obstacle(t, o))));
             entities.push(raw(self.contact_forces(sim)));
         }
@@ -222,7 +222,7 @@ impl View {
             })
             .collect();
         let metadata = [("von_mises_max", format!("{:e}", self.von_mises_max)), ("colormap", format!("viridis: 0 to von_mises_max in {COLOR_LEVELS} levels"))];
-        let mut e = entity(t, &format!("body/{}", body.name), &metadata);
+        let mut e = entity(t, &format!("body/{}", body.name()), &metadata);
         e.insert(if self.dim == 2 { "lines" } else { "triangles" }.into(), Value::Array(primitives));
         Value::Object(e)
     }
@@ -230,7 +230,7 @@ impl View {
     /// Contact forces on the slave nodes as arrows ending at the node, longest = 10% of the
     /// scene's size at the largest force seen so far.
     fn contact_forces(&mut self, sim: &Simulation) -> Value {
-        let forces: Vec<(Vec3, Vec3)> = sim.contact_points.iter().map(|c| (sim.bodies[c.slave_body as usize].position(c.slave_node as usize), c.force())).filter(|(_, f)| norm(*f) > 0.0).collect();
+        let forces: Vec<(Vec3, Vec3)> = sim.contact_points().iter().map(|c| (sim.bodies()[c.slave_body as usize].position(c.slave_node as usize), c.force())).filter(|(_, f)| norm(*f) > 0.0).collect();
         self.force_max = forces.iter().map(|(_, f)| norm(*f)).fold(self.force_max, Real::max);
         let arrows: Vec<Value> = forces
             .iter()
@@ -245,7 +245,7 @@ impl View {
                 })
             })
             .collect();
-        let mut e = entity(sim.t, "contact_forces", &[("force_max", format!("{:e}", self.force_max)), ("count", forces.len().to_string())]);
+        let mut e = entity(sim.t(), "contact_forces", &[("force_max", format!("{:e}", self.force_max)), ("count", forces.len().to_string())]);
         e.insert("arrows".into(), json!(arrows));
         Value::Object(e)
     }

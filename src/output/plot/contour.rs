@@ -68,13 +68,13 @@ fn clip(a: (f64, f64), b: (f64, f64), lo: [Real; 2], hi: [Real; 2]) -> Option<((
 /// bodies' element fields ([`crate::solver::Body::cell_fields`]).
 pub fn contour_png(sim: &Simulation, fields: &[Vec<CellFields>], title: &str, path: &Path) -> Result<(), PlotError> {
     let draw_err = |e: &dyn std::fmt::Display| PlotError::Draw { path: path.into(), message: e.to_string() };
-    if sim.dim != 2 {
+    if sim.dim() != 2 {
         return Err(PlotError::Draw { path: path.into(), message: "contour plots are drawn for 2D scenes; open the VTU files in ParaView for 3D".into() });
     }
     register_font();
     let (mut lo, mut hi) = ([Real::INFINITY; 2], [Real::NEG_INFINITY; 2]);
-    for b in &sim.bodies {
-        for n in 0..b.mesh.nodes.len() {
+    for b in sim.bodies() {
+        for n in 0..b.mesh().nodes.len() {
             let x = b.position(n);
             for i in 0..2 {
                 lo[i] = lo[i].min(x[i]);
@@ -93,20 +93,20 @@ pub fn contour_png(sim: &Simulation, fields: &[Vec<CellFields>], title: &str, pa
     let (left, right) = root.split_horizontally(plot_width);
     let mut chart = ChartBuilder::on(&left).caption(title, (FAMILY, 22)).margin(14).x_label_area_size(46).y_label_area_size(70).build_cartesian_2d(lo[0]..hi[0], lo[1]..hi[1]).map_err(|e| draw_err(&e))?;
     chart.configure_mesh().disable_mesh().x_desc("x").y_desc("y").label_style((FAMILY, 13)).draw().map_err(|e| draw_err(&e))?;
-    for (b, body_fields) in sim.bodies.iter().zip(fields) {
-        let polygons = (0..b.mesh.element_count()).map(|e| {
-            let corners: Vec<(f64, f64)> = b.mesh.element(e).iter().map(|&n| b.position(n as usize)).map(|x| (x[0], x[1])).collect();
+    for (b, body_fields) in sim.bodies().iter().zip(fields) {
+        let polygons = (0..b.mesh().element_count()).map(|e| {
+            let corners: Vec<(f64, f64)> = b.mesh().element(e).iter().map(|&n| b.position(n as usize)).map(|x| (x[0], x[1])).collect();
             Polygon::new(corners, viridis(body_fields[e].von_mises / vm_max).filled())
         });
         chart.draw_series(polygons).map_err(|e| draw_err(&e))?;
     }
-    if let Some(contact) = &sim.contact {
-        for (surface, b) in contact.surfaces.iter().zip(&sim.bodies) {
+    if let Some(contact) = &sim.contact() {
+        for (surface, b) in contact.surfaces.iter().zip(sim.bodies()) {
             let segments = (0..surface.facet_count()).map(|f| PathElement::new(surface.facet(f).iter().map(|&n| b.position(n as usize)).map(|x| (x[0], x[1])).collect::<Vec<_>>(), OUTLINE));
             chart.draw_series(segments).map_err(|e| draw_err(&e))?;
         }
         for o in &contact.obstacles {
-            for line in obstacle_lines(o, sim.t, lo, hi) {
+            for line in obstacle_lines(o, sim.t(), lo, hi) {
                 let visible = line.windows(2).filter_map(|w| clip(w[0], w[1], lo, hi));
                 chart.draw_series(visible.map(|(a, b)| PathElement::new(vec![a, b], OBSTACLE.stroke_width(3)))).map_err(|e| draw_err(&e))?;
             }

@@ -8,29 +8,29 @@ use super::*;
 impl Body {
     /// The step's viscoelastic relaxation, if the body has a Prony series.
     pub fn relaxation(&self) -> Option<Relaxation<'_>> {
-        self.viscoelastic.as_ref().map(|_| Relaxation { c: self.relaxation_c, history: &self.history })
+        self.def.viscoelastic.as_ref().map(|_| Relaxation { c: self.work.relaxation_c, history: &self.work.history })
     }
 
     /// What the GPU world uploads of the body.
     pub fn world_body(&self) -> WorldBody<'_> {
-        WorldBody { mesh: self.elements(), geometry: &self.geometry, model: &self.model, formulation: self.formulation, pattern: &self.pattern, gather: &self.gather, dofs: &self.dofs, viscous: self.viscoelastic.is_some() }
+        WorldBody { mesh: self.elements(), geometry: &self.def.geometry, model: &self.def.model, formulation: self.def.formulation, pattern: &self.def.pattern, gather: &self.def.gather, dofs: &self.def.dofs, viscous: self.def.viscoelastic.is_some() }
     }
 
     /// The step's start values of every dof (after [`Body::begin_step`]).
     pub fn step_inputs(&self) -> &[DofStep<Real>] {
-        &self.step_inputs
+        &self.work.step_inputs
     }
 
     /// What the device takes at the start of the body's step ([`crate::gpu::GpuWorld::begin_step`]);
     /// `free`: the step has no contact point on the body.
     pub fn step_start(&self, body: usize, free: bool) -> StepStart<'_> {
-        assert!(self.state_held.is_none() || (free && self.may_step_on_device()), "a body with contact points starts from the host's state");
-        StepStart { body, inputs: &self.step_inputs, u: &self.state.u, on_device: free && self.may_step_on_device() }
+        assert!(self.committed.state_held.is_none() || (free && self.may_step_on_device()), "a body with contact points starts from the host's state");
+        StepStart { body, inputs: &self.work.step_inputs, u: &self.committed.state.u, on_device: free && self.may_step_on_device() }
     }
 
     /// The committed state the device follows after a kept step ([`crate::gpu::GpuWorld::commit_step`]).
     pub fn step_end(&self, body: usize) -> StepEnd<'_> {
-        StepEnd { body, u: &self.state.u, v: &self.state.v, f_int: &self.state.f_int, on_device: self.may_step_on_device(), held: self.state_held.is_some() }
+        StepEnd { body, u: &self.committed.state.u, v: &self.committed.state.v, f_int: &self.committed.state.f_int, on_device: self.may_step_on_device(), held: self.committed.state_held.is_some() }
     }
 
     /// Whether the device may begin and commit the body's steps from the state it keeps: its
@@ -38,20 +38,20 @@ impl Body {
     /// with time; no prescribed dofs, which move by their own rule; no Prony series, whose
     /// history the host advances).
     pub fn may_step_on_device(&self) -> bool {
-        self.loads.is_empty() && self.prescribed.is_empty() && self.viscoelastic.is_none()
+        self.def.loads.is_empty() && self.def.prescribed.is_empty() && self.def.viscoelastic.is_none()
     }
 
     /// A device failure of an evaluation that involved this body.
     pub fn device_failure(&self, error: &GpuError) -> StepFailure {
-        StepFailure::Device { body: self.name.clone(), error: error.to_string() }
+        StepFailure::Device { body: self.def.name.clone(), error: error.to_string() }
     }
 
     /// The body's share of a GPU world evaluation at the trial displacement: the tangent if
     /// `tangent`, the residual if `residual`. Finish with [`Body::finish_device_evaluation`].
     pub fn device_evaluation(&mut self, body: usize, tangent: bool, residual: bool) -> Evaluation<'_> {
-        self.tangent_current = false;
-        self.evaluated.valid = false;
-        Evaluation { body, u: &self.trial.u, tangent, values: &mut self.values, dof_out: residual.then_some(&mut self.dof_out[..]), failure: None }
+        self.work.tangent_current = false;
+        self.work.evaluated.valid = false;
+        Evaluation { body, u: &self.work.trial.u, tangent, values: &mut self.work.values, dof_out: residual.then_some(&mut self.work.dof_out[..]), failure: None }
     }
 
     /// Takes the results of a GPU world evaluation (see [`Body::device_evaluation`]). A residual
@@ -59,12 +59,12 @@ impl Body {
     /// that Newton converges to the same answer and the f32 tangent only changes how fast.
     pub fn finish_device_evaluation(&mut self, p: &StepParams, failure: Option<ElementFailure>, tangent: bool, residual: bool) -> Result<(), StepFailure> {
         if let Some(failure) = failure {
-            return Err(self.element_failure(&self.trial.u, failure));
+            return Err(self.element_failure(&self.work.trial.u, failure));
         }
-        self.tangent_current = tangent;
+        self.work.tangent_current = tangent;
         if residual {
             if !tangent {
-                self.evaluated.record(&self.trial.u, &self.step_inputs, coefficients(p));
+                self.work.evaluated.record(&self.work.trial.u, &self.work.step_inputs, coefficients(p));
             }
             self.absorb_residual(p);
         }
@@ -74,25 +74,25 @@ impl Body {
     /// Per dof, `u_t + dt (1 - θ) v_t`: the trial velocity is `(u - base) / θdt` (a device
     /// that takes the increments of a group in contact computes it so).
     pub fn trial_velocity_base(&self, p: &StepParams) -> Vec<Real> {
-        self.state.u.iter().zip(&self.state.v).map(|(u, v)| u + p.dt * (1.0 - p.theta) * v).collect()
+        self.committed.state.u.iter().zip(&self.committed.state.v).map(|(u, v)| u + p.dt * (1.0 - p.theta) * v).collect()
     }
 
     /// Whether the next increments can be taken on the device ([`crate::gpu::GpuWorld::newton`]):
     /// the body has free dofs and keeps a factorisation fit for them.
     pub fn iterates_on_device(&self, p: &StepParams) -> bool {
-        self.dofs.free_count > 0 && !self.needs_factorization(p)
+        self.def.dofs.free_count > 0 && !self.needs_factorization(p)
     }
 
     /// Whether the body's factorisation is one for this step's `c1` that the next increment may
     /// use, right after [`Body::refresh_factor`] (which keeps or renews it): its next increment
     /// can be taken on the device.
     pub fn factor_fit(&self, p: &StepParams) -> bool {
-        self.dofs.free_count > 0 && self.factor_kept_for(p)
+        self.def.dofs.free_count > 0 && self.factor_kept_for(p)
     }
 
     /// Which factorisation the body holds (a new number for each).
     pub fn factor_version(&self) -> u64 {
-        self.factor_version
+        self.work.factor_version
     }
 
     /// `K̄⁻¹` of the free dofs of the kept factorisation, row by row, for a device that applies
@@ -100,15 +100,15 @@ impl Body {
     /// tangent ([`Body::kept_factor`]); else, or if the dense factorisation fails, the columns
     /// of the factor's solves with the identity (`K̄` is symmetric).
     pub fn effective_inverse(&mut self, times: &mut PhaseTimes) -> Vec<Real> {
-        if !self.tangent_current {
+        if !self.work.tangent_current {
             let t0 = Instant::now();
-            let dense = self.solver.dense_inverse(&self.values);
+            let dense = self.work.solver.dense_inverse(&self.work.values);
             times.solve += t0.elapsed().as_secs_f64();
             if let Some(inverse) = dense {
                 return inverse;
             }
         }
-        let n = self.dofs.free_count;
+        let n = self.def.dofs.free_count;
         let mut x = vec![0.0; n * n];
         for f in 0..n {
             x[f * n + f] = 1.0;
@@ -136,19 +136,19 @@ impl Body {
         };
         let residual = evaluated.then(|| self.residual_norm());
         if !evaluated {
-            self.evaluated.valid = false;
+            self.work.evaluated.valid = false;
         }
         NewtonCall {
             body,
-            factor: self.factor_version,
+            factor: self.work.factor_version,
             inverse,
             member,
             residual,
-            u: &mut self.trial.u,
-            dof_out: &mut self.dof_out,
-            u_start: &self.state.u,
-            inputs: &self.step_inputs,
-            contact_force: Some(&self.contact_force),
+            u: &mut self.work.trial.u,
+            dof_out: &mut self.work.dof_out,
+            u_start: &self.committed.state.u,
+            inputs: &self.work.step_inputs,
+            contact_force: Some(&self.work.contact_force),
             keep: false,
             positions: false,
             summary: None,
@@ -170,25 +170,25 @@ impl Body {
         if let Some((summary, positions)) = summary {
             // Converged and kept on the device: the host's vectors are not the step's (but for
             // the displacements, when they came back).
-            self.trial_held = Some(summary);
-            self.trial_positions = positions;
-            self.still = false;
-            self.tangent_current = false;
-            self.evaluated.valid = false;
+            self.work.trial_held = Some(summary);
+            self.work.trial_positions = positions;
+            self.work.still = false;
+            self.work.tangent_current = false;
+            self.work.evaluated.valid = false;
             return Ok(());
         }
-        self.device_tangent = tangent.map(|values| (self.trial.u.clone(), values.to_vec()));
+        self.work.device_tangent = tangent.map(|values| (self.work.trial.u.clone(), values.to_vec()));
         if let Some(failure) = failure {
-            return Err(self.element_failure(&self.trial.u, failure));
+            return Err(self.element_failure(&self.work.trial.u, failure));
         }
-        self.tangent_current = false;
-        self.still &= outcome.moved == 0;
+        self.work.tangent_current = false;
+        self.work.still &= outcome.moved == 0;
         if outcome.iterations > 0 {
-            self.last_increment = Some(outcome.increment);
-            self.previous_residual = Some(outcome.previous_residual);
+            self.work.last_increment = Some(outcome.increment);
+            self.work.previous_residual = Some(outcome.previous_residual);
         }
-        self.evaluated.record(&self.trial.u, &self.step_inputs, coefficients(p));
-        self.evaluated.strain = strain_energy;
+        self.work.evaluated.record(&self.work.trial.u, &self.work.step_inputs, coefficients(p));
+        self.work.evaluated.strain = strain_energy;
         self.absorb_residual(p);
         Ok(())
     }
@@ -199,18 +199,18 @@ impl Body {
     /// inputs follow from it as `step_begin` computed them, and the residuals from those.
     pub fn take_committed_mid_step(&mut self, p: &StepParams, states: &[DofState<Real>]) {
         self.take_committed(states);
-        for (d, s) in self.step_inputs.iter_mut().enumerate() {
-            *s = DofStep { mass: self.mass[d], u_pred: self.state.u[d] + p.dt * self.state.v[d], f_int_t: self.state.f_int[d], f_ext: self.f_ext[d] };
+        for (d, s) in self.work.step_inputs.iter_mut().enumerate() {
+            *s = DofStep { mass: self.def.mass[d], u_pred: self.committed.state.u[d] + p.dt * self.committed.state.v[d], f_int_t: self.committed.state.f_int[d], f_ext: self.work.f_ext[d] };
         }
         let c = coefficients(p);
-        for (d, out) in self.dof_out.iter_mut().enumerate() {
-            out.g = self.step_inputs[d].residual(c, self.trial.u[d], out.f_int);
+        for (d, out) in self.work.dof_out.iter_mut().enumerate() {
+            out.g = self.work.step_inputs[d].residual(c, self.work.trial.u[d], out.f_int);
         }
     }
 
     /// The strain energy at the trial displacement when a device Newton call left it there
     /// ([`Body::finish_device_newton`]) and the displacement has not changed since, bit for bit.
     pub fn evaluated_strain_energy(&self) -> Option<Real> {
-        self.evaluated.strain.filter(|_| self.evaluated.valid && same_bits(&self.trial.u, &self.evaluated.u))
+        self.work.evaluated.strain.filter(|_| self.work.evaluated.valid && same_bits(&self.work.trial.u, &self.work.evaluated.u))
     }
 }
