@@ -85,7 +85,7 @@ fn newton_iteration(c: &mut Criterion) {
     let c1 = 1.0 / (theta * dt * dt);
     let coefficients = Coefficients { factor: xi, c1 };
     let mut times = PhaseTimes::default();
-    println!("newton_hex8_50k: {} free dofs, {} stored non-zeros", body.dofs.free_count, body.pattern.nnz());
+    println!("newton_hex8_50k: {} free dofs, {} stored non-zeros", body.dofs().free_count, body.pattern().nnz());
     let mut group = c.benchmark_group("newton_hex8_50k");
     group.sample_size(10);
     group.bench_function("assembly", |b| b.iter(|| body.assemble(&u, coefficients, &mut times).unwrap()));
@@ -95,7 +95,7 @@ fn newton_iteration(c: &mut Criterion) {
             body.factorize_effective(c1, &mut times).unwrap()
         })
     });
-    let rhs0: Vec<f64> = (0..body.dofs.free_count).map(|i| (i as f64).sin()).collect();
+    let rhs0: Vec<f64> = (0..body.dofs().free_count).map(|i| (i as f64).sin()).collect();
     group.bench_function("solve", |b| {
         b.iter(|| {
             let mut rhs = rhs0.clone();
