@@ -172,4 +172,15 @@ impl ContactStats {
         }
         s
     }
+
+    /// Adds a sub-step's statistics to a step's: the largest counts and depths, the sums of
+    /// impulses and dissipation (the overlaps are measured apart).
+    pub fn add_substep(&mut self, sub: &ContactStats) {
+        self.active = self.active.max(sub.active);
+        self.sticking = self.sticking.max(sub.sticking);
+        self.sliding = self.sliding.max(sub.sliding);
+        self.max_penetration = self.max_penetration.max(sub.max_penetration);
+        self.normal_impulse += sub.normal_impulse;
+        self.friction_dissipation_step += sub.friction_dissipation_step;
+    }
 }

@@ -68,6 +68,45 @@ fn declared_version(bytes: &[u8]) -> Option<String> {
     lines.next()?.split_whitespace().next().map(String::from)
 }
 
+/// Every node's coordinates by tag (blocks without tags number their nodes on from the last).
+fn node_coordinates(nodes: Option<&mshio::mshfile::Nodes<u64, i32, Real>>) -> HashMap<u64, [Real; 3]> {
+    let mut coords = HashMap::new();
+    let Some(nodes) = nodes else { return coords };
+    let mut next = nodes.min_node_tag;
+    for block in &nodes.node_blocks {
+        let mut tags: Vec<(u64, usize)> = match &block.node_tags {
+            Some(map) => map.iter().map(|(&t, &i)| (t, i)).collect(),
+            None => (0..block.nodes.len()).map(|i| (next + i as u64, i)).collect(),
+        };
+        tags.sort_unstable();
+        next += block.nodes.len() as u64;
+        for (tag, i) in tags {
+            let n = &block.nodes[i];
+            coords.insert(tag, [n.x, n.y, n.z]);
+        }
+    }
+    coords
+}
+
+/// The physical groups of each entity, by `(dimension, tag)`.
+fn entity_groups(entities: Option<&mshio::mshfile::Entities<i32, Real>>) -> HashMap<(i32, i32), Vec<i32>> {
+    let mut groups = HashMap::new();
+    let Some(ent) = entities else { return groups };
+    for p in &ent.points {
+        groups.insert((0, p.tag), p.physical_tags.clone());
+    }
+    for c in &ent.curves {
+        groups.insert((1, c.tag), c.physical_tags.clone());
+    }
+    for s in &ent.surfaces {
+        groups.insert((2, s.tag), s.physical_tags.clone());
+    }
+    for v in &ent.volumes {
+        groups.insert((3, v.tag), v.physical_tags.clone());
+    }
+    groups
+}
+
 /// The mesh of a Gmsh file: all elements of its highest dimension, or with `group` only those of
 /// that physical group (by name).
 pub fn read(bytes: &[u8], group: Option<&str>) -> Result<Mesh, GmshError> {
@@ -85,38 +124,9 @@ pub fn read(bytes: &[u8], group: Option<&str>) -> Result<Mesh, GmshError> {
         return Err(GmshError::Version(parsed.header.version.to_string()));
     }
     let data = parsed.data;
-    let mut coords: HashMap<u64, [Real; 3]> = HashMap::new();
-    if let Some(nodes) = &data.nodes {
-        let mut next = nodes.min_node_tag;
-        for block in &nodes.node_blocks {
-            let mut tags: Vec<(u64, usize)> = match &block.node_tags {
-                Some(map) => map.iter().map(|(&t, &i)| (t, i)).collect(),
-                None => (0..block.nodes.len()).map(|i| (next + i as u64, i)).collect(),
-            };
-            tags.sort_unstable();
-            next += block.nodes.len() as u64;
-            for (tag, i) in tags {
-                let n = &block.nodes[i];
-                coords.insert(tag, [n.x, n.y, n.z]);
-            }
-        }
-    }
+    let coords = node_coordinates(data.nodes.as_ref());
     let names = physical_names(bytes);
-    let mut entity_groups: HashMap<(i32, i32), Vec<i32>> = HashMap::new();
-    if let Some(ent) = &data.entities {
-        for p in &ent.points {
-            entity_groups.insert((0, p.tag), p.physical_tags.clone());
-        }
-        for c in &ent.curves {
-            entity_groups.insert((1, c.tag), c.physical_tags.clone());
-        }
-        for s in &ent.surfaces {
-            entity_groups.insert((2, s.tag), s.physical_tags.clone());
-        }
-        for v in &ent.volumes {
-            entity_groups.insert((3, v.tag), v.physical_tags.clone());
-        }
-    }
+    let entity_groups = entity_groups(data.entities.as_ref());
     let group_names = |dim: i32, tag: i32| -> Vec<String> { entity_groups.get(&(dim, tag)).map(Vec::as_slice).unwrap_or_default().iter().map(|p| names.get(&(dim, p.abs())).cloned().unwrap_or_else(|| format!("physical_{}", p.abs()))).collect() };
     let blocks = data.elements.map(|e| e.element_blocks).unwrap_or_default();
     let kind = blocks.iter().filter_map(|b| kind_of(b.element_type)).max_by_key(|k| k.dim()).ok_or_else(|| {

@@ -621,19 +621,7 @@ impl Simulation {
         let gravity = self.gravity;
         let t = self.t;
         self.bodies.par_iter_mut().for_each(|body| body.begin_step(&p, &gravity, t));
-        if let Some(world) = &mut self.world {
-            // A body with contact points iterates with the host's step inputs mostly: its step
-            // begins there, so that nothing the device began is overwritten by its uploads.
-            let mut touching = vec![false; self.bodies.len()];
-            for t in points.iter().flat_map(|c| c.terms()) {
-                touching[t.body as usize] = true;
-            }
-            let starts: Vec<StepStart> = self.bodies.iter().enumerate().map(|(b, body)| body.step_start(b, !touching[b])).collect();
-            world.begin_step(&starts, StepMotion::of(p.dt, p.theta, self.dim)).map_err(|e| self.bodies[0].device_failure(&e))?;
-            for (b, relaxation) in self.bodies.iter().enumerate().filter_map(|(b, body)| Some((b, body.relaxation()?))) {
-                world.set_relaxation(b, relaxation);
-            }
-        }
+        self.begin_device_step(&points, &p)?;
         let stop = self.interrupt.as_deref();
         let hold = self.hold(&points);
         let (points, groups) = solve_groups(&mut self.bodies, points, &p, settings.as_ref(), &warm, velocity_scale, self.world.as_mut(), stop, hold.as_deref(), &mut report.wall);
@@ -688,13 +676,7 @@ impl Simulation {
         }
         report.substeps += 1;
         report.raised_theta += raised as usize;
-        let r = &mut report.contact;
-        r.active = r.active.max(stats.active);
-        r.sticking = r.sticking.max(stats.sticking);
-        r.sliding = r.sliding.max(stats.sliding);
-        r.max_penetration = r.max_penetration.max(stats.max_penetration);
-        r.normal_impulse += stats.normal_impulse;
-        r.friction_dissipation_step += stats.friction_dissipation_step;
+        report.contact.add_substep(&stats);
         self.contact_points = points;
         for body in &mut self.bodies {
             body.commit();
@@ -710,6 +692,23 @@ impl Simulation {
         self.last_overlap = overlap.ratio;
         report.contact.max_overlap = report.contact.max_overlap.max(overlap.depth);
         report.contact.max_overlap_ratio = report.contact.max_overlap_ratio.max(overlap.ratio);
+        Ok(())
+    }
+
+    /// Begins the step of every body on the device, if there is one. A body with contact
+    /// points iterates with the host's step inputs mostly: its step begins there, so that
+    /// nothing the device began is overwritten by its uploads.
+    fn begin_device_step(&mut self, points: &[ContactPoint], p: &StepParams) -> Result<(), StepFailure> {
+        let Some(world) = &mut self.world else { return Ok(()) };
+        let mut touching = vec![false; self.bodies.len()];
+        for t in points.iter().flat_map(|c| c.terms()) {
+            touching[t.body as usize] = true;
+        }
+        let starts: Vec<StepStart> = self.bodies.iter().enumerate().map(|(b, body)| body.step_start(b, !touching[b])).collect();
+        world.begin_step(&starts, StepMotion::of(p.dt, p.theta, self.dim)).map_err(|e| self.bodies[0].device_failure(&e))?;
+        for (b, relaxation) in self.bodies.iter().enumerate().filter_map(|(b, body)| Some((b, body.relaxation()?))) {
+            world.set_relaxation(b, relaxation);
+        }
         Ok(())
     }
 
