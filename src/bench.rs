@@ -11,7 +11,7 @@ use crate::gpu::types::{Coefficients, DofOut, DofStep};
 use crate::gpu::uzawa_step::{UzawaPoint, UzawaStepKernel};
 use crate::gpu::uzawa_sweep::UzawaSweeps;
 use crate::gpu::{Evaluation, Gpu, GpuError, GpuWorld, WorldKernel};
-use crate::material::Model;
+use crate::material::{Entry, Model};
 use crate::mesh::{generate, ElementKind, Mesh};
 use crate::precision::{Precision, Real};
 use crate::solver::PhaseTimes;
@@ -25,7 +25,7 @@ pub use newton::dense_inverse;
 
 /// Every material model with its example parameters (`material::Law::EXAMPLE`), as benchmarks use them.
 pub fn bench_models() -> Vec<Model> {
-    Model::ENTRIES.iter().filter_map(|e| Model::example(e.name)).collect()
+    Model::ENTRIES.iter().map(Entry::example_model).collect()
 }
 
 pub const KINDS: [ElementKind; 4] = [ElementKind::Tri3, ElementKind::Quad4, ElementKind::Tet4, ElementKind::Hex8];
@@ -442,7 +442,7 @@ fn kernel_cost(kernel: Costed, case: &BenchCase, real: usize) -> (f64, f64) {
     let (n, nen, dim) = (case.elements() as f64, kind.nodes() as f64, kind.dim() as f64);
     let nqp = crate::element::shape::quadrature(kind).len() as f64;
     let stride = element_out_stride(case.pattern.element_dofs) as f64;
-    let (tangent_flops, stress_flops, energy_flops) = Model::entry(case.model.name()).map_or((0.0, 0.0, 0.0), |e| e.flops);
+    let (tangent_flops, stress_flops, energy_flops) = case.model.row().flops;
     let real = real as f64;
     let element_inputs = real * (nqp * (3.0 * nen + 1.0) + nen * dim) + 4.0 * nen;
     match kernel {

@@ -516,7 +516,7 @@ impl Case {
 /// a list of terms one term shorter (Ogden's third term then has μ = 0, which the kernels
 /// skip): a batch's second material.
 fn stiffened(model: &Model) -> Model {
-    let entry = Model::entry(model.name()).expect("a registered model");
+    let entry = model.row();
     let scaled: Vec<(&str, Vec<f64>)> = entry.example.iter().map(|&(name, v)| (name, v[..v.len().saturating_sub(1).max(1)].iter().map(|x| 1.25 * x).collect())).collect();
     let pairs: Vec<(&str, &[f64])> = scaled.iter().map(|(name, v)| (*name, v.as_slice())).collect();
     (entry.build)(&parameters(&pairs))

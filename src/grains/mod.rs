@@ -252,7 +252,6 @@ pub fn measure(net: &Network, obstacle_names: &[String]) -> Measures {
     let square = |m: &[[f64; 3]; 3], scale: f64| -> Vec<Vec<f64>> { (0..d).map(|i| (0..d).map(|j| 0.5 * (m[i][j] + m[j][i]) * scale).collect()).collect() };
     let fabric = square(&fabric, if between > 0 { 1.0 / between as f64 } else { 0.0 });
     let stress = square(&stress, 1.0 / container_volume);
-    let pressure = (0..d).map(|i| stress[i][i]).sum::<f64>() / d as f64;
     let fabric_anisotropy = if d == 2 { 2.0 * (2.0 * deviatoric_norm2(&fabric)).sqrt() } else { 5.0 * (1.5 * deviatoric_norm2(&fabric)).sqrt() };
     let walls: Vec<WallPressure> = net
         .walls
@@ -280,7 +279,7 @@ pub fn measure(net: &Network, obstacle_names: &[String]) -> Measures {
         sliding_fraction: per(sliding, contacts),
         fabric,
         fabric_anisotropy,
-        pressure,
+        pressure: mean_stress(&stress),
         deviator: deviator(&stress),
         stress,
         walls,
@@ -288,10 +287,15 @@ pub fn measure(net: &Network, obstacle_names: &[String]) -> Measures {
     }
 }
 
+/// `tr m / d` of a `d x d` tensor: a stress's mean stress `p`.
+fn mean_stress(m: &[Vec<f64>]) -> f64 {
+    (0..m.len()).map(|i| m[i][i]).sum::<f64>() / m.len() as f64
+}
+
 /// `s:s` of a `d x d` tensor's deviator `s`.
 fn deviatoric_norm2(m: &[Vec<f64>]) -> f64 {
     let d = m.len();
-    let mean = (0..d).map(|i| m[i][i]).sum::<f64>() / d as f64;
+    let mean = mean_stress(m);
     (0..d).flat_map(|i| (0..d).map(move |j| (i, j))).map(|(i, j)| (m[i][j] - if i == j { mean } else { 0.0 }).powi(2)).sum::<f64>()
 }
 
@@ -331,17 +335,7 @@ pub fn window_means(rows: &[Measures], index: usize, window: f64) -> WindowMeans
     let d = rows[index].stress.len();
     let stress: Vec<Vec<f64>> = (0..d).map(|i| (0..d).map(|j| mean(&|r| r.stress[i][j])).collect()).collect();
     let walls = rows[index].walls.iter().map(|w| WallPressure { name: w.name.clone(), pressure: mean(&|r| r.walls.iter().find(|v| v.name == w.name).map_or(0.0, |v| v.pressure)) }).collect();
-    WindowMeans {
-        from: chosen[0].t,
-        to,
-        steps: chosen.len(),
-        coordination: mean(&|r| r.coordination),
-        pressure: (0..d).map(|i| stress[i][i]).sum::<f64>() / d as f64,
-        deviator: deviator(&stress),
-        stress,
-        walls,
-        wall_pressure: mean(&|r| r.wall_pressure),
-    }
+    WindowMeans { from: chosen[0].t, to, steps: chosen.len(), coordination: mean(&|r| r.coordination), pressure: mean_stress(&stress), deviator: deviator(&stress), stress, walls, wall_pressure: mean(&|r| r.wall_pressure) }
 }
 
 /// The distribution of the normal forces over their mean at one step: a histogram of bins

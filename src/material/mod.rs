@@ -24,7 +24,6 @@ pub use svk::Svk;
 pub use viscous::{BranchStep, Prony, Relaxation, Viscoelastic};
 
 use crate::precision::Real;
-use registry::parameters;
 use tensor::{Mat3, Tangent};
 
 /// A hyperelastic law written in the Green-Lagrange strain E (3x3, symmetric).
@@ -132,7 +131,12 @@ impl Model {
 
     /// The model `name` with its example parameters ([`Law::EXAMPLE`]).
     pub fn example(name: &str) -> Option<Model> {
-        Self::entry(name).map(|e| (e.build)(&parameters(e.example)))
+        Self::entry(name).map(Entry::example_model)
+    }
+
+    /// This model's row of the registry.
+    pub fn row(&self) -> &'static Entry {
+        Self::entry(self.name()).expect("every model has its row in the table")
     }
 
     /// Small-strain (Young's modulus, Poisson ratio), used for wave speeds and time-step hints.

@@ -188,6 +188,11 @@ pub struct Entry {
 }
 
 impl Entry {
+    /// The model with its example parameters ([`Law::EXAMPLE`]).
+    pub fn example_model(&self) -> super::Model {
+        (self.build)(&parameters(self.example))
+    }
+
     pub const fn of<L: Law>(build: fn(&Parameters) -> super::Model) -> Self {
         Self { name: L::NAME, parameters: L::PARAMETERS, bulk: L::BULK, wgsl: L::WGSL, decoupled: L::DECOUPLED, example: L::EXAMPLE, flops: L::FLOPS, check: L::check, build }
     }
