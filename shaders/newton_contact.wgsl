@@ -153,7 +153,7 @@ fn prepare(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) wo
         for (var f = lane; f < n; f += NEWTON_WORKGROUP) {
             var x = real(0.0);
             for (var j = 0u; j < n; j++) {
-                x += inverse[row.inverse_start + j * n + f] * rhs[j];
+                x += inverse[row.inverse_start + packed(j, f)] * rhs[j];
             }
             x0[dof_start + free_dofs[row.free_start + f]] = x;
         }

@@ -1,8 +1,13 @@
 // What the host books at the end of a step for each member of a device Newton call whose step
 // the device began (its committed state is the step's start), at the iterate where its
 // iterations ended: per member, `summary_len(dim)` reals at `m * stride`,
-//   [Σ m v² / 2, Σ m (v - v_t)², Σ Δu ((1 - ξ) f_int,t + ξ f_int), max over nodes of |v|²,
-//    Σ m x (dim), Σ m v (dim), Σ m_node x × v (1 in 2D, 3 in 3D), box of x: low (dim), high (dim)]
+//   [status + 4 x iterations (NewtonState, exact in a real), the residual, the strain energy
+//    (`newton_finish`'s), Σ m v² / 2, Σ m (v - v_t)², Σ Δu ((1 - ξ) f_int,t + ξ f_int), max over
+//    nodes of |v|², Σ m x (dim), Σ m v (dim), Σ m_node x × v (1 in 2D, 3 in 3D)]
+// so that a member whose step's end stays on the device sends one span back, and the box of x
+// in f32 rounded outward (the largest f32 not above the low corner, the smallest not below the
+// high one) at `m * 2 * dim` of `boxes`: low (dim), high (dim). The contact search only needs
+// a box that holds the nodes; half the bytes of the exact one.
 // with v the theta rule's velocity (eq. 15, as `step_commit` computes it), x = X + u. The host
 // then needs neither the member's displacements nor its forces: its energies, momenta, centre
 // of mass and contact box come from these (`Body::take_summary`). One member per invocation.
@@ -21,6 +26,32 @@ const WORKGROUP = 64u;
 @group(0) @binding(8) var<storage, read> jobs: array<Active>;
 @group(0) @binding(9) var<storage, read> dispatch: array<u32>;
 @group(0) @binding(10) var<storage, read_write> summary: array<real>;
+@group(0) @binding(11) var<storage, read> state: array<NewtonState>;
+@group(0) @binding(12) var<storage, read> member_energy: array<real>;
+@group(0) @binding(13) var<storage, read_write> boxes: array<f32>;
+
+// The smallest normal f32: the step away from zero (a subnormal may be flushed to zero).
+const F32_TINY = 1.17549435e-38f;
+
+// The largest f32 not above x (f32(x) rounds by less than a unit in the last place).
+fn f32_below(x: real) -> f32 {
+    let y = f32(x);
+    if real(y) <= x {
+        return y;
+    }
+    if y > 0.0f {
+        return bitcast<f32>(bitcast<u32>(y) - 1u);
+    }
+    if y < 0.0f {
+        return bitcast<f32>(bitcast<u32>(y) + 1u);
+    }
+    return -F32_TINY;
+}
+
+// The smallest f32 not below x.
+fn f32_above(x: real) -> f32 {
+    return -f32_below(-x);
+}
 
 @compute @workgroup_size(WORKGROUP)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
@@ -73,8 +104,12 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         speed2 = max(speed2, s2);
         l += node_mass * cross(x, v);
     }
-    let stride = 4u + 4u * dim + angular;
-    let at = m * stride;
+    let stride = 7u + 2u * dim + angular;
+    let head = m * stride;
+    summary[head] = real(state[m].status + 4u * state[m].iterations);
+    summary[head + 1u] = state[m].residual;
+    summary[head + 2u] = member_energy[m];
+    let at = head + 3u;
     summary[at] = real(0.5) * kinetic;
     summary[at + 1u] = theta_term;
     summary[at + 2u] = force_work;
@@ -82,8 +117,8 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
     for (var i = 0u; i < dim; i++) {
         summary[at + 4u + i] = mx[i];
         summary[at + 4u + dim + i] = p[i];
-        summary[at + 4u + 2u * dim + angular + i] = lo[i];
-        summary[at + 4u + 3u * dim + angular + i] = hi[i];
+        boxes[m * 2u * dim + i] = f32_below(lo[i]);
+        boxes[m * 2u * dim + dim + i] = f32_above(hi[i]);
     }
     if dim == 2u {
         summary[at + 4u + 2u * dim] = l.z;

@@ -1,5 +1,5 @@
 // One Newton increment of each active member with its kept factorisation, applied as the dense
-// inverse of its effective stiffness (a small body: at most MAX_FREE free dofs):
+// inverse of its effective stiffness (its lower triangle, `packed`) (a small body: at most MAX_FREE free dofs):
 //   Δu = K̄⁻¹ (f_c - g) on the free dofs (f_c: the contact forces, zero for a body without
 //   contact points; for a group in contact, those `newton_contact`'s `forces` just applied),
 //   u += Δu,
@@ -40,11 +40,9 @@ fn main(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workg
     workgroupBarrier();
     var sum2 = real(0.0);
     for (var f = lane; f < n; f += NEWTON_WORKGROUP) {
-        // K̄⁻¹ is symmetric: column f read as row f, so that neighbouring invocations read
-        // neighbouring entries.
         var du = real(0.0);
         for (var j = 0u; j < n; j++) {
-            du += inverse[row.inverse_start + j * n + f] * rhs[j];
+            du += inverse[row.inverse_start + packed(j, f)] * rhs[j];
         }
         let d = dof_start + free_dofs[row.free_start + f];
         u[d] += du;

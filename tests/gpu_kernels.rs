@@ -10,7 +10,7 @@ use bifirst::cpu;
 use bifirst::element::{ElementOutput, Formulation, Patches, ReferenceGeometry};
 use bifirst::gpu::shaders::{is_decoupled, is_element_kernel, validate, ElementVariant, SHADERS};
 use bifirst::gpu::types::{
-    summary_len, Active, Coefficients, ContactCall, ContactGroup, ContactState, DofOut, DofState, DofStep, MaterialParams, MemberRange, NewtonMember, NewtonState, StepMotion, MODE_TANGENT, NEWTON_CONVERGED, NEWTON_HOST, NEWTON_ITERATING,
+    summary_len, Active, Coefficients, ContactCall, ContactGroup, ContactState, DofOut, DofState, DofStep, MaterialParams, MemberRange, NewtonMember, NewtonState, StepMotion, StepSummary, MODE_TANGENT, NEWTON_CONVERGED, NEWTON_HOST, NEWTON_ITERATING,
 };
 use bifirst::gpu::uzawa_step::{UzawaPoint, UzawaStepKernel};
 use bifirst::gpu::{ElementFailure, Evaluation, GpuWorld, NewtonCall, WorldBody};
@@ -617,17 +617,29 @@ fn newton_summary_kernel_matches_its_cpu_twin() {
         let reference: Vec<f64> = (0..n).map(|_| 10.0 * value()).collect();
         let u: Vec<f64> = (0..n).map(|_| value()).collect();
         let dof_out: Vec<DofOut<f64>> = (0..n).map(|_| DofOut { f_int: value(), g: value() }).collect();
+        // Each member's Newton state and strain energy travel in its summary.
+        let state: Vec<NewtonState<f64>> = (0..members.len() as u32).map(|m| NewtonState { status: m % 4, iterations: 3 + m, residual: value().abs(), ..NewtonState::default() }).collect();
+        let member_energy: Vec<f64> = (0..members.len()).map(|_| value()).collect();
         let (motion, coefficients) = (StepMotion::of(1e-3, 0.55, dim), Coefficients { factor: 0.7, c1: 3.0 });
         let call = [0usize, 2];
-        let got = bifirst::gpu::world::run_newton_summary(&gpu, &members, &call, (motion, coefficients, &committed, &step, &reference, &u, &dof_out)).expect("the summary kernel runs");
-        let mut twin = vec![0.0; got.len()];
-        let inputs = cpu::SummaryInputs { motion, coefficients, committed: &committed, step: &step, reference: &reference, u: &u, dof_out: &dof_out };
+        let (got, got_boxes) = bifirst::gpu::world::run_newton_summary(&gpu, &members, &call, (motion, coefficients, &committed, &step, &reference, &u, &dof_out, &state, &member_energy)).expect("the summary kernel runs");
+        let (mut twin, mut twin_boxes) = (vec![0.0; got.len()], vec![0.0f32; got_boxes.len()]);
+        let inputs = cpu::SummaryInputs { motion, coefficients, committed: &committed, step: &step, reference: &reference, u: &u, dof_out: &dof_out, state: &state, member_energy: &member_energy };
         let jobs: Vec<Active> = call.iter().map(|&m| Active { member: m as u32, mode: 0 }).collect();
-        cpu::newton_summary(&inputs, &members, &jobs, &mut twin);
+        cpu::newton_summary(&inputs, &members, &jobs, &mut twin, &mut twin_boxes);
+        // The boxes are f32 rounded outward: the same bits, and they hold every node.
+        assert_eq!(got_boxes, twin_boxes, "dim {dim}: the boxes");
         let len = summary_len(dim);
         for m in 0..members.len() {
             let (g, t) = (&got[m * len..(m + 1) * len], &twin[m * len..(m + 1) * len]);
             if call.contains(&m) {
+                let (carried, summary) = StepSummary::of(dim, g, &got_boxes[m * 2 * dim..(m + 1) * 2 * dim]);
+                assert_eq!((carried.status, carried.iterations, carried.residual), (state[m].status, state[m].iterations, state[m].residual), "the state it carries");
+                let r = members[m].dof_start as usize..(members[m].dof_start + members[m].dofs) as usize;
+                for d in r {
+                    let x = reference[d] + u[d];
+                    assert!(summary.low[d % dim] <= x && x <= summary.high[d % dim], "dim {dim} member {m}: dof {d} at {x} outside its box");
+                }
                 let error = g.iter().zip(t).map(|(a, b)| (a - b).abs() / b.abs().max(1e-300)).fold(0.0, f64::max);
                 eprintln!("dim {dim} member {m}: relative error {error:.2e}");
                 assert!(error <= 1e-12, "dim {dim} member {m}: {g:?} against {t:?}");
@@ -1276,7 +1288,7 @@ fn newton_contact_kernels_match_their_cpu_twins() {
                             let mut s = 0.0;
                             for f in 0..n {
                                 for g in 0..n {
-                                    s += hi[f] * inverses[b][f * n + g] * hj[g];
+                                    s += hi[f] * inverses[b][cpu::packed(f, g)] * hj[g];
                                 }
                             }
                             block[3 * a + e] += s / theta_dt;

@@ -623,7 +623,7 @@ fn a_falling_grain_that_steps_on_the_device_sends_nothing_per_dof_up() {
         return;
     }
     // The host takes every grain's step end here (not `hold_states`).
-    let (sim, per_step) = falling_grains(12, 5, true, false);
+    let (sim, per_step) = falling_grains(12, 5, Some(RoundPlacement::Gpu), false);
     let dofs: usize = sim.bodies().iter().map(|b| b.state().u.len()).sum();
     eprintln!("{} grains, {dofs} dofs: bytes per step {per_step:?}", sim.bodies().len());
     // What still crosses: the trial displacements and internal forces down (16 bytes a dof),
@@ -634,17 +634,17 @@ fn a_falling_grain_that_steps_on_the_device_sends_nothing_per_dof_up() {
 }
 
 /// `grains_many` with `count` grains falling under gravity for `steps` steps: a simulation on
-/// the device with every round there (its steps' ends kept there when `hold`), or the CPU
-/// backend's; the bytes each step moved.
-fn falling_grains(count: usize, steps: usize, device: bool, hold: bool) -> (bifirst::solver::Simulation, Vec<u64>) {
+/// the device with its rounds placed by `device` (its steps' ends kept there when `hold`), or
+/// the CPU backend's (`None`); the bytes each step moved.
+fn falling_grains(count: usize, steps: usize, device: Option<RoundPlacement>, hold: bool) -> (bifirst::solver::Simulation, Vec<u64>) {
     let sets: Vec<String> = [format!("packing.count={count}"), "time.end=1.0".into(), "gravity=[0.0,-9.81]".into()].to_vec();
     let loaded = bifirst::scene::load_scene(&scene_path("grains_many"), &sets).expect("scene");
     let mut sim = bifirst::solver::build_simulation(&loaded).expect("simulation");
-    if device {
+    if let Some(rounds) = device {
         let gpu = std::sync::Arc::new(bifirst::gpu::open(None, Some(Precision::F64)).expect("an adapter"));
         let bodies: Vec<_> = sim.bodies().iter().map(|b| b.world_body()).collect();
         let mut world = bifirst::gpu::GpuWorld::new(gpu, &bodies).expect("world");
-        world.rounds = RoundPlacement::Gpu;
+        world.rounds = rounds;
         drop(bodies);
         sim.set_world(Some(world));
         sim.set_hold_states(hold);
@@ -669,9 +669,9 @@ fn falling_grains_that_nothing_is_near_leave_their_step_ends_on_the_device() {
         return;
     }
     let steps = 5;
-    let (mut held, bytes) = falling_grains(400, steps, true, true);
-    let (cpu, _) = falling_grains(400, steps, false, false);
-    let (mut larger, larger_bytes) = falling_grains(3600, steps, true, true);
+    let (mut held, bytes) = falling_grains(400, steps, Some(RoundPlacement::Gpu), true);
+    let (cpu, _) = falling_grains(400, steps, None, false);
+    let (mut larger, larger_bytes) = falling_grains(3600, steps, Some(RoundPlacement::Gpu), true);
     let per_grain = |bytes: &[u64], n: usize| {
         let mut later: Vec<f64> = bytes[1..].iter().map(|&b| b as f64 / n as f64).collect();
         later.sort_by(f64::total_cmp);
@@ -699,6 +699,31 @@ fn falling_grains_that_nothing_is_near_leave_their_step_ends_on_the_device() {
     assert!(held.bodies().iter().all(|b| b.held_state().is_none()));
     let worst = held.bodies().iter().zip(cpu.bodies()).flat_map(|(a, b)| a.state().u.iter().zip(&b.state().u).chain(a.state().v.iter().zip(&b.state().v))).map(|(a, b)| (a - b).abs() / (1e-3 + b.abs())).fold(0.0, f64::max);
     assert!(worst <= 1e-9, "the states brought back are the CPU backend's: {worst:.3e}");
+}
+
+#[test]
+fn auto_rounds_keep_falling_grains_on_the_device_of_a_software_adapter_as_on_hardware() {
+    // Issue 59: `--rounds auto` kept every round after a step's first on the CPU of a software
+    // adapter, so the issue's `--backend gpu` command sent each falling grain's state across
+    // the bus every step on lavapipe (4 320 bytes a grain of this scene), a path no hardware
+    // took. A software adapter now decides as the hardware does: 400 falling grains are
+    // elements enough for a later round there, their iterations and
+    // step ends stay on the device, and a step moves less than a grain's displacements alone.
+    // On two threads, as CI has: `auto` weighs the elements against the run's threads.
+    let test = "auto_rounds_keep_falling_grains_on_the_device_of_a_software_adapter_as_on_hardware";
+    if !gpu_available(test) {
+        return;
+    }
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().expect("a pool");
+    let (held, bytes) = pool.install(|| falling_grains(400, 5, Some(RoundPlacement::Auto), true));
+    let (cpu, _) = falling_grains(400, 5, None, false);
+    let mut later: Vec<f64> = bytes[1..].iter().map(|&b| b as f64 / 400.0).collect();
+    later.sort_by(f64::total_cmp);
+    let dofs_per_grain = held.bodies().iter().map(|b| b.state().u.len()).sum::<usize>() as f64 / 400.0;
+    eprintln!("bytes a grain moves per step after the first: {later:?}; {dofs_per_grain:.0} dofs a grain");
+    assert!(later[later.len() / 2] < 8.0 * dofs_per_grain, "less than a grain's displacements alone: {later:?}");
+    let scale = cpu.energies().total.abs();
+    assert!((held.energies().total - cpu.energies().total).abs() <= 1e-9 * scale, "the CPU backend's energies");
 }
 
 #[test]

@@ -5,7 +5,8 @@
 
 // What a member's iterations need, set by the host for the call.
 struct NewtonMember {
-    // Where its K̄⁻¹ (free x free, row by row) starts in `inverse`.
+    // Where its K̄⁻¹ (the lower triangle of free x free, row by row: `packed`) starts in
+    // `inverse`.
     inverse_start: u32,
     // Where its free dofs (indices into the member's dofs, ascending) start in `free`.
     free_start: u32,
@@ -88,4 +89,11 @@ fn reduce_max(lane: u32, value: real) -> real {
     let most = partial[0];
     workgroupBarrier();
     return most;
+}
+
+// Where entry (i, j) of a symmetric matrix lies in its lower triangle stored row by row: half
+// the entries of the full matrix, read the same (K̄⁻¹ is symmetric).
+fn packed(i: u32, j: u32) -> u32 {
+    let a = max(i, j);
+    return a * (a + 1u) / 2u + min(i, j);
 }

@@ -28,13 +28,19 @@ fn reduce_max(partial: [Real; NEWTON_WORKGROUP]) -> Real {
     partial.into_iter().fold(0.0, Real::max)
 }
 
-/// Entry `f` of `K̄⁻¹ rhs` for a member whose `K̄⁻¹` is at `row.inverse_start`: column `f` read
-/// as row `f` (`K̄⁻¹` is symmetric), as the shaders read it, summed in `rhs`'s order.
+/// Where entry `(i, j)` of a symmetric matrix lies in its lower triangle stored row by row
+/// (`packed` of `newton.wgsl`).
+pub fn packed(i: usize, j: usize) -> usize {
+    let a = i.max(j);
+    a * (a + 1) / 2 + i.min(j)
+}
+
+/// Entry `f` of `K̄⁻¹ rhs` for a member whose `K̄⁻¹` (its lower triangle, [`packed`]) is at
+/// `row.inverse_start`, as the shaders read it, summed in `rhs`'s order.
 fn inverse_times(inverse: &[Real], row: &NewtonMember<Real>, f: usize, rhs: &[Real]) -> Real {
-    let n = row.free_count as usize;
     let mut x = 0.0;
     for (j, r) in rhs.iter().enumerate() {
-        x += inverse[row.inverse_start as usize + j * n + f] * r;
+        x += inverse[row.inverse_start as usize + packed(j, f)] * r;
     }
     x
 }
@@ -158,14 +164,35 @@ pub struct SummaryInputs<'a> {
     pub reference: &'a [Real],
     pub u: &'a [Real],
     pub dof_out: &'a [DofOut<Real>],
+    pub state: &'a [NewtonState<Real>],
+    pub member_energy: &'a [Real],
+}
+
+/// The largest f32 not above `x` (`f32_below` of `newton_summary.wgsl`).
+pub fn f32_below(x: Real) -> f32 {
+    let y = x as f32;
+    if Real::from(y) <= x {
+        y
+    } else if y > 0.0 {
+        f32::from_bits(y.to_bits() - 1)
+    } else if y < 0.0 {
+        f32::from_bits(y.to_bits() + 1)
+    } else {
+        -f32::MIN_POSITIVE
+    }
+}
+
+/// The smallest f32 not below `x`.
+pub fn f32_above(x: Real) -> f32 {
+    -f32_below(-x)
 }
 
 /// `newton_summary`: per listed member, at `m * summary_len(dim)` of `summary`, what the host
-/// books at the end of its step ([`crate::gpu::types::summary_len`] says the layout).
-pub fn newton_summary(inputs: &SummaryInputs, members: &[MemberRange], call: &[Active], summary: &mut [Real]) {
-    let SummaryInputs { motion, coefficients, committed, step, reference, u, dof_out } = *inputs;
+/// books at the end of its step ([`crate::gpu::types::summary_len`] says the layout), and at
+/// `m * 2 dim` of `boxes` the box of its nodes in f32, rounded outward.
+pub fn newton_summary(inputs: &SummaryInputs, members: &[MemberRange], call: &[Active], summary: &mut [Real], boxes: &mut [f32]) {
+    let SummaryInputs { motion, coefficients, committed, step, reference, u, dof_out, state, member_energy } = *inputs;
     let dim = (motion.dim as usize).clamp(2, 3);
-    let angular = if dim == 2 { 1 } else { 3 };
     let xi = coefficients.factor;
     for job in call {
         let m = job.member as usize;
@@ -202,7 +229,11 @@ pub fn newton_summary(inputs: &SummaryInputs, members: &[MemberRange], call: &[A
                 l[i] += node_mass * cross[i];
             }
         }
-        let at = m * summary_len(dim);
+        let head = m * summary_len(dim);
+        summary[head] = Real::from(state[m].status + 4 * state[m].iterations);
+        summary[head + 1] = state[m].residual;
+        summary[head + 2] = member_energy[m];
+        let at = head + 3;
         summary[at] = 0.5 * kinetic;
         summary[at + 1] = theta_term;
         summary[at + 2] = force_work;
@@ -210,8 +241,8 @@ pub fn newton_summary(inputs: &SummaryInputs, members: &[MemberRange], call: &[A
         for i in 0..dim {
             summary[at + 4 + i] = mx[i];
             summary[at + 4 + dim + i] = p[i];
-            summary[at + 4 + 2 * dim + angular + i] = lo[i];
-            summary[at + 4 + 3 * dim + angular + i] = hi[i];
+            boxes[m * 2 * dim + i] = f32_below(lo[i]);
+            boxes[m * 2 * dim + dim + i] = f32_above(hi[i]);
         }
         if dim == 2 {
             summary[at + 4 + 2 * dim] = l[2];

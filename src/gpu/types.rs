@@ -85,12 +85,13 @@ impl StepMotion<f64> {
     }
 }
 
-/// The reals `newton_summary` writes per member in a scene of dimension `dim`: kinetic energy, the
-/// theta and force terms of the step's dissipation, the largest squared nodal speed, then
-/// `Σ m x`, `Σ m v`, the angular momentum (1 component in 2D, 3 in 3D) and the box of the
-/// nodes (low, high), `dim` each but the angular momentum.
+/// The reals `newton_summary` writes per member in a scene of dimension `dim`: its Newton
+/// state's status and iterations (`status + 4 iterations`), residual and strain energy, the
+/// kinetic energy, the theta and force terms of the step's dissipation, the largest squared
+/// nodal speed, then `Σ m x`, `Σ m v` (`dim` each) and the angular momentum (1 component in
+/// 2D, 3 in 3D). The box of the nodes goes apart, in f32 (`2 dim` of them).
 pub const fn summary_len(dim: usize) -> usize {
-    4 + 4 * dim + if dim == 2 { 1 } else { 3 }
+    7 + 2 * dim + if dim == 2 { 1 } else { 3 }
 }
 
 /// A body's step end as the device reduced it (`newton_summary`, with the strain energy of
@@ -108,7 +109,7 @@ pub struct StepSummary {
     pub mass_moment: [f64; 3],
     pub momentum: [f64; 3],
     pub angular_momentum: [f64; 3],
-    /// The box of the body's nodes.
+    /// A box that holds the body's nodes (f32, rounded outward).
     pub low: [f64; 3],
     pub high: [f64; 3],
     pub strain: f64,
@@ -116,9 +117,21 @@ pub struct StepSummary {
 }
 
 impl StepSummary {
-    /// From `newton_summary`'s `summary_len(dim)` reals.
-    pub fn of(dim: usize, reals: &[f64], strain: f64, residual: f64) -> Self {
-        let angular = if dim == 2 { 1 } else { 3 };
+    /// The Newton state a summary carries (status, iterations, residual: what the host reads
+    /// of a member whose step's end stays on the device), and the summary itself.
+    /// `boxes`: its box (`2 dim` f32, low then high).
+    pub fn of(dim: usize, summary: &[f64], boxes: &[f32]) -> (NewtonState<f64>, Self) {
+        let word = summary[0] as u32;
+        let state = NewtonState { status: word % 4, iterations: word / 4, residual: summary[1], ..NewtonState::default() };
+        let mut s = Self::from_reals(dim, &summary[3..], summary[2], summary[1]);
+        for i in 0..dim {
+            s.low[i] = f64::from(boxes[i]);
+            s.high[i] = f64::from(boxes[dim + i]);
+        }
+        (state, s)
+    }
+
+    fn from_reals(dim: usize, reals: &[f64], strain: f64, residual: f64) -> Self {
         let mut s = Self { kinetic: reals[0], theta_term: reals[1], force_work: reals[2], max_speed: reals[3].sqrt(), strain, residual, ..Self::default() };
         s.mass_moment[..dim].copy_from_slice(&reals[4..4 + dim]);
         s.momentum[..dim].copy_from_slice(&reals[4 + dim..4 + 2 * dim]);
@@ -127,8 +140,6 @@ impl StepSummary {
         } else {
             s.angular_momentum.copy_from_slice(&reals[4 + 2 * dim..4 + 2 * dim + 3]);
         }
-        s.low[..dim].copy_from_slice(&reals[4 + 2 * dim + angular..4 + 3 * dim + angular]);
-        s.high[..dim].copy_from_slice(&reals[4 + 3 * dim + angular..4 + 4 * dim + angular]);
         s
     }
 }

@@ -263,6 +263,8 @@ enum Source {
     NewtonForces,
     /// A device Newton call's end-of-step summary per member (`newton_summary`).
     Summary,
+    /// The box of each member's nodes, in f32 (`newton_summary`).
+    Boxes,
     /// The committed states of steps begun on the device.
     Committed,
 }
@@ -753,6 +755,7 @@ impl GpuWorld {
                 Source::MemberEnergy => &b.newton.as_ref().expect("a batch whose Newton energies are read has them").member_energy,
                 Source::NewtonForces => &b.newton.as_ref().expect("a batch whose Newton forces are read has them").packed_forces,
                 Source::Summary => &b.newton.as_ref().expect("a batch whose summaries are read has them").summary,
+                Source::Boxes => &b.newton.as_ref().expect("a batch whose summaries are read has them").boxes,
                 Source::Committed => b.newton.as_ref().expect("a batch whose committed states are read has them").resident.committed(),
             };
             encoder.copy_buffer_to_buffer(source, c.source.start, target, c.target, c.source.end - c.source.start);

@@ -126,8 +126,8 @@ impl CholeskySolver {
     }
 
     /// Solves in place with the last factorisation.
-    /// The inverse of the matrix whose lower triangle `values` holds (this pattern's), row by
-    /// row ([`dense_inverse`]).
+    /// The lower triangle, row by row, of the inverse of the matrix whose lower triangle
+    /// `values` holds (this pattern's) ([`dense_inverse`]).
     pub fn dense_inverse(&self, values: &[Real]) -> Option<Vec<Real>> {
         let pattern = &self.symbolic.pattern;
         dense_inverse(pattern.col_ptr(), pattern.row_idx(), values)
@@ -152,7 +152,8 @@ impl CholeskySolver {
     }
 }
 
-/// The inverse, row by row, of the symmetric matrix whose lower triangle `values` fills the CSC
+/// The lower triangle, row by row (`cpu::packed`), of the inverse of the symmetric
+/// matrix whose lower triangle `values` fills the CSC
 /// pattern `col_ptr`, `row_idx`, from a dense Cholesky factorisation: for a body of tens of dofs
 /// (a grain) a few dense kernels, where a sparse factor's solves of the identity's columns walk
 /// the factor once per column (doc/benchmarks.md, "A grain in flight in one submission a step").
@@ -172,8 +173,8 @@ pub fn dense_inverse(col_ptr: &[u32], row_idx: &[u32], values: &[Real]) -> Optio
     factor::cholesky_in_place(a.as_mut(), Default::default(), Par::Seq, stack, Default::default()).ok()?;
     let mut out = faer::Mat::<Real>::zeros(n, n);
     inverse::inverse(out.as_mut(), a.as_ref(), Par::Seq, stack);
-    // The lower triangle is written; the matrix is symmetric.
-    Some((0..n * n).map(|at| (at / n, at % n)).map(|(i, j)| out[(i.max(j), i.min(j))]).collect())
+    // The lower triangle is written; the matrix is symmetric, and the device reads half of it.
+    Some((0..n).flat_map(|i| (0..=i).map(move |j| (i, j))).map(|(i, j)| out[(i, j)]).collect())
 }
 
 #[cfg(test)]
@@ -211,7 +212,9 @@ mod tests {
         }
         solver.solve_columns(&mut columns, n);
         let largest = columns.iter().fold(0.0 as Real, |m, x| m.max(x.abs()));
-        let worst = dense.iter().zip(&columns).fold(0.0 as Real, |m, (a, b)| m.max((a - b).abs()));
+        assert_eq!(dense.len(), n * (n + 1) / 2, "the lower triangle");
+        let lower = (0..n).flat_map(|i| (0..=i).map(move |j| (i, j)));
+        let worst = dense.iter().zip(lower).fold(0.0 as Real, |m, (a, (i, j))| m.max((a - columns[j * n + i]).abs()));
         assert!(worst <= 1e-13 * largest, "{worst:e} against {largest:e}");
         assert_eq!(solver.dense_inverse(&values), Some(dense));
     }

@@ -58,10 +58,11 @@ struct CallPlan<'a> {
 /// summary.
 #[derive(Clone, Copy, Default)]
 struct Landing {
-    state: usize,
+    /// A call that is not kept: where its Newton state and strain energy land.
+    state_and_energy: Option<(usize, usize)>,
     iterate: Option<[usize; 3]>,
-    energy: usize,
-    summary: Option<usize>,
+    /// A kept call: its summary, which holds its state and energy too, and its box.
+    summary: Option<(usize, usize)>,
     /// A kept call's displacements, when it sends them ([`NewtonCall::positions`]).
     positions: Option<usize>,
 }
@@ -73,12 +74,19 @@ struct Landing {
 fn unpack_calls(precision: Precision, calls: &mut [NewtonCall], (landing, coefficients, dim): (&[Landing], Coefficients<Real>, usize), tangents: &[(usize, usize, usize)], bytes: &[u8]) {
     let real = precision.size();
     calls.par_iter_mut().zip(landing).for_each(|(call, at)| {
-        call.outcome = bytemuck::pod_read_unaligned(&bytes[at.state..at.state + std::mem::size_of::<NewtonState<Real>>()]);
-        let strain = super::from_device(precision, &bytes[at.energy..at.energy + real])[0];
-        call.strain_energy = Some(strain);
-        if let Some(s) = at.summary {
-            let reals = super::from_device(precision, &bytes[s..s + summary_len(dim) * real]);
-            call.summary = (call.outcome.status == NEWTON_CONVERGED).then(|| StepSummary::of(dim, &reals, strain, call.outcome.residual));
+        match (at.state_and_energy, at.summary) {
+            (Some((state, energy)), _) => {
+                call.outcome = bytemuck::pod_read_unaligned(&bytes[state..state + std::mem::size_of::<NewtonState<Real>>()]);
+                call.strain_energy = Some(super::from_device(precision, &bytes[energy..energy + real])[0]);
+            }
+            (None, Some((s, b))) => {
+                let boxes: &[f32] = bytemuck::cast_slice(&bytes[b..b + 8 * dim]);
+                let (state, summary) = StepSummary::of(dim, &super::from_device(precision, &bytes[s..s + summary_len(dim) * real]), boxes);
+                call.outcome = state;
+                call.strain_energy = Some(summary.strain);
+                call.summary = (state.status == NEWTON_CONVERGED).then_some(summary);
+            }
+            (None, None) => unreachable!("a call reads its state or its summary"),
         }
         if let Some(iterate) = at.iterate {
             unpack_iterate(precision, call, iterate, coefficients, bytes);
@@ -236,6 +244,8 @@ pub(super) struct NewtonBuffers {
     /// these few reals instead of its displacements and forces.
     summarise: Pass,
     pub(super) summary: Buffer,
+    /// Each member's box in f32 (`newton_summary`).
+    pub(super) boxes: Buffer,
     update: Pass,
     judge: Pass,
     compact: Pass,
@@ -259,7 +269,8 @@ pub(super) struct NewtonBuffers {
     pub(super) resident: super::step::Resident,
 }
 
-/// Where each member's `K̄⁻¹` lies in a batch's `inverse` buffer: members of at most
+/// Where each member's `K̄⁻¹` (its lower triangle, `cpu::packed`) lies in a batch's
+/// `inverse` buffer: members of at most
 /// `NEWTON_MAX_FREE` free dofs, in member order, while the buffer stays within the device's
 /// binding limit; `None` for the others (they iterate on the host).
 pub(super) fn inverse_slots(free_counts: &[usize], real: usize, max_bytes: u64) -> (Vec<Option<u32>>, usize) {
@@ -267,10 +278,11 @@ pub(super) fn inverse_slots(free_counts: &[usize], real: usize, max_bytes: u64) 
     let slots = free_counts
         .iter()
         .map(|&n| {
-            let fits = n > 0 && n <= NEWTON_MAX_FREE && ((total + n * n) * real) as u64 <= max_bytes && total + n * n <= u32::MAX as usize;
+            let size = n * (n + 1) / 2;
+            let fits = n > 0 && n <= NEWTON_MAX_FREE && ((total + size) * real) as u64 <= max_bytes && total + size <= u32::MAX as usize;
             fits.then(|| {
-                total += n * n;
-                (total - n * n) as u32
+                total += size;
+                (total - size) as u32
             })
         })
         .collect();
@@ -338,6 +350,7 @@ impl NewtonBuffers {
             &[("energy", &b.energy), ("dof_out", &b.dof_out), ("members", &b.member_buffer), ("jobs", &call), ("dispatch", &dispatch), ("member_energy", &member_energy), ("forces", &packed_forces)],
         );
         let summary = buffer(gpu, "summary", members * crate::gpu::types::summary_len(3) * real, storage | BufferUsages::COPY_SRC);
+        let boxes = buffer(gpu, "boxes", members * 6 * 4, storage | BufferUsages::COPY_SRC);
         let reference = super::buffer_init(gpu, "reference", &super::to_device(gpu.precision, &b.reference), storage);
         let summarise = Pass::bound(
             gpu,
@@ -356,6 +369,9 @@ impl NewtonBuffers {
                 ("jobs", &call),
                 ("dispatch", &dispatch),
                 ("summary", &summary),
+                ("state", &state),
+                ("member_energy", &member_energy),
+                ("boxes", &boxes),
             ],
         );
         let initial = NewtonState::<Real> { status: NEWTON_ITERATING, residual: Real::MAX, previous_residual: Real::MAX, ..NewtonState::default() };
@@ -368,6 +384,7 @@ impl NewtonBuffers {
             call_host: Vec::new(),
             summarise,
             summary,
+            boxes,
             inverse,
             free,
             newton,
@@ -566,7 +583,7 @@ impl GpuWorld {
             let entries: usize = members.iter().map(|&(_, m)| self.batches[batch].members[m].nonzeros as usize).sum();
             (points * 3 * real + groups * std::mem::size_of::<ContactState<Real>>() + 16 + entries * real) as u64
         });
-        let per_member = 16 + std::mem::size_of::<NewtonState<Real>>() + summary_len(3) * real;
+        let per_member = 16 + std::mem::size_of::<NewtonState<Real>>() + summary_len(3) * real + 6 * 4;
         // (a kept call's displacements fit in the room of another's displacements and forces)
         let bytes = (total_members * per_member + total_dofs * 2 * real) as u64 + if list.is_empty() { 0 } else { self.readback.size() } + contact_bytes;
         self.newton_target_of(bytes)
@@ -666,25 +683,21 @@ impl GpuWorld {
         let real = self.gpu.precision.size();
         let mut landing = vec![Landing::default(); calls.len()];
         for (batch, mine, _) in work {
-            let members: Vec<usize> = mine.iter().map(|&(_, m)| m).collect();
-            let state_size = std::mem::size_of::<NewtonState<Real>>() as u64;
-            let state_span = |m: usize| m as u64 * state_size..(m as u64 + 1) * state_size;
-            let states = readback.queue_runs(*batch, Source::NewtonState, &members, &state_span);
-            let energy_span = |m: usize| (m * real) as u64..((m + 1) * real) as u64;
-            let energies = readback.queue_runs(*batch, Source::MemberEnergy, &members, &energy_span);
             let (kept, others): (Vec<_>, Vec<_>) = mine.iter().partition(|&&(i, _)| calls[i].keep);
+            for (&(i, _), at) in others.iter().zip(self.queue_state_and_energy(readback, *batch, &others)) {
+                landing[i].state_and_energy = Some(at);
+            }
             let iterates = self.queue_iterates(readback, *batch, &others);
             let summary_span = |m: usize| (m * summary_len(dim) * real) as u64..((m + 1) * summary_len(dim) * real) as u64;
-            let summaries = readback.queue_runs(*batch, Source::Summary, &kept.iter().map(|&(_, m)| m).collect::<Vec<_>>(), &summary_span);
-            for (k, &(i, _)) in mine.iter().enumerate() {
-                landing[i].state = states[k];
-                landing[i].energy = energies[k];
-            }
+            let kept_members: Vec<usize> = kept.iter().map(|&(_, m)| m).collect();
+            let summaries = readback.queue_runs(*batch, Source::Summary, &kept_members, &summary_span);
+            let box_span = |m: usize| (m * 8 * dim) as u64..((m + 1) * 8 * dim) as u64;
+            let boxes = readback.queue_runs(*batch, Source::Boxes, &kept_members, &box_span);
             for (&(i, _), at) in others.iter().zip(iterates) {
                 landing[i].iterate = Some(at);
             }
-            for (&(i, _), at) in kept.iter().zip(summaries) {
-                landing[i].summary = Some(at);
+            for ((&(i, _), at), b) in kept.iter().zip(summaries).zip(boxes) {
+                landing[i].summary = Some((at, b));
             }
             let placed: Vec<(usize, usize)> = kept.iter().copied().filter(|&(i, _)| calls[i].positions).collect();
             let b = &self.batches[*batch];
@@ -697,6 +710,19 @@ impl GpuWorld {
             }
         }
         landing
+    }
+
+    /// Queues the Newton states and strain energies of the listed calls `(call, member)` of a
+    /// batch (in member order); returns where each call's land.
+    fn queue_state_and_energy(&self, readback: &mut ReadBack, batch: usize, mine: &[(usize, usize)]) -> Vec<(usize, usize)> {
+        let real = self.gpu.precision.size();
+        let members: Vec<usize> = mine.iter().map(|&(_, m)| m).collect();
+        let state_size = std::mem::size_of::<NewtonState<Real>>() as u64;
+        let state_span = |m: usize| m as u64 * state_size..(m as u64 + 1) * state_size;
+        let states = readback.queue_runs(batch, Source::NewtonState, &members, &state_span);
+        let energy_span = |m: usize| (m * real) as u64..((m + 1) * real) as u64;
+        let energies = readback.queue_runs(batch, Source::MemberEnergy, &members, &energy_span);
+        states.into_iter().zip(energies).collect()
     }
 
     /// Queues the failure flags, displacements and internal forces of the listed calls `(call,
@@ -725,18 +751,21 @@ impl GpuWorld {
             return Ok(());
         }
         let mut readback = ReadBack::default();
-        let mut landing: Vec<(usize, [usize; 3])> = Vec::new();
+        let mut landing: Vec<(usize, [usize; 3], usize)> = Vec::new();
         for (batch, mine, _) in work {
             let theirs: Vec<(usize, usize)> = mine.iter().copied().filter(|&(i, _)| wanted(&calls[i])).collect();
+            let states = self.queue_state_and_energy(&mut readback, *batch, &theirs);
             let at = self.queue_iterates(&mut readback, *batch, &theirs);
-            landing.extend(theirs.iter().map(|&(i, _)| i).zip(at));
+            landing.extend(theirs.iter().zip(at).zip(states).map(|((&(i, _), at), (state, _))| (i, at, state)));
         }
         let target = self.newton_target_of(readback.end);
         let encoder = self.encoder("newton iterates");
         let precision = self.gpu.precision;
         self.read_back_into(&target, encoder, &readback, "newton_update", times, Instant::now(), |bytes| {
-            for &(i, at) in &landing {
+            for &(i, at, state) in &landing {
                 calls[i].keep = false;
+                // The whole state: the host goes on from the device's last increment.
+                calls[i].outcome = bytemuck::pod_read_unaligned(&bytes[state..state + std::mem::size_of::<NewtonState<Real>>()]);
                 unpack_iterate(precision, &mut calls[i], at, coefficients, bytes);
             }
         })
@@ -853,7 +882,7 @@ impl GpuWorld {
             let slot = b.inverse_slot[m].expect("a capable body has an inverse slot");
             let (free_start, free_count) = b.free_range[m];
             if let Some(inverse) = call.inverse.take() {
-                assert_eq!(inverse.len(), (free_count * free_count) as usize, "K̄⁻¹ of the member's free dofs");
+                assert_eq!(inverse.len(), (free_count * (free_count + 1) / 2) as usize, "the lower triangle of K̄⁻¹ of the member's free dofs");
                 let (offset, bytes) = (slot as u64 * real, inverse.len() as u64 * real);
                 match inverse_runs.last_mut() {
                     Some((_, end, run)) if *end == offset => {

@@ -12,7 +12,7 @@
 //! again.
 
 use super::{buffer, Batch, GpuWorld, Mirror, Pass, WORKGROUP};
-use crate::gpu::types::{summary_len, Active, Coefficients, DofOut, DofState, DofStep, MemberRange, StepMotion, MODE_FORCES};
+use crate::gpu::types::{summary_len, Active, Coefficients, DofOut, DofState, DofStep, MemberRange, NewtonState, StepMotion, MODE_FORCES};
 use crate::gpu::{Gpu, GpuError};
 use crate::policy::PhaseTimes;
 use crate::precision::{same_bits, Precision, Real};
@@ -446,19 +446,21 @@ pub fn run_step_kernels(
 
 /// What `newton_summary` reads besides the members and the call's list: the step's motion and
 /// coefficients, the committed states, the step inputs, every dof's reference coordinate, the
-/// iterate and its forces.
-pub type SummaryBuffers<'a> = (StepMotion<Real>, Coefficients<Real>, &'a [DofState<Real>], &'a [DofStep<Real>], &'a [Real], &'a [Real], &'a [DofOut<Real>]);
+/// iterate and its forces, and the members' Newton states and strain energies.
+pub type SummaryBuffers<'a> = (StepMotion<Real>, Coefficients<Real>, &'a [DofState<Real>], &'a [DofStep<Real>], &'a [Real], &'a [Real], &'a [DofOut<Real>], &'a [NewtonState<Real>], &'a [Real]);
 
 /// `newton_summary` over the members `call` lists, alone on an f64 device from the given
-/// buffers; the summaries it writes (`summary_len(dim)` reals per member, zero for the others),
-/// for the parity tests with the CPU twin.
-pub fn run_newton_summary(gpu: &Gpu, members: &[MemberRange], call: &[usize], (motion, coefficients, committed, step, reference, u, dof_out): SummaryBuffers) -> Result<Vec<Real>, GpuError> {
+/// buffers; the summaries and boxes it writes (`summary_len(dim)` reals and `2 dim` f32 per
+/// member, zero for the others), for the parity tests with the CPU twin.
+pub fn run_newton_summary(gpu: &Gpu, members: &[MemberRange], call: &[usize], (motion, coefficients, committed, step, reference, u, dof_out, state, member_energy): SummaryBuffers) -> Result<(Vec<Real>, Vec<f32>), GpuError> {
     assert_eq!(gpu.precision, Precision::F64, "the device keeps committed states in f64 only");
     let pipeline = gpu.pipeline_at("newton_summary", "main", None)?;
     let read = BufferUsages::STORAGE;
     let init = |label: &str, bytes: &[u8], usage: BufferUsages| super::buffer_init(gpu, label, bytes, usage);
     let size = members.len() * summary_len(motion.dim as usize);
     let summary = init("summary", bytemuck::cast_slice(&vec![0.0 as Real; size]), read | BufferUsages::COPY_SRC);
+    let box_size = members.len() * 2 * motion.dim as usize;
+    let boxes = init("boxes", bytemuck::cast_slice(&vec![0.0f32; box_size]), read | BufferUsages::COPY_SRC);
     let mut dispatch = [0u32; super::newton::DISPATCH_WORDS];
     dispatch[super::newton::DISPATCH_WORDS - 1] = call.len() as u32;
     let jobs: Vec<Active> = call.iter().map(|&m| Active { member: m as u32, mode: MODE_FORCES }).collect();
@@ -473,19 +475,24 @@ pub fn run_newton_summary(gpu: &Gpu, members: &[MemberRange], call: &[usize], (m
         ("members", init("members", bytemuck::cast_slice(members), read)),
         ("jobs", init("jobs", bytemuck::cast_slice(&jobs), read)),
         ("dispatch", init("dispatch", bytemuck::cast_slice(&dispatch), read)),
+        ("state", init("state", bytemuck::cast_slice(state), read)),
+        ("member_energy", init("member energy", bytemuck::cast_slice(member_energy), read)),
     ];
     let mut bindings: Vec<(&str, &Buffer)> = buffers.iter().map(|(name, b)| (*name, b)).collect();
     bindings.push(("summary", &summary));
+    bindings.push(("boxes", &boxes));
     let pass = Pass::bound(gpu, pipeline, ("newton_summary", "main"), None, &bindings);
     let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("newton summary") });
     {
         let mut compute = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("newton summary"), timestamp_writes: None });
         pass.dispatch(gpu, &mut compute, call.len().div_ceil(WORKGROUP).max(1) as u32);
     }
-    let staging = buffer_of(gpu, size * 8);
+    let (staging, box_staging) = (buffer_of(gpu, size * 8), buffer_of(gpu, box_size * 4));
     encoder.copy_buffer_to_buffer(&summary, 0, &staging, 0, (size * 8) as u64);
+    encoder.copy_buffer_to_buffer(&boxes, 0, &box_staging, 0, (box_size * 4) as u64);
     gpu.submit(encoder)?;
-    Ok(bytemuck::pod_collect_to_vec(&gpu.read_range("newton_summary", &staging, (size * 8) as u64)?))
+    let summaries = bytemuck::pod_collect_to_vec(&gpu.read_range("newton_summary", &staging, (size * 8) as u64)?);
+    Ok((summaries, bytemuck::pod_collect_to_vec(&gpu.read_range("newton_summary", &box_staging, (box_size * 4) as u64)?)))
 }
 
 /// A mappable buffer of `bytes` for a read-back.

@@ -95,10 +95,11 @@ impl Body {
         self.work.factor_version
     }
 
-    /// `K̄⁻¹` of the free dofs of the kept factorisation, row by row, for a device that applies
-    /// it: a dense inverse of the values factorised, which the body holds while it has no newer
-    /// tangent ([`Body::kept_factor`]); else, or if the dense factorisation fails, the columns
-    /// of the factor's solves with the identity (`K̄` is symmetric).
+    /// `K̄⁻¹` of the free dofs of the kept factorisation, its lower triangle row by row
+    /// (`cpu::packed`), for a device that applies it: a dense inverse of the values
+    /// factorised, which the body holds while it has no newer tangent ([`Body::kept_factor`]);
+    /// else, or if the dense factorisation fails, the factor's solves of the identity's columns,
+    /// entry `(i, j)`, `i >= j`, from column `j` (`K̄` is symmetric).
     pub fn effective_inverse(&mut self, times: &mut PhaseTimes) -> Vec<Real> {
         if !self.work.tangent_current {
             let t0 = Instant::now();
@@ -114,7 +115,7 @@ impl Body {
             x[f * n + f] = 1.0;
         }
         self.solve_effective(&mut x, times);
-        x
+        (0..n).flat_map(|i| (0..=i).map(move |j| (i, j))).map(|(i, j)| x[j * n + i]).collect()
     }
 
     /// The body's share of device Newton iterations from its evaluated iterate: the tolerances
