@@ -10,10 +10,11 @@ use bifirst::cpu;
 use bifirst::element::{ElementOutput, Formulation, Patches, ReferenceGeometry};
 use bifirst::gpu::shaders::{is_decoupled, is_element_kernel, validate, ElementVariant, SHADERS};
 use bifirst::gpu::types::{
-    summary_len, Active, Coefficients, ContactCall, ContactGroup, ContactState, DofOut, DofState, DofStep, MaterialParams, MemberRange, NewtonMember, NewtonState, StepMotion, StepSummary, MODE_TANGENT, NEWTON_CONVERGED, NEWTON_HOST, NEWTON_ITERATING,
+    summary_len, Active, Coefficients, ContactCall, ContactGroup, ContactState, DofOut, DofState, DofStep, Inversion, MaterialParams, MemberRange, NewtonMember, NewtonState, StepMotion, StepSummary, MODE_TANGENT, NEWTON_CONVERGED, NEWTON_HOST,
+    NEWTON_ITERATING,
 };
 use bifirst::gpu::uzawa_step::{UzawaPoint, UzawaStepKernel};
-use bifirst::gpu::{ElementFailure, Evaluation, GpuWorld, NewtonCall, WorldBody};
+use bifirst::gpu::{ElementFailure, Evaluation, GpuWorld, Inverse, NewtonCall, WorldBody};
 use bifirst::material::registry::parameters;
 use bifirst::material::{Model, Relaxation};
 use bifirst::mesh::{generate, ElementKind, Mesh};
@@ -179,6 +180,12 @@ fn newton_structs_match_the_shader_layout() {
             let (members, span) = naga_layout(&module, "NewtonState");
             assert_eq!((members, span as usize), (layout(&state_u32, &state_real), sizes[1]), "{kernel} {}", precision.name());
         }
+    }
+    // `newton_invert`'s job: four u32.
+    for precision in PRECISIONS {
+        let module = validate("newton_invert", precision, None).unwrap();
+        let fields = ["member", "values_start", "pattern_start", "pad"].iter().enumerate().map(|(i, f)| (f.to_string(), 4 * i as u32)).collect::<Vec<_>>();
+        assert_eq!(naga_layout(&module, "Inversion"), (fields, size_of::<Inversion>() as u32), "newton_invert {}", precision.name());
     }
     // `newton_contact`'s own structs: four u32, then reals.
     for precision in PRECISIONS {
@@ -1001,6 +1008,63 @@ fn cpu_residual(c: &Case, u: &[f64], step: &[DofStep<f64>], coefficients: Coeffi
     out
 }
 
+/// `newton_invert` makes `K̄⁻¹` from `K̄`'s values in its pattern as its CPU twin does (1e-12 of
+/// the largest entry), and that is the inverse the host's dense factorisation gives (1e-10):
+/// two bodies of each element kind at once, in slots and patterns of their own.
+#[test]
+fn newton_invert_kernel_matches_its_cpu_twin_and_the_dense_inverse() {
+    let Some(gpu) = gpu_or_skip("newton_invert_kernel_matches_its_cpu_twin_and_the_dense_inverse", Precision::F64) else { return };
+    let coefficients = Coefficients { factor: 1.0, c1: 1e6 };
+    for (k, kind) in [ElementKind::Tri3, ElementKind::Quad4, ElementKind::Tet4, ElementKind::Hex8].into_iter().enumerate() {
+        let mut cases = two_bodies(ElementVariant { kind, formulation: Formulation::Displacement, material: "neo_hookean" }, 700 + k as u64);
+        // The second body of 3D kinds held on half its nodes: small enough for a software
+        // adapter's loops (below).
+        if kind.dim() == 3 {
+            let c = &mut cases[1];
+            let middle = c.mesh.nodes.iter().map(|x| x[0]).fold(0.0f64, f64::max) / 2.0;
+            let prescribed: Vec<bool> = c.mesh.nodes.iter().flat_map(|x| [x[0] <= middle; 3]).collect();
+            c.dofs = DofMap::new(3, &prescribed);
+            c.pattern = StiffnessPattern::new(&c.mesh, &c.dofs);
+            c.gather = GatherMap::new(&c.mesh, 3, &c.pattern);
+        }
+        let (mut newton, mut effective, mut patterns, mut inversions, mut slots) = (Vec::new(), Vec::new(), Vec::new(), Vec::new(), 0usize);
+        for (m, c) in cases.iter().enumerate() {
+            let n = c.pattern.n;
+            let mut values = stiffness_values(c, &c.u, coefficients);
+            for &at in &c.pattern.diagonal {
+                values[at as usize] += coefficients.c1;
+            }
+            newton.push(NewtonMember { inverse_start: slots as u32, free_count: n as u32, ..NewtonMember::default() });
+            inversions.push(Inversion { member: m as u32, values_start: effective.len() as u32, pattern_start: patterns.len() as u32, pad: 0 });
+            effective.extend_from_slice(&values);
+            patterns.extend_from_slice(&c.pattern.col_ptr);
+            patterns.extend_from_slice(&c.pattern.row_idx);
+            slots += n * (n + 1) / 2;
+        }
+        let mut twin = vec![0.0; slots];
+        for job in &inversions {
+            cpu::newton_invert(&mut twin, &newton, &effective, &patterns, job);
+        }
+        let dense: Vec<f64> = cases.iter().flat_map(|c| bifirst::bench::dense_inverse(&c.pattern, &stiffness_values(c, &c.u, coefficients), &vec![coefficients.c1; c.pattern.n])).collect();
+        let largest = dense.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+        let gap = |a: &[f64], b: &[f64]| a.iter().zip(b).fold(0.0f64, |m, (x, y)| m.max((x - y).abs())) / largest;
+        assert!(gap(&twin, &dense) <= 1e-10, "{}: the twin and the host's dense inverse: {:.2e}", kind.name(), gap(&twin, &dense));
+        // llvmpipe ends an invocation's loops past 65 535 iterations: a software adapter inverts
+        // only what stays within them (`GpuWorld::inverts`; the 3D cases have 192 free dofs).
+        let fits = |m: &NewtonMember<f64>| !gpu.adapter.software() || bifirst::gpu::world::invert_loops(m.free_count as usize) <= bifirst::gpu::uzawa_sweep::SOFTWARE_LOOP_BUDGET;
+        let jobs: Vec<Inversion> = inversions.iter().copied().filter(|j| fits(&newton[j.member as usize])).collect();
+        assert!(!jobs.is_empty(), "{}: a member within every adapter's loops", kind.name());
+        let got = bifirst::gpu::world::run_newton_invert(&gpu, &newton, slots, &effective, &patterns, &jobs).expect("the inversion kernel runs");
+        for job in &jobs {
+            let row = newton[job.member as usize];
+            let span = row.inverse_start as usize..row.inverse_start as usize + (row.free_count * (row.free_count + 1) / 2) as usize;
+            let (g, t) = (&got[span.clone()], &twin[span]);
+            eprintln!("{} ({} free dofs): device against twin {:.2e}, twin against the dense inverse {:.2e}", kind.name(), row.free_count, gap(g, t), gap(&twin, &dense));
+            assert!(gap(g, t) <= 1e-12, "{}: the kernel and its twin", kind.name());
+        }
+    }
+}
+
 /// Device Newton iterations (`newton_update`, the forces, `newton_judge`, `newton_compact`,
 /// several per submission) take the iterations their CPU twins take, to 1e-12: two bodies of
 /// each element kind in one world, one with a budget of one increment (it must drop out of the
@@ -1074,7 +1138,7 @@ fn newton_kernels_match_their_cpu_twins() {
                 .map(|(b, (u, dof_out))| NewtonCall {
                     body: b,
                     factor: 1,
-                    inverse: Some(inverses[b].clone()),
+                    inverse: Some(Inverse::Dense(inverses[b].clone())),
                     member: member(b),
                     residual: evaluated.then(|| residual0(b)),
                     u,
@@ -1155,7 +1219,7 @@ fn a_device_newton_call_for_one_body_of_a_large_batch_reads_back_only_its_own() 
     let call = NewtonCall {
         body: 399,
         factor: 1,
-        inverse: Some(inverse.clone()),
+        inverse: Some(Inverse::Dense(inverse.clone())),
         member,
         residual: Some(residual0),
         u: &mut u,
@@ -1209,7 +1273,7 @@ fn a_device_newton_increment_that_inverts_an_element_fails_the_body() {
     let mut calls = [NewtonCall {
         body: 0,
         factor: 1,
-        inverse: Some(inverse),
+        inverse: Some(Inverse::Dense(inverse)),
         member,
         residual: Some(1.0),
         u: &mut u,
@@ -1409,7 +1473,7 @@ fn newton_contact_kernels_match_their_cpu_twins() {
                 .map(|(b, (u, dof_out))| NewtonCall {
                     body: b,
                     factor: 1,
-                    inverse: Some(inverses[b].clone()),
+                    inverse: Some(Inverse::Dense(inverses[b].clone())),
                     member: member(b, 0, 0),
                     residual: evaluated.then(|| residual0(b)),
                     u,

@@ -74,7 +74,7 @@ pub(super) fn newton_rows(options: &BenchOptions, gpus: &[Arc<Gpu>], peaks: &[Pe
                 .map(|(b, (u, out))| {
                     u.copy_from_slice(&case.u);
                     out.copy_from_slice(&first);
-                    let inverse = (!world.newton_inverse_current(b, 1)).then(|| inverse.clone());
+                    let inverse = (!world.newton_inverse_current(b, 1)).then(|| crate::gpu::Inverse::Dense(inverse.clone()));
                     NewtonCall {
                         body: b,
                         factor: 1,

@@ -5,7 +5,7 @@
 
 use super::uzawa::{global, triple};
 use crate::contact::uzawa::SETTLE;
-use crate::gpu::types::{summary_len, Active, Coefficients, DofOut, DofState, DofStep, MemberRange, NewtonMember, NewtonState, StepMotion, NEWTON_CONVERGED, NEWTON_FAILED, NEWTON_HOST, NEWTON_ITERATING, NEWTON_WORKGROUP, NO_FAILURE};
+use crate::gpu::types::{summary_len, Active, Coefficients, DofOut, DofState, DofStep, Inversion, MemberRange, NewtonMember, NewtonState, StepMotion, NEWTON_CONVERGED, NEWTON_FAILED, NEWTON_HOST, NEWTON_ITERATING, NEWTON_WORKGROUP, NO_FAILURE};
 use crate::gpu::uzawa_sweep::{NodeGather, UzawaJudgeState, UzawaLocal, UzawaProblem, JUDGE_CONVERGED, JUDGE_LIVE};
 use crate::gpu::ContactLayout;
 use crate::policy::{REFACTOR_CONTRACTION, TIGHTEN_AFTER, TIGHTEST_INNER, UZAWA_STALLS};
@@ -43,6 +43,63 @@ fn inverse_times(inverse: &[Real], row: &NewtonMember<Real>, f: usize, rhs: &[Re
         x += inverse[row.inverse_start as usize + packed(j, f)] * r;
     }
     x
+}
+
+/// `newton_invert` for one listed member: its `K̄⁻¹` (lower triangle, [`packed`]) into its slot
+/// of `inverse`, from its `K̄` values in `effective` and its pattern in `patterns`, by the
+/// shader's steps in the shader's order of every sum.
+pub fn newton_invert(inverse: &mut [Real], newton: &[NewtonMember<Real>], effective: &[Real], patterns: &[u32], job: &Inversion) {
+    let row = newton[job.member as usize];
+    let n = row.free_count as usize;
+    let slot = &mut inverse[row.inverse_start as usize..][..n * (n + 1) / 2];
+    let (starts, rows) = (&patterns[job.pattern_start as usize..][..n + 1], &patterns[job.pattern_start as usize + n + 1..]);
+    slot.fill(0.0);
+    for j in 0..n {
+        for k in starts[j] as usize..starts[j + 1] as usize {
+            slot[packed(rows[k] as usize, j)] = effective[job.values_start as usize + k];
+        }
+    }
+    for k in 0..n {
+        let d = slot[packed(k, k)].sqrt();
+        slot[packed(k, k)] = d;
+        let scale = 1.0 / d;
+        for i in k + 1..n {
+            slot[packed(i, k)] *= scale;
+        }
+        for i in k + 1..n {
+            let lik = slot[packed(i, k)];
+            for j in k + 1..i + 1 {
+                slot[packed(i, j)] -= lik * slot[packed(j, k)];
+            }
+        }
+    }
+    let mut column = vec![0.0; n];
+    for j in (0..n).rev() {
+        for i in j + 1..n {
+            column[i] = slot[packed(i, j)];
+        }
+        let p = 1.0 / slot[packed(j, j)];
+        for i in j + 1..n {
+            let mut x = 0.0;
+            for k in j + 1..i + 1 {
+                x += slot[packed(i, k)] * column[k];
+            }
+            slot[packed(i, j)] = -p * x;
+        }
+        slot[packed(j, j)] = p;
+    }
+    for i in 0..n {
+        for j in 0..i + 1 {
+            let mut x = 0.0;
+            for k in i..n {
+                x += slot[packed(k, i)] * slot[packed(k, j)];
+            }
+            column[j] = x;
+        }
+        for j in 0..i + 1 {
+            slot[packed(i, j)] = column[j];
+        }
+    }
 }
 
 /// `newton_update` for member `m`: `Δu = K̄⁻¹ (f_c - g)` on its free dofs (`contact`: the

@@ -21,6 +21,7 @@ pub const SHADERS: &[(&str, &str)] = &[
     ("newton_compact", include_str!("../../shaders/newton_compact.wgsl")),
     ("newton_contact", include_str!("../../shaders/newton_contact.wgsl")),
     ("newton_finish", include_str!("../../shaders/newton_finish.wgsl")),
+    ("newton_invert", include_str!("../../shaders/newton_invert.wgsl")),
     ("newton_judge", include_str!("../../shaders/newton_judge.wgsl")),
     ("newton_summary", include_str!("../../shaders/newton_summary.wgsl")),
     ("newton_update", include_str!("../../shaders/newton_update.wgsl")),

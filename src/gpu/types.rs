@@ -228,6 +228,18 @@ pub struct NewtonState<R> {
     pub increment: R,
 }
 
+/// `struct Inversion` of `shaders/newton_invert.wgsl`: a member whose `K̄⁻¹` the device makes
+/// from its `K̄` values (at `values_start` of the call's values) and its pattern (at
+/// `pattern_start` of the batch's patterns: column starts, then row indices).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Pod, Zeroable)]
+pub struct Inversion {
+    pub member: u32,
+    pub values_start: u32,
+    pub pattern_start: u32,
+    pub pad: u32,
+}
+
 /// A member's `failure` entry (its lowest inverted element, its lowest non-finite one) when
 /// the element kernel found nothing wrong.
 pub const NO_FAILURE: u32 = u32::MAX;

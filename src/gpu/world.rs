@@ -14,7 +14,7 @@ mod newton;
 mod step;
 
 pub use contact::{ContactLayout, GroupContact};
-pub use newton::NewtonCall;
+pub use newton::{invert_loops, run_newton_invert, Inverse, NewtonCall};
 pub use step::{run_newton_summary, run_step_kernels, StepEnd, StepKernelsOut, StepStart, SummaryBuffers};
 
 use super::types::{Active, Coefficients, DofOut, MaterialParams, MemberRange, MODE_FORCES, MODE_TANGENT, NEWTON_MAX_FREE, NO_FAILURE, NO_HISTORY};
@@ -166,6 +166,10 @@ struct Batch {
     step_host: Vec<Real>,
     u: Buffer,
     reference: Vec<Real>,
+    /// The distinct stiffness patterns of the members (column starts, then row indices; grains
+    /// of one shape share theirs), and where each member's starts: `newton_invert` reads them.
+    patterns: Vec<u32>,
+    pattern_start: Vec<u32>,
     step: Buffer,
     failure: Buffer,
     active: Buffer,
@@ -1004,6 +1008,7 @@ impl Batch {
             let join = |h: std::thread::ScopedJoinHandle<'_, Result<Pass, GpuError>>| h.join().expect("a pipeline compiles without panicking");
             Ok::<_, GpuError>((join(forces)?, join(csr)?, join(residual)?, energy?))
         })?;
+        let (patterns, pattern_start) = distinct_patterns(&members, bodies);
         let (inverse_slot, inverse_entries) = newton::inverse_slots(&free_range.iter().map(|&(_, n)| n as usize).collect::<Vec<_>>(), real, max_bytes);
         Ok(Self {
             members: ranges,
@@ -1013,6 +1018,8 @@ impl Batch {
             step_host: vec![0.0; 4 * dofs],
             u,
             reference,
+            patterns,
+            pattern_start,
             step,
             failure,
             active,
@@ -1082,6 +1089,26 @@ pub fn from_device(precision: Precision, bytes: &[u8]) -> Vec<Real> {
     let mut out = vec![0.0; bytes.len() / precision.size()];
     copy_from_device(precision, bytes, &mut out);
     out
+}
+
+/// The members' stiffness patterns laid end to end once each (bodies that share one, the grains
+/// of a shape, by address), and where each member's starts.
+fn distinct_patterns(members: &[usize], bodies: &[WorldBody]) -> (Vec<u32>, Vec<u32>) {
+    let mut seen: std::collections::HashMap<*const StiffnessPattern, u32> = std::collections::HashMap::new();
+    let mut patterns = Vec::new();
+    let starts = members
+        .iter()
+        .map(|&i| {
+            let pattern = bodies[i].pattern;
+            *seen.entry(std::ptr::from_ref(pattern)).or_insert_with(|| {
+                let start = patterns.len() as u32;
+                patterns.extend_from_slice(&pattern.col_ptr);
+                patterns.extend_from_slice(&pattern.row_idx);
+                start
+            })
+        })
+        .collect();
+    (patterns, starts)
 }
 
 #[cfg(test)]

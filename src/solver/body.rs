@@ -8,7 +8,7 @@ use crate::cpu::{assemble_csr, assemble_residual, dispatch_element_force_tangent
 use crate::element::{element_cell_fields, element_point_fields, element_von_mises, point_gradients, CellFields, ElementError, ElementOutput, Formulation, Patches, ReferenceGeometry};
 use crate::gpu::types::{Coefficients, DofOut, DofStep};
 use crate::gpu::types::{DofState, NewtonMember, NewtonState, StepSummary};
-use crate::gpu::{ElementFailure, Evaluation, GpuError, NewtonCall, StepEnd, StepStart, WorldBody};
+use crate::gpu::{ElementFailure, Evaluation, GpuError, Inverse, NewtonCall, StepEnd, StepStart, WorldBody};
 use crate::material::tensor::green_lagrange;
 use crate::material::viscous::HISTORY;
 use crate::material::{BranchStep, Hyperelastic, Model, Relaxation, Viscoelastic};

@@ -9,7 +9,7 @@ use crate::contact::uzawa::{Outcome, Problem};
 use crate::contact::Settings;
 use crate::gpu::types::ContactState;
 use crate::gpu::types::{NewtonState, StepSummary};
-use crate::gpu::{ElementFailure, Evaluation, GpuError, GpuWorld, GroupContact, NewtonCall};
+use crate::gpu::{ElementFailure, Evaluation, GpuError, GpuWorld, GroupContact, Inverse, NewtonCall};
 use crate::mesh::ElementKind;
 use crate::policy::PhaseTimes;
 use crate::precision::{Precision, Real};
@@ -224,15 +224,7 @@ fn on_device(groups: &[Group], live: &[bool], wanted: &dyn Fn(&Body) -> bool, wo
 
 /// The elements of each kind of the bodies of the `live` groups that `wanted` selects.
 fn element_work(groups: &[Group], live: &[bool], wanted: &dyn Fn(&Body) -> bool) -> Vec<(ElementKind, usize)> {
-    let mut work: Vec<(ElementKind, usize)> = Vec::new();
-    for body in groups.iter().zip(live).filter(|(_, &l)| l).flat_map(|(g, _)| g.bodies.iter()).filter(|b| wanted(b)) {
-        let mesh = body.elements();
-        match work.iter_mut().find(|(kind, _)| *kind == mesh.kind) {
-            Some((_, n)) => *n += mesh.element_count(),
-            None => work.push((mesh.kind, mesh.element_count())),
-        }
-    }
-    work
+    super::element_work(groups.iter().zip(live).filter(|(_, &l)| l).flat_map(|(g, _)| g.bodies.iter().map(|b| &**b)).filter(|b| wanted(b)))
 }
 
 /// Whether the Uzawa sweeps of the `chosen` groups' contact problems go to the device
@@ -432,8 +424,9 @@ fn evaluations_of_pass(groups: &mut [Group], live: &[bool], kind: PassKind, c: &
 }
 
 /// `K̄⁻¹` of each factorisation of the `iterating` groups' bodies that the device lacks (after a
-/// step that refactorised many grains: all of them), in parallel.
-fn missing_inverses(groups: &mut [Group], iterating: &[bool], world: &GpuWorld) -> Vec<Vec<Option<Vec<Real>>>> {
+/// step that refactorised many grains: all of them), in parallel: `K̄` for the device to invert
+/// where the body holds the values it factorised ([`Body::device_inverse`]).
+fn missing_inverses(groups: &mut [Group], iterating: &[bool], world: &GpuWorld) -> Vec<Vec<Option<Inverse>>> {
     groups
         .par_iter_mut()
         .zip(iterating)
@@ -442,7 +435,7 @@ fn missing_inverses(groups: &mut [Group], iterating: &[bool], world: &GpuWorld) 
                 return Vec::new();
             }
             let wall = &mut g.newton.report.wall;
-            g.bodies.iter_mut().zip(g.ids).map(|(b, &id)| (!world.newton_inverse_current(id, b.factor_version())).then(|| b.effective_inverse(wall))).collect()
+            g.bodies.iter_mut().zip(g.ids).map(|(b, &id)| (!world.newton_inverse_current(id, b.factor_version())).then(|| b.device_inverse(world.inverts(b.dofs().free_count), wall))).collect()
         })
         .collect()
 }
@@ -454,7 +447,7 @@ fn evaluations_share<'a>(g: &'a mut Group, chosen: &[bool], kind: PassKind, c: &
 }
 
 /// The calls of a group that iterates on the device, with its contact problem if it has one.
-fn iterations_share<'a>(g: &'a mut Group, inverses: Vec<Option<Vec<Real>>>, kind: PassKind, c: &Context, motion_scale: Real) -> PassShare<'a> {
+fn iterations_share<'a>(g: &'a mut Group, inverses: Vec<Option<Inverse>>, kind: PassKind, c: &Context, motion_scale: Real) -> PassShare<'a> {
     let p = c.p;
     let budget = p.max_iterations - g.newton.report.iterations;
     let Group { ids, bodies, contact, newton, .. } = g;

@@ -1,7 +1,8 @@
 //! A step's Newton iterations on the device, for the bodies that keep their factorisation and
 //! have no contact point (most of a packing's groups after the first round: a grain in free
-//! flight, or one that rests alone). The host computes `K̄⁻¹` of a small body's free dofs from
-//! faer's factors when they are refreshed, and it goes up once per factorisation; the device
+//! flight, or one that rests alone). When a small body's factorisation is refreshed, the host
+//! sends `K̄` (the values faer factorised) and the device makes `K̄⁻¹` of its free dofs
+//! (`newton_invert`), once per factorisation; the device
 //! then takes the increments (`newton_update`), the forces (`element_force_tangent`'s
 //! `forces`, `assemble_residual`), the convergence test (`newton_judge`) and drops the members
 //! that are done from the next iteration's list and dispatch counts (`newton_compact`), several
@@ -15,7 +16,7 @@ use super::contact::{ContactLayout, ContactPasses, ContactPipelines, GroupContac
 use super::{buffer, to_device, Batch, Evaluation, GpuWorld, Pass, ReadBack, Source, WORKGROUP};
 use crate::contact::uzawa::Problem;
 use crate::gpu::types::{
-    summary_len, Active, Coefficients, ContactState, DofOut, DofStep, NewtonMember, NewtonState, StepSummary, MODE_FORCES, MODE_TANGENT, NEWTON_CONVERGED, NEWTON_FAILED, NEWTON_HOST, NEWTON_ITERATING, NEWTON_MAX_FREE, NO_FAILURE,
+    summary_len, Active, Coefficients, ContactState, DofOut, DofStep, Inversion, NewtonMember, NewtonState, StepSummary, MODE_FORCES, MODE_TANGENT, NEWTON_CONVERGED, NEWTON_FAILED, NEWTON_HOST, NEWTON_ITERATING, NEWTON_MAX_FREE, NO_FAILURE,
 };
 use crate::gpu::uzawa_sweep::UzawaSweeps;
 use crate::gpu::{ElementFailure, Gpu, GpuError};
@@ -137,13 +138,43 @@ fn unpack_contact(precision: Precision, problems: &mut [Problem], contacts: &mut
 /// member)`, points and groups.
 type ContactTarget<'a> = (usize, &'a [(usize, usize)], usize, usize);
 
+/// A factorisation's `K̄⁻¹` for a device that does not hold it yet.
+pub enum Inverse {
+    /// `K̄` itself, the values factorised in the body's stiffness pattern: the device makes
+    /// `K̄⁻¹` (`newton_invert`), and the bytes that go up are the non-zeros.
+    Effective(Vec<Real>),
+    /// `K̄⁻¹` made on the host, its lower triangle row by row (`cpu::packed`).
+    Dense(Vec<Real>),
+}
+
+/// The most loop iterations an invocation of `newton_invert` runs for a member of `n` free dofs
+/// (its first lane, which takes the most rows of every loop over rows).
+pub fn invert_loops(n: usize) -> usize {
+    let lanes = crate::gpu::types::NEWTON_WORKGROUP;
+    let rows = |count: usize| count.div_ceil(lanes);
+    let cholesky: usize = (0..n).map(|k| 1 + rows(n - k - 1) * (2 + (n - k - 1))).sum();
+    let triangle: usize = (0..n).map(|j| 2 + rows(n - j - 1) * (2 + (n - j - 1))).sum();
+    let product: usize = (0..n).map(|i| 1 + rows(i + 1) * (2 + (n - i))).sum();
+    rows(n * (n + 1) / 2) + rows(n) * (1 + n) + cholesky + triangle + product
+}
+
+impl GpuWorld {
+    /// Whether the device makes `K̄⁻¹` of a member of `free` free dofs (`newton_invert`): on a
+    /// software adapter only where the kernel's loops stay within what its invocations run
+    /// ([`crate::gpu::uzawa_sweep::SOFTWARE_LOOP_BUDGET`]: llvmpipe ends a loop past it without an
+    /// error; about 150 free dofs); else the host sends `K̄⁻¹`.
+    pub fn inverts(&self, free: usize) -> bool {
+        !self.software() || invert_loops(free) <= crate::gpu::uzawa_sweep::SOFTWARE_LOOP_BUDGET
+    }
+}
+
 /// One body's share of [`GpuWorld::newton`].
 pub struct NewtonCall<'a> {
     pub body: usize,
-    /// The version of the body's factorisation, and `K̄⁻¹` of its free dofs (row by row) when
-    /// the device does not hold that version's yet ([`GpuWorld::newton_inverse_current`]).
+    /// The version of the body's factorisation, and its `K̄⁻¹` of the free dofs when the device
+    /// does not hold that version's yet ([`GpuWorld::newton_inverse_current`]).
     pub factor: u64,
-    pub inverse: Option<Vec<Real>>,
+    pub inverse: Option<Inverse>,
     /// The body's tolerances and budget (`inverse_start`, `free_start` and `free_count` are the
     /// world's to set).
     pub member: NewtonMember<Real>,
@@ -216,6 +247,10 @@ impl HostTangents {
 /// them (a scene that never iterates on the device pays nothing).
 pub(super) struct NewtonBuffers {
     pub(super) inverse: Buffer,
+    /// The batch's distinct stiffness patterns (`Batch::patterns`), for `newton_invert`.
+    patterns: Buffer,
+    /// The inversions a call staged, recorded at the head of its first submission.
+    invert: Option<(Pass, u32)>,
     pub(super) free: Buffer,
     pub(super) newton: Buffer,
     pub(super) state: Buffer,
@@ -293,6 +328,7 @@ pub(super) fn inverse_slots(free_counts: &[usize], real: usize, max_bytes: u64) 
 /// world (they do not depend on the batch's element or material).
 pub(super) struct NewtonPipelines {
     update: ComputePipeline,
+    invert: ComputePipeline,
     judge: ComputePipeline,
     compact: ComputePipeline,
     compact_host: ComputePipeline,
@@ -305,6 +341,7 @@ impl NewtonPipelines {
     fn new(gpu: &Gpu) -> Result<Self, GpuError> {
         Ok(Self {
             update: gpu.pipeline_at("newton_update", "main", None)?,
+            invert: gpu.pipeline_at("newton_invert", "main", None)?,
             judge: gpu.pipeline_at("newton_judge", "main", None)?,
             compact: gpu.pipeline_at("newton_compact", "main", None)?,
             compact_host: gpu.pipeline_at("newton_compact", "host", None)?,
@@ -352,6 +389,7 @@ impl NewtonBuffers {
         let summary = buffer(gpu, "summary", members * crate::gpu::types::summary_len(3) * real, storage | BufferUsages::COPY_SRC);
         let boxes = buffer(gpu, "boxes", members * 6 * 4, storage | BufferUsages::COPY_SRC);
         let reference = super::buffer_init(gpu, "reference", &super::to_device(gpu.precision, &b.reference), storage);
+        let patterns = super::buffer_init(gpu, "patterns", bytemuck::cast_slice(&b.patterns), storage);
         let summarise = Pass::bound(
             gpu,
             pipelines.summary.clone(),
@@ -385,6 +423,8 @@ impl NewtonBuffers {
             summarise,
             summary,
             boxes,
+            patterns,
+            invert: None,
             inverse,
             free,
             newton,
@@ -492,6 +532,7 @@ impl GpuWorld {
             let mut encoder = encoder.unwrap_or_else(|| self.encoder("newton"));
             if first {
                 self.record_call_start(&mut encoder, &work);
+                self.record_inversions(&mut encoder, &work);
             }
             self.record_iterations(&mut encoder, &plan, first && evaluate_first, iterations);
             let landing = self.queue_states(&mut readback, &work, calls, dim);
@@ -609,6 +650,19 @@ impl GpuWorld {
                 encoder.copy_buffer_to_buffer(&n.initial_state, first as u64 * state, &n.state, first as u64 * state, count as u64 * state);
                 encoder.copy_buffer_to_buffer(&n.no_failure, 8 * first as u64, &b.failure, 8 * first as u64, 8 * count as u64);
             }
+        }
+    }
+
+    /// Records the inversions the call staged (`newton_invert`), before its iterations read
+    /// the inverses.
+    fn record_inversions(&mut self, encoder: &mut wgpu::CommandEncoder, work: &[BatchCalls]) {
+        let staged: Vec<(Pass, u32)> = work.iter().filter_map(|(batch, _, _)| self.batches[*batch].newton.as_mut().and_then(|n| n.invert.take())).collect();
+        if staged.is_empty() {
+            return;
+        }
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("newton invert"), timestamp_writes: None });
+        for (invert, count) in &staged {
+            invert.dispatch(&self.gpu, &mut pass, *count);
         }
     }
 
@@ -877,21 +931,34 @@ impl GpuWorld {
         // New inverses of members whose slots follow each other go up in one write (after a
         // step that refactorised every grain, one inverse per grain): (offset, end, inverses).
         let mut inverse_runs: Vec<(u64, u64, Vec<Vec<Real>>)> = Vec::new();
+        // K̄ of the members whose K̄⁻¹ the device makes, end to end, and where each lies (none
+        // left from a call that did not run).
+        let (mut effective, mut inversions): (Vec<Real>, Vec<Inversion>) = (Vec::new(), Vec::new());
+        n.invert = None;
         for &(i, m) in mine {
             let call = &mut calls[i];
             let slot = b.inverse_slot[m].expect("a capable body has an inverse slot");
             let (free_start, free_count) = b.free_range[m];
-            if let Some(inverse) = call.inverse.take() {
-                assert_eq!(inverse.len(), (free_count * (free_count + 1) / 2) as usize, "the lower triangle of K̄⁻¹ of the member's free dofs");
-                let (offset, bytes) = (slot as u64 * real, inverse.len() as u64 * real);
-                match inverse_runs.last_mut() {
-                    Some((_, end, run)) if *end == offset => {
-                        *end += bytes;
-                        run.push(inverse);
+            match call.inverse.take() {
+                Some(Inverse::Dense(inverse)) => {
+                    assert_eq!(inverse.len(), (free_count * (free_count + 1) / 2) as usize, "the lower triangle of K̄⁻¹ of the member's free dofs");
+                    let (offset, bytes) = (slot as u64 * real, inverse.len() as u64 * real);
+                    match inverse_runs.last_mut() {
+                        Some((_, end, run)) if *end == offset => {
+                            *end += bytes;
+                            run.push(inverse);
+                        }
+                        _ => inverse_runs.push((offset, offset + bytes, vec![inverse])),
                     }
-                    _ => inverse_runs.push((offset, offset + bytes, vec![inverse])),
+                    n.inverse_version[m] = Some(call.factor);
                 }
-                n.inverse_version[m] = Some(call.factor);
+                Some(Inverse::Effective(values)) => {
+                    assert_eq!(values.len(), b.members[m].nonzeros as usize, "K̄ in the member's pattern");
+                    inversions.push(Inversion { member: m as u32, values_start: effective.len() as u32, pattern_start: b.pattern_start[m], pad: 0 });
+                    effective.extend_from_slice(&values);
+                    n.inverse_version[m] = Some(call.factor);
+                }
+                None => {}
             }
             let member = NewtonMember { inverse_start: slot, free_start, free_count, ..call.member };
             // The device reads a member's parameters only: those it holds need not go up again
@@ -941,6 +1008,15 @@ impl GpuWorld {
         debug_assert_eq!(DISPATCHES * 3 + 1, DISPATCH_WORDS);
         uploads.push((n.dispatch.clone(), 0, bytemuck::cast_slice(&dispatch).to_vec()));
         let (inverse, residuals) = (n.inverse.clone(), b.dof_out.clone());
+        if !inversions.is_empty() {
+            let storage = BufferUsages::STORAGE | BufferUsages::COPY_DST;
+            let (values, jobs) = (buffer(&self.gpu, "effective stiffness", effective.len() * real as usize, storage), buffer(&self.gpu, "inversions", std::mem::size_of_val(&inversions[..]), storage));
+            let pipeline = self.newton_pipelines.as_ref().expect("made with the batch's buffers").invert.clone();
+            let pass = Pass::bound(&self.gpu, pipeline, ("newton_invert", "main"), None, &[("inverse", &n.inverse), ("newton", &n.newton), ("effective", &values), ("patterns", &n.patterns), ("inversions", &jobs)]);
+            n.invert = Some((pass, inversions.len() as u32));
+            uploads.push((values, 0, bytemuck::cast_slice(&effective).to_vec()));
+            uploads.push((jobs, 0, bytemuck::cast_slice(&inversions).to_vec()));
+        }
         for (buffer, offset, bytes) in uploads {
             self.upload(&buffer, offset, &bytes);
         }
@@ -964,4 +1040,32 @@ impl GpuWorld {
         self.upload_member_runs(batch, &residuals, 2 * real, &evaluated);
         [fx, fy, count]
     }
+}
+
+/// `newton_invert` alone on an f64 device: the `inverse` buffer (`inverse_len` reals, zero
+/// first) after the listed inversions, for the parity tests with the CPU twin.
+pub fn run_newton_invert(gpu: &Gpu, newton: &[NewtonMember<Real>], inverse_len: usize, effective: &[Real], patterns: &[u32], inversions: &[Inversion]) -> Result<Vec<Real>, GpuError> {
+    assert_eq!(gpu.precision, Precision::F64, "device Newton iterations need f64 kernels");
+    let storage = BufferUsages::STORAGE;
+    let init = |label: &str, bytes: &[u8], usage: BufferUsages| super::buffer_init(gpu, label, bytes, usage);
+    let inverse = init("inverse", bytemuck::cast_slice(&vec![0.0 as Real; inverse_len]), storage | BufferUsages::COPY_SRC);
+    let buffers = [
+        ("newton", init("newton", bytemuck::cast_slice(newton), storage)),
+        ("effective", init("effective", bytemuck::cast_slice(effective), storage)),
+        ("patterns", init("patterns", bytemuck::cast_slice(patterns), storage)),
+        ("inversions", init("inversions", bytemuck::cast_slice(inversions), storage)),
+    ];
+    let mut bindings: Vec<(&str, &Buffer)> = buffers.iter().map(|(name, b)| (*name, b)).collect();
+    bindings.push(("inverse", &inverse));
+    let pass = Pass::bound(gpu, gpu.pipeline_at("newton_invert", "main", None)?, ("newton_invert", "main"), None, &bindings);
+    let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("newton invert") });
+    {
+        let mut compute = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("newton invert"), timestamp_writes: None });
+        pass.dispatch(gpu, &mut compute, inversions.len() as u32);
+    }
+    let bytes = (inverse_len * std::mem::size_of::<Real>()) as u64;
+    let staging = buffer(gpu, "invert read-back", bytes as usize, BufferUsages::MAP_READ | BufferUsages::COPY_DST);
+    encoder.copy_buffer_to_buffer(&inverse, 0, &staging, 0, bytes);
+    gpu.submit(encoder)?;
+    Ok(bytemuck::pod_collect_to_vec(&gpu.read_range("newton_invert", &staging, bytes)?))
 }

@@ -95,6 +95,17 @@ impl Body {
         self.work.factor_version
     }
 
+    /// What the device needs to make `K̄⁻¹` of the kept factorisation: where it `inverts` one
+    /// of this size, the values factorised, `K̄`, while the body holds them (no newer tangent:
+    /// [`Body::kept_factor`]); else `K̄⁻¹` ([`Body::effective_inverse`]).
+    pub fn device_inverse(&mut self, inverts: bool, times: &mut PhaseTimes) -> Inverse {
+        if inverts && !self.work.tangent_current {
+            Inverse::Effective(self.work.values.clone())
+        } else {
+            Inverse::Dense(self.effective_inverse(times))
+        }
+    }
+
     /// `K̄⁻¹` of the free dofs of the kept factorisation, its lower triangle row by row
     /// (`cpu::packed`), for a device that applies it: a dense inverse of the values
     /// factorised, which the body holds while it has no newer tangent ([`Body::kept_factor`]);
@@ -123,7 +134,7 @@ impl Body {
     /// `budget` increments, `inverse` when the device does not hold this factorisation's;
     /// `evaluated`: the trial displacement's evaluation is the body's (else the device evaluates
     /// it first).
-    pub fn newton_call(&mut self, body: usize, p: &StepParams, motion_scale: Real, budget: usize, inverse: Option<Vec<Real>>, evaluated: bool) -> NewtonCall<'_> {
+    pub fn newton_call(&mut self, body: usize, p: &StepParams, motion_scale: Real, budget: usize, inverse: Option<Inverse>, evaluated: bool) -> NewtonCall<'_> {
         let [constant, per_travel, stiffness] = self.residual_floor_terms(p);
         let member = NewtonMember {
             budget: budget as u32,

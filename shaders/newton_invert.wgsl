@@ -1,0 +1,107 @@
+// K̄⁻¹ of the listed members from their effective stiffness K̄ = ξ K + c1 M (the values the host
+// factorised: the lower triangle of the free dofs, column by column in their pattern), into
+// each member's slot of `inverse` as the lower triangle row by row (`packed`): a dense Cholesky
+// factorisation K̄ = L Lᵀ in the slot, L⁻¹ in place, then K̄⁻¹ = L⁻ᵀ L⁻¹ in place. So the host
+// sends a grain's non-zeros instead of its inverse (a tenth of the bytes for a 2D grain) and
+// computes no inverse. A K̄ that is not positive definite leaves NaN, which the iterations'
+// residual hands to the host. One workgroup per listed member; each entry is summed by one
+// invocation in a fixed order. CPU twin: `cpu::newton_invert`.
+
+struct Inversion {
+    member: u32,
+    // Where its K̄ values start in `effective`.
+    values_start: u32,
+    // Where its pattern starts in `patterns`: column starts (free + 1), then row indices.
+    pattern_start: u32,
+    pad: u32,
+}
+
+@group(0) @binding(0) var<storage, read_write> inverse: array<real>;
+@group(0) @binding(1) var<storage, read> newton: array<NewtonMember>;
+@group(0) @binding(2) var<storage, read> effective: array<real>;
+@group(0) @binding(3) var<storage, read> patterns: array<u32>;
+@group(0) @binding(4) var<storage, read> inversions: array<Inversion>;
+
+var<workgroup> column: array<real, MAX_FREE>;
+var<workgroup> pivot: real;
+
+@compute @workgroup_size(NEWTON_WORKGROUP)
+fn main(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workgroup: vec3<u32>) {
+    let job = inversions[workgroup.x];
+    let row = newton[job.member];
+    let n = row.free_count;
+    let at = row.inverse_start;
+    let rows = job.pattern_start + n + 1u;
+    for (var e = lane; e < n * (n + 1u) / 2u; e += NEWTON_WORKGROUP) {
+        inverse[at + e] = real(0.0);
+    }
+    storageBarrier();
+    for (var j = lane; j < n; j += NEWTON_WORKGROUP) {
+        for (var k = patterns[job.pattern_start + j]; k < patterns[job.pattern_start + j + 1u]; k++) {
+            inverse[at + packed(patterns[rows + k], j)] = effective[job.values_start + k];
+        }
+    }
+    storageBarrier();
+    // L, column by column: the pivot, the column below it, the trailing triangle.
+    for (var k = 0u; k < n; k++) {
+        if lane == 0u {
+            let d = sqrt(inverse[at + packed(k, k)]);
+            inverse[at + packed(k, k)] = d;
+            pivot = real(1.0) / d;
+        }
+        storageBarrier();
+        let scale = workgroupUniformLoad(&pivot);
+        for (var i = k + 1u + lane; i < n; i += NEWTON_WORKGROUP) {
+            inverse[at + packed(i, k)] *= scale;
+        }
+        storageBarrier();
+        for (var i = k + 1u + lane; i < n; i += NEWTON_WORKGROUP) {
+            let lik = inverse[at + packed(i, k)];
+            for (var j = k + 1u; j < i + 1u; j++) {
+                inverse[at + packed(i, j)] -= lik * inverse[at + packed(j, k)];
+            }
+        }
+        storageBarrier();
+    }
+    // L⁻¹ in place, from the last column back: column j is -(T a) / L_jj, with T the inverted
+    // block below and right of the pivot and a the column below it.
+    for (var t = 0u; t < n; t++) {
+        let j = n - 1u - t;
+        for (var i = j + 1u + lane; i < n; i += NEWTON_WORKGROUP) {
+            column[i] = inverse[at + packed(i, j)];
+        }
+        if lane == 0u {
+            pivot = real(1.0) / inverse[at + packed(j, j)];
+        }
+        let p = workgroupUniformLoad(&pivot);
+        for (var i = j + 1u + lane; i < n; i += NEWTON_WORKGROUP) {
+            var x = real(0.0);
+            for (var k = j + 1u; k < i + 1u; k++) {
+                x += inverse[at + packed(i, k)] * column[k];
+            }
+            inverse[at + packed(i, j)] = -p * x;
+        }
+        if lane == 0u {
+            inverse[at + packed(j, j)] = p;
+        }
+        storageBarrier();
+        workgroupBarrier();
+    }
+    // K̄⁻¹ = L⁻ᵀ L⁻¹, row by row: row i reads rows i and below of L⁻¹ only, so it is written
+    // over once all of it is summed.
+    for (var i = 0u; i < n; i++) {
+        for (var j = lane; j < i + 1u; j += NEWTON_WORKGROUP) {
+            var x = real(0.0);
+            for (var k = i; k < n; k++) {
+                x += inverse[at + packed(k, i)] * inverse[at + packed(k, j)];
+            }
+            column[j] = x;
+        }
+        workgroupBarrier();
+        for (var j = lane; j < i + 1u; j += NEWTON_WORKGROUP) {
+            inverse[at + packed(i, j)] = column[j];
+        }
+        storageBarrier();
+        workgroupBarrier();
+    }
+}
