@@ -168,6 +168,51 @@ impl GpuWorld {
     }
 }
 
+/// The inverses a call's members need, as they go up: `K̄⁻¹` made on the host in runs of
+/// consecutive slots (one write each; after a step that refactorised every grain, one inverse
+/// per grain): `(offset, end, inverses)`; and `K̄` of the members whose `K̄⁻¹` the device makes,
+/// end to end, with their `newton_invert` jobs.
+#[derive(Default)]
+struct NewInverses {
+    runs: Vec<(u64, u64, Vec<Vec<Real>>)>,
+    effective: Vec<Real>,
+    inversions: Vec<Inversion>,
+}
+
+impl NewInverses {
+    /// Member `m`'s (its pattern at `pattern_start`; `sizes`: its triangle's and its pattern's
+    /// reals), its slot at byte `offset`.
+    fn add(&mut self, inverse: Inverse, [triangle, nonzeros]: [usize; 2], offset: u64, (m, pattern_start): (usize, u32)) {
+        match inverse {
+            Inverse::Dense(inverse) => {
+                assert_eq!(inverse.len(), triangle, "the lower triangle of K̄⁻¹ of the member's free dofs");
+                let end = offset + std::mem::size_of_val(&inverse[..]) as u64;
+                match self.runs.last_mut() {
+                    Some((_, last, run)) if *last == offset => {
+                        *last = end;
+                        run.push(inverse);
+                    }
+                    _ => self.runs.push((offset, end, vec![inverse])),
+                }
+            }
+            Inverse::Effective(values) => {
+                assert_eq!(values.len(), nonzeros, "K̄ in the member's pattern");
+                self.inversions.push(Inversion { member: m as u32, values_start: self.effective.len() as u32, pattern_start, pad: 0 });
+                self.effective.extend_from_slice(&values);
+            }
+        }
+    }
+
+    /// The `newton_invert` pass of the inversions, and the buffers of `K̄` and of the jobs it
+    /// binds (for the uploads).
+    fn invert_pass(&self, gpu: &Gpu, pipeline: ComputePipeline, n: &NewtonBuffers) -> (Pass, Buffer, Buffer) {
+        let storage = BufferUsages::STORAGE | BufferUsages::COPY_DST;
+        let (values, jobs) = (buffer(gpu, "effective stiffness", std::mem::size_of_val(&self.effective[..]), storage), buffer(gpu, "inversions", std::mem::size_of_val(&self.inversions[..]), storage));
+        let pass = Pass::bound(gpu, pipeline, ("newton_invert", "main"), None, &[("inverse", &n.inverse), ("newton", &n.newton), ("effective", &values), ("patterns", &n.patterns), ("inversions", &jobs)]);
+        (pass, values, jobs)
+    }
+}
+
 /// One body's share of [`GpuWorld::newton`].
 pub struct NewtonCall<'a> {
     pub body: usize,
@@ -386,10 +431,8 @@ impl NewtonBuffers {
             None,
             &[("energy", &b.energy), ("dof_out", &b.dof_out), ("members", &b.member_buffer), ("jobs", &call), ("dispatch", &dispatch), ("member_energy", &member_energy), ("forces", &packed_forces)],
         );
-        let summary = buffer(gpu, "summary", members * crate::gpu::types::summary_len(3) * real, storage | BufferUsages::COPY_SRC);
-        let boxes = buffer(gpu, "boxes", members * 6 * 4, storage | BufferUsages::COPY_SRC);
-        let reference = super::buffer_init(gpu, "reference", &super::to_device(gpu.precision, &b.reference), storage);
-        let patterns = super::buffer_init(gpu, "patterns", bytemuck::cast_slice(&b.patterns), storage);
+        let (summary, boxes) = (buffer(gpu, "summary", members * summary_len(3) * real, storage | BufferUsages::COPY_SRC), buffer(gpu, "boxes", members * 6 * 4, storage | BufferUsages::COPY_SRC));
+        let (reference, patterns) = (super::buffer_init(gpu, "reference", &super::to_device(gpu.precision, &b.reference), storage), super::buffer_init(gpu, "patterns", bytemuck::cast_slice(&b.patterns), storage));
         let summarise = Pass::bound(
             gpu,
             pipelines.summary.clone(),
@@ -928,37 +971,16 @@ impl GpuWorld {
         let n = b.newton.as_mut().expect("made before staging");
         let mut states = Vec::with_capacity(mine.len());
         let mut changed = Vec::new();
-        // New inverses of members whose slots follow each other go up in one write (after a
-        // step that refactorised every grain, one inverse per grain): (offset, end, inverses).
-        let mut inverse_runs: Vec<(u64, u64, Vec<Vec<Real>>)> = Vec::new();
-        // K̄ of the members whose K̄⁻¹ the device makes, end to end, and where each lies (none
-        // left from a call that did not run).
-        let (mut effective, mut inversions): (Vec<Real>, Vec<Inversion>) = (Vec::new(), Vec::new());
+        let mut new = NewInverses::default();
+        // (none left from a call that did not run)
         n.invert = None;
         for &(i, m) in mine {
             let call = &mut calls[i];
             let slot = b.inverse_slot[m].expect("a capable body has an inverse slot");
             let (free_start, free_count) = b.free_range[m];
-            match call.inverse.take() {
-                Some(Inverse::Dense(inverse)) => {
-                    assert_eq!(inverse.len(), (free_count * (free_count + 1) / 2) as usize, "the lower triangle of K̄⁻¹ of the member's free dofs");
-                    let (offset, bytes) = (slot as u64 * real, inverse.len() as u64 * real);
-                    match inverse_runs.last_mut() {
-                        Some((_, end, run)) if *end == offset => {
-                            *end += bytes;
-                            run.push(inverse);
-                        }
-                        _ => inverse_runs.push((offset, offset + bytes, vec![inverse])),
-                    }
-                    n.inverse_version[m] = Some(call.factor);
-                }
-                Some(Inverse::Effective(values)) => {
-                    assert_eq!(values.len(), b.members[m].nonzeros as usize, "K̄ in the member's pattern");
-                    inversions.push(Inversion { member: m as u32, values_start: effective.len() as u32, pattern_start: b.pattern_start[m], pad: 0 });
-                    effective.extend_from_slice(&values);
-                    n.inverse_version[m] = Some(call.factor);
-                }
-                None => {}
+            if let Some(inverse) = call.inverse.take() {
+                new.add(inverse, [(free_count * (free_count + 1) / 2) as usize, b.members[m].nonzeros as usize], slot as u64 * real, (m, b.pattern_start[m]));
+                n.inverse_version[m] = Some(call.factor);
             }
             let member = NewtonMember { inverse_start: slot, free_start, free_count, ..call.member };
             // The device reads a member's parameters only: those it holds need not go up again
@@ -1008,14 +1030,12 @@ impl GpuWorld {
         debug_assert_eq!(DISPATCHES * 3 + 1, DISPATCH_WORDS);
         uploads.push((n.dispatch.clone(), 0, bytemuck::cast_slice(&dispatch).to_vec()));
         let (inverse, residuals) = (n.inverse.clone(), b.dof_out.clone());
-        if !inversions.is_empty() {
-            let storage = BufferUsages::STORAGE | BufferUsages::COPY_DST;
-            let (values, jobs) = (buffer(&self.gpu, "effective stiffness", effective.len() * real as usize, storage), buffer(&self.gpu, "inversions", std::mem::size_of_val(&inversions[..]), storage));
+        if !new.inversions.is_empty() {
             let pipeline = self.newton_pipelines.as_ref().expect("made with the batch's buffers").invert.clone();
-            let pass = Pass::bound(&self.gpu, pipeline, ("newton_invert", "main"), None, &[("inverse", &n.inverse), ("newton", &n.newton), ("effective", &values), ("patterns", &n.patterns), ("inversions", &jobs)]);
-            n.invert = Some((pass, inversions.len() as u32));
-            uploads.push((values, 0, bytemuck::cast_slice(&effective).to_vec()));
-            uploads.push((jobs, 0, bytemuck::cast_slice(&inversions).to_vec()));
+            let (pass, values, jobs) = new.invert_pass(&self.gpu, pipeline, n);
+            n.invert = Some((pass, new.inversions.len() as u32));
+            uploads.push((values, 0, bytemuck::cast_slice(&new.effective).to_vec()));
+            uploads.push((jobs, 0, bytemuck::cast_slice(&new.inversions).to_vec()));
         }
         for (buffer, offset, bytes) in uploads {
             self.upload(&buffer, offset, &bytes);
@@ -1030,7 +1050,7 @@ impl GpuWorld {
         // Device Newton iterations run in f64 only (asserted by `newton`): the host's reals are
         // the device's bytes.
         debug_assert_eq!(precision, Precision::F64);
-        for (offset, _, run) in inverse_runs {
+        for (offset, _, run) in new.runs {
             self.upload_pieces(&inverse, offset, &run.iter().map(|x| bytemuck::cast_slice(x)).collect::<Vec<&[u8]>>());
         }
         // Members evaluated on the host side of the call: their results; the others' the
