@@ -10,8 +10,8 @@ use bifirst::cpu;
 use bifirst::element::{ElementOutput, Formulation, Patches, ReferenceGeometry};
 use bifirst::gpu::shaders::{is_decoupled, is_element_kernel, validate, ElementVariant, SHADERS};
 use bifirst::gpu::types::{
-    summary_len, Active, Coefficients, ContactCall, ContactGroup, ContactState, DofOut, DofState, DofStep, Inversion, MaterialParams, MemberRange, NewtonMember, NewtonState, StepMotion, StepSummary, MODE_TANGENT, NEWTON_CONVERGED, NEWTON_HOST,
-    NEWTON_ITERATING,
+    packed, packed_len, summary_len, Active, Coefficients, ContactCall, ContactGroup, ContactState, DofOut, DofState, DofStep, Inversion, MaterialParams, MemberRange, NewtonMember, NewtonState, StepMotion, StepSummary, MODE_TANGENT,
+    NEWTON_CONVERGED, NEWTON_HOST, NEWTON_ITERATING,
 };
 use bifirst::gpu::uzawa_step::{UzawaPoint, UzawaStepKernel};
 use bifirst::gpu::{ElementFailure, Evaluation, GpuWorld, Inverse, NewtonCall, WorldBody};
@@ -1039,7 +1039,7 @@ fn newton_invert_kernel_matches_its_cpu_twin_and_the_dense_inverse() {
             effective.extend_from_slice(&values);
             patterns.extend_from_slice(&c.pattern.col_ptr);
             patterns.extend_from_slice(&c.pattern.row_idx);
-            slots += n * (n + 1) / 2;
+            slots += packed_len(n);
         }
         let mut twin = vec![0.0; slots];
         for job in &inversions {
@@ -1057,7 +1057,7 @@ fn newton_invert_kernel_matches_its_cpu_twin_and_the_dense_inverse() {
         let got = bifirst::gpu::world::run_newton_invert(&gpu, &newton, slots, &effective, &patterns, &jobs).expect("the inversion kernel runs");
         for job in &jobs {
             let row = newton[job.member as usize];
-            let span = row.inverse_start as usize..row.inverse_start as usize + (row.free_count * (row.free_count + 1) / 2) as usize;
+            let span = row.inverse_start as usize..row.inverse_start as usize + packed_len(row.free_count as usize);
             let (g, t) = (&got[span.clone()], &twin[span]);
             eprintln!("{} ({} free dofs): device against twin {:.2e}, twin against the dense inverse {:.2e}", kind.name(), row.free_count, gap(g, t), gap(&twin, &dense));
             assert!(gap(g, t) <= 1e-12, "{}: the kernel and its twin", kind.name());
@@ -1352,7 +1352,7 @@ fn newton_contact_kernels_match_their_cpu_twins() {
                             let mut s = 0.0;
                             for f in 0..n {
                                 for g in 0..n {
-                                    s += hi[f] * inverses[b][cpu::packed(f, g)] * hj[g];
+                                    s += hi[f] * inverses[b][packed(f, g)] * hj[g];
                                 }
                             }
                             block[3 * a + e] += s / theta_dt;

@@ -5,7 +5,9 @@
 
 use super::uzawa::{global, triple};
 use crate::contact::uzawa::SETTLE;
-use crate::gpu::types::{summary_len, Active, Coefficients, DofOut, DofState, DofStep, Inversion, MemberRange, NewtonMember, NewtonState, StepMotion, NEWTON_CONVERGED, NEWTON_FAILED, NEWTON_HOST, NEWTON_ITERATING, NEWTON_WORKGROUP, NO_FAILURE};
+use crate::gpu::types::{
+    packed, packed_len, summary_len, Active, Coefficients, DofOut, DofState, DofStep, Inversion, MemberRange, NewtonMember, NewtonState, StepMotion, NEWTON_CONVERGED, NEWTON_FAILED, NEWTON_HOST, NEWTON_ITERATING, NEWTON_WORKGROUP, NO_FAILURE,
+};
 use crate::gpu::uzawa_sweep::{NodeGather, UzawaJudgeState, UzawaLocal, UzawaProblem, JUDGE_CONVERGED, JUDGE_LIVE};
 use crate::gpu::ContactLayout;
 use crate::policy::{REFACTOR_CONTRACTION, TIGHTEN_AFTER, TIGHTEST_INNER, UZAWA_STALLS};
@@ -28,13 +30,6 @@ fn reduce_max(partial: [Real; NEWTON_WORKGROUP]) -> Real {
     partial.into_iter().fold(0.0, Real::max)
 }
 
-/// Where entry `(i, j)` of a symmetric matrix lies in its lower triangle stored row by row
-/// (`packed` of `newton.wgsl`).
-pub fn packed(i: usize, j: usize) -> usize {
-    let a = i.max(j);
-    a * (a + 1) / 2 + i.min(j)
-}
-
 /// Entry `f` of `K̄⁻¹ rhs` for a member whose `K̄⁻¹` (its lower triangle, [`packed`]) is at
 /// `row.inverse_start`, as the shaders read it, summed in `rhs`'s order.
 fn inverse_times(inverse: &[Real], row: &NewtonMember<Real>, f: usize, rhs: &[Real]) -> Real {
@@ -51,7 +46,7 @@ fn inverse_times(inverse: &[Real], row: &NewtonMember<Real>, f: usize, rhs: &[Re
 pub fn newton_invert(inverse: &mut [Real], newton: &[NewtonMember<Real>], effective: &[Real], patterns: &[u32], job: &Inversion) {
     let row = newton[job.member as usize];
     let n = row.free_count as usize;
-    let slot = &mut inverse[row.inverse_start as usize..][..n * (n + 1) / 2];
+    let slot = &mut inverse[row.inverse_start as usize..][..packed_len(n)];
     let (starts, rows) = (&patterns[job.pattern_start as usize..][..n + 1], &patterns[job.pattern_start as usize + n + 1..]);
     slot.fill(0.0);
     for j in 0..n {

@@ -94,6 +94,24 @@ pub const fn summary_len(dim: usize) -> usize {
     7 + 2 * dim + if dim == 2 { 1 } else { 3 }
 }
 
+/// Where entry `(i, j)` of a symmetric matrix lies in its lower triangle stored row by row
+/// (`packed` of `newton.wgsl`): how a member's `K̄⁻¹` is laid out in its slot.
+pub fn packed(i: usize, j: usize) -> usize {
+    let a = i.max(j);
+    a * (a + 1) / 2 + i.min(j)
+}
+
+/// The entries of an `n x n` symmetric matrix's lower triangle ([`packed`]).
+pub const fn packed_len(n: usize) -> usize {
+    n * (n + 1) / 2
+}
+
+/// The lower triangle of an `n x n` symmetric matrix, row by row ([`packed`]), entry `(i, j)`,
+/// `i >= j`, from `entry(i, j)`.
+pub fn pack_lower(n: usize, entry: impl Fn(usize, usize) -> f64) -> Vec<f64> {
+    (0..n).flat_map(|i| (0..=i).map(move |j| (i, j))).map(|(i, j)| entry(i, j)).collect()
+}
+
 /// A body's step end as the device reduced it (`newton_summary`, with the strain energy of
 /// `newton_finish` and the residual where its iterations ended), for a body whose displacements
 /// and forces stay on the device. Components beyond the scene's dimension are zero.

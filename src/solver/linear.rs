@@ -152,7 +152,7 @@ impl CholeskySolver {
     }
 }
 
-/// The lower triangle, row by row (`cpu::packed`), of the inverse of the symmetric
+/// The lower triangle, row by row (`gpu::types::packed`), of the inverse of the symmetric
 /// matrix whose lower triangle `values` fills the CSC
 /// pattern `col_ptr`, `row_idx`, from a dense Cholesky factorisation: for a body of tens of dofs
 /// (a grain) a few dense kernels, where a sparse factor's solves of the identity's columns walk
@@ -174,7 +174,7 @@ pub fn dense_inverse(col_ptr: &[u32], row_idx: &[u32], values: &[Real]) -> Optio
     let mut out = faer::Mat::<Real>::zeros(n, n);
     inverse::inverse(out.as_mut(), a.as_ref(), Par::Seq, stack);
     // The lower triangle is written; the matrix is symmetric, and the device reads half of it.
-    Some((0..n).flat_map(|i| (0..=i).map(move |j| (i, j))).map(|(i, j)| out[(i, j)]).collect())
+    Some(crate::gpu::types::pack_lower(n, |i, j| out[(i, j)]))
 }
 
 #[cfg(test)]
@@ -212,9 +212,9 @@ mod tests {
         }
         solver.solve_columns(&mut columns, n);
         let largest = columns.iter().fold(0.0 as Real, |m, x| m.max(x.abs()));
-        assert_eq!(dense.len(), n * (n + 1) / 2, "the lower triangle");
-        let lower = (0..n).flat_map(|i| (0..=i).map(move |j| (i, j)));
-        let worst = dense.iter().zip(lower).fold(0.0 as Real, |m, (a, (i, j))| m.max((a - columns[j * n + i]).abs()));
+        let solved = crate::gpu::types::pack_lower(n, |i, j| columns[j * n + i]);
+        assert_eq!(dense.len(), solved.len(), "the lower triangle");
+        let worst = dense.iter().zip(&solved).fold(0.0 as Real, |m, (a, b)| m.max((a - b).abs()));
         assert!(worst <= 1e-13 * largest, "{worst:e} against {largest:e}");
         assert_eq!(solver.dense_inverse(&values), Some(dense));
     }

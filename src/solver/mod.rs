@@ -806,16 +806,14 @@ impl Simulation {
                 let list: Vec<(usize, &[Real])> = self.bodies.iter().enumerate().filter(|(b, _)| strains[*b].is_none()).map(|(b, body)| (b, &body.work.trial.u[..])).collect();
                 // A few bodies (grains that took their step on the host) cost the CPU twins less
                 // than a device pass, as a later Newton round does.
-                let work = element_work(list.iter().map(|&(b, _)| &self.bodies[b]));
-                if !list.is_empty() && !crate::backend::round_on_device(world, false, &work) {
-                    let on_host: Vec<(usize, Real)> = list.par_iter().map(|&(b, _)| (b, self.bodies[b].trial_strain_energy())).collect();
-                    for (b, e) in on_host {
-                        strains[b] = Some(e);
-                    }
-                } else if !list.is_empty() {
-                    let energies = world.element_energies(&list, times).map_err(|e| self.bodies[0].device_failure(&e))?;
+                if !list.is_empty() {
+                    let energies: Vec<Real> = if crate::backend::round_on_device(world, false, &element_work(list.iter().map(|&(b, _)| &self.bodies[b]))) {
+                        world.element_energies(&list, times).map_err(|e| self.bodies[0].device_failure(&e))?.iter().map(|e| e.iter().sum()).collect()
+                    } else {
+                        list.par_iter().map(|&(b, _)| self.bodies[b].trial_strain_energy()).collect()
+                    };
                     for ((b, _), e) in list.iter().zip(energies) {
-                        strains[*b] = Some(e.iter().sum());
+                        strains[*b] = Some(e);
                     }
                 }
                 strains.into_iter().map(|s| s.expect("every body's energy")).collect()

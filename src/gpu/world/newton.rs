@@ -16,7 +16,8 @@ use super::contact::{ContactLayout, ContactPasses, ContactPipelines, GroupContac
 use super::{buffer, to_device, Batch, Evaluation, GpuWorld, Pass, ReadBack, Source, WORKGROUP};
 use crate::contact::uzawa::Problem;
 use crate::gpu::types::{
-    summary_len, Active, Coefficients, ContactState, DofOut, DofStep, Inversion, NewtonMember, NewtonState, StepSummary, MODE_FORCES, MODE_TANGENT, NEWTON_CONVERGED, NEWTON_FAILED, NEWTON_HOST, NEWTON_ITERATING, NEWTON_MAX_FREE, NO_FAILURE,
+    packed_len, summary_len, Active, Coefficients, ContactState, DofOut, DofStep, Inversion, NewtonMember, NewtonState, StepSummary, MODE_FORCES, MODE_TANGENT, NEWTON_CONVERGED, NEWTON_FAILED, NEWTON_HOST, NEWTON_ITERATING, NEWTON_MAX_FREE,
+    NO_FAILURE,
 };
 use crate::gpu::uzawa_sweep::UzawaSweeps;
 use crate::gpu::{ElementFailure, Gpu, GpuError};
@@ -143,7 +144,7 @@ pub enum Inverse {
     /// `K̄` itself, the values factorised in the body's stiffness pattern: the device makes
     /// `K̄⁻¹` (`newton_invert`), and the bytes that go up are the non-zeros.
     Effective(Vec<Real>),
-    /// `K̄⁻¹` made on the host, its lower triangle row by row (`cpu::packed`).
+    /// `K̄⁻¹` made on the host, its lower triangle row by row (`gpu::types::packed`).
     Dense(Vec<Real>),
 }
 
@@ -155,7 +156,7 @@ pub fn invert_loops(n: usize) -> usize {
     let cholesky: usize = (0..n).map(|k| 1 + rows(n - k - 1) * (2 + (n - k - 1))).sum();
     let triangle: usize = (0..n).map(|j| 2 + rows(n - j - 1) * (2 + (n - j - 1))).sum();
     let product: usize = (0..n).map(|i| 1 + rows(i + 1) * (2 + (n - i))).sum();
-    rows(n * (n + 1) / 2) + rows(n) * (1 + n) + cholesky + triangle + product
+    rows(packed_len(n)) + rows(n) * (1 + n) + cholesky + triangle + product
 }
 
 impl GpuWorld {
@@ -349,7 +350,7 @@ pub(super) struct NewtonBuffers {
     pub(super) resident: super::step::Resident,
 }
 
-/// Where each member's `K̄⁻¹` (its lower triangle, `cpu::packed`) lies in a batch's
+/// Where each member's `K̄⁻¹` (its lower triangle, `gpu::types::packed`) lies in a batch's
 /// `inverse` buffer: members of at most
 /// `NEWTON_MAX_FREE` free dofs, in member order, while the buffer stays within the device's
 /// binding limit; `None` for the others (they iterate on the host).
@@ -358,7 +359,7 @@ pub(super) fn inverse_slots(free_counts: &[usize], real: usize, max_bytes: u64) 
     let slots = free_counts
         .iter()
         .map(|&n| {
-            let size = n * (n + 1) / 2;
+            let size = packed_len(n);
             let fits = n > 0 && n <= NEWTON_MAX_FREE && ((total + size) * real) as u64 <= max_bytes && total + size <= u32::MAX as usize;
             fits.then(|| {
                 total += size;
@@ -979,7 +980,7 @@ impl GpuWorld {
             let slot = b.inverse_slot[m].expect("a capable body has an inverse slot");
             let (free_start, free_count) = b.free_range[m];
             if let Some(inverse) = call.inverse.take() {
-                new.add(inverse, [(free_count * (free_count + 1) / 2) as usize, b.members[m].nonzeros as usize], slot as u64 * real, (m, b.pattern_start[m]));
+                new.add(inverse, [packed_len(free_count as usize), b.members[m].nonzeros as usize], slot as u64 * real, (m, b.pattern_start[m]));
                 n.inverse_version[m] = Some(call.factor);
             }
             let member = NewtonMember { inverse_start: slot, free_start, free_count, ..call.member };

@@ -107,7 +107,7 @@ impl Body {
     }
 
     /// `K̄⁻¹` of the free dofs of the kept factorisation, its lower triangle row by row
-    /// (`cpu::packed`), for a device that applies it: a dense inverse of the values
+    /// (`gpu::types::packed`), for a device that applies it: a dense inverse of the values
     /// factorised, which the body holds while it has no newer tangent ([`Body::kept_factor`]);
     /// else, or if the dense factorisation fails, the factor's solves of the identity's columns,
     /// entry `(i, j)`, `i >= j`, from column `j` (`K̄` is symmetric).
@@ -126,7 +126,7 @@ impl Body {
             x[f * n + f] = 1.0;
         }
         self.solve_effective(&mut x, times);
-        (0..n).flat_map(|i| (0..=i).map(move |j| (i, j))).map(|(i, j)| x[j * n + i]).collect()
+        crate::gpu::types::pack_lower(n, |i, j| x[j * n + i])
     }
 
     /// The body's share of device Newton iterations from its evaluated iterate: the tolerances
