@@ -83,7 +83,7 @@ fn newton_iteration(c: &mut Criterion) {
     let u: Vec<f64> = mesh.nodes.iter().flat_map(|&x| deform(x)).collect();
     let (dt, theta, xi) = (1e-3, 0.5, 0.5);
     let c1 = 1.0 / (theta * dt * dt);
-    let coefficients = Coefficients { factor: xi, c1 };
+    let coefficients = Coefficients { factor: xi, c1, motion: 0.0 };
     let mut times = PhaseTimes::default();
     println!("newton_hex8_50k: {} free dofs, {} stored non-zeros", body.dofs().free_count, body.pattern().nnz());
     let mut group = c.benchmark_group("newton_hex8_50k");

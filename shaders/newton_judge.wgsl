@@ -80,7 +80,7 @@ fn main(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workg
         return;
     }
     let tolerance = row.residual_tolerance * scale + row.floor + row.floor_per_travel * most;
-    let allowed = row.increment_tolerance * max(moved, row.increment_floor) + row.round_off * size;
+    let allowed = row.increment_tolerance * max(moved, max(row.increment_floor, coefficients.motion)) + row.round_off * size;
     let contraction = residual / max(s.residual, REAL_MIN_POSITIVE);
     s.balanced = u32(residual <= tolerance);
     if residual <= tolerance && s.increment <= allowed {

@@ -82,7 +82,7 @@ impl BenchCase {
         let gather = GatherMap::new(&mesh, dim, &pattern);
         let geometry = ReferenceGeometry::new(&mesh).expect("generated meshes are valid");
         let step = u.iter().enumerate().map(|(d, &x)| DofStep { mass: 1.0 + (d % 7) as Real * 0.1, u_pred: 0.9 * x, f_int_t: 0.0, f_ext: 0.1 }).collect();
-        Self { mesh, model, formulation, geometry, dofs, pattern, gather, u, step, coefficients: Coefficients { factor: 0.5, c1: 1e4 } }
+        Self { mesh, model, formulation, geometry, dofs, pattern, gather, u, step, coefficients: Coefficients { factor: 0.5, c1: 1e4, motion: 0.0 } }
     }
 
     pub fn elements(&self) -> usize {

@@ -4,7 +4,7 @@
 
 #[path = "common/run.rs"]
 mod common_run;
-use bifirst::contact::detect::detect;
+use bifirst::contact::detect::{detect, Detection};
 use bifirst::contact::geometry::{dot, on_quad, on_segment, sub};
 use bifirst::contact::pairs::{BodyPairs, Rank};
 use bifirst::contact::{Configuration, ContactModel, Master, Settings, Surface, Sweep};
@@ -217,4 +217,34 @@ fn upper_node(mesh: &Mesh, x: f64) -> u32 {
     let column = |p: &&[f64; 3]| (p[0] - x).abs() < 1e-12;
     let lowest = mesh.nodes.iter().filter(column).map(|p| p[1]).fold(f64::INFINITY, f64::min);
     mesh.nodes.iter().position(|p| column(&p) && p[1] == lowest).expect("a node at x") as u32
+}
+
+/// Caught by issue 59's falling packing: two bodies whose boxes come within half a facet of
+/// each other, but farther apart than the search margin, were placed for the narrow phase every
+/// step (the body pairs' boxes were grown by the depth a point may have as well), and a device
+/// that kept the grains' states sent each such grain's displacements back: 55 bytes a grain a
+/// step of the 236 that 20 000 falling grains moved. No node of either can make a point with
+/// the other, so neither is placed; within the margin, both are, and their points found.
+#[test]
+fn bodies_farther_apart_than_the_margin_are_not_placed_for_the_narrow_phase() {
+    let margin = 0.01;
+    for (gap, placed) in [(0.05, false), (0.005, true)] {
+        let lower = rectangle([0.0, 0.0], [1.0, 0.5], [4, 2], ElementKind::Quad4);
+        let upper = rectangle([0.2, 0.5 + gap], [1.0, 0.5], [4, 2], ElementKind::Quad4);
+        let meshes = [lower, upper];
+        let model = ContactModel {
+            settings: Settings { tolerance: 1e-8, max_iterations: 10, sweep: Sweep::GaussSeidel, acceleration: Default::default(), fallback: Default::default() },
+            surfaces: meshes.iter().map(Surface::of).collect(),
+            obstacles: Vec::new(),
+            pairs: upper_on_lower(0.2),
+        };
+        let positions: Vec<Vec<[f64; 3]>> = meshes.iter().map(|m| m.nodes.clone()).collect();
+        let mut config = Configuration::new(&model, positions);
+        // The facets are 0.25 long: half of one (the deepest a point may be) is beyond the gap.
+        assert!(gap < 0.5 * 0.25);
+        let detection = Detection::new(&model, &config, 0.0, 0.1, margin, &mut Default::default());
+        assert_eq!(detection.needed, vec![placed; 2], "gap {gap}");
+        let found = detection.points(&model, &mut config, &|_, _| unreachable!("every body is placed"), 2, margin);
+        assert_eq!(found.is_empty(), !placed, "gap {gap}: {} points", found.len());
+    }
 }

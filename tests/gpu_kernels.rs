@@ -145,7 +145,7 @@ fn kernel_structs_match_the_shader_layouts() {
     let p = MaterialParams::<f64> { g: 1.0, k: 2.0, a1: 3.0, a2: 4.0, a3: 5.0, a4: 6.0, a5: 7.0, a6: 8.0 };
     assert_eq!(bytemuck::cast::<_, [f64; 8]>(p), [1.0, 2.0, 3.0, 4.0, 5.0, 6.0, 7.0, 8.0], "field order");
     for kernel in ["assemble_csr", "assemble_residual"] {
-        check_all_real_struct(kernel, None, "Coefficients", &["factor", "c1"], [size_of::<Coefficients<f32>>(), size_of::<Coefficients<f64>>()]);
+        check_all_real_struct(kernel, None, "Coefficients", &["factor", "c1", "motion"], [size_of::<Coefficients<f32>>(), size_of::<Coefficients<f64>>()]);
     }
     check_all_real_struct("assemble_residual", None, "DofStep", &["mass", "u_pred", "f_int_t", "f_ext"], [size_of::<DofStep<f32>>(), size_of::<DofStep<f64>>()]);
     for kernel in ["step_begin", "step_commit"] {
@@ -627,7 +627,7 @@ fn newton_summary_kernel_matches_its_cpu_twin() {
         // Each member's Newton state and strain energy travel in its summary.
         let state: Vec<NewtonState<f64>> = (0..members.len() as u32).map(|m| NewtonState { status: m % 4, iterations: 3 + m, residual: value().abs(), ..NewtonState::default() }).collect();
         let member_energy: Vec<f64> = (0..members.len()).map(|_| value()).collect();
-        let (motion, coefficients) = (StepMotion::of(1e-3, 0.55, dim), Coefficients { factor: 0.7, c1: 3.0 });
+        let (motion, coefficients) = (StepMotion::of(1e-3, 0.55, dim), Coefficients { factor: 0.7, c1: 3.0, motion: 0.0 });
         let call = [0usize, 2];
         let (got, got_boxes) = bifirst::gpu::world::run_newton_summary(&gpu, &members, &call, (motion, coefficients, &committed, &step, &reference, &u, &dof_out, &state, &member_energy)).expect("the summary kernel runs");
         let (mut twin, mut twin_boxes) = (vec![0.0; got.len()], vec![0.0f32; got_boxes.len()]);
@@ -680,7 +680,7 @@ fn element_force_tangent_kernel_matches_its_cpu_twin() {
             let mut world = world_of(&gpu, &cases);
             let (mut values, mut dof_out) = buffers_for(&cases);
             for tangent in [false, true] {
-                let failures = evaluate_all(&mut world, &cases, tangent, &mut values, &mut dof_out, Coefficients { factor: 0.5, c1: 1.0 });
+                let failures = evaluate_all(&mut world, &cases, tangent, &mut values, &mut dof_out, Coefficients { factor: 0.5, c1: 1.0, motion: 0.0 });
                 assert_eq!(failures, [None, None], "{variant:?}");
                 let mut worst = 0.0f64;
                 for (b, c) in cases.iter().enumerate() {
@@ -725,7 +725,7 @@ fn element_kernels_match_their_cpu_twins_at_extreme_volume_changes() {
             }
             let mut world = world_of(&gpu, &cases);
             let (mut values, mut dof_out) = buffers_for(&cases);
-            let failures = evaluate_all(&mut world, &cases, true, &mut values, &mut dof_out, Coefficients { factor: 0.5, c1: 1.0 });
+            let failures = evaluate_all(&mut world, &cases, true, &mut values, &mut dof_out, Coefficients { factor: 0.5, c1: 1.0, motion: 0.0 });
             assert_eq!(failures, [None, None], "{variant:?} scaled by {scale}");
             for (b, c) in cases.iter().enumerate() {
                 let on_gpu = world.element_results(b).expect("read back");
@@ -763,7 +763,7 @@ fn grouped_patches_in_the_element_kernel_match_its_cpu_twin() {
             let cases = [Case { mesh: cells, model: model_of("neo_hookean"), formulation: Formulation::Fbar, geometry, dofs, pattern, gather, u, relaxation: None }];
             let mut world = world_of(&gpu, &cases);
             let (mut values, mut dof_out) = buffers_for(&cases);
-            let failures = evaluate_all(&mut world, &cases, true, &mut values, &mut dof_out, Coefficients { factor: 0.5, c1: 1.0 });
+            let failures = evaluate_all(&mut world, &cases, true, &mut values, &mut dof_out, Coefficients { factor: 0.5, c1: 1.0, motion: 0.0 });
             assert_eq!(failures, [None], "{:?}", mesh.kind);
             let on_gpu = world.element_results(0).expect("read back");
             let stride = element_out_stride(cases[0].pattern.element_dofs);
@@ -804,7 +804,7 @@ fn viscoelastic_relaxation_in_the_element_kernel_matches_its_cpu_twin() {
             world.set_relaxation(1, Relaxation { c, history: &history });
             let (mut values, mut dof_out) = buffers_for(&cases);
             for tangent in [false, true] {
-                let failures = evaluate_all(&mut world, &cases, tangent, &mut values, &mut dof_out, Coefficients { factor: 0.5, c1: 1.0 });
+                let failures = evaluate_all(&mut world, &cases, tangent, &mut values, &mut dof_out, Coefficients { factor: 0.5, c1: 1.0, motion: 0.0 });
                 assert_eq!(failures, [None, None], "{material} {kind:?}");
                 for (b, case) in cases.iter().enumerate() {
                     let on_gpu = world.element_results(b).expect("read back");
@@ -845,7 +845,7 @@ fn element_force_tangent_kernel_reports_the_first_inverted_element_of_each_body(
         let mut world = world_of(&gpu, &cases);
         let (mut values, mut dof_out) = buffers_for(&cases);
         for tangent in [false, true] {
-            let failures = evaluate_all(&mut world, &cases, tangent, &mut values, &mut dof_out, Coefficients { factor: 0.5, c1: 1.0 });
+            let failures = evaluate_all(&mut world, &cases, tangent, &mut values, &mut dof_out, Coefficients { factor: 0.5, c1: 1.0, motion: 0.0 });
             assert_eq!(failures[0], None, "the good body passes");
             assert!(matches!(failures[1], Some(ElementFailure::Inverted(e)) if e <= 7), "{formulation:?} tangent {tangent}: {:?}", failures[1]);
         }
@@ -864,7 +864,7 @@ fn assembly_kernels_match_their_cpu_twins() {
             let mut rng = random::rng(300 + k as u64);
             let steps: Vec<Vec<DofStep<f64>>> =
                 cases.iter().map(|c| (0..c.u.len()).map(|_| DofStep { mass: rng.random_range(0.1..1.0), u_pred: rng.random_range(-0.1..0.1), f_int_t: rng.random_range(-50.0..50.0), f_ext: rng.random_range(-5.0..5.0) }).collect()).collect();
-            let coefficients = Coefficients { factor: 0.55, c1: 4e4 };
+            let coefficients = Coefficients { factor: 0.55, c1: 4e4, motion: 0.0 };
             let mut world = world_of(&gpu, &cases);
             let list: Vec<(usize, &[DofStep<f64>])> = steps.iter().enumerate().map(|(b, s)| (b, &s[..])).collect();
             world.set_step_inputs(&list);
@@ -924,7 +924,7 @@ fn one_device_pass_serves_any_number_of_bodies() {
     let variant = ElementVariant { kind: ElementKind::Tet4, formulation: Formulation::Displacement, material: "lvf" };
     let cases: Vec<Case> = (0..40).map(|k| case(variant, 600 + k)).collect();
     let mut world = world_of(&gpu, &cases);
-    let coefficients = Coefficients { factor: 0.5, c1: 10.0 };
+    let coefficients = Coefficients { factor: 0.5, c1: 10.0, motion: 0.0 };
     let steps: Vec<Vec<DofStep<f64>>> = cases.iter().map(|c| vec![DofStep { mass: 1.0, u_pred: 0.0, f_int_t: 0.0, f_ext: 0.0 }; c.u.len()]).collect();
     let list: Vec<(usize, &[DofStep<f64>])> = steps.iter().enumerate().map(|(b, s)| (b, &s[..])).collect();
     world.set_step_inputs(&list);
@@ -1014,7 +1014,7 @@ fn cpu_residual(c: &Case, u: &[f64], step: &[DofStep<f64>], coefficients: Coeffi
 #[test]
 fn newton_invert_kernel_matches_its_cpu_twin_and_the_dense_inverse() {
     let Some(gpu) = gpu_or_skip("newton_invert_kernel_matches_its_cpu_twin_and_the_dense_inverse", Precision::F64) else { return };
-    let coefficients = Coefficients { factor: 1.0, c1: 1e6 };
+    let coefficients = Coefficients { factor: 1.0, c1: 1e6, motion: 0.0 };
     for (k, kind) in [ElementKind::Tri3, ElementKind::Quad4, ElementKind::Tet4, ElementKind::Hex8].into_iter().enumerate() {
         let mut cases = two_bodies(ElementVariant { kind, formulation: Formulation::Displacement, material: "neo_hookean" }, 700 + k as u64);
         // The second body of 3D kinds held on half its nodes: small enough for a software
@@ -1074,7 +1074,7 @@ fn newton_invert_kernel_matches_its_cpu_twin_and_the_dense_inverse() {
 fn newton_kernels_match_their_cpu_twins() {
     let Some(gpu) = gpu_or_skip("newton_kernels_match_their_cpu_twins", Precision::F64) else { return };
     let gpu = Arc::new(gpu);
-    let coefficients = Coefficients { factor: 1.0, c1: 1e6 };
+    let coefficients = Coefficients { factor: 1.0, c1: 1e6, motion: 0.0 };
     for (k, kind) in [ElementKind::Tri3, ElementKind::Quad4, ElementKind::Tet4, ElementKind::Hex8].into_iter().enumerate() {
         let cases = two_bodies(ElementVariant { kind, formulation: Formulation::Displacement, material: "neo_hookean" }, 400 + k as u64);
         // The step started from 0.9 u at rest: Newton goes from u towards the balance of inertia
@@ -1087,8 +1087,10 @@ fn newton_kernels_match_their_cpu_twins() {
         // the residual take in.
         let pushes: Vec<Vec<f64>> = cases.iter().enumerate().map(|(b, c)| (0..c.u.len()).map(|d| if b == 1 { 1e3 * ((d % 7) as f64 - 3.0) * c.u[d].abs().max(1e-3) } else { 0.0 }).collect()).collect();
         // `evaluated`: the call brings the evaluation of its iterates, else the device makes it
-        // and judges it first (the first round of a step), as the twins do.
-        for (budgets, tolerance, evaluated) in [([1u32, 3], 0.0, true), ([25, 25], 1e-9, true), ([1, 3], 0.0, false), ([25, 25], 1e-9, false)] {
+        // and judges it first (the first round of a step), as the twins do. `motion`: the
+        // call's floor of the increment bound, above the members' own (1e-3) or not.
+        for (budgets, tolerance, evaluated, motion) in [([1u32, 3], 0.0, true, 0.0), ([25, 25], 1e-9, true, 0.0), ([25, 25], 1e-9, true, 5e-2), ([1, 3], 0.0, false, 0.0), ([25, 25], 1e-9, false, 5e-2)] {
+            let coefficients = Coefficients { motion, ..coefficients };
             let member = |b: usize| NewtonMember {
                 inverse_start: 0,
                 free_start: 0,
@@ -1204,7 +1206,7 @@ fn newton_kernels_match_their_cpu_twins() {
 fn a_device_newton_call_for_one_body_of_a_large_batch_reads_back_only_its_own() {
     let Some(gpu) = gpu_or_skip("a_device_newton_call_for_one_body_of_a_large_batch_reads_back_only_its_own", Precision::F64) else { return };
     let gpu = Arc::new(gpu);
-    let coefficients = Coefficients { factor: 1.0, c1: 1e6 };
+    let coefficients = Coefficients { factor: 1.0, c1: 1e6, motion: 0.0 };
     let c = case(ElementVariant { kind: ElementKind::Tri3, formulation: Formulation::Displacement, material: "neo_hookean" }, 500);
     let bodies: Vec<WorldBody> = (0..400).map(|_| c.world_body()).collect();
     let mut world = GpuWorld::new(gpu, &bodies).expect("device world");
@@ -1258,7 +1260,7 @@ fn a_device_newton_call_for_one_body_of_a_large_batch_reads_back_only_its_own() 
 #[test]
 fn a_device_newton_increment_that_inverts_an_element_fails_the_body() {
     let Some(gpu) = gpu_or_skip("a_device_newton_increment_that_inverts_an_element_fails_the_body", Precision::F64) else { return };
-    let coefficients = Coefficients { factor: 1.0, c1: 1e6 };
+    let coefficients = Coefficients { factor: 1.0, c1: 1e6, motion: 0.0 };
     let c = case(ElementVariant { kind: ElementKind::Quad4, formulation: Formulation::Displacement, material: "blatz_ko" }, 600);
     let mut world = GpuWorld::new(Arc::new(gpu), &[c.world_body()]).expect("device world");
     let step: Vec<DofStep<f64>> = c.u.iter().map(|&x| DofStep { mass: 1.0, u_pred: 0.9 * x, f_int_t: 0.0, f_ext: 0.0 }).collect();
@@ -1309,7 +1311,7 @@ fn newton_contact_kernels_match_their_cpu_twins() {
     let Some(gpu) = gpu_or_skip("newton_contact_kernels_match_their_cpu_twins", Precision::F64) else { return };
     let gpu = Arc::new(gpu);
     let (theta_dt, c1) = (1e-3, 1e6);
-    let coefficients = Coefficients { factor: 1.0, c1 };
+    let coefficients = Coefficients { factor: 1.0, c1, motion: 0.0 };
     let (mut tightened, mut stall_cases) = (0, 0);
     for (k, kind) in [ElementKind::Tri3, ElementKind::Tet4].into_iter().enumerate() {
         let cases = two_bodies(ElementVariant { kind, formulation: Formulation::Displacement, material: "neo_hookean" }, 700 + k as u64);

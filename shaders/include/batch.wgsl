@@ -39,6 +39,10 @@ struct Coefficients {
     factor: real,
     // 1/(θ dt²): multiplies the inertia.
     c1: real,
+    // How far the scene's fastest motion goes in the step: the floor of the Newton increment's
+    // bound (`newton_judge`), one for every member, so that a member's own row does not change
+    // from step to step while the scene speeds up. Zero outside Newton calls.
+    motion: real,
 }
 
 // What a dof needs from the start of the step.

@@ -323,7 +323,8 @@ fn facet_boxes<const N: usize>(facets: &[u32], x: &[Vec3], dim: usize, margin: R
 
 /// Slave nodes against master facets, searched only inside the body pairs whose boxes come
 /// within reach of each other ([`broad::neighbours`]), the slaves in parallel. The result is
-/// that of a search of every node against every facet: the same points in the same order.
+/// that of a search of every node against every facet, less the points of nodes outside their
+/// master's box: the same points in the same order.
 struct PairSearch {
     /// Each body's box grown by how far off it a node can still make a point with it.
     grown_boxes: Vec<broad::Aabb>,
@@ -336,12 +337,16 @@ impl PairSearch {
         if !model.pairs.any() {
             return Self { grown_boxes: Vec::new(), masters: vec![Vec::new(); boxes.len()] };
         }
-        // A point's node is at most `reach` (half a facet, or the margin) off its facet's plane
-        // and `EDGE_TOLERANCE` of an edge beyond its sides: a body's box grown by that for its
-        // largest facet, and the margin, holds every node that can make a point with it, so
-        // that two bodies whose grown boxes do not meet are not searched.
-        let reach = |size: Real| margin.max(0.5 * size);
-        let grown_boxes: Vec<broad::Aabb> = boxes.iter().zip(largest).map(|(&b, &size)| broad::grown(b, reach(size) + EDGE_TOLERANCE * size + margin)).collect();
+        // A point's foot is on its facet or at most `EDGE_TOLERANCE` of an edge beyond its
+        // sides, and its node either in front of the facet by at most the margin or behind it,
+        // inside the master and so inside its box: a body's box grown by the margin and that
+        // band of its largest facet holds every node that can make a point with it, so that two
+        // bodies whose grown boxes do not meet are not searched. (A node behind a facet but
+        // outside the master's box has gone past a thin corner of the master: it is not in it.)
+        // Growing by half a facet, the depth a point may have, as this did before, placed most
+        // grains of a loose packing for nothing: each placement read a grain's displacements
+        // back from a device every step.
+        let grown_boxes: Vec<broad::Aabb> = boxes.iter().zip(largest).map(|(&b, &size)| broad::grown(b, margin + EDGE_TOLERANCE * size)).collect();
         // Bodies move a fraction of a facet per step: a skin of half the largest facet keeps
         // the pairs for several steps of the fastest body without many more pairs to test.
         let skin = 0.5 * largest.iter().copied().fold(0.0, Real::max);

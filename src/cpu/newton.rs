@@ -176,7 +176,7 @@ pub fn newton_judge(
         return;
     }
     let tolerance = row.residual_tolerance * scale + row.floor + row.floor_per_travel * most;
-    let allowed = row.increment_tolerance * moved.max(row.increment_floor) + row.round_off * size;
+    let allowed = row.increment_tolerance * moved.max(row.increment_floor.max(coefficients.motion)) + row.round_off * size;
     let contraction = residual / s.residual.max(Real::MIN_POSITIVE);
     s.balanced = (residual <= tolerance) as u32;
     if residual <= tolerance && s.increment <= allowed {

@@ -19,12 +19,15 @@ pub struct MaterialParams<R> {
 }
 
 /// `struct Coefficients` of `shaders/include/batch.wgsl` (the assembly and Newton kernels):
-/// `factor` (ξ) multiplies the tangent and the new internal force, `c1 = 1/(θ dt²)` the inertia.
+/// `factor` (ξ) multiplies the tangent and the new internal force, `c1 = 1/(θ dt²)` the inertia,
+/// `motion` (how far the scene's fastest motion goes in the step; zero outside Newton calls) is
+/// the floor of the Newton increment's bound.
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Coefficients<R> {
     pub factor: R,
     pub c1: R,
+    pub motion: R,
 }
 
 /// `struct DofStep` of `shaders/include/batch.wgsl`: what a dof needs from the start of the step.

@@ -385,7 +385,7 @@ impl GpuWorld {
         }
         let mut place = vec![(0, 0); bodies.len()];
         let mut batches = Vec::with_capacity(groups.len());
-        let coefficients = buffer(&gpu, "coefficients", 2 * real.max(8), BufferUsages::UNIFORM | BufferUsages::COPY_DST);
+        let coefficients = buffer(&gpu, "coefficients", 3 * real.max(8), BufferUsages::UNIFORM | BufferUsages::COPY_DST);
         let mut traffic = Traffic::default();
         let mut readback_bytes = 0usize;
         for (variant, members, _) in groups {
@@ -570,7 +570,7 @@ impl GpuWorld {
     pub fn evaluate(&mut self, list: &mut [Evaluation], coefficients: Coefficients<Real>, times: &mut PhaseTimes) -> Result<(), GpuError> {
         let t0 = Instant::now();
         let coefficient_buffer = self.coefficients.clone();
-        self.upload(&coefficient_buffer, 0, &to_device(self.gpu.precision, &[coefficients.factor, coefficients.c1]));
+        self.upload(&coefficient_buffer, 0, &to_device(self.gpu.precision, &[coefficients.factor, coefficients.c1, coefficients.motion]));
         let mut encoder = None;
         let mut readback = ReadBack::default();
         let landing = self.record_evaluation(list, &mut encoder, &mut readback)?;

@@ -75,7 +75,7 @@ impl Prescribed {
 
 /// The assembly coefficients of a step: `ξ` on the stiffness, `c1 = 1/(θ dt²)` on the mass.
 pub fn coefficients(p: &StepParams) -> Coefficients<Real> {
-    Coefficients { factor: p.xi, c1: 1.0 / (p.theta * p.dt * p.dt) }
+    Coefficients { factor: p.xi, c1: 1.0 / (p.theta * p.dt * p.dt), motion: 0.0 }
 }
 
 /// Theta-method and Newton parameters of a step.

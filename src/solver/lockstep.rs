@@ -8,7 +8,7 @@ use super::group::{Context, Group, GroupReport, Hold};
 use crate::contact::uzawa::{Outcome, Problem};
 use crate::contact::Settings;
 use crate::gpu::types::ContactState;
-use crate::gpu::types::{NewtonState, StepSummary};
+use crate::gpu::types::{Coefficients, NewtonState, StepSummary};
 use crate::gpu::{ElementFailure, Evaluation, GpuError, GpuWorld, GroupContact, Inverse, NewtonCall};
 use crate::mesh::ElementKind;
 use crate::policy::PhaseTimes;
@@ -341,7 +341,6 @@ fn device_pass(groups: &mut [Group], live: &[bool], kind: PassKind, world: &mut 
         return results;
     }
     let mut inverses = missing_inverses(groups, kind.iterating, world);
-    let motion_scale = c.velocity_scale * p.dt;
     let dim = groups.first().and_then(|g| g.bodies.first()).map_or(2, |b| b.def.dim);
     // Each group's share, made in parallel, then laid end to end.
     let shares: Vec<PassShare> = groups
@@ -349,12 +348,13 @@ fn device_pass(groups: &mut [Group], live: &[bool], kind: PassKind, world: &mut 
         .zip(&chosen)
         .zip(inverses.par_iter_mut())
         .zip(kind.iterating)
-        .map(|(((g, chosen), inverses), &on_device)| if on_device { iterations_share(g, std::mem::take(inverses), kind, c, motion_scale) } else { (Vec::new(), None, evaluations_share(g, chosen, kind, c)) })
+        .map(|(((g, chosen), inverses), &on_device)| if on_device { iterations_share(g, std::mem::take(inverses), kind, c) } else { (Vec::new(), None, evaluations_share(g, chosen, kind, c)) })
         .collect();
     let mut layout = lay_out(shares, kind.iterating);
     let PassLayout { list, calls, problems, contacts, .. } = &mut layout;
     let asked: Vec<bool> = calls.iter().map(|call| call.keep).collect();
-    let passed = if calls.is_empty() { world.evaluate(list, coefficients(p), times) } else { world.newton(calls, problems, contacts, list, coefficients(p), (dim, p.theta * p.dt), c.interrupt, times) };
+    let passed =
+        if calls.is_empty() { world.evaluate(list, coefficients(p), times) } else { world.newton(calls, problems, contacts, list, Coefficients { motion: c.velocity_scale * p.dt, ..coefficients(p) }, (dim, p.theta * p.dt), c.interrupt, times) };
     let failures: Vec<Option<ElementFailure>> = list.iter().map(|e| e.failure).collect();
     let ends = IterationEnds { calls: calls.iter_mut().map(|call| (call.outcome, call.strain_energy, call.failure, call.tangent.take(), call.summary.map(|s| (s, call.positions)))).collect(), contacts: contacts.iter().map(|g| g.outcome).collect() };
     // The calls that were to keep their step's end on the device and did not converge there.
@@ -447,7 +447,7 @@ fn evaluations_share<'a>(g: &'a mut Group, chosen: &[bool], kind: PassKind, c: &
 }
 
 /// The calls of a group that iterates on the device, with its contact problem if it has one.
-fn iterations_share<'a>(g: &'a mut Group, inverses: Vec<Option<Inverse>>, kind: PassKind, c: &Context, motion_scale: Real) -> PassShare<'a> {
+fn iterations_share<'a>(g: &'a mut Group, inverses: Vec<Option<Inverse>>, kind: PassKind, c: &Context) -> PassShare<'a> {
     let p = c.p;
     let budget = p.max_iterations - g.newton.report.iterations;
     let Group { ids, bodies, contact, newton, .. } = g;
@@ -461,7 +461,7 @@ fn iterations_share<'a>(g: &'a mut Group, inverses: Vec<Option<Inverse>>, kind: 
         .zip(inverses)
         .map(|((body, &id), inverse)| {
             let hold = if body.may_step_on_device() { hold(id) } else { Hold::No };
-            let mut call = body.newton_call(id, p, motion_scale, budget, inverse, !kind.unevaluated);
+            let mut call = body.newton_call(id, p, budget, inverse, !kind.unevaluated);
             (call.keep, call.positions) = (hold != Hold::No, hold == Hold::AllButPositions);
             call
         })

@@ -545,7 +545,7 @@ impl GpuWorld {
         let precision = self.gpu.precision;
         assert_eq!(precision, Precision::F64, "device Newton iterations need f64 kernels");
         let coefficient_buffer = self.coefficients.clone();
-        self.upload(&coefficient_buffer, 0, &to_device(precision, &[coefficients.factor, coefficients.c1]));
+        self.upload(&coefficient_buffer, 0, &to_device(precision, &[coefficients.factor, coefficients.c1, coefficients.motion]));
         let work = self.stage_calls(calls)?;
         let contact = if contacts.is_empty() { None } else { Some(self.stage_contact(calls, problems, contacts, dim, theta_dt)?) };
         // An increment's solve runs every sweep its problem may take, as the host's does, where

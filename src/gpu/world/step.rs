@@ -466,7 +466,7 @@ pub fn run_newton_summary(gpu: &Gpu, members: &[MemberRange], call: &[usize], (m
     let jobs: Vec<Active> = call.iter().map(|&m| Active { member: m as u32, mode: MODE_FORCES }).collect();
     let buffers = [
         ("motion", init("motion", bytemuck::bytes_of(&motion), BufferUsages::UNIFORM)),
-        ("coefficients", init("coefficients", bytemuck::cast_slice(&[coefficients.factor, coefficients.c1]), BufferUsages::UNIFORM)),
+        ("coefficients", init("coefficients", bytemuck::cast_slice(&[coefficients.factor, coefficients.c1, coefficients.motion]), BufferUsages::UNIFORM)),
         ("committed", init("committed", bytemuck::cast_slice(committed), read)),
         ("step", init("step", bytemuck::cast_slice(step), read)),
         ("reference", init("reference", bytemuck::cast_slice(reference), read)),

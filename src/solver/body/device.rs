@@ -130,11 +130,12 @@ impl Body {
     }
 
     /// The body's share of device Newton iterations from its evaluated iterate: the tolerances
-    /// of [`Body::converged`] (the parts that do not change while it iterates), at most
+    /// of [`Body::converged`] (the parts that do not change while it iterates; the scene's
+    /// motion, the increment bound's floor, is the call's `Coefficients::motion`), at most
     /// `budget` increments, `inverse` when the device does not hold this factorisation's;
     /// `evaluated`: the trial displacement's evaluation is the body's (else the device evaluates
     /// it first).
-    pub fn newton_call(&mut self, body: usize, p: &StepParams, motion_scale: Real, budget: usize, inverse: Option<Inverse>, evaluated: bool) -> NewtonCall<'_> {
+    pub fn newton_call(&mut self, body: usize, p: &StepParams, budget: usize, inverse: Option<Inverse>, evaluated: bool) -> NewtonCall<'_> {
         let [constant, per_travel, stiffness] = self.residual_floor_terms(p);
         let member = NewtonMember {
             budget: budget as u32,
@@ -142,7 +143,9 @@ impl Body {
             floor: constant + stiffness,
             floor_per_travel: per_travel,
             increment_tolerance: p.increment_tolerance,
-            increment_floor: self.increment_floor(motion_scale),
+            // The scene's motion, which grows while grains fall, is the call's (`Coefficients`):
+            // the member's own row stays the same from step to step and is not uploaded again.
+            increment_floor: self.increment_floor(0.0),
             round_off: 1e3 * Real::EPSILON * self.stiffness_spread(),
             ..NewtonMember::default()
         };
