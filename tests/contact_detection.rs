@@ -248,3 +248,56 @@ fn bodies_farther_apart_than_the_margin_are_not_placed_for_the_narrow_phase() {
         assert_eq!(found.is_empty(), !placed, "gap {gap}: {} points", found.len());
     }
 }
+
+/// The 3D twin of the corner rule (issue 55, item 2): a slave node on a concave edge of its
+/// master (a V-shaped groove along y in the master's top, the slave's bottom shaped to it) is
+/// held by a facet on each side of the groove; over a flat top, by one. Held by the nearer
+/// facet alone, a node pressed into a dent's edge could sink through the facet across it.
+#[test]
+fn a_node_on_a_concave_edge_is_held_by_both_sides_in_3d() {
+    for notch in [0.1, 0.0] {
+        let mut lower = cuboid([0.0, 0.0, 0.0], [2.0, 1.0, 1.0], [4, 2, 2], ElementKind::Hex8);
+        let mut upper = cuboid([0.9, 0.25, 0.0], [0.2, 0.5, 0.1], [2, 2, 1], ElementKind::Hex8);
+        // The master's top: down by `notch` at x = 1, straight to x = 0.5 and 1.5.
+        let top = |x: f64| 1.0 - notch * (1.0 - (x - 1.0).abs() / 0.5).max(0.0);
+        for x in &mut lower.nodes {
+            if x[2] == 1.0 {
+                x[2] = top(x[0]);
+            }
+        }
+        // The slave's bottom 0.005 above it, its top 0.1 higher.
+        for x in &mut upper.nodes {
+            x[2] += top(x[0]) + 0.005;
+        }
+        let meshes = [lower, upper];
+        let model = ContactModel {
+            settings: Settings { tolerance: 1e-8, max_iterations: 10, sweep: Sweep::GaussSeidel, acceleration: Default::default(), fallback: Default::default() },
+            surfaces: meshes.iter().map(Surface::of).collect(),
+            obstacles: Vec::new(),
+            pairs: upper_on_lower(0.2),
+        };
+        let positions: Vec<Vec<[f64; 3]>> = meshes.iter().map(|m| m.nodes.clone()).collect();
+        let mut config = Configuration::new(&model, positions.clone());
+        let found = detect(&model, &mut config, &|_, _| unreachable!("every body is placed"), 3, 0.0, 0.1, 0.01, &mut Default::default());
+        // The slave's bottom: 3 x 3 nodes, the middle row (x = 1) on the groove's edge.
+        let slave = &meshes[1].nodes;
+        let on_edge: Vec<u32> = (0..slave.len() as u32).filter(|&n| (slave[n as usize][0] - 1.0).abs() < 1e-12 && slave[n as usize][2] < top(1.0) + 0.01).collect();
+        assert_eq!(on_edge.len(), 3);
+        let gap = 0.005 * (1.0 / (1.0 + 4.0 * notch * notch)).sqrt();
+        assert!(found.iter().all(|c| c.slave_body == 1 && c.master == Master::Body(0) && (c.gap - gap).abs() < 1e-12), "notch {notch}: gaps {:?}", found.iter().map(|c| c.gap).collect::<Vec<_>>());
+        assert_eq!(found.len(), if notch > 0.0 { 12 } else { 9 }, "notch {notch}: {} points", found.len());
+        for node in on_edge {
+            let here: Vec<_> = found.iter().filter(|c| c.slave_node == node).collect();
+            if notch > 0.0 {
+                assert_eq!(here.len(), 2, "node {node}");
+                assert!(!here[0].corner && here[1].corner);
+                // One point on each side of the groove: normals mirrored about the vertical.
+                let (a, b) = (here[0].frame[0], here[1].frame[0]);
+                assert!((a[0] + b[0]).abs() < 1e-12 && a[1].abs() < 1e-12 && b[1].abs() < 1e-12 && (a[2] - b[2]).abs() < 1e-12 && a[0].abs() > 0.1, "{a:?} {b:?}");
+            } else {
+                assert_eq!(here.len(), 1);
+                assert!(!here[0].corner);
+            }
+        }
+    }
+}

@@ -375,8 +375,8 @@ impl PairSearch {
                 // Best facet per master body for the current node, among this slave's masters: one
                 // that faces the node's own surface, else one that does not (`Candidate`).
                 let mut best: Vec<[Option<(Real, usize, Projection)>; 2]> = vec![[None, None]; masters[s].len()];
-                // In 2D, every facing facet of the current node, by master: a second one holds it
-                // in a concave corner of the master ([`concave`]).
+                // Every facing facet of the current node, by master: a second one holds it in a
+                // concave corner (2D) or edge (3D) of the master ([`concave`]).
                 let mut facing: Vec<(usize, usize, Projection)> = Vec::new();
                 let mut xs: Vec<Vec3> = Vec::with_capacity(4);
                 for &node in &surfaces[s].nodes {
@@ -398,9 +398,7 @@ impl PairSearch {
                             let normal = normals.get_or_insert_with(|| node_normals(&surfaces[s], &positions[s]))[node as usize];
                             let tier = match Candidate::of(normal, &p, || project(x, &xs, 0.0).is_some()) {
                                 Candidate::Facing => {
-                                    if dim == 2 {
-                                        facing.push((k, f, p));
-                                    }
+                                    facing.push((k, f, p));
                                     0
                                 }
                                 Candidate::Askew => 1,
@@ -420,7 +418,7 @@ impl PairSearch {
                         let mu = model.pairs.friction(s, m).expect("pair checked");
                         let second = model.pairs.second(s, m);
                         points.push(body_point(s, node, m, surfaces[m].facet(f), &p, dim, mu, second));
-                        if !held_facing || dim != 2 {
+                        if !held_facing {
                             continue;
                         }
                         let corner = facing.iter().filter(|(kk, g, _)| *kk == k && *g != f && concave(surfaces[m].facet(f), surfaces[m].facet(*g), &p.normal, &positions[m])).min_by(|a, b| a.2.gap.abs().total_cmp(&b.2.gap.abs()));
@@ -457,20 +455,32 @@ fn body_point(s: usize, node: u32, m: usize, facet: &[u32], p: &Projection, dim:
 /// through turned by 20° and more (doc/benchmarks.md, "Contact below the elements").
 const CONCAVE: Real = 0.2;
 
-/// Whether segments `a` (outward unit normal `normal`) and `b` of one 2D body meet at a concave
-/// corner: they share a node and the other node of `b` lies outside `a`'s line. There the outside
-/// of the body is the intersection of the two segments' outsides, and a node in the corner must
-/// be held by both: held by the nearer alone, it sank through the other (grains pressed into the
-/// dented side of a neighbour, 2.9 % of an element at any step). 3D surfaces do not take the
-/// second point yet: there facets also meet at a single node, where a saddle is neither convex
-/// nor concave, and the concave edges alone are not told apart here.
+/// Whether facets `a` (outward unit normal `normal`) and `b` of one body meet concavely: they
+/// share a node, and the nodes of `b` off `a` lie outside `a`'s plane (2D: line); in 3D also
+/// those of `a` off `b` outside `b`'s plane. There the outside of the body is the intersection
+/// of the two facets' outsides, and a node in the corner must be held by both: held by the
+/// nearer alone, it sank through the other (2D: grains pressed into the dented side of a
+/// neighbour, 2.9 % of an element at any step). In 3D the test in both directions takes the
+/// concave edges and the facets that meet at a single node with each beyond the other (the
+/// inside of a dent's corner), not a saddle, where one facet's nodes lie on both sides of the
+/// other's plane and a node held on one stays out of the other.
 fn concave(a: &[u32], b: &[u32], normal: &Vec3, x: &[Vec3]) -> bool {
     let Some(&shared) = b.iter().find(|n| a.contains(n)) else { return false };
     let o = x[shared as usize];
-    b.iter().filter(|n| !a.contains(n)).any(|&n| {
-        let d = sub(x[n as usize], o);
-        geometry::dot(d, *normal) > CONCAVE * norm(d)
-    })
+    let beyond = |facet: &[u32], plane: &[u32], normal: Vec3| {
+        facet.iter().filter(|n| !plane.contains(n)).all(|&n| {
+            let d = sub(x[n as usize], o);
+            geometry::dot(d, normal) > CONCAVE * norm(d)
+        })
+    };
+    if a.len() == 2 {
+        return beyond(b, a, *normal);
+    }
+    let mut points = [[0.0; 3]; 4];
+    for (p, &n) in points.iter_mut().zip(b) {
+        *p = x[n as usize];
+    }
+    beyond(b, a, *normal) && beyond(a, b, geometry::normalize(facet_normal(&points[..b.len()])))
 }
 
 /// Outward normal of a facet, scaled by its area (length in 2D).
