@@ -17,7 +17,12 @@ const WORKGROUP = 64u;
 
 @compute @workgroup_size(WORKGROUP)
 fn main(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workgroup: vec3<u32>) {
-    let range = members[jobs[workgroup.z].member];
+    // A slot a member left (the host sends the slots that changed).
+    let member = jobs[workgroup.z].member;
+    if member == NO_MEMBER {
+        return;
+    }
+    let range = members[member];
     let local = chunk_of(workgroup) * WORKGROUP + lane;
     if local >= range.dofs {
         return;

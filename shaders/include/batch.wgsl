@@ -26,6 +26,8 @@ struct Active {
 // Modes: the internal force (and residual), or also the tangent (and stiffness values).
 const FORCES = 1u;
 const TANGENT = 2u;
+// `Active.member` of a slot of a step pass's list that no member holds.
+const NO_MEMBER = 0xffffffffu;
 const MAX_ROW = 65535u;
 
 // The workgroup's index inside its member.

@@ -12,7 +12,7 @@
 //! again.
 
 use super::{buffer, Batch, GpuWorld, Mirror, Pass, WORKGROUP};
-use crate::gpu::types::{summary_len, Active, Coefficients, DofOut, DofState, DofStep, MemberRange, NewtonState, StepMotion, MODE_FORCES};
+use crate::gpu::types::{summary_len, Active, Coefficients, DofOut, DofState, DofStep, MemberRange, NewtonState, StepMotion, MODE_FORCES, NO_MEMBER};
 use crate::gpu::{Gpu, GpuError};
 use crate::policy::PhaseTimes;
 use crate::precision::{same_bits, Precision, Real};
@@ -98,9 +98,56 @@ pub(super) struct Resident {
     /// each member is in either.
     lists: [Vec<usize>; 2],
     involved: Vec<bool>,
-    /// The motions and lists as last uploaded, per pass.
+    /// The motions as last uploaded, and the lists as the device holds them, per pass.
     uploaded_motions: [Option<StepMotion<Real>>; 2],
-    uploaded_lists: [Vec<usize>; 2],
+    slots: [Slots; 2],
+}
+
+/// A pass's list as the device holds it: a member per slot, [`NO_MEMBER`] in the slots of the
+/// members that left it. A list that changes by a few members sends those slots only: when the
+/// lowest grains of a falling packing land, they leave the steps' passes, and the whole list
+/// went up again (8 bytes a grain of 20 000, two or three times a step).
+#[derive(Debug, Default)]
+struct Slots {
+    members: Vec<u32>,
+}
+
+impl Slots {
+    /// Takes the members of `list` (distinct, below `count`), keeping those still listed in
+    /// their slots and the others in the empty slots, or after the last; starts afresh when
+    /// most slots would be empty. Returns the runs of slots that changed, `(first, entries)`.
+    fn take(&mut self, list: &[usize], count: usize) -> Vec<(usize, Vec<Active>)> {
+        let mut wanted = vec![false; count];
+        for &m in list {
+            wanted[m] = true;
+        }
+        let mut changed = vec![false; self.members.len()];
+        for (slot, member) in self.members.iter_mut().enumerate() {
+            if *member != NO_MEMBER && !std::mem::replace(&mut wanted[*member as usize], false) {
+                (*member, changed[slot]) = (NO_MEMBER, true);
+            }
+        }
+        // `wanted` now holds the members that have no slot yet.
+        let mut empty = (0..self.members.len()).filter(|&s| self.members[s] == NO_MEMBER).collect::<Vec<_>>().into_iter();
+        for &m in list.iter().filter(|&&m| wanted[m]) {
+            let slot = empty.next().unwrap_or_else(|| {
+                self.members.push(NO_MEMBER);
+                changed.push(false);
+                self.members.len() - 1
+            });
+            (self.members[slot], changed[slot]) = (m as u32, true);
+        }
+        while self.members.last() == Some(&NO_MEMBER) {
+            self.members.pop();
+        }
+        changed.truncate(self.members.len());
+        if self.members.len() > 2 * list.len() + 64 {
+            self.members = list.iter().map(|&m| m as u32).collect();
+            changed = vec![true; self.members.len()];
+        }
+        let slots: Vec<usize> = (0..changed.len()).filter(|&s| changed[s]).collect();
+        super::runs(&slots).into_iter().map(|run| (run[0], run.iter().map(|&s| Active { member: self.members[s], mode: MODE_FORCES }).collect())).collect()
+    }
 }
 
 impl Resident {
@@ -125,7 +172,7 @@ impl Resident {
             lists: [Vec::new(), Vec::new()],
             involved: vec![false; members],
             uploaded_motions: [None, None],
-            uploaded_lists: [Vec::new(), Vec::new()],
+            slots: [Slots::default(), Slots::default()],
         }
     }
 
@@ -216,18 +263,14 @@ impl GpuWorld {
         // What changed goes up: a packing in flight begins the same grains with the same motion
         // step after step.
         let motion_changed = r.uploaded_motions[k].is_none_or(|m| !same_bits(&[m], &[motion]));
-        let list_changed = r.uploaded_lists[k] != list;
         r.uploaded_motions[k] = Some(motion);
-        if list_changed {
-            r.uploaded_lists[k].clone_from(&list);
-        }
+        let changed = r.slots[k].take(&list, r.valid.len());
         // Committed states are kept in f64 only (device Newton iterations are).
         if motion_changed {
             self.upload(&motion_buffer, 0, bytemuck::bytes_of(&motion));
         }
-        if list_changed {
-            let jobs_list: Vec<Active> = list.iter().map(|&m| Active { member: m as u32, mode: MODE_FORCES }).collect();
-            self.upload(&jobs, 0, bytemuck::cast_slice(&jobs_list));
+        for (first, entries) in changed {
+            self.upload(&jobs, 8 * first as u64, bytemuck::cast_slice(&entries));
         }
         let r = &mut self.batches[batch].newton.as_mut().expect("a batch with committed states").resident;
         for &m in &list {
@@ -305,7 +348,9 @@ impl GpuWorld {
             for k in [1, 0] {
                 let list = std::mem::take(&mut r.lists[k]);
                 let most = list.iter().map(|&m| b.members[m].dofs as usize).max().unwrap_or(0);
-                r.passes[k].record(&self.gpu, encoder, WORKGROUP, most, list.len());
+                // Over the slots, the empty ones included (they return at once).
+                let slots = if list.is_empty() { 0 } else { r.slots[k].members.len() };
+                r.passes[k].record(&self.gpu, encoder, WORKGROUP, most, slots);
             }
         }
     }
@@ -429,7 +474,7 @@ pub fn run_step_kernels(
     let bindings = StepBindings { motions: [&begin_motion, &commit_motion], jobs: [&begin_jobs, &commit_jobs], committed: &committed_b, step: &step_b, u: &u_b, u_start: &u_start_b, dof_out: &dof_out_b, members: &members_b };
     let [begin_pass, commit_pass] = pipelines.passes(gpu, &bindings);
     let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("step kernels") });
-    let most = |list: &[usize]| list.iter().map(|&m| members[m].dofs as usize).max().unwrap_or(0);
+    let most = |list: &[usize]| list.iter().filter(|&&m| m != NO_MEMBER as usize).map(|&m| members[m].dofs as usize).max().unwrap_or(0);
     commit_pass.record(gpu, &mut encoder, WORKGROUP, most(commit), commit.len());
     begin_pass.record(gpu, &mut encoder, WORKGROUP, most(begin), begin.len());
     let read = |buffer: &Buffer, bytes: usize, encoder: &mut wgpu::CommandEncoder| {
@@ -498,4 +543,44 @@ pub fn run_newton_summary(gpu: &Gpu, members: &[MemberRange], call: &[usize], (m
 /// A mappable buffer of `bytes` for a read-back.
 fn buffer_of(gpu: &Gpu, bytes: usize) -> Buffer {
     buffer(gpu, "step read-back", bytes, BufferUsages::MAP_READ | BufferUsages::COPY_DST)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn held(s: &Slots) -> Vec<u32> {
+        let mut members: Vec<u32> = s.members.iter().copied().filter(|&m| m != NO_MEMBER).collect();
+        members.sort_unstable();
+        members
+    }
+
+    #[test]
+    fn a_step_list_that_loses_and_gains_members_sends_the_slots_that_changed() {
+        let mut s = Slots::default();
+        let all: Vec<usize> = (0..100).collect();
+        let first = s.take(&all, 100);
+        assert_eq!((first.len(), first[0].0, first[0].1.len()), (1, 0, 100));
+        assert!(s.take(&all, 100).is_empty(), "the same list sends nothing");
+        // Two grains land: their slots empty, nothing else moves.
+        let fewer: Vec<usize> = all.iter().copied().filter(|&m| m != 10 && m != 11).collect();
+        assert_eq!(s.take(&fewer, 100), vec![(10, vec![Active { member: NO_MEMBER, mode: MODE_FORCES }; 2])]);
+        assert_eq!(s.members.len(), 100);
+        // One takes off again: the first empty slot.
+        let back: Vec<usize> = fewer.iter().copied().chain([11]).collect();
+        assert_eq!(s.take(&back, 100), vec![(10, vec![Active { member: 11, mode: MODE_FORCES }])]);
+        assert_eq!(held(&s), (0..100u32).filter(|&m| m != 10).collect::<Vec<_>>());
+        // The last ones leave: the list ends at its last member.
+        assert!(!s.take(&(0..90).collect::<Vec<_>>(), 100).is_empty());
+        assert_eq!(s.members.len(), 90);
+        // Most leave: their slots empty, the list as long as its last member's slot.
+        let no = Active { member: NO_MEMBER, mode: MODE_FORCES };
+        assert_eq!(s.take(&[5, 7], 100), vec![(0, vec![no; 5]), (6, vec![no])]);
+        assert_eq!(s.members, vec![NO_MEMBER, NO_MEMBER, NO_MEMBER, NO_MEMBER, NO_MEMBER, 5, NO_MEMBER, 7]);
+        // Most of a long list empty: a fresh list, all of it sent.
+        let mut long = Slots::default();
+        long.take(&(0..1000).collect::<Vec<_>>(), 1000);
+        assert_eq!(long.take(&[5, 900], 1000), vec![(0, vec![Active { member: 5, mode: MODE_FORCES }, Active { member: 900, mode: MODE_FORCES }])]);
+        assert_eq!(long.members, vec![5, 900]);
+    }
 }
