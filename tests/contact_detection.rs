@@ -20,6 +20,18 @@ fn upper_on_lower(mu: f64) -> BodyPairs {
     pairs
 }
 
+/// The contact model of two bodies, the upper one (1) the slave on the lower one (0), friction
+/// 0.2, and the meshes' nodes as the positions.
+fn upper_on_lower_model(meshes: &[Mesh]) -> (ContactModel, Vec<Vec<[f64; 3]>>) {
+    let model = ContactModel {
+        settings: Settings { tolerance: 1e-8, max_iterations: 10, sweep: Sweep::GaussSeidel, acceleration: Default::default(), fallback: Default::default() },
+        surfaces: meshes.iter().map(Surface::of).collect(),
+        obstacles: Vec::new(),
+        pairs: upper_on_lower(0.2),
+    };
+    (model, meshes.iter().map(|m| m.nodes.clone()).collect())
+}
+
 fn facet_normal(mesh: &Mesh, facet: &[u32]) -> [f64; 3] {
     let x: Vec<[f64; 3]> = facet.iter().map(|&n| mesh.nodes[n as usize]).collect();
     match x.len() {
@@ -97,13 +109,7 @@ fn broad_phase_finds_what_brute_force_finds() {
         }
         let meshes = [lower, upper];
         let surfaces: Vec<Surface> = meshes.iter().map(Surface::of).collect();
-        let model = ContactModel {
-            settings: Settings { tolerance: 1e-8, max_iterations: 10, sweep: Sweep::GaussSeidel, acceleration: Default::default(), fallback: Default::default() },
-            surfaces: surfaces.clone(),
-            obstacles: Vec::new(),
-            pairs: upper_on_lower(0.2),
-        };
-        let positions: Vec<Vec<[f64; 3]>> = meshes.iter().map(|m| m.nodes.clone()).collect();
+        let (model, positions) = upper_on_lower_model(&meshes);
         let margin = 0.01;
         let mut config = Configuration::new(&model, positions.clone());
         let found = detect(&model, &mut config, &|_, _| unreachable!("every body is placed"), 3, 0.0, 0.1, margin, &mut Default::default());
@@ -185,13 +191,7 @@ fn a_node_in_a_concave_corner_is_held_by_both_facets() {
             x[1] += top(x[0]) + 0.005;
         }
         let meshes = [lower, upper];
-        let model = ContactModel {
-            settings: Settings { tolerance: 1e-8, max_iterations: 10, sweep: Sweep::GaussSeidel, acceleration: Default::default(), fallback: Default::default() },
-            surfaces: meshes.iter().map(Surface::of).collect(),
-            obstacles: Vec::new(),
-            pairs: upper_on_lower(0.2),
-        };
-        let positions: Vec<Vec<[f64; 3]>> = meshes.iter().map(|m| m.nodes.clone()).collect();
+        let (model, positions) = upper_on_lower_model(&meshes);
         let mut config = Configuration::new(&model, positions.clone());
         let found = detect(&model, &mut config, &|_, _| unreachable!("every body is placed"), 2, 0.0, 0.1, 0.01, &mut Default::default());
         let middle = upper_node(&meshes[1], 1.0);
@@ -232,13 +232,7 @@ fn bodies_farther_apart_than_the_margin_are_not_placed_for_the_narrow_phase() {
         let lower = rectangle([0.0, 0.0], [1.0, 0.5], [4, 2], ElementKind::Quad4);
         let upper = rectangle([0.2, 0.5 + gap], [1.0, 0.5], [4, 2], ElementKind::Quad4);
         let meshes = [lower, upper];
-        let model = ContactModel {
-            settings: Settings { tolerance: 1e-8, max_iterations: 10, sweep: Sweep::GaussSeidel, acceleration: Default::default(), fallback: Default::default() },
-            surfaces: meshes.iter().map(Surface::of).collect(),
-            obstacles: Vec::new(),
-            pairs: upper_on_lower(0.2),
-        };
-        let positions: Vec<Vec<[f64; 3]>> = meshes.iter().map(|m| m.nodes.clone()).collect();
+        let (model, positions) = upper_on_lower_model(&meshes);
         let mut config = Configuration::new(&model, positions);
         // The facets are 0.25 long: half of one (the deepest a point may be) is beyond the gap.
         assert!(gap < 0.5 * 0.25);
@@ -270,13 +264,7 @@ fn a_node_on_a_concave_edge_is_held_by_both_sides_in_3d() {
             x[2] += top(x[0]) + 0.005;
         }
         let meshes = [lower, upper];
-        let model = ContactModel {
-            settings: Settings { tolerance: 1e-8, max_iterations: 10, sweep: Sweep::GaussSeidel, acceleration: Default::default(), fallback: Default::default() },
-            surfaces: meshes.iter().map(Surface::of).collect(),
-            obstacles: Vec::new(),
-            pairs: upper_on_lower(0.2),
-        };
-        let positions: Vec<Vec<[f64; 3]>> = meshes.iter().map(|m| m.nodes.clone()).collect();
+        let (model, positions) = upper_on_lower_model(&meshes);
         let mut config = Configuration::new(&model, positions.clone());
         let found = detect(&model, &mut config, &|_, _| unreachable!("every body is placed"), 3, 0.0, 0.1, 0.01, &mut Default::default());
         // The slave's bottom: 3 x 3 nodes, the middle row (x = 1) on the groove's edge.
