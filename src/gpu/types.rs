@@ -213,12 +213,12 @@ pub struct Active {
 
 /// `FORCES` of `batch.wgsl`: internal force and residual.
 pub const MODE_FORCES: u32 = 1;
+/// `TANGENT` of `batch.wgsl`: also the tangent and the stiffness values.
+pub const MODE_TANGENT: u32 = 2;
 
 /// `NO_MEMBER` of `batch.wgsl`: `Active::member` of a slot of a step pass's list that no member
 /// holds (`step_begin` and `step_commit` skip it).
 pub const NO_MEMBER: u32 = u32::MAX;
-/// `TANGENT` of `batch.wgsl`: also the tangent and the stiffness values.
-pub const MODE_TANGENT: u32 = 2;
 
 /// `struct NewtonMember` of `shaders/include/newton.wgsl`: what a member's device Newton
 /// iterations need ([`crate::cpu::newton_judge`] reads the fields as the shader does).

@@ -270,7 +270,7 @@ impl GpuWorld {
             self.upload(&motion_buffer, 0, bytemuck::bytes_of(&motion));
         }
         for (first, entries) in changed {
-            self.upload(&jobs, 8 * first as u64, bytemuck::cast_slice(&entries));
+            self.upload(&jobs, (first * std::mem::size_of::<Active>()) as u64, bytemuck::cast_slice(&entries));
         }
         let r = &mut self.batches[batch].newton.as_mut().expect("a batch with committed states").resident;
         for &m in &list {
