@@ -1,17 +1,20 @@
-// What the host books at the end of a step for each member of a device Newton call whose step
-// the device began (its committed state is the step's start), at the iterate where its
-// iterations ended: per member, `summary_len(dim)` reals at `m * stride`,
-//   [status + 4 x iterations (NewtonState, exact in a real), the residual, the strain energy
-//    (`newton_finish`'s), Σ m v² / 2, Σ m (v - v_t)², Σ Δu ((1 - ξ) f_int,t + ξ f_int), max over
-//    nodes of |v|², Σ m x (dim), Σ m v (dim), Σ m_node x × v (1 in 2D, 3 in 3D)]
-// so that a member whose step's end stays on the device sends one span back, and the box of x
-// in f32 rounded outward (the largest f32 not above the low corner, the smallest not below the
-// high one) at `m * 2 * dim` of `boxes`: low (dim), high (dim). The contact search only needs
-// a box that holds the nodes; half the bytes of the exact one.
-// with v the theta rule's velocity (eq. 15, as `step_commit` computes it), x = X + u. The host
-// then needs neither the member's displacements nor its forces: its energies, momenta, centre
-// of mass and contact box come from these (`Body::take_summary`). One member per invocation.
-// CPU twin: `cpu::newton_summary`.
+// What the host books at the end of a step for each member of a device Newton call that keeps
+// its step's end on the device (the first KEPT_COUNT of the call's list), whose step the device
+// began (its committed state is the step's start), at the iterate where its iterations ended.
+// What the host reads every step, `summary_len(dim)` reals at `m * stride`:
+//   [status + 4 x iterations (NewtonState, exact in a real), Σ m v² / 2, Σ m x (dim),
+//    Σ m v (dim), Σ m_node x × v (1 in 2D, 3 in 3D)]
+// and the box of x in f32 rounded outward (the largest f32 not above the low corner, the
+// smallest not below the high one) at `m * 2 * dim` of `boxes`: low (dim), high (dim). The
+// contact search only needs a box that holds the nodes; half the bytes of the exact one.
+// What `newton_tally` sums over the members instead, TALLY_ROW reals at `m * TALLY_ROW` of
+// `rows`:
+//   [the residual, the strain energy E (`newton_finish`'s), Σ m (v - v_t)²,
+//    Σ Δu ((1 - ξ) f_int,t + ξ f_int) - (E - E_t), max over nodes of |v|²]
+// with v the theta rule's velocity (eq. 15, as `step_commit` computes it), x = X + u, E_t the
+// committed state's strain energy. The host then needs neither the member's displacements nor
+// its forces: its momenta, centre of mass and contact box come from these. One member per
+// invocation. CPU twin: `cpu::newton_summary`.
 
 const WORKGROUP = 64u;
 
@@ -29,6 +32,8 @@ const WORKGROUP = 64u;
 @group(0) @binding(11) var<storage, read> state: array<NewtonState>;
 @group(0) @binding(12) var<storage, read> member_energy: array<real>;
 @group(0) @binding(13) var<storage, read_write> boxes: array<f32>;
+@group(0) @binding(14) var<storage, read> committed_energy: array<real>;
+@group(0) @binding(15) var<storage, read_write> rows: array<real>;
 
 // The smallest normal f32: the step away from zero (a subnormal may be flushed to zero).
 const F32_TINY = 1.17549435e-38f;
@@ -55,7 +60,7 @@ fn f32_above(x: real) -> f32 {
 
 @compute @workgroup_size(WORKGROUP)
 fn main(@builtin(global_invocation_id) id: vec3<u32>) {
-    if id.x >= dispatch[CALL_COUNT] {
+    if id.x >= dispatch[KEPT_COUNT] {
         return;
     }
     let m = jobs[id.x].member;
@@ -104,27 +109,27 @@ fn main(@builtin(global_invocation_id) id: vec3<u32>) {
         speed2 = max(speed2, s2);
         l += node_mass * cross(x, v);
     }
-    let stride = 7u + 2u * dim + angular;
-    let head = m * stride;
+    let head = m * (2u + 2u * dim + angular);
     summary[head] = real(state[m].status + 4u * state[m].iterations);
-    summary[head + 1u] = state[m].residual;
-    summary[head + 2u] = member_energy[m];
-    let at = head + 3u;
-    summary[at] = real(0.5) * kinetic;
-    summary[at + 1u] = theta_term;
-    summary[at + 2u] = force_work;
-    summary[at + 3u] = speed2;
+    summary[head + 1u] = real(0.5) * kinetic;
     for (var i = 0u; i < dim; i++) {
-        summary[at + 4u + i] = mx[i];
-        summary[at + 4u + dim + i] = p[i];
+        summary[head + 2u + i] = mx[i];
+        summary[head + 2u + dim + i] = p[i];
         boxes[m * 2u * dim + i] = f32_below(lo[i]);
         boxes[m * 2u * dim + dim + i] = f32_above(hi[i]);
     }
     if dim == 2u {
-        summary[at + 4u + 2u * dim] = l.z;
+        summary[head + 2u + 2u * dim] = l.z;
     } else {
         for (var i = 0u; i < 3u; i++) {
-            summary[at + 4u + 2u * dim + i] = l[i];
+            summary[head + 2u + 2u * dim + i] = l[i];
         }
     }
+    let strain = member_energy[m];
+    let row = m * TALLY_ROW;
+    rows[row] = state[m].residual;
+    rows[row + 1u] = strain;
+    rows[row + 2u] = theta_term;
+    rows[row + 3u] = force_work - (strain - committed_energy[m]);
+    rows[row + 4u] = speed2;
 }

@@ -11,7 +11,7 @@ use bifirst::element::{ElementOutput, Formulation, Patches, ReferenceGeometry};
 use bifirst::gpu::shaders::{is_decoupled, is_element_kernel, validate, ElementVariant, SHADERS};
 use bifirst::gpu::types::{
     packed, packed_len, summary_len, Active, Coefficients, ContactCall, ContactGroup, ContactState, DofOut, DofState, DofStep, Inversion, MaterialParams, MemberRange, NewtonMember, NewtonState, StepMotion, StepSummary, MODE_TANGENT,
-    NEWTON_CONVERGED, NEWTON_HOST, NEWTON_ITERATING, NO_MEMBER,
+    NEWTON_CONVERGED, NEWTON_HOST, NEWTON_ITERATING, NO_MEMBER, TALLY_ROW,
 };
 use bifirst::gpu::uzawa_step::{UzawaPoint, UzawaStepKernel};
 use bifirst::gpu::{ElementFailure, Evaluation, GpuWorld, Inverse, NewtonCall, WorldBody};
@@ -578,12 +578,13 @@ fn step_kernels_match_their_cpu_twins() {
     let step: Vec<DofStep<f64>> = (0..n).map(|_| DofStep { mass: value().abs(), u_pred: value(), f_int_t: value(), f_ext: value() }).collect();
     let u: Vec<f64> = (0..n).map(|_| value()).collect();
     let dof_out: Vec<DofOut<f64>> = (0..n).map(|_| DofOut { f_int: value(), g: value() }).collect();
+    let (committed_energy, member_energy): (Vec<f64>, Vec<f64>) = (0..sizes.len()).map(|_| (value(), value())).unzip();
     let (commit, begin) = ([0usize, NO_MEMBER as usize, 2], [0usize, 1, 2]);
     let (commit_motion, begin_motion) = (StepMotion::of(1e-3, 0.55, 2), StepMotion::of(5e-4, 1.0, 2));
-    let got = bifirst::gpu::world::run_step_kernels(&gpu, &members, (&commit, commit_motion), (&begin, begin_motion), &committed, &step, &u, &dof_out).expect("the step kernels run");
-    let (mut c, mut s, mut x, mut x0) = (committed.clone(), step.clone(), u.clone(), vec![0.0; n]);
+    let got = bifirst::gpu::world::run_step_kernels(&gpu, &members, (&commit, commit_motion), (&begin, begin_motion), &committed, &step, (&u, &dof_out), (&committed_energy, &member_energy)).expect("the step kernels run");
+    let (mut c, mut s, mut x, mut x0, mut e) = (committed.clone(), step.clone(), u.clone(), vec![0.0; n], committed_energy.clone());
     for &m in commit.iter().filter(|&&m| m != NO_MEMBER as usize) {
-        cpu::step_commit(commit_motion, &mut c, &x, &dof_out, members[m]);
+        cpu::step_commit(commit_motion, (&mut c, &mut e), (&x, &dof_out, &member_energy), m, members[m]);
     }
     for &m in &begin {
         cpu::step_begin(begin_motion, &c, &mut s, &mut x, &mut x0, members[m]);
@@ -598,16 +599,20 @@ fn step_kernels_match_their_cpu_twins() {
     assert_eq!(got.2[last.clone()], u[last.clone()], "and its displacements");
     let moved = members[1].dof_start as usize..members[2].dof_start as usize;
     assert_eq!(flat(&got.0[moved.clone()]), flat(&committed[moved]), "a member begun but not committed keeps its committed state");
+    assert_eq!(got.4, e, "the committed strain energies: the members' where committed, else as they were");
+    assert_eq!((got.4[0], got.4[1]), (member_energy[0], committed_energy[1]));
 }
 
 #[test]
-fn newton_summary_kernel_matches_its_cpu_twin() {
-    // Members of 3, 35 and 64 nodes in 2D and 3D, the middle one left out of the call: its
-    // summary stays zero. Every reduction of the twin within 1e-12 of its scale.
-    let Some(gpu) = gpu_or_skip("newton_summary_kernel_matches_its_cpu_twin", Precision::F64) else { return };
+fn newton_summary_and_tally_kernels_match_their_cpu_twins() {
+    // 150 members of 3 to 40 nodes in 2D and 3D, called in a shuffled order, the first 100 of
+    // the call kept: the summaries and rows of the others stay zero. The tally adds the rows of
+    // the kept members that converged (about a quarter did not), more than one per invocation.
+    // Every reduction of the twins within 1e-12 of its scale.
+    let Some(gpu) = gpu_or_skip("newton_summary_and_tally_kernels_match_their_cpu_twins", Precision::F64) else { return };
     let mut rng = random::rng(591);
     for dim in [2usize, 3] {
-        let nodes = [3u32, 35, 64];
+        let nodes: Vec<u32> = (0..150).map(|_| rng.random_range(3..=40)).collect();
         let members: Vec<MemberRange> = nodes
             .iter()
             .scan(0, |start, &k| {
@@ -625,36 +630,47 @@ fn newton_summary_kernel_matches_its_cpu_twin() {
         let reference: Vec<f64> = (0..n).map(|_| 10.0 * value()).collect();
         let u: Vec<f64> = (0..n).map(|_| value()).collect();
         let dof_out: Vec<DofOut<f64>> = (0..n).map(|_| DofOut { f_int: value(), g: value() }).collect();
-        // Each member's Newton state and strain energy travel in its summary.
-        let state: Vec<NewtonState<f64>> = (0..members.len() as u32).map(|m| NewtonState { status: m % 4, iterations: 3 + m, residual: value().abs(), ..NewtonState::default() }).collect();
-        let member_energy: Vec<f64> = (0..members.len()).map(|_| value()).collect();
+        let state: Vec<NewtonState<f64>> = (0..members.len() as u32).map(|m| NewtonState { status: if m % 4 == 3 { NEWTON_HOST } else { NEWTON_CONVERGED }, iterations: 3 + m, residual: value().abs(), ..NewtonState::default() }).collect();
+        let (member_energy, committed_energy): (Vec<f64>, Vec<f64>) = (0..members.len()).map(|_| (value(), value())).unzip();
         let (motion, coefficients) = (StepMotion::of(1e-3, 0.55, dim), Coefficients { factor: 0.7, c1: 3.0, motion: 0.0 });
-        let call = [0usize, 2];
-        let (got, got_boxes) = bifirst::gpu::world::run_newton_summary(&gpu, &members, &call, (motion, coefficients, &committed, &step, &reference, &u, &dof_out, &state, &member_energy)).expect("the summary kernel runs");
-        let (mut twin, mut twin_boxes) = (vec![0.0; got.len()], vec![0.0f32; got_boxes.len()]);
-        let inputs = cpu::SummaryInputs { motion, coefficients, committed: &committed, step: &step, reference: &reference, u: &u, dof_out: &dof_out, state: &state, member_energy: &member_energy };
-        let jobs: Vec<Active> = call.iter().map(|&m| Active { member: m as u32, mode: 0 }).collect();
-        cpu::newton_summary(&inputs, &members, &jobs, &mut twin, &mut twin_boxes);
+        let mut call: Vec<usize> = (0..members.len()).filter(|m| m % 10 != 7).collect();
+        call.sort_by_key(|&m| (m * 37) % 151);
+        let kept = 100;
+        let buffers = (motion, coefficients, (&committed[..], &committed_energy[..]), &step[..], &reference[..], &u[..], &dof_out[..], &state[..], &member_energy[..]);
+        let (got, got_boxes, got_rows, got_tally) = bifirst::gpu::world::run_newton_summary(&gpu, &members, (&call, kept), buffers).expect("the summary kernels run");
+        let (mut twin, mut twin_boxes, mut twin_rows) = (vec![0.0; got.len()], vec![0.0f32; got_boxes.len()], vec![0.0; got_rows.len()]);
+        let inputs = cpu::SummaryInputs { motion, coefficients, committed: &committed, step: &step, reference: &reference, u: &u, dof_out: &dof_out, state: &state, member_energy: &member_energy, committed_energy: &committed_energy };
+        let jobs: Vec<Active> = call[..kept].iter().map(|&m| Active { member: m as u32, mode: 0 }).collect();
+        cpu::newton_summary(&inputs, &members, &jobs, (&mut twin, &mut twin_boxes, &mut twin_rows));
+        let twin_tally = cpu::newton_tally(&jobs, &state, &twin_rows);
         // The boxes are f32 rounded outward: the same bits, and they hold every node.
         assert_eq!(got_boxes, twin_boxes, "dim {dim}: the boxes");
-        let len = summary_len(dim);
+        let relative = |g: &[f64], t: &[f64]| g.iter().zip(t).map(|(a, b)| (a - b).abs() / b.abs().max(1e-300)).fold(0.0, f64::max);
+        let (len, worst) = (summary_len(dim), std::cell::Cell::new(0.0f64));
         for m in 0..members.len() {
-            let (g, t) = (&got[m * len..(m + 1) * len], &twin[m * len..(m + 1) * len]);
-            if call.contains(&m) {
-                let (carried, summary) = StepSummary::of(dim, g, &got_boxes[m * 2 * dim..(m + 1) * 2 * dim]);
-                assert_eq!((carried.status, carried.iterations, carried.residual), (state[m].status, state[m].iterations, state[m].residual), "the state it carries");
-                let r = members[m].dof_start as usize..(members[m].dof_start + members[m].dofs) as usize;
-                for d in r {
-                    let x = reference[d] + u[d];
-                    assert!(summary.low[d % dim] <= x && x <= summary.high[d % dim], "dim {dim} member {m}: dof {d} at {x} outside its box");
-                }
-                let error = g.iter().zip(t).map(|(a, b)| (a - b).abs() / b.abs().max(1e-300)).fold(0.0, f64::max);
-                eprintln!("dim {dim} member {m}: relative error {error:.2e}");
-                assert!(error <= 1e-12, "dim {dim} member {m}: {g:?} against {t:?}");
-            } else {
-                assert!(g.iter().all(|&x| x == 0.0), "a member outside the call is not written");
+            let (g, t, row) = (&got[m * len..(m + 1) * len], &twin[m * len..(m + 1) * len], &got_rows[m * TALLY_ROW..(m + 1) * TALLY_ROW]);
+            if !call[..kept].contains(&m) {
+                assert!(g.iter().chain(row).all(|&x| x == 0.0), "a member not kept is not written");
+                continue;
             }
+            let (carried, summary) = StepSummary::of(dim, g, &got_boxes[m * 2 * dim..(m + 1) * 2 * dim]);
+            assert_eq!((carried.status, carried.iterations), (state[m].status, state[m].iterations), "the state it carries");
+            assert_eq!((row[0], row[1]), (state[m].residual, member_energy[m]), "the residual and energy its row carries");
+            let r = members[m].dof_start as usize..(members[m].dof_start + members[m].dofs) as usize;
+            for d in r {
+                let x = reference[d] + u[d];
+                assert!(summary.low[d % dim] <= x && x <= summary.high[d % dim], "dim {dim} member {m}: dof {d} at {x} outside its box");
+            }
+            worst.set(worst.get().max(relative(g, t)).max(relative(row, &twin_rows[m * TALLY_ROW..(m + 1) * TALLY_ROW])));
         }
+        let tally_error = relative(&got_tally, &twin_tally);
+        eprintln!("dim {dim}: summaries and rows within {:.2e}, tally within {tally_error:.2e}", worst.get());
+        assert!(worst.get() <= 1e-12 && tally_error <= 1e-12, "dim {dim}: {got_tally:?} against {twin_tally:?}");
+        let converged: Vec<usize> = call[..kept].iter().copied().filter(|&m| state[m].status == NEWTON_CONVERGED).collect();
+        assert_eq!(got_tally[0], converged.len() as f64, "the tally counts the kept members that converged");
+        let strain: f64 = converged.iter().map(|&m| member_energy[m]).sum();
+        assert!((got_tally[3] - strain).abs() <= 1e-12 * strain.abs().max(1.0), "their strain energies: {} against {strain}", got_tally[3]);
+        assert_eq!(got_tally[5], converged.iter().map(|&m| state[m].residual).fold(0.0, f64::max), "their largest residual");
     }
 }
 

@@ -50,13 +50,16 @@ const HOST = 2u;
 const FAILED = 3u;
 
 // The module's prelude sets MAX_FREE (the most free dofs a member may have: `newton_update`
-// keeps the right-hand side in workgroup memory), NEWTON_WORKGROUP and REFACTOR_CONTRACTION
-// (`Body::refresh_factor`'s rule) from the engine's constants.
+// keeps the right-hand side in workgroup memory), NEWTON_WORKGROUP, REFACTOR_CONTRACTION
+// (`Body::refresh_factor`'s rule), TALLY_ROW and TALLY_LEN (`newton_summary`'s rows and
+// `newton_tally`'s sums) from the engine's constants.
 
 // `dispatch`: the indirect arguments (x, y, z) of update, forces, residual and judge, then the
-// length of the call's list; `newton_compact` sets every z to the members still iterating.
+// length of the call's list, then how many of its first members keep their step's end on the
+// device; `newton_compact` sets every z to the members still iterating.
 const DISPATCHES = 4u;
 const CALL_COUNT = 12u;
+const KEPT_COUNT = 13u;
 
 // Sums over a workgroup by halves, four at a time (the CPU twins add in the same order), and
 // a largest value.

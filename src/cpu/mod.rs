@@ -11,7 +11,7 @@
 //! | `uzawa_step` | [`uzawa_step`] |
 //! | `uzawa_sweep` | [`uzawa_sweep`] |
 //! | `uzawa_judge`, `uzawa_solve` | [`uzawa_judge`], [`uzawa_solve`] |
-//! | `newton_update`, `newton_judge`, `newton_compact` (`main`, `host`), `newton_finish`, `newton_summary`, `newton_invert` | [`newton_update`], [`newton_judge`], [`newton_compact`], [`newton_compact_host`], [`newton_finish`], [`newton_summary`], [`newton_invert`] |
+//! | `newton_update`, `newton_judge`, `newton_compact` (`main`, `host`), `newton_finish`, `newton_summary`, `newton_tally`, `newton_invert` | [`newton_update`], [`newton_judge`], [`newton_compact`], [`newton_compact_host`], [`newton_finish`], [`newton_summary`], [`newton_tally`], [`newton_invert`] |
 //! | `newton_contact` (`prepare`, `forces`, `judge`, `first_forces`, `first_judge`) | [`newton_contact_prepare`], [`newton_contact_forces`], [`newton_contact_judge`], [`newton_contact_first_forces`], [`newton_contact_first_judge`] |
 //! | `step_begin`, `step_commit` | [`step_begin`], [`step_commit`] |
 //! | `peak_copy` | [`peak_copy`] |
@@ -25,8 +25,8 @@ pub use crate::contact::law::uzawa_step;
 pub use crate::contact::uzawa::uzawa_sweep;
 pub use crate::element::{element_energy, element_force_tangent};
 pub use newton::{
-    newton_compact, newton_compact_host, newton_contact_first_forces, newton_contact_first_judge, newton_contact_forces, newton_contact_judge, newton_contact_prepare, newton_finish, newton_invert, newton_judge, newton_summary, newton_update,
-    SummaryInputs,
+    newton_compact, newton_compact_host, newton_contact_first_forces, newton_contact_first_judge, newton_contact_forces, newton_contact_judge, newton_contact_prepare, newton_finish, newton_invert, newton_judge, newton_summary, newton_tally,
+    newton_update, SummaryInputs,
 };
 pub use step::{step_begin, step_commit};
 pub use uzawa::{uzawa_judge, uzawa_solve};

@@ -7,6 +7,7 @@ use super::uzawa::{global, triple};
 use crate::contact::uzawa::SETTLE;
 use crate::gpu::types::{
     packed, packed_len, summary_len, Active, Coefficients, DofOut, DofState, DofStep, Inversion, MemberRange, NewtonMember, NewtonState, StepMotion, NEWTON_CONVERGED, NEWTON_FAILED, NEWTON_HOST, NEWTON_ITERATING, NEWTON_WORKGROUP, NO_FAILURE,
+    TALLY_LEN, TALLY_ROW,
 };
 use crate::gpu::uzawa_sweep::{NodeGather, UzawaJudgeState, UzawaLocal, UzawaProblem, JUDGE_CONVERGED, JUDGE_LIVE};
 use crate::gpu::ContactLayout;
@@ -206,8 +207,8 @@ pub fn newton_finish(energy: &[Real], dof_out: &[DofOut<Real>], members: &[Membe
 }
 
 /// What `newton_summary` reads: the step's motion and coefficients, the committed states (the
-/// step's start), the step inputs (masses), the reference position of every dof, the iterate
-/// and its forces.
+/// step's start) and their strain energies, the step inputs (masses), the reference position of
+/// every dof, the iterate and its forces, the Newton states and the strain energies there.
 pub struct SummaryInputs<'a> {
     pub motion: StepMotion<Real>,
     pub coefficients: Coefficients<Real>,
@@ -218,6 +219,7 @@ pub struct SummaryInputs<'a> {
     pub dof_out: &'a [DofOut<Real>],
     pub state: &'a [NewtonState<Real>],
     pub member_energy: &'a [Real],
+    pub committed_energy: &'a [Real],
 }
 
 /// The largest f32 not above `x` (`f32_below` of `newton_summary.wgsl`).
@@ -239,11 +241,12 @@ pub fn f32_above(x: Real) -> f32 {
     -f32_below(-x)
 }
 
-/// `newton_summary`: per listed member, at `m * summary_len(dim)` of `summary`, what the host
-/// books at the end of its step ([`crate::gpu::types::summary_len`] says the layout), and at
-/// `m * 2 dim` of `boxes` the box of its nodes in f32, rounded outward.
-pub fn newton_summary(inputs: &SummaryInputs, members: &[MemberRange], call: &[Active], summary: &mut [Real], boxes: &mut [f32]) {
-    let SummaryInputs { motion, coefficients, committed, step, reference, u, dof_out, state, member_energy } = *inputs;
+/// `newton_summary`: per listed member (the kept members of a call), at `m * summary_len(dim)`
+/// of `summary` what the host reads at the end of its step ([`crate::gpu::types::summary_len`]
+/// says the layout), at `m * 2 dim` of `boxes` the box of its nodes in f32, rounded outward,
+/// and at `m * TALLY_ROW` of `rows` what `newton_tally` sums ([`TALLY_ROW`]).
+pub fn newton_summary(inputs: &SummaryInputs, members: &[MemberRange], call: &[Active], (summary, boxes, rows): (&mut [Real], &mut [f32], &mut [Real])) {
+    let SummaryInputs { motion, coefficients, committed, step, reference, u, dof_out, state, member_energy, committed_energy } = *inputs;
     let dim = (motion.dim as usize).clamp(2, 3);
     let xi = coefficients.factor;
     for job in call {
@@ -283,25 +286,43 @@ pub fn newton_summary(inputs: &SummaryInputs, members: &[MemberRange], call: &[A
         }
         let head = m * summary_len(dim);
         summary[head] = Real::from(state[m].status + 4 * state[m].iterations);
-        summary[head + 1] = state[m].residual;
-        summary[head + 2] = member_energy[m];
-        let at = head + 3;
-        summary[at] = 0.5 * kinetic;
-        summary[at + 1] = theta_term;
-        summary[at + 2] = force_work;
-        summary[at + 3] = speed2;
+        summary[head + 1] = 0.5 * kinetic;
         for i in 0..dim {
-            summary[at + 4 + i] = mx[i];
-            summary[at + 4 + dim + i] = p[i];
+            summary[head + 2 + i] = mx[i];
+            summary[head + 2 + dim + i] = p[i];
             boxes[m * 2 * dim + i] = f32_below(lo[i]);
             boxes[m * 2 * dim + dim + i] = f32_above(hi[i]);
         }
         if dim == 2 {
-            summary[at + 4 + 2 * dim] = l[2];
+            summary[head + 2 + 2 * dim] = l[2];
         } else {
-            summary[at + 4 + 2 * dim..at + 4 + 2 * dim + 3].copy_from_slice(&l);
+            summary[head + 2 + 2 * dim..head + 2 + 2 * dim + 3].copy_from_slice(&l);
         }
+        let strain = member_energy[m];
+        let row = &mut rows[m * TALLY_ROW..(m + 1) * TALLY_ROW];
+        row.copy_from_slice(&[state[m].residual, strain, theta_term, force_work - (strain - committed_energy[m]), speed2]);
     }
+}
+
+/// `newton_tally`: over the members `call` lists (a call's kept members) that converged, what
+/// the host books of them ([`TALLY_LEN`] reals: [`crate::gpu::types::StepTally::of`]), from
+/// their rows of `newton_summary`, each lane's share summed as the shader's invocation sums it.
+pub fn newton_tally(call: &[Active], state: &[NewtonState<Real>], rows: &[Real]) -> [Real; TALLY_LEN] {
+    let (mut sums, mut speed2, mut residual) = ([[0.0; NEWTON_WORKGROUP]; 4], [0.0 as Real; NEWTON_WORKGROUP], [0.0 as Real; NEWTON_WORKGROUP]);
+    for (k, job) in call.iter().enumerate() {
+        let m = job.member as usize;
+        if state[m].status != NEWTON_CONVERGED {
+            continue;
+        }
+        let (lane, row) = (k % NEWTON_WORKGROUP, &rows[m * TALLY_ROW..(m + 1) * TALLY_ROW]);
+        for (sum, value) in sums.iter_mut().zip([1.0, row[2], row[3], row[1]]) {
+            sum[lane] += value;
+        }
+        speed2[lane] = speed2[lane].max(row[4]);
+        residual[lane] = residual[lane].max(row[0]);
+    }
+    let [members, theta, force, strain] = sums.map(reduce_sum);
+    [members, theta, force, strain, reduce_max(speed2), reduce_max(residual)]
 }
 
 /// `newton_compact`: the members of the call's list still iterating, in its order, into `jobs`;

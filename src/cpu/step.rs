@@ -20,9 +20,11 @@ pub fn step_begin(motion: StepMotion<Real>, committed: &[DofState<Real>], step: 
     }
 }
 
-/// `step_commit` for member `range`: per dof the theta rule's velocity from the committed state
-/// and the step's last iterate, and the new committed state.
-pub fn step_commit(motion: StepMotion<Real>, committed: &mut [DofState<Real>], u: &[Real], dof_out: &[DofOut<Real>], range: MemberRange) {
+/// `step_commit` for member `member` (its dofs `range`): per dof the theta rule's velocity from
+/// the committed state and the step's last iterate, and the new committed state; its strain
+/// energy, the member's.
+pub fn step_commit(motion: StepMotion<Real>, (committed, committed_energy): (&mut [DofState<Real>], &mut [Real]), (u, dof_out, member_energy): (&[Real], &[DofOut<Real>], &[Real]), member: usize, range: MemberRange) {
+    committed_energy[member] = member_energy[member];
     for local in 0..range.dofs as usize {
         let d = range.dof_start as usize + local;
         let c = committed[d];

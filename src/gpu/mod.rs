@@ -15,7 +15,7 @@ pub mod world;
 
 pub use context::{describe_adapters, hardware_adapter, open, AdapterReport, Gpu, GpuError};
 pub use shaders::ElementVariant;
-pub use world::{ContactLayout, ElementFailure, Evaluation, GpuWorld, GroupContact, Inverse, NewtonCall, StepEnd, StepStart, Traffic, WorldBody, WorldKernel};
+pub use world::{ContactLayout, ElementFailure, Evaluation, GpuWorld, GroupContact, Inverse, KeptIterate, KeptState, NewtonCall, StepEnd, StepStart, Traffic, WorldBody, WorldKernel};
 
 /// Workgroups per row of a dispatch: a grid of more workgroups than one dimension allows is laid
 /// out in rows of this many (`MAX_ROW` of `batch.wgsl`; the kernels index by row).

@@ -24,6 +24,7 @@ pub const SHADERS: &[(&str, &str)] = &[
     ("newton_invert", include_str!("../../shaders/newton_invert.wgsl")),
     ("newton_judge", include_str!("../../shaders/newton_judge.wgsl")),
     ("newton_summary", include_str!("../../shaders/newton_summary.wgsl")),
+    ("newton_tally", include_str!("../../shaders/newton_tally.wgsl")),
     ("newton_update", include_str!("../../shaders/newton_update.wgsl")),
     ("peak_copy", include_str!("../../shaders/peak_copy.wgsl")),
     ("step_begin", include_str!("../../shaders/step_begin.wgsl")),
@@ -140,8 +141,9 @@ pub fn source(kernel: &str, precision: Precision, variant: Option<ElementVariant
         module += include("batch")?;
     }
     if is_newton_kernel(kernel) {
-        use super::types::{NEWTON_MAX_FREE, NEWTON_WORKGROUP};
+        use super::types::{NEWTON_MAX_FREE, NEWTON_WORKGROUP, TALLY_LEN, TALLY_ROW};
         module += &format!("const MAX_FREE = {NEWTON_MAX_FREE}u;\nconst NEWTON_WORKGROUP = {NEWTON_WORKGROUP}u;\nconst REFACTOR_CONTRACTION = {:?};\n", crate::policy::REFACTOR_CONTRACTION);
+        module += &format!("const TALLY_ROW = {TALLY_ROW}u;\nconst TALLY_LEN = {TALLY_LEN}u;\n");
         module += include("newton")?;
         if kernel == "newton_contact" {
             // The Uzawa points, problems and states it prepares and reads (`uzawa_solve`'s).

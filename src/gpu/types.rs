@@ -88,13 +88,70 @@ impl StepMotion<f64> {
     }
 }
 
-/// The reals `newton_summary` writes per member in a scene of dimension `dim`: its Newton
-/// state's status and iterations (`status + 4 iterations`), residual and strain energy, the
-/// kinetic energy, the theta and force terms of the step's dissipation, the largest squared
-/// nodal speed, then `Σ m x`, `Σ m v` (`dim` each) and the angular momentum (1 component in
-/// 2D, 3 in 3D). The box of the nodes goes apart, in f32 (`2 dim` of them).
+/// The reals `newton_summary` writes per member in a scene of dimension `dim` that the host
+/// reads every step (what `/bodies` logs and the energy balance needs of each body): its Newton
+/// state's status and iterations (`status + 4 iterations`), the kinetic energy, `Σ m x`,
+/// `Σ m v` (`dim` each) and the angular momentum (1 component in 2D, 3 in 3D). The box of the
+/// nodes goes apart, in f32 (`2 dim` of them), and the rest of the step's bookkeeping into the
+/// member's [`TALLY_ROW`], which `newton_tally` adds up on the device.
 pub const fn summary_len(dim: usize) -> usize {
-    7 + 2 * dim + if dim == 2 { 1 } else { 3 }
+    2 + 2 * dim + if dim == 2 { 1 } else { 3 }
+}
+
+/// The reals of a member's tally row (`newton_summary`), which the host reads only for a
+/// member whose step's end it takes back: the residual where its iterations ended, its strain
+/// energy there, `Σ m (v - v_t)²` (times `θ - 1/2`, the theta rule's dissipation), the force
+/// terms' dissipation `Σ Δu ((1 - ξ) f_int,t + ξ f_int) - (E_end - E_start)`, and the largest
+/// squared nodal speed.
+pub const TALLY_ROW: usize = 5;
+
+/// The reals `newton_tally` writes per batch: over the kept members of a call that converged,
+/// their count, then the sums of their theta terms, force dissipations and strain energies, the
+/// largest squared nodal speed and the largest residual ([`StepTally`]).
+pub const TALLY_LEN: usize = 6;
+
+/// What the host books of the members whose step's ends the device keeps, summed on the device
+/// (`newton_tally`) instead of read member by member.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct StepTally {
+    pub members: usize,
+    /// `Σ m (v - v_t)²`: times `θ - 1/2`, the theta rule's dissipation.
+    pub theta_term: f64,
+    /// `Σ Δu ((1 - ξ) f_int,t + ξ f_int) - ΔE`: the force terms' dissipation.
+    pub force_dissipation: f64,
+    /// The strain energy at the step's end.
+    pub strain: f64,
+    pub max_speed2: f64,
+    pub max_residual: f64,
+}
+
+impl StepTally {
+    /// From `newton_tally`'s reals ([`TALLY_LEN`]).
+    pub fn of(reals: &[f64]) -> Self {
+        Self { members: reals[0] as usize, theta_term: reals[1], force_dissipation: reals[2], strain: reals[3], max_speed2: reals[4], max_residual: reals[5] }
+    }
+
+    /// Both tallies' members. The largest values stay the larger (a member taken out keeps
+    /// counting there: they bound what the step reports, they are not booked).
+    pub fn add(&mut self, other: &Self) {
+        self.members += other.members;
+        self.theta_term += other.theta_term;
+        self.force_dissipation += other.force_dissipation;
+        self.strain += other.strain;
+        self.max_speed2 = self.max_speed2.max(other.max_speed2);
+        self.max_residual = self.max_residual.max(other.max_residual);
+    }
+
+    /// Takes out one member whose tally row (`row`, [`TALLY_ROW`]) was counted.
+    pub fn remove(&mut self, row: &[f64]) {
+        self.members -= 1;
+        self.theta_term -= row[2];
+        self.force_dissipation -= row[3];
+        self.strain -= row[1];
+        if self.members == 0 {
+            *self = Self::default();
+        }
+    }
 }
 
 /// Where entry `(i, j)` of a symmetric matrix lies in its lower triangle stored row by row
@@ -115,17 +172,13 @@ pub fn pack_lower(n: usize, entry: impl Fn(usize, usize) -> f64) -> Vec<f64> {
     (0..n).flat_map(|i| (0..=i).map(move |j| (i, j))).map(|(i, j)| entry(i, j)).collect()
 }
 
-/// A body's step end as the device reduced it (`newton_summary`, with the strain energy of
-/// `newton_finish` and the residual where its iterations ended), for a body whose displacements
-/// and forces stay on the device. Components beyond the scene's dimension are zero.
+/// A body's step end as the device reduced it (`newton_summary`), for a body whose
+/// displacements and forces stay on the device: what the host reads of it every step. The rest
+/// of its step's bookkeeping is summed over such bodies on the device ([`StepTally`]).
+/// Components beyond the scene's dimension are zero.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct StepSummary {
     pub kinetic: f64,
-    /// `Σ m (v - v_t)²`: times `θ - 1/2`, the theta rule's dissipation.
-    pub theta_term: f64,
-    /// `Σ Δu ((1 - ξ) f_int,t + ξ f_int)`: the internal forces' work over the step.
-    pub force_work: f64,
-    pub max_speed: f64,
     /// `Σ m x`: the centre of mass times the mass, and the gravity potential.
     pub mass_moment: [f64; 3],
     pub momentum: [f64; 3],
@@ -133,35 +186,27 @@ pub struct StepSummary {
     /// A box that holds the body's nodes (f32, rounded outward).
     pub low: [f64; 3],
     pub high: [f64; 3],
-    pub strain: f64,
-    pub residual: f64,
 }
 
 impl StepSummary {
-    /// The Newton state a summary carries (status, iterations, residual: what the host reads
-    /// of a member whose step's end stays on the device), and the summary itself.
-    /// `boxes`: its box (`2 dim` f32, low then high).
+    /// The Newton status and iterations a summary carries (the rest of the state stays on the
+    /// device), and the summary itself. `boxes`: its box (`2 dim` f32, low then high).
     pub fn of(dim: usize, summary: &[f64], boxes: &[f32]) -> (NewtonState<f64>, Self) {
         let word = summary[0] as u32;
-        let state = NewtonState { status: word % 4, iterations: word / 4, residual: summary[1], ..NewtonState::default() };
-        let mut s = Self::from_reals(dim, &summary[3..], summary[2], summary[1]);
+        let state = NewtonState { status: word % 4, iterations: word / 4, ..NewtonState::default() };
+        let mut s = Self { kinetic: summary[1], ..Self::default() };
+        s.mass_moment[..dim].copy_from_slice(&summary[2..2 + dim]);
+        s.momentum[..dim].copy_from_slice(&summary[2 + dim..2 + 2 * dim]);
+        if dim == 2 {
+            s.angular_momentum[2] = summary[2 + 2 * dim];
+        } else {
+            s.angular_momentum.copy_from_slice(&summary[2 + 2 * dim..2 + 2 * dim + 3]);
+        }
         for i in 0..dim {
             s.low[i] = f64::from(boxes[i]);
             s.high[i] = f64::from(boxes[dim + i]);
         }
         (state, s)
-    }
-
-    fn from_reals(dim: usize, reals: &[f64], strain: f64, residual: f64) -> Self {
-        let mut s = Self { kinetic: reals[0], theta_term: reals[1], force_work: reals[2], max_speed: reals[3].sqrt(), strain, residual, ..Self::default() };
-        s.mass_moment[..dim].copy_from_slice(&reals[4..4 + dim]);
-        s.momentum[..dim].copy_from_slice(&reals[4 + dim..4 + 2 * dim]);
-        if dim == 2 {
-            s.angular_momentum[2] = reals[4 + 2 * dim];
-        } else {
-            s.angular_momentum.copy_from_slice(&reals[4 + 2 * dim..4 + 2 * dim + 3]);
-        }
-        s
     }
 }
 

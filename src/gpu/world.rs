@@ -15,9 +15,9 @@ mod step;
 
 pub use contact::{ContactLayout, GroupContact};
 pub use newton::{invert_loops, run_newton_invert, Inverse, NewtonCall};
-pub use step::{run_newton_summary, run_step_kernels, StepEnd, StepKernelsOut, StepStart, SummaryBuffers};
+pub use step::{run_newton_summary, run_step_kernels, KeptIterate, KeptState, StepEnd, StepKernelsOut, StepStart, SummaryBuffers, SummaryOut};
 
-use super::types::{Active, Coefficients, DofOut, MaterialParams, MemberRange, MODE_FORCES, MODE_TANGENT, NEWTON_MAX_FREE, NO_FAILURE, NO_HISTORY};
+use super::types::{Active, Coefficients, DofOut, MaterialParams, MemberRange, StepTally, MODE_FORCES, MODE_TANGENT, NEWTON_MAX_FREE, NO_FAILURE, NO_HISTORY};
 use super::uzawa_sweep::UzawaSweeps;
 use super::{ElementVariant, Gpu, GpuError};
 use crate::assembly::{element_out_stride, DofMap, GatherMap, StiffnessPattern};
@@ -271,6 +271,12 @@ enum Source {
     Boxes,
     /// The committed states of steps begun on the device.
     Committed,
+    /// Their strain energies, per member.
+    CommittedEnergy,
+    /// Per member of a kept call, what `newton_tally` sums (`newton_summary`).
+    TallyRows,
+    /// The sums of a call's kept members (`newton_tally`).
+    Tally,
 }
 
 /// The copies of one pass into the read-back buffer, each landing 8-byte aligned after the last.
@@ -334,6 +340,10 @@ pub struct GpuWorld {
     newton_pipelines: Option<newton::NewtonPipelines>,
     /// Compiled by the first device Newton call with groups in contact.
     contact_pipelines: Option<contact::ContactPipelines>,
+    /// What the step's kept ends add up to (`newton_tally`), less those the host took back.
+    step_tally: StepTally,
+    /// The committed states the device keeps for the host: how many, and their strain energy.
+    held: (usize, Real),
 }
 
 pub(super) fn buffer(gpu: &Gpu, label: &str, bytes: usize, usage: BufferUsages) -> Buffer {
@@ -398,7 +408,23 @@ impl GpuWorld {
             batches.push(batch);
         }
         let readback = buffer(&gpu, "readback", readback_bytes, BufferUsages::MAP_READ | BufferUsages::COPY_DST);
-        Ok(Self { gpu, batches, place, coefficients, readback, traffic, submits: 0, contact: None, uzawa: UzawaPlacement::default(), rounds: RoundPlacement::default(), newton_readback: None, newton_pipelines: None, contact_pipelines: None })
+        Ok(Self {
+            gpu,
+            batches,
+            place,
+            coefficients,
+            readback,
+            traffic,
+            submits: 0,
+            contact: None,
+            uzawa: UzawaPlacement::default(),
+            rounds: RoundPlacement::default(),
+            newton_readback: None,
+            newton_pipelines: None,
+            contact_pipelines: None,
+            step_tally: StepTally::default(),
+            held: (0, 0.0),
+        })
     }
 
     pub fn precision(&self) -> Precision {
@@ -761,6 +787,9 @@ impl GpuWorld {
                 Source::Summary => &b.newton.as_ref().expect("a batch whose summaries are read has them").summary,
                 Source::Boxes => &b.newton.as_ref().expect("a batch whose summaries are read has them").boxes,
                 Source::Committed => b.newton.as_ref().expect("a batch whose committed states are read has them").resident.committed(),
+                Source::CommittedEnergy => b.newton.as_ref().expect("a batch whose committed states are read has them").resident.committed_energy(),
+                Source::TallyRows => &b.newton.as_ref().expect("a batch whose summaries are read has them").rows,
+                Source::Tally => &b.newton.as_ref().expect("a batch whose summaries are read has them").tally,
             };
             encoder.copy_buffer_to_buffer(source, c.source.start, target, c.target, c.source.end - c.source.start);
         }

@@ -7,8 +7,9 @@ use crate::assembly::{element_out_stride, DofMap, GatherMap, StiffnessPattern};
 use crate::cpu::{assemble_csr, assemble_residual, dispatch_element_force_tangent, element_energy, element_force_tangent};
 use crate::element::{element_cell_fields, element_point_fields, element_von_mises, point_gradients, CellFields, ElementError, ElementOutput, Formulation, Patches, ReferenceGeometry};
 use crate::gpu::types::{Coefficients, DofOut, DofStep};
-use crate::gpu::types::{DofState, NewtonMember, NewtonState, StepSummary};
+use crate::gpu::types::{NewtonMember, NewtonState, StepSummary};
 use crate::gpu::{ElementFailure, Evaluation, GpuError, Inverse, NewtonCall, StepEnd, StepStart, WorldBody};
+use crate::gpu::{KeptIterate, KeptState};
 use crate::material::tensor::green_lagrange;
 use crate::material::viscous::HISTORY;
 use crate::material::{BranchStep, Hyperelastic, Model, Relaxation, Viscoelastic};
@@ -214,7 +215,8 @@ pub struct Definition {
 pub struct Committed {
     pub(super) state: State,
     /// The committed state is the device's ([`crate::gpu::StepEnd::held`]): `state`'s vectors
-    /// are stale, and what the host books of it comes from this summary, until
+    /// and strain energy are stale, and what the host books of it comes from this summary (its
+    /// strain energy from the device's sum, [`crate::gpu::GpuWorld::held_strain`]), until
     /// [`Body::take_committed`] brings it back.
     pub(super) state_held: Option<StepSummary>,
     /// While the state (the trial) is held: its displacements are the host's all the same
@@ -635,9 +637,7 @@ impl Body {
 
     /// Norm of the residual with contact, `g - f_c`, over the free dofs.
     pub fn residual_norm(&self) -> Real {
-        if let Some(held) = &self.work.trial_held {
-            return held.residual;
-        }
+        debug_assert!(self.work.trial_held.is_none(), "a step end the device keeps has its residual there (GpuWorld::step_tally)");
         self.def.dofs.free_pairs().map(|(d, _)| (self.work.g[d] - self.work.contact_force[d]).powi(2)).sum::<Real>().sqrt()
     }
 
@@ -791,11 +791,7 @@ impl Body {
     /// velocities, support reactions `g - f_c` at the prescribed dofs, and the step's energy
     /// terms.
     pub fn finish_step(&mut self, p: &StepParams, strain: Real) -> StepEnergy {
-        if let Some(held) = &self.work.trial_held {
-            // Neither loads, nor supports, nor Prony series: a body the device steps has none.
-            let start_strain = self.committed.state_held.as_ref().map_or(self.committed.state.strain, |s| s.strain);
-            return StepEnergy { theta_dissipation: (p.theta - 0.5) * held.theta_term, force_dissipation: held.force_work - (held.strain - start_strain), ..StepEnergy::default() };
-        }
+        debug_assert!(self.work.trial_held.is_none(), "a step end the device keeps is booked from its sums (GpuWorld::step_tally)");
         let ndof = self.def.mass.len();
         let v: Vec<Real> = (0..ndof).map(|d| self.trial_velocity(p, d)).collect();
         self.work.trial.v = v;
@@ -1045,29 +1041,30 @@ impl Body {
         self.work.trial_held.is_none() || self.work.trial_positions
     }
 
-    /// Takes back the committed state the device kept (`states`: one per dof, from
-    /// [`crate::gpu::GpuWorld::read_kept`]) with its strain energy.
-    pub fn take_committed(&mut self, states: &[DofState<Real>]) {
-        let held = self.committed.state_held.take().expect("a committed state the device keeps");
-        for (d, s) in states.iter().enumerate() {
+    /// Takes back the committed state the device kept, with its strain energy (from
+    /// [`crate::gpu::GpuWorld::read_kept`]).
+    pub fn take_committed(&mut self, kept: &KeptState) {
+        self.committed.state_held.take().expect("a committed state the device keeps");
+        for (d, s) in kept.states.iter().enumerate() {
             (self.committed.state.u[d], self.committed.state.v[d], self.committed.state.f_int[d]) = (s.u, s.v, s.f_int);
         }
-        self.committed.state.strain = held.strain;
+        self.committed.state.strain = kept.strain;
         self.committed.state.strain_at_u = true;
     }
 
     /// Takes back the step's end the device kept: its iterate `u` and internal forces `f_int`
     /// ([`crate::gpu::GpuWorld::read_kept`]), evaluated as if the host had taken them. The
     /// step's inputs must be the host's ([`Body::begin_step`] from a committed state it holds).
-    pub fn take_iterate(&mut self, p: &StepParams, u: &[Real], f_int: &[Real]) {
-        let held = self.work.trial_held.take().expect("a step end the device keeps");
+    pub fn take_iterate(&mut self, p: &StepParams, kept: &KeptIterate) {
+        self.work.trial_held.take().expect("a step end the device keeps");
+        let KeptIterate { u, f_int, strain } = kept;
         self.work.trial.u.copy_from_slice(u);
         let c = coefficients(p);
         for (d, out) in self.work.dof_out.iter_mut().enumerate() {
             *out = DofOut { f_int: f_int[d], g: self.work.step_inputs[d].residual(c, u[d], f_int[d]) };
         }
         self.work.evaluated.record(&self.work.trial.u, &self.work.step_inputs, c);
-        self.work.evaluated.strain = Some(held.strain);
+        self.work.evaluated.strain = Some(*strain);
         self.absorb_residual(p);
     }
 
@@ -1078,12 +1075,10 @@ impl Body {
         0.5 * self.def.mass.iter().zip(&self.committed.state.v).map(|(m, v)| m * v * v).sum::<Real>()
     }
 
-    /// The model's strain energy and what the Prony branches hold beyond it.
-    pub fn strain_energy(&self) -> Real {
-        if let Some(held) = &self.committed.state_held {
-            return held.strain;
-        }
-        self.committed.state.strain + self.committed.state.branch_energy
+    /// The model's strain energy and what the Prony branches hold beyond it; `None` while the
+    /// device keeps the committed state (its energy is in [`crate::gpu::GpuWorld::held_strain`]).
+    pub fn strain_energy(&self) -> Option<Real> {
+        self.committed.state_held.is_none().then_some(self.committed.state.strain + self.committed.state.branch_energy)
     }
 
     /// Strain energy at the trial displacement, `element_energy` on the CPU (the state's when

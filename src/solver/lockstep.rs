@@ -391,8 +391,8 @@ fn take_back_unconverged(groups: &mut [Group], unkept: &[usize], world: &mut Gpu
     }
     let ids: Vec<usize> = held.iter().map(|&(id, _)| id).collect();
     let (states, _) = world.read_kept(&ids, &[], times)?;
-    for ((_, (k, j)), states) in held.iter().zip(states) {
-        groups[*k].bodies[*j].take_committed_mid_step(c.p, &states);
+    for ((_, (k, j)), kept) in held.iter().zip(states) {
+        groups[*k].bodies[*j].take_committed_mid_step(c.p, &kept);
     }
     Ok(())
 }

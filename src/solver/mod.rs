@@ -12,6 +12,7 @@ mod setup;
 pub mod topology;
 
 pub use crate::policy::{PhaseTimes, REFACTOR_CONTRACTION, TIGHTEN_AFTER, UZAWA_STALLS};
+use body::StepEnergy;
 pub use body::{Body, NodalLoad, StepFailure};
 pub use restart::{RestoreError, SavedBody, SavedFactor, SavedReaction, SavedState};
 pub use setup::{build_mesh, build_simulation};
@@ -260,8 +261,8 @@ fn take_committed_of(bodies: &mut [Body], world: Option<&mut GpuWorld>, held: &[
     }
     let world = world.expect("a state kept on a device");
     let (states, _) = world.read_kept(held, &[], times).map_err(|e| bodies[held[0]].device_failure(&e))?;
-    for (&b, states) in held.iter().zip(states) {
-        bodies[b].take_committed(&states);
+    for (&b, kept) in held.iter().zip(states) {
+        bodies[b].take_committed(&kept);
     }
     Ok(())
 }
@@ -277,11 +278,11 @@ fn take_step_ends(bodies: &mut [Body], world: Option<&mut GpuWorld>, needed: &[b
     let failure = |e: crate::gpu::GpuError| bodies[held[0]].device_failure(&e);
     let starts: Vec<usize> = held.iter().copied().filter(|&b| bodies[b].held_state().is_some()).collect();
     let (states, ends) = world.read_kept(&starts, &held, times).map_err(failure)?;
-    for (&b, states) in starts.iter().zip(states) {
-        bodies[b].take_committed_mid_step(p, &states);
+    for (&b, kept) in starts.iter().zip(states) {
+        bodies[b].take_committed_mid_step(p, &kept);
     }
-    for (&b, (u, f_int)) in held.iter().zip(ends) {
-        bodies[b].take_iterate(p, &u, &f_int);
+    for (&b, kept) in held.iter().zip(ends) {
+        bodies[b].take_iterate(p, &kept);
     }
     Ok(())
 }
@@ -796,14 +797,17 @@ impl Simulation {
     /// [`ContactStats`] counts it) and numerical dissipation, and the obstacles' reactions.
     /// Returns the largest nodal speed at the step's end.
     fn book_step(&mut self, p: &StepParams, points: &[ContactPoint], friction: Real, times: &mut PhaseTimes) -> Result<Real, StepFailure> {
-        // f32 kernels leave the energies, like the residual, to the f64 CPU twins.
-        let strains: Vec<Real> = match self.world.as_mut().filter(|w| w.precision() == Precision::F64) {
-            None => self.bodies.par_iter().map(Body::trial_strain_energy).collect(),
+        // Per body its strain energy at the step's end; none for a step end the device keeps (its
+        // terms are in the device's sums). f32 kernels leave the energies, like the residual, to
+        // the f64 CPU twins.
+        let strains: Vec<Option<Real>> = match self.world.as_mut().filter(|w| w.precision() == Precision::F64) {
+            None => self.bodies.par_iter().map(|b| Some(b.trial_strain_energy())).collect(),
             Some(world) => {
                 // A body that has not moved keeps its state's energy, as on the CPU; one whose
                 // device Newton call left its energy at the trial displacement takes that.
-                let mut strains: Vec<Option<Real>> = self.bodies.par_iter().map(|b| b.held_end().map(|h| h.strain).or_else(|| b.unmoved_strain_energy()).or_else(|| b.evaluated_strain_energy())).collect();
-                let list: Vec<(usize, &[Real])> = self.bodies.iter().enumerate().filter(|(b, _)| strains[*b].is_none()).map(|(b, body)| (b, &body.work.trial.u[..])).collect();
+                let mut strains: Vec<Option<Real>> = self.bodies.par_iter().map(|b| b.unmoved_strain_energy().or_else(|| b.evaluated_strain_energy())).collect();
+                let held: Vec<bool> = self.bodies.iter().map(|b| b.held_end().is_some()).collect();
+                let list: Vec<(usize, &[Real])> = self.bodies.iter().enumerate().filter(|(b, _)| strains[*b].is_none() && !held[*b]).map(|(b, body)| (b, &body.work.trial.u[..])).collect();
                 // A few bodies (grains that took their step on the host) cost the CPU twins less
                 // than a device pass, as a later Newton round does.
                 if !list.is_empty() {
@@ -816,7 +820,7 @@ impl Simulation {
                         strains[*b] = Some(e);
                     }
                 }
-                strains.into_iter().map(|s| s.expect("every body's energy")).collect()
+                strains.into_iter().zip(held).map(|(s, held)| (!held).then(|| s.expect("every body's energy"))).collect()
             }
         };
         let dim = self.dim;
@@ -824,16 +828,23 @@ impl Simulation {
             .bodies
             .par_iter_mut()
             .zip(strains)
-            .map(|(body, strain)| {
-                let energy = body.finish_step(p, strain);
-                (energy, body.held_end().map_or_else(|| max_speed(&body.work.trial.v, dim), |h| h.max_speed))
+            .map(|(body, strain)| match strain {
+                Some(strain) => (body.finish_step(p, strain), max_speed(&body.work.trial.v, dim)),
+                None => (StepEnergy::default(), 0.0),
             })
             .collect();
-        let speed = finished.iter().map(|f| f.1).fold(0.0, Real::max);
+        let mut speed = finished.iter().map(|f| f.1).fold(0.0, Real::max);
         for (e, _) in finished {
             self.external_work += e.support_work + e.load_work;
             self.numerical_dissipation += e.theta_dissipation + e.force_dissipation;
             self.viscous_dissipation += e.viscous_dissipation;
+        }
+        // The step ends the device keeps: neither loads, nor supports, nor Prony series (a body
+        // the device steps has none), their theta and force terms summed there.
+        if let Some(world) = &self.world {
+            let kept = world.step_tally();
+            self.numerical_dissipation += (p.theta - 0.5) * kept.theta_term + kept.force_dissipation;
+            speed = speed.max(kept.max_speed2.sqrt());
         }
         let mut reactions = vec![[0.0; 3]; self.contact.as_ref().map_or(0, |c| c.obstacles.len())];
         let (mut relative_work, mut correction) = (0.0, 0.0);
@@ -899,12 +910,14 @@ impl Simulation {
         // Without gravity the potential is zero: no pass over every node's position.
         let weightless = self.gravity == [0.0; 3];
         let potential = |b: &Body| if weightless { 0.0 } else { b.potential_energy(&self.gravity) };
-        let bodies: Vec<[Real; 3]> = self.bodies.par_iter().map(|b| [b.kinetic_energy(), b.strain_energy(), potential(b)]).collect();
+        // A body whose committed state the device keeps has its strain energy in the device's sum.
+        let bodies: Vec<[Real; 3]> = self.bodies.par_iter().map(|b| [b.kinetic_energy(), b.strain_energy().unwrap_or(0.0), potential(b)]).collect();
         for [kinetic, strain, potential] in bodies {
             e.kinetic += kinetic;
             e.strain += strain;
             e.potential += potential;
         }
+        e.strain += self.world.as_ref().map_or(0.0, GpuWorld::held_strain);
         e.total = e.kinetic + e.strain + e.potential;
         let e0 = self.initial_energy;
         let scale = [e0, e.total, e.external_work, e.contact_correction, e.friction_dissipation, e.viscous_dissipation, e.numerical_dissipation, e.kinetic, e.strain].iter().map(|x| x.abs()).fold(Real::MIN_POSITIVE, Real::max);

@@ -457,7 +457,7 @@ fn check_initial_state(loaded: &LoadedScene, bodies: &mut [Body], contact: Optio
         }
     }
     for b in bodies.iter() {
-        let (kinetic, strain, potential) = (b.kinetic_energy(), b.strain_energy(), b.potential_energy(gravity));
+        let (kinetic, strain, potential) = (b.kinetic_energy(), b.strain_energy().expect("a state the host holds before the first step"), b.potential_energy(gravity));
         if ![kinetic, strain, potential].iter().all(|e| e.is_finite()) {
             return Err(loaded.error(
                 Invalid,

@@ -16,8 +16,8 @@ use super::contact::{ContactLayout, ContactPasses, ContactPipelines, GroupContac
 use super::{buffer, to_device, Batch, Evaluation, GpuWorld, Pass, ReadBack, Source, WORKGROUP};
 use crate::contact::uzawa::Problem;
 use crate::gpu::types::{
-    packed_len, summary_len, Active, Coefficients, ContactState, DofOut, DofStep, Inversion, NewtonMember, NewtonState, StepSummary, MODE_FORCES, MODE_TANGENT, NEWTON_CONVERGED, NEWTON_FAILED, NEWTON_HOST, NEWTON_ITERATING, NEWTON_MAX_FREE,
-    NO_FAILURE,
+    packed_len, summary_len, Active, Coefficients, ContactState, DofOut, DofStep, Inversion, NewtonMember, NewtonState, StepSummary, StepTally, MODE_FORCES, MODE_TANGENT, NEWTON_CONVERGED, NEWTON_FAILED, NEWTON_HOST, NEWTON_ITERATING,
+    NEWTON_MAX_FREE, NO_FAILURE, TALLY_LEN, TALLY_ROW,
 };
 use crate::gpu::uzawa_sweep::UzawaSweeps;
 use crate::gpu::{ElementFailure, Gpu, GpuError};
@@ -37,9 +37,12 @@ use wgpu::{Buffer, BufferUsages, ComputePipeline};
 const ITERATIONS_PER_SUBMIT: u32 = 12;
 
 /// The indirect dispatches (x, y, z) of update, forces, residual and judge, then the length of
-/// the call's list (`DISPATCHES` and `CALL_COUNT` of `newton.wgsl`).
-pub(super) const DISPATCH_WORDS: usize = 13;
+/// the call's list and how many of its first members are kept (`DISPATCHES`, `CALL_COUNT` and
+/// `KEPT_COUNT` of `newton.wgsl`).
+pub(super) const DISPATCH_WORDS: usize = 14;
 const DISPATCHES: usize = 4;
+pub(super) const CALL_COUNT: usize = 12;
+pub(super) const KEPT_COUNT: usize = 13;
 
 /// A batch's share of a [`GpuWorld::newton`] call: the batch, its `(call, member)` pairs in
 /// member order, and the workgroups of the energy pass over them.
@@ -85,7 +88,8 @@ fn unpack_calls(precision: Precision, calls: &mut [NewtonCall], (landing, coeffi
                 let boxes: &[f32] = bytemuck::cast_slice(&bytes[b..b + 8 * dim]);
                 let (state, summary) = StepSummary::of(dim, &super::from_device(precision, &bytes[s..s + summary_len(dim) * real]), boxes);
                 call.outcome = state;
-                call.strain_energy = Some(summary.strain);
+                // (a kept call that did not converge takes its strain energy with its iterate)
+                call.strain_energy = None;
                 call.summary = (state.status == NEWTON_CONVERGED).then_some(summary);
             }
             (None, None) => unreachable!("a call reads its state or its summary"),
@@ -327,6 +331,10 @@ pub(super) struct NewtonBuffers {
     pub(super) summary: Buffer,
     /// Each member's box in f32 (`newton_summary`).
     pub(super) boxes: Buffer,
+    /// Each kept member's row of what `newton_tally` sums (`newton_summary`), and the sums.
+    pub(super) rows: Buffer,
+    pub(super) tally: Buffer,
+    add_up: Pass,
     update: Pass,
     judge: Pass,
     compact: Pass,
@@ -380,6 +388,7 @@ pub(super) struct NewtonPipelines {
     compact_host: ComputePipeline,
     finish: ComputePipeline,
     summary: ComputePipeline,
+    tally: ComputePipeline,
     step: super::step::StepPipelines,
 }
 
@@ -393,6 +402,7 @@ impl NewtonPipelines {
             compact_host: gpu.pipeline_at("newton_compact", "host", None)?,
             finish: gpu.pipeline_at("newton_finish", "main", None)?,
             summary: gpu.pipeline_at("newton_summary", "main", None)?,
+            tally: gpu.pipeline_at("newton_tally", "main", None)?,
             step: super::step::StepPipelines::new(gpu)?,
         })
     }
@@ -422,8 +432,8 @@ impl NewtonBuffers {
         let update = Pass::bound(gpu, pipelines.update.clone(), ("newton_update", "main"), None, &[&common[..], &[("inverse", &inverse)]].concat());
         let judge = Pass::bound(gpu, pipelines.judge.clone(), ("newton_judge", "main"), None, &[&common[..], &[("u_start", &u_start), ("step", &b.step), ("coefficients", coefficients), ("failure", &b.failure)]].concat());
         let compact = Pass::bound(gpu, pipelines.compact.clone(), ("newton_compact", "main"), None, &[("call", &call), ("state", &state), ("jobs", &jobs), ("dispatch", &dispatch)]);
-        let resident = super::step::Resident::new(gpu, &pipelines.step, b, &u_start);
         let member_energy = buffer(gpu, "member energy", members * real, storage | BufferUsages::COPY_SRC);
+        let resident = super::step::Resident::new(gpu, &pipelines.step, b, &u_start, &member_energy);
         let packed_forces = buffer(gpu, "newton forces", dofs * real, storage | BufferUsages::COPY_SRC);
         let finish = Pass::bound(
             gpu,
@@ -433,6 +443,7 @@ impl NewtonBuffers {
             &[("energy", &b.energy), ("dof_out", &b.dof_out), ("members", &b.member_buffer), ("jobs", &call), ("dispatch", &dispatch), ("member_energy", &member_energy), ("forces", &packed_forces)],
         );
         let (summary, boxes) = (buffer(gpu, "summary", members * summary_len(3) * real, storage | BufferUsages::COPY_SRC), buffer(gpu, "boxes", members * 6 * 4, storage | BufferUsages::COPY_SRC));
+        let (rows, tally) = (buffer(gpu, "tally rows", members * TALLY_ROW * real, storage | BufferUsages::COPY_SRC), buffer(gpu, "tally", TALLY_LEN * real, storage | BufferUsages::COPY_SRC));
         let (reference, patterns) = (super::buffer_init(gpu, "reference", &super::to_device(gpu.precision, &b.reference), storage), super::buffer_init(gpu, "patterns", bytemuck::cast_slice(&b.patterns), storage));
         let summarise = Pass::bound(
             gpu,
@@ -454,8 +465,11 @@ impl NewtonBuffers {
                 ("state", &state),
                 ("member_energy", &member_energy),
                 ("boxes", &boxes),
+                ("committed_energy", resident.committed_energy()),
+                ("rows", &rows),
             ],
         );
+        let add_up = Pass::bound(gpu, pipelines.tally.clone(), ("newton_tally", "main"), None, &[("call", &call), ("dispatch", &dispatch), ("state", &state), ("rows", &rows), ("tally", &tally)]);
         let initial = NewtonState::<Real> { status: NEWTON_ITERATING, residual: Real::MAX, previous_residual: Real::MAX, ..NewtonState::default() };
         let initial_state = super::buffer_init(gpu, "initial newton state", bytemuck::cast_slice(&vec![initial; members]), BufferUsages::COPY_SRC);
         let no_failure = super::buffer_init(gpu, "no failure", bytemuck::cast_slice(&vec![NO_FAILURE; 2 * members]), BufferUsages::COPY_SRC);
@@ -467,6 +481,9 @@ impl NewtonBuffers {
             summarise,
             summary,
             boxes,
+            rows,
+            tally,
+            add_up,
             patterns,
             invert: None,
             inverse,
@@ -569,6 +586,8 @@ impl GpuWorld {
         let evaluate_first = calls.first().is_some_and(|c| c.residual.is_none());
         assert!(calls.iter().all(|c| c.residual.is_none() == evaluate_first), "a call's members are all evaluated, or none");
         let mut first = true;
+        // The last submission's tallies: they count every kept member that has converged.
+        let mut tally = StepTally::default();
         loop {
             let mut encoder = None;
             let mut readback = ReadBack::default();
@@ -579,7 +598,7 @@ impl GpuWorld {
                 self.record_inversions(&mut encoder, &work);
             }
             self.record_iterations(&mut encoder, &plan, first && evaluate_first, iterations);
-            let landing = self.queue_states(&mut readback, &work, calls, dim);
+            let (landing, tallies) = self.queue_states(&mut readback, &work, calls, dim);
             // The stiffness values of the members in contact, `(call, where, entries)`: taken
             // for those handed back.
             let tangent_landing: Vec<(usize, usize, usize)> = match &contact {
@@ -602,6 +621,10 @@ impl GpuWorld {
                     super::unpack_evaluation(precision, list, landing, bytes);
                 }
                 unpack_calls(precision, calls, (&landing, coefficients, dim), &tangent_landing, bytes);
+                tally = StepTally::default();
+                for &at in &tallies {
+                    tally.add(&StepTally::of(&super::from_device(precision, &bytes[at..at + TALLY_LEN * precision.size()])));
+                }
                 iterating = calls.iter().any(|call| call.outcome.status == NEWTON_ITERATING);
                 if let Some(at) = contact_landing {
                     unpack_contact(precision, problems, contacts, at, bytes);
@@ -615,6 +638,7 @@ impl GpuWorld {
             t0 = Instant::now();
         }
         self.take_unconverged(&work, calls, coefficients, times)?;
+        self.step_tally.add(&tally);
         self.after_newton(&work, calls, contacts);
         Ok(())
     }
@@ -670,7 +694,8 @@ impl GpuWorld {
         });
         let per_member = 16 + std::mem::size_of::<NewtonState<Real>>() + summary_len(3) * real + 6 * 4;
         // (a kept call's displacements fit in the room of another's displacements and forces)
-        let bytes = (total_members * per_member + total_dofs * 2 * real) as u64 + if list.is_empty() { 0 } else { self.readback.size() } + contact_bytes;
+        let tallies = work.len() * TALLY_LEN * real;
+        let bytes = (total_members * per_member + total_dofs * 2 * real + tallies) as u64 + if list.is_empty() { 0 } else { self.readback.size() } + contact_bytes;
         self.newton_target_of(bytes)
     }
 
@@ -771,15 +796,17 @@ impl GpuWorld {
             n.energy.dispatch_xyz(&self.gpu, &mut pass, *energy);
             n.finish.dispatch(&self.gpu, &mut pass, mine.len().div_ceil(WORKGROUP) as u32);
             n.summarise.dispatch(&self.gpu, &mut pass, mine.len().div_ceil(WORKGROUP) as u32);
+            n.add_up.dispatch(&self.gpu, &mut pass, 1);
         }
     }
 
     /// Queues each call's state and strain energy, and its failure flags, displacements and
-    /// internal forces, or (a kept call, `dim` the scene's) its summary; returns per call where
-    /// they land.
-    fn queue_states(&self, readback: &mut ReadBack, work: &[BatchCalls], calls: &[NewtonCall], dim: usize) -> Vec<Landing> {
+    /// internal forces, or (a kept call, `dim` the scene's) its summary, and per batch with kept
+    /// calls their tally; returns per call where they land, and where the tallies land.
+    fn queue_states(&self, readback: &mut ReadBack, work: &[BatchCalls], calls: &[NewtonCall], dim: usize) -> (Vec<Landing>, Vec<usize>) {
         let real = self.gpu.precision.size();
         let mut landing = vec![Landing::default(); calls.len()];
+        let mut tallies = Vec::new();
         for (batch, mine, _) in work {
             let (kept, others): (Vec<_>, Vec<_>) = mine.iter().partition(|&&(i, _)| calls[i].keep);
             for (&(i, _), at) in others.iter().zip(self.queue_state_and_energy(readback, *batch, &others)) {
@@ -788,6 +815,9 @@ impl GpuWorld {
             let iterates = self.queue_iterates(readback, *batch, &others);
             let summary_span = |m: usize| (m * summary_len(dim) * real) as u64..((m + 1) * summary_len(dim) * real) as u64;
             let kept_members: Vec<usize> = kept.iter().map(|&(_, m)| m).collect();
+            if !kept.is_empty() {
+                tallies.push(readback.queue(*batch, Source::Tally, 0..(TALLY_LEN * real) as u64) as usize);
+            }
             let summaries = readback.queue_runs(*batch, Source::Summary, &kept_members, &summary_span);
             let box_span = |m: usize| (m * 8 * dim) as u64..((m + 1) * 8 * dim) as u64;
             let boxes = readback.queue_runs(*batch, Source::Boxes, &kept_members, &box_span);
@@ -807,7 +837,7 @@ impl GpuWorld {
                 landing[i].positions = Some(at);
             }
         }
-        landing
+        (landing, tallies)
     }
 
     /// Queues the Newton states and strain energies of the listed calls `(call, member)` of a
@@ -849,21 +879,22 @@ impl GpuWorld {
             return Ok(());
         }
         let mut readback = ReadBack::default();
-        let mut landing: Vec<(usize, [usize; 3], usize)> = Vec::new();
+        let mut landing: Vec<(usize, [usize; 3], (usize, usize))> = Vec::new();
         for (batch, mine, _) in work {
             let theirs: Vec<(usize, usize)> = mine.iter().copied().filter(|&(i, _)| wanted(&calls[i])).collect();
             let states = self.queue_state_and_energy(&mut readback, *batch, &theirs);
             let at = self.queue_iterates(&mut readback, *batch, &theirs);
-            landing.extend(theirs.iter().zip(at).zip(states).map(|((&(i, _), at), (state, _))| (i, at, state)));
+            landing.extend(theirs.iter().zip(at).zip(states).map(|((&(i, _), at), state)| (i, at, state)));
         }
         let target = self.newton_target_of(readback.end);
         let encoder = self.encoder("newton iterates");
         let precision = self.gpu.precision;
         self.read_back_into(&target, encoder, &readback, "newton_update", times, Instant::now(), |bytes| {
-            for &(i, at, state) in &landing {
+            for &(i, at, (state, energy)) in &landing {
                 calls[i].keep = false;
                 // The whole state: the host goes on from the device's last increment.
                 calls[i].outcome = bytemuck::pod_read_unaligned(&bytes[state..state + std::mem::size_of::<NewtonState<Real>>()]);
+                calls[i].strain_energy = Some(super::from_device(precision, &bytes[energy..energy + precision.size()])[0]);
                 unpack_iterate(precision, &mut calls[i], at, coefficients, bytes);
             }
         })
@@ -952,7 +983,7 @@ impl GpuWorld {
         let most = |f: fn(&crate::gpu::types::MemberRange) -> u32| mine.iter().map(|&(_, m)| f(&b.members[m]) as usize).max().unwrap_or(0);
         let (tx, ty) = crate::gpu::dispatch_rows(most(|r| r.elements).div_ceil(b.tangent_elements_per_group));
         let (cx, cy) = crate::gpu::dispatch_rows(most(|r| r.nonzeros).div_ceil(WORKGROUP));
-        let dispatch: [u32; DISPATCH_WORDS] = [tx, ty, 0, cx, cy, 0, 1, 1, 0, 1, 1, 0, list.len() as u32];
+        let dispatch: [u32; DISPATCH_WORDS] = [tx, ty, 0, cx, cy, 0, 1, 1, 0, 1, 1, 0, list.len() as u32, 0];
         let h = b.newton.as_ref().and_then(|n| n.host_tangents.as_ref()).expect("made above");
         let (call, arguments) = (h.call.clone(), h.dispatch.clone());
         self.upload(&call, 0, bytemuck::cast_slice(&list));
@@ -1017,8 +1048,10 @@ impl GpuWorld {
             k += run.len();
         }
         // The list goes up when it changed (a packing in flight calls the same grains step after
-        // step); the device copies it into the iterations' list.
-        let list: Vec<Active> = members.iter().map(|&m| Active { member: m as u32, mode: MODE_FORCES }).collect();
+        // step); the device copies it into the iterations' list. The kept calls come first:
+        // `newton_summary` and `newton_tally` take those.
+        let (kept, others): (Vec<_>, Vec<_>) = mine.iter().partition(|&&(i, _)| calls[i].keep);
+        let list: Vec<Active> = kept.iter().chain(&others).map(|&&(_, m)| Active { member: m as u32, mode: MODE_FORCES }).collect();
         if !same_bits(&list, &n.call_host) {
             uploads.push((n.call.clone(), 0, bytemuck::cast_slice(&list).to_vec()));
             n.call_host.clone_from(&list);
@@ -1027,8 +1060,8 @@ impl GpuWorld {
         let most = |f: fn(&crate::gpu::types::MemberRange) -> u32| members.iter().map(|&m| f(&b.members[m]) as usize).max().unwrap_or(0);
         let (fx, fy) = crate::gpu::dispatch_rows(most(|r| r.elements).div_ceil(WORKGROUP));
         let (rx, ry) = crate::gpu::dispatch_rows(most(|r| r.dofs).div_ceil(WORKGROUP));
-        let dispatch: [u32; DISPATCH_WORDS] = [1, 1, count, fx, fy, count, rx, ry, count, 1, 1, count, count];
-        debug_assert_eq!(DISPATCHES * 3 + 1, DISPATCH_WORDS);
+        let dispatch: [u32; DISPATCH_WORDS] = [1, 1, count, fx, fy, count, rx, ry, count, 1, 1, count, count, kept.len() as u32];
+        debug_assert_eq!((DISPATCHES * 3, DISPATCHES * 3 + 2), (CALL_COUNT, DISPATCH_WORDS));
         uploads.push((n.dispatch.clone(), 0, bytemuck::cast_slice(&dispatch).to_vec()));
         let (inverse, residuals) = (n.inverse.clone(), b.dof_out.clone());
         if !new.inversions.is_empty() {

@@ -12,11 +12,30 @@
 //! again.
 
 use super::{buffer, Batch, GpuWorld, Mirror, Pass, WORKGROUP};
-use crate::gpu::types::{summary_len, Active, Coefficients, DofOut, DofState, DofStep, MemberRange, NewtonState, StepMotion, MODE_FORCES, NO_MEMBER};
+use crate::gpu::types::{summary_len, Active, Coefficients, DofOut, DofState, DofStep, MemberRange, NewtonState, StepMotion, StepTally, MODE_FORCES, NO_MEMBER, TALLY_LEN, TALLY_ROW};
 use crate::gpu::{Gpu, GpuError};
 use crate::policy::PhaseTimes;
 use crate::precision::{same_bits, Precision, Real};
 use wgpu::{Buffer, BufferUsages, ComputePipeline};
+
+/// A committed state the device kept, handed back ([`GpuWorld::read_kept`]): one `DofState`
+/// per dof, and its strain energy.
+pub struct KeptState {
+    pub states: Vec<DofState<Real>>,
+    pub strain: Real,
+}
+
+/// A step's end the device kept, handed back ([`GpuWorld::read_kept`]): the iterate, its
+/// internal forces and strain energy.
+pub struct KeptIterate {
+    pub u: Vec<Real>,
+    pub f_int: Vec<Real>,
+    pub strain: Real,
+}
+
+/// A read-back of the same span of each listed body: the bodies, the batch buffer, and the
+/// span of a member (its batch and index).
+type SpanRequest<'a> = (&'a [usize], super::Source, &'a dyn Fn(&Batch, usize) -> std::ops::Range<u64>);
 
 /// What the host hands the world at the start of one body's step.
 pub struct StepStart<'a> {
@@ -36,6 +55,8 @@ pub struct StepEnd<'a> {
     pub u: &'a [Real],
     pub v: &'a [Real],
     pub f_int: &'a [Real],
+    /// The committed strain energy (the host's, unless `held`).
+    pub strain: Real,
     pub on_device: bool,
     /// The step ended with a kept device Newton call ([`crate::gpu::NewtonCall::keep`]): the
     /// host's `u`, `v` and `f_int` are not the step's, the device's iterate is.
@@ -58,17 +79,20 @@ impl StepPipelines {
     fn passes(&self, gpu: &Gpu, b: &StepBindings) -> [Pass; 2] {
         let common = [("committed", b.committed), ("u", b.u), ("members", b.members)];
         let begin = [&common[..], &[("motion", b.motions[0]), ("jobs", b.jobs[0]), ("step", b.step), ("u_start", b.u_start)]].concat();
-        let commit = [&common[..], &[("motion", b.motions[1]), ("jobs", b.jobs[1]), ("dof_out", b.dof_out)]].concat();
+        let commit = [&common[..], &[("motion", b.motions[1]), ("jobs", b.jobs[1]), ("dof_out", b.dof_out), ("member_energy", b.member_energy), ("committed_energy", b.committed_energy)]].concat();
         [Pass::bound(gpu, self.begin.clone(), ("step_begin", "main"), None, &begin), Pass::bound(gpu, self.commit.clone(), ("step_commit", "main"), None, &commit)]
     }
 }
 
 /// The buffers the step kernels bind: the motions and job lists of the begin (`[0]`) and of the
-/// commit (`[1]`), and the per-dof and per-member buffers they share.
+/// commit (`[1]`), the per-dof and per-member buffers they share, and the strain energies the
+/// commit takes.
 struct StepBindings<'a> {
     motions: [&'a Buffer; 2],
     jobs: [&'a Buffer; 2],
     committed: &'a Buffer,
+    member_energy: &'a Buffer,
+    committed_energy: &'a Buffer,
     step: &'a Buffer,
     u: &'a Buffer,
     u_start: &'a Buffer,
@@ -79,6 +103,8 @@ struct StepBindings<'a> {
 /// A batch's committed states on the device and what the host knows of them, per member.
 pub(super) struct Resident {
     committed: Buffer,
+    /// The committed states' strain energies, one per member.
+    committed_energy: Buffer,
     motions: [Buffer; 2],
     jobs: [Buffer; 2],
     /// `step_begin` (`[0]`) and `step_commit` (`[1]`), as `motions` and `jobs`.
@@ -151,17 +177,21 @@ impl Slots {
 }
 
 impl Resident {
-    pub(super) fn new(gpu: &Gpu, pipelines: &StepPipelines, b: &Batch, u_start: &Buffer) -> Self {
+    /// `member_energy`: the strain energies where device Newton calls ended (`newton_finish`).
+    pub(super) fn new(gpu: &Gpu, pipelines: &StepPipelines, b: &Batch, u_start: &Buffer, member_energy: &Buffer) -> Self {
         let real = gpu.precision.size();
         let (dofs, members) = (b.u_host.len(), b.members.len());
         let committed = buffer(gpu, "committed state", dofs * 3 * real, BufferUsages::STORAGE | BufferUsages::COPY_DST | BufferUsages::COPY_SRC);
+        let committed_energy = buffer(gpu, "committed energy", members * real, BufferUsages::STORAGE | BufferUsages::COPY_DST | BufferUsages::COPY_SRC);
         let motion = || buffer(gpu, "step motion", 4 * real, BufferUsages::UNIFORM | BufferUsages::COPY_DST);
         let jobs = || buffer(gpu, "step jobs", members * 8, BufferUsages::STORAGE | BufferUsages::COPY_DST);
         let (motions, jobs) = ([motion(), motion()], [jobs(), jobs()]);
-        let bindings = StepBindings { motions: [&motions[0], &motions[1]], jobs: [&jobs[0], &jobs[1]], committed: &committed, step: &b.step, u: &b.u, u_start, dof_out: &b.dof_out, members: &b.member_buffer };
+        let bindings =
+            StepBindings { motions: [&motions[0], &motions[1]], jobs: [&jobs[0], &jobs[1]], committed: &committed, member_energy, committed_energy: &committed_energy, step: &b.step, u: &b.u, u_start, dof_out: &b.dof_out, members: &b.member_buffer };
         let passes = pipelines.passes(gpu, &bindings);
         Self {
             committed,
+            committed_energy,
             motions,
             jobs,
             passes,
@@ -179,6 +209,11 @@ impl Resident {
     /// The committed states (one `DofState` per dof).
     pub(super) fn committed(&self) -> &Buffer {
         &self.committed
+    }
+
+    /// The committed states' strain energies (one per member).
+    pub(super) fn committed_energy(&self) -> &Buffer {
+        &self.committed_energy
     }
 
     /// The motion of the step `step_begin` begins (the step the Newton calls solve).
@@ -218,6 +253,7 @@ impl GpuWorld {
     /// changed: a grain at rest starts every step from the same ones).
     pub fn begin_step(&mut self, starts: &[StepStart], motion: StepMotion<Real>) -> Result<(), GpuError> {
         self.flush_prologue()?;
+        self.step_tally = StepTally::default();
         for batch in 0..self.batches.len() {
             let mut mine: Vec<&StepStart> = starts.iter().filter(|s| self.place[s.body].0 == batch).collect();
             mine.sort_unstable_by_key(|s| self.place[s.body].1);
@@ -280,12 +316,13 @@ impl GpuWorld {
     }
 
     /// The committed states of the listed bodies `committed` (each kept on the device: a step of
-    /// its ended there, [`StepEnd::held`]), one `DofState` per dof, after the commit that is
-    /// waiting (recorded at the head of the same submission); and the last device Newton
-    /// iterates and internal forces of the bodies `iterates` (kept calls:
-    /// [`crate::gpu::NewtonCall::keep`]), as their calls left them. One submission.
-    #[allow(clippy::type_complexity)]
-    pub fn read_kept(&mut self, committed: &[usize], iterates: &[usize], times: &mut PhaseTimes) -> Result<(Vec<Vec<DofState<Real>>>, Vec<(Vec<Real>, Vec<Real>)>), GpuError> {
+    /// its ended there, [`StepEnd::held`]), one `DofState` per dof, with their strain energies,
+    /// after the commit that is waiting (recorded at the head of the same submission); and the
+    /// last device Newton iterates, internal forces and strain energies of the bodies `iterates`
+    /// (kept calls that converged: [`crate::gpu::NewtonCall::keep`]), as their calls left them.
+    /// One submission. Both are the host's from here on: the device's sums
+    /// ([`GpuWorld::step_tally`], [`GpuWorld::held_strain`]) no longer count them.
+    pub fn read_kept(&mut self, committed: &[usize], iterates: &[usize], times: &mut PhaseTimes) -> Result<(Vec<KeptState>, Vec<KeptIterate>), GpuError> {
         if !committed.is_empty() {
             for batch in 0..self.batches.len() {
                 if let Some((list, motion)) = self.batches[batch].newton.as_mut().and_then(|n| n.resident.pending.take()) {
@@ -300,17 +337,45 @@ impl GpuWorld {
                 (dofs.start * size) as u64..(dofs.end * size) as u64
             }
         };
-        let (states, reals) = (per_dof(state), per_dof(real));
-        let requests: [(&[usize], super::Source, &dyn Fn(&Batch, usize) -> std::ops::Range<u64>); 3] = [(committed, super::Source::Committed, &states), (iterates, super::Source::Displacement, &reals), (iterates, super::Source::NewtonForces, &reals)];
-        let mut bytes = self.read_member_spans(&requests, times)?.into_iter();
-        let (states, u, f) = (bytes.next().expect("three requests"), bytes.next().expect("three requests"), bytes.next().expect("three requests"));
-        Ok((states.iter().map(|b| bytemuck::pod_collect_to_vec(b)).collect(), u.iter().zip(&f).map(|(u, f)| (bytemuck::pod_collect_to_vec(u), bytemuck::pod_collect_to_vec(f))).collect()))
+        let per_member = |size: usize| move |_: &Batch, m: usize| (m * size) as u64..((m + 1) * size) as u64;
+        let (states, reals, energy, row) = (per_dof(state), per_dof(real), per_member(real), per_member(TALLY_ROW * real));
+        let requests: [SpanRequest; 5] = [
+            (committed, super::Source::Committed, &states),
+            (committed, super::Source::CommittedEnergy, &energy),
+            (iterates, super::Source::Displacement, &reals),
+            (iterates, super::Source::NewtonForces, &reals),
+            (iterates, super::Source::TallyRows, &row),
+        ];
+        let [states, energies, u, f, rows]: [Vec<Vec<u8>>; 5] = self.read_member_spans(&requests, times)?.try_into().expect("five requests");
+        let energies: Vec<Real> = energies.iter().map(|b| bytemuck::pod_read_unaligned(b)).collect();
+        for e in &energies {
+            self.held.0 = self.held.0.saturating_sub(1);
+            self.held.1 = if self.held.0 == 0 { 0.0 } else { self.held.1 - e };
+        }
+        let rows: Vec<Vec<Real>> = rows.iter().map(|b| bytemuck::pod_collect_to_vec(b)).collect();
+        for row in &rows {
+            self.step_tally.remove(row);
+        }
+        let kept = states.iter().zip(energies).map(|(b, e)| KeptState { states: bytemuck::pod_collect_to_vec(b), strain: e }).collect();
+        let iterates = u.iter().zip(&f).zip(&rows).map(|((u, f), row)| KeptIterate { u: bytemuck::pod_collect_to_vec(u), f_int: bytemuck::pod_collect_to_vec(f), strain: row[1] }).collect();
+        Ok((kept, iterates))
+    }
+
+    /// What the step's ends that the device keeps add up to ([`GpuWorld::read_kept`] takes
+    /// out those it hands back): booked by the host at the step's end.
+    pub fn step_tally(&self) -> StepTally {
+        self.step_tally
+    }
+
+    /// The strain energy of the committed states the device keeps for the host, summed on the
+    /// device (`newton_tally` at the step's end, less those [`GpuWorld::read_kept`] handed back).
+    pub fn held_strain(&self) -> Real {
+        self.held.1
     }
 
     /// Per request, each listed body's span (`span` of its batch and member) of a batch buffer,
     /// all in one submission (none without a span).
-    #[allow(clippy::type_complexity)]
-    fn read_member_spans(&mut self, requests: &[(&[usize], super::Source, &dyn Fn(&Batch, usize) -> std::ops::Range<u64>)], times: &mut PhaseTimes) -> Result<Vec<Vec<Vec<u8>>>, GpuError> {
+    fn read_member_spans(&mut self, requests: &[SpanRequest], times: &mut PhaseTimes) -> Result<Vec<Vec<Vec<u8>>>, GpuError> {
         let mut readback = super::ReadBack::default();
         let mut landing: Vec<Vec<(u64, u64)>> = requests.iter().map(|(bodies, _, _)| vec![(0, 0); bodies.len()]).collect();
         for ((bodies, what, span), landing) in requests.iter().zip(&mut landing) {
@@ -398,6 +463,10 @@ impl GpuWorld {
         if self.gpu.precision != Precision::F64 {
             return;
         }
+        // The step's kept ends are the committed states the device keeps for the host now.
+        let held = ends.iter().filter(|e| e.held).count();
+        debug_assert_eq!(held, self.step_tally.members, "the tally counts every kept end");
+        self.held = (held, if held == 0 { 0.0 } else { self.step_tally.strain });
         for batch in 0..self.batches.len() {
             let mut mine: Vec<&StepEnd> = ends.iter().filter(|e| self.place[e.body].0 == batch).collect();
             mine.sort_unstable_by_key(|e| self.place[e.body].1);
@@ -422,16 +491,23 @@ impl GpuWorld {
             for &m in &members {
                 r.valid[m] = true;
             }
-            let committed = r.committed.clone();
+            let (committed, energy) = (r.committed.clone(), r.committed_energy.clone());
             self.settle_prologue(batch, &members);
             let states: Vec<(usize, Vec<DofState<Real>>)> = uploads.iter().map(|&(m, e)| (m, (0..e.u.len()).map(|d| DofState { u: e.u[d], v: e.v[d], f_int: e.f_int[d] }).collect())).collect();
             let pieces: Vec<(usize, &[u8])> = states.iter().map(|(m, s)| (*m, bytemuck::cast_slice(s))).collect();
             self.upload_member_runs(batch, &committed, 3 * 8, &pieces);
+            let strains: Vec<Real> = uploads.iter().map(|(_, e)| e.strain).collect();
+            let mut k = 0;
+            for run in super::runs(&members) {
+                self.upload(&energy, run[0] as u64 * 8, bytemuck::cast_slice(&strains[k..k + run.len()]));
+                k += run.len();
+            }
         }
     }
 
     /// Drops every committed state the device holds (the host's changed: a restored state).
     pub fn forget_committed(&mut self) {
+        self.held = (0, 0.0);
         for n in self.batches.iter_mut().filter_map(|b| b.newton.as_mut()) {
             let r = &mut n.resident;
             r.valid.fill(false);
@@ -444,12 +520,13 @@ impl GpuWorld {
 }
 
 /// What the step kernels leave: the committed states, the step inputs, the trial and the start
-/// displacements.
-pub type StepKernelsOut = (Vec<DofState<Real>>, Vec<DofStep<Real>>, Vec<Real>, Vec<Real>);
+/// displacements, the committed strain energies.
+pub type StepKernelsOut = (Vec<DofState<Real>>, Vec<DofStep<Real>>, Vec<Real>, Vec<Real>, Vec<Real>);
 
 /// `step_commit` over the members `commit` lists, then `step_begin` over those `begin` lists,
-/// alone on an f64 device from the given buffers, in one submission as a step's start records
-/// them; what they leave, for the parity tests with the CPU twins.
+/// alone on an f64 device from the given buffers (`energies`: the committed and the members'
+/// strain energies), in one submission as a step's start records them; what they leave, for
+/// the parity tests with the CPU twins.
 #[allow(clippy::too_many_arguments)]
 pub fn run_step_kernels(
     gpu: &Gpu,
@@ -458,8 +535,8 @@ pub fn run_step_kernels(
     (begin, begin_motion): (&[usize], StepMotion<Real>),
     committed: &[DofState<Real>],
     step: &[DofStep<Real>],
-    u: &[Real],
-    dof_out: &[DofOut<Real>],
+    (u, dof_out): (&[Real], &[DofOut<Real>]),
+    (committed_energy, member_energy): (&[Real], &[Real]),
 ) -> Result<StepKernelsOut, GpuError> {
     assert_eq!(gpu.precision, Precision::F64, "the device keeps committed states in f64 only");
     let pipelines = StepPipelines::new(gpu)?;
@@ -467,52 +544,80 @@ pub fn run_step_kernels(
     let init = |label: &str, bytes: &[u8], usage: BufferUsages| super::buffer_init(gpu, label, bytes, usage);
     let (committed_b, step_b, u_b, u_start_b) = (init("committed", bytemuck::cast_slice(committed), rw), init("step", bytemuck::cast_slice(step), rw), init("u", bytemuck::cast_slice(u), rw), buffer(gpu, "u start", u.len() * 8, rw));
     let (dof_out_b, members_b) = (init("dof out", bytemuck::cast_slice(dof_out), BufferUsages::STORAGE), init("members", bytemuck::cast_slice(members), BufferUsages::STORAGE));
+    let (committed_energy_b, member_energy_b) = (init("committed energy", bytemuck::cast_slice(committed_energy), rw), init("member energy", bytemuck::cast_slice(member_energy), BufferUsages::STORAGE));
     let uniform = BufferUsages::UNIFORM;
     let motion = |m: StepMotion<Real>| init("motion", bytemuck::cast_slice(&[m]), uniform);
     let jobs = |list: &[usize]| init("jobs", bytemuck::cast_slice(&list.iter().map(|&m| Active { member: m as u32, mode: MODE_FORCES }).collect::<Vec<_>>()), BufferUsages::STORAGE);
     let (commit_motion, begin_motion, commit_jobs, begin_jobs) = (motion(commit_motion), motion(begin_motion), jobs(commit), jobs(begin));
-    let bindings = StepBindings { motions: [&begin_motion, &commit_motion], jobs: [&begin_jobs, &commit_jobs], committed: &committed_b, step: &step_b, u: &u_b, u_start: &u_start_b, dof_out: &dof_out_b, members: &members_b };
+    let bindings = StepBindings {
+        motions: [&begin_motion, &commit_motion],
+        jobs: [&begin_jobs, &commit_jobs],
+        committed: &committed_b,
+        member_energy: &member_energy_b,
+        committed_energy: &committed_energy_b,
+        step: &step_b,
+        u: &u_b,
+        u_start: &u_start_b,
+        dof_out: &dof_out_b,
+        members: &members_b,
+    };
     let [begin_pass, commit_pass] = pipelines.passes(gpu, &bindings);
     let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("step kernels") });
     let most = |list: &[usize]| list.iter().filter(|&&m| m != NO_MEMBER as usize).map(|&m| members[m].dofs as usize).max().unwrap_or(0);
     commit_pass.record(gpu, &mut encoder, WORKGROUP, most(commit), commit.len());
     begin_pass.record(gpu, &mut encoder, WORKGROUP, most(begin), begin.len());
-    let read = |buffer: &Buffer, bytes: usize, encoder: &mut wgpu::CommandEncoder| {
-        let staging = buffer_of(gpu, bytes);
-        encoder.copy_buffer_to_buffer(buffer, 0, &staging, 0, bytes as u64);
-        staging
-    };
-    let sizes = [std::mem::size_of_val(committed), std::mem::size_of_val(step), u.len() * 8, u.len() * 8];
-    let staged: Vec<Buffer> = [&committed_b, &step_b, &u_b, &u_start_b].iter().zip(sizes).map(|(b, bytes)| read(b, bytes, &mut encoder)).collect();
+    let sizes = [std::mem::size_of_val(committed), std::mem::size_of_val(step), u.len() * 8, u.len() * 8, committed_energy.len() * 8];
+    let bytes = read_buffers(gpu, encoder, &[&committed_b, &step_b, &u_b, &u_start_b, &committed_energy_b], &sizes)?;
+    Ok((bytemuck::pod_collect_to_vec(&bytes[0]), bytemuck::pod_collect_to_vec(&bytes[1]), bytemuck::pod_collect_to_vec(&bytes[2]), bytemuck::pod_collect_to_vec(&bytes[3]), bytemuck::pod_collect_to_vec(&bytes[4])))
+}
+
+/// Copies the first `sizes[k]` bytes of each buffer into mappable ones after the commands of
+/// `encoder`, submits, and reads them.
+fn read_buffers(gpu: &Gpu, mut encoder: wgpu::CommandEncoder, buffers: &[&Buffer], sizes: &[usize]) -> Result<Vec<Vec<u8>>, GpuError> {
+    let staged: Vec<Buffer> = buffers
+        .iter()
+        .zip(sizes)
+        .map(|(b, &bytes)| {
+            let staging = buffer_of(gpu, bytes);
+            encoder.copy_buffer_to_buffer(b, 0, &staging, 0, bytes as u64);
+            staging
+        })
+        .collect();
     gpu.submit(encoder)?;
-    let bytes: Vec<Vec<u8>> = staged.iter().zip(sizes).map(|(b, size)| gpu.read_range("step_begin", b, size as u64)).collect::<Result<_, _>>()?;
-    Ok((bytemuck::pod_collect_to_vec(&bytes[0]), bytemuck::pod_collect_to_vec(&bytes[1]), bytemuck::pod_collect_to_vec(&bytes[2]), bytemuck::pod_collect_to_vec(&bytes[3])))
+    staged.iter().zip(sizes).map(|(b, &size)| gpu.read_range("step kernels", b, size as u64)).collect()
 }
 
 /// What `newton_summary` reads besides the members and the call's list: the step's motion and
-/// coefficients, the committed states, the step inputs, every dof's reference coordinate, the
-/// iterate and its forces, and the members' Newton states and strain energies.
-pub type SummaryBuffers<'a> = (StepMotion<Real>, Coefficients<Real>, &'a [DofState<Real>], &'a [DofStep<Real>], &'a [Real], &'a [Real], &'a [DofOut<Real>], &'a [NewtonState<Real>], &'a [Real]);
+/// coefficients, the committed states and their strain energies, the step inputs, every dof's
+/// reference coordinate, the iterate and its forces, and the members' Newton states and strain
+/// energies.
+pub type SummaryBuffers<'a> = (StepMotion<Real>, Coefficients<Real>, (&'a [DofState<Real>], &'a [Real]), &'a [DofStep<Real>], &'a [Real], &'a [Real], &'a [DofOut<Real>], &'a [NewtonState<Real>], &'a [Real]);
 
-/// `newton_summary` over the members `call` lists, alone on an f64 device from the given
-/// buffers; the summaries and boxes it writes (`summary_len(dim)` reals and `2 dim` f32 per
-/// member, zero for the others), for the parity tests with the CPU twin.
-pub fn run_newton_summary(gpu: &Gpu, members: &[MemberRange], call: &[usize], (motion, coefficients, committed, step, reference, u, dof_out, state, member_energy): SummaryBuffers) -> Result<(Vec<Real>, Vec<f32>), GpuError> {
+/// What `newton_summary` and `newton_tally` leave: the summaries, the boxes, the tally rows,
+/// and the tally.
+pub type SummaryOut = (Vec<Real>, Vec<f32>, Vec<Real>, Vec<Real>);
+
+/// `newton_summary` over the first `kept` members `call` lists, then `newton_tally`, alone on
+/// an f64 device from the given buffers; the summaries, boxes and rows the first writes
+/// (`summary_len(dim)` reals, `2 dim` f32 and `TALLY_ROW` reals per member, zero for the
+/// others) and the tally, for the parity tests with the CPU twins.
+pub fn run_newton_summary(gpu: &Gpu, members: &[MemberRange], (call, kept): (&[usize], usize), (motion, coefficients, (committed, committed_energy), step, reference, u, dof_out, state, member_energy): SummaryBuffers) -> Result<SummaryOut, GpuError> {
     assert_eq!(gpu.precision, Precision::F64, "the device keeps committed states in f64 only");
-    let pipeline = gpu.pipeline_at("newton_summary", "main", None)?;
+    let (summary_pipeline, tally_pipeline) = (gpu.pipeline_at("newton_summary", "main", None)?, gpu.pipeline_at("newton_tally", "main", None)?);
     let read = BufferUsages::STORAGE;
     let init = |label: &str, bytes: &[u8], usage: BufferUsages| super::buffer_init(gpu, label, bytes, usage);
-    let size = members.len() * summary_len(motion.dim as usize);
-    let summary = init("summary", bytemuck::cast_slice(&vec![0.0 as Real; size]), read | BufferUsages::COPY_SRC);
-    let box_size = members.len() * 2 * motion.dim as usize;
-    let boxes = init("boxes", bytemuck::cast_slice(&vec![0.0f32; box_size]), read | BufferUsages::COPY_SRC);
+    let zeros = |label: &str, reals: usize| init(label, bytemuck::cast_slice(&vec![0.0 as Real; reals]), read | BufferUsages::COPY_SRC);
+    let sizes = [members.len() * summary_len(motion.dim as usize) * 8, members.len() * 2 * motion.dim as usize * 4, members.len() * TALLY_ROW * 8, TALLY_LEN * 8];
+    let (summary, boxes, rows, tally) = (zeros("summary", sizes[0] / 8), zeros("boxes", sizes[1] / 8 + 1), zeros("rows", sizes[2] / 8), zeros("tally", TALLY_LEN));
     let mut dispatch = [0u32; super::newton::DISPATCH_WORDS];
-    dispatch[super::newton::DISPATCH_WORDS - 1] = call.len() as u32;
+    dispatch[super::newton::CALL_COUNT] = call.len() as u32;
+    dispatch[super::newton::KEPT_COUNT] = kept as u32;
     let jobs: Vec<Active> = call.iter().map(|&m| Active { member: m as u32, mode: MODE_FORCES }).collect();
     let buffers = [
         ("motion", init("motion", bytemuck::bytes_of(&motion), BufferUsages::UNIFORM)),
         ("coefficients", init("coefficients", bytemuck::cast_slice(&[coefficients.factor, coefficients.c1, coefficients.motion]), BufferUsages::UNIFORM)),
         ("committed", init("committed", bytemuck::cast_slice(committed), read)),
+        ("committed_energy", init("committed energy", bytemuck::cast_slice(committed_energy), read)),
         ("step", init("step", bytemuck::cast_slice(step), read)),
         ("reference", init("reference", bytemuck::cast_slice(reference), read)),
         ("u", init("u", bytemuck::cast_slice(u), read)),
@@ -524,20 +629,18 @@ pub fn run_newton_summary(gpu: &Gpu, members: &[MemberRange], call: &[usize], (m
         ("member_energy", init("member energy", bytemuck::cast_slice(member_energy), read)),
     ];
     let mut bindings: Vec<(&str, &Buffer)> = buffers.iter().map(|(name, b)| (*name, b)).collect();
-    bindings.push(("summary", &summary));
-    bindings.push(("boxes", &boxes));
-    let pass = Pass::bound(gpu, pipeline, ("newton_summary", "main"), None, &bindings);
+    bindings.extend([("summary", &summary), ("boxes", &boxes), ("rows", &rows)]);
+    let summarise = Pass::bound(gpu, summary_pipeline, ("newton_summary", "main"), None, &bindings);
+    let find = |name: &str| &buffers.iter().find(|(n, _)| *n == name).expect("bound above").1;
+    let add_up = Pass::bound(gpu, tally_pipeline, ("newton_tally", "main"), None, &[("call", find("jobs")), ("dispatch", find("dispatch")), ("state", find("state")), ("rows", &rows), ("tally", &tally)]);
     let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("newton summary") });
     {
         let mut compute = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("newton summary"), timestamp_writes: None });
-        pass.dispatch(gpu, &mut compute, call.len().div_ceil(WORKGROUP).max(1) as u32);
+        summarise.dispatch(gpu, &mut compute, call.len().div_ceil(WORKGROUP).max(1) as u32);
+        add_up.dispatch(gpu, &mut compute, 1);
     }
-    let (staging, box_staging) = (buffer_of(gpu, size * 8), buffer_of(gpu, box_size * 4));
-    encoder.copy_buffer_to_buffer(&summary, 0, &staging, 0, (size * 8) as u64);
-    encoder.copy_buffer_to_buffer(&boxes, 0, &box_staging, 0, (box_size * 4) as u64);
-    gpu.submit(encoder)?;
-    let summaries = bytemuck::pod_collect_to_vec(&gpu.read_range("newton_summary", &staging, (size * 8) as u64)?);
-    Ok((summaries, bytemuck::pod_collect_to_vec(&gpu.read_range("newton_summary", &box_staging, (box_size * 4) as u64)?)))
+    let bytes = read_buffers(gpu, encoder, &[&summary, &boxes, &rows, &tally], &sizes)?;
+    Ok((bytemuck::pod_collect_to_vec(&bytes[0]), bytemuck::pod_collect_to_vec(&bytes[1]), bytemuck::pod_collect_to_vec(&bytes[2]), bytemuck::pod_collect_to_vec(&bytes[3])))
 }
 
 /// A mappable buffer of `bytes` for a read-back.

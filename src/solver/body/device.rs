@@ -30,7 +30,7 @@ impl Body {
 
     /// The committed state the device follows after a kept step ([`crate::gpu::GpuWorld::commit_step`]).
     pub fn step_end(&self, body: usize) -> StepEnd<'_> {
-        StepEnd { body, u: &self.committed.state.u, v: &self.committed.state.v, f_int: &self.committed.state.f_int, on_device: self.may_step_on_device(), held: self.committed.state_held.is_some() }
+        StepEnd { body, u: &self.committed.state.u, v: &self.committed.state.v, f_int: &self.committed.state.f_int, strain: self.committed.state.strain, on_device: self.may_step_on_device(), held: self.committed.state_held.is_some() }
     }
 
     /// Whether the device may begin and commit the body's steps from the state it keeps: its
@@ -212,8 +212,8 @@ impl Body {
     /// residuals computed from the host's stale step inputs): the committed state the device
     /// held (`states`, [`crate::gpu::GpuWorld::read_kept`]) is the host's again, the step's
     /// inputs follow from it as `step_begin` computed them, and the residuals from those.
-    pub fn take_committed_mid_step(&mut self, p: &StepParams, states: &[DofState<Real>]) {
-        self.take_committed(states);
+    pub fn take_committed_mid_step(&mut self, p: &StepParams, kept: &KeptState) {
+        self.take_committed(kept);
         for (d, s) in self.work.step_inputs.iter_mut().enumerate() {
             *s = DofStep { mass: self.def.mass[d], u_pred: self.committed.state.u[d] + p.dt * self.committed.state.v[d], f_int_t: self.committed.state.f_int[d], f_ext: self.work.f_ext[d] };
         }
