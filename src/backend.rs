@@ -247,16 +247,20 @@ pub fn uzawa_on_device(world: &GpuWorld, settings: &Settings, points: usize, col
 /// placed.
 pub const DEVICE_PASS_SECONDS: f64 = 3e-4;
 
+/// The cores of the machine whose rates [`cpu_seconds_per_element`] are (the H100's host).
+const REFERENCE_CORES: f64 = 16.0;
+
 /// CPU seconds per element and core of a force and tangent evaluation, by element kind: the
 /// CPU column of `bifirst bench --elements 1000000` on that machine (16 cores: Tri3 23.9 M/s,
 /// Quad4 6.58 M/s, Tet4 14.1 M/s, Hex8 860 k/s) times 16.
 fn cpu_seconds_per_element(kind: ElementKind) -> f64 {
-    16.0 / match kind {
-        ElementKind::Tri3 => 23.9e6,
-        ElementKind::Quad4 => 6.58e6,
-        ElementKind::Tet4 => 14.1e6,
-        ElementKind::Hex8 => 860e3,
-    }
+    REFERENCE_CORES
+        / match kind {
+            ElementKind::Tri3 => 23.9e6,
+            ElementKind::Quad4 => 6.58e6,
+            ElementKind::Tet4 => 14.1e6,
+            ElementKind::Hex8 => 860e3,
+        }
 }
 
 /// Whether a Newton round evaluates its bodies, `elements` of each kind, on the device of
@@ -265,15 +269,17 @@ fn cpu_seconds_per_element(kind: ElementKind) -> f64 {
 /// on the run's threads than a device pass costs ([`DEVICE_PASS_SECONDS`]): after the first
 /// round only the groups still iterating remain, mostly a few grains in contact, which the CPU
 /// evaluates in microseconds while a pass waits for the device. A software adapter decides as
-/// the hardware would (the H100's rates, not its own): it is how CI sees the GPU path, and a
-/// later round kept off the device would send every iterating body's state across the bus.
-/// Estimated from the H100's measurements, not yet measured as a rule.
+/// the H100's machine would (its rates and its cores, not the software's nor this machine's):
+/// it is how CI sees the GPU path, on two cores, where a round of the hundred grains that land
+/// in a falling packing went to the device and sent their states across the bus each round
+/// (a submit and 20-30 bytes a grain of the packing each, on lavapipe), which that machine
+/// evaluates on its CPU. Estimated from the H100's measurements, not yet measured as a rule.
 pub fn round_on_device(world: &GpuWorld, first: bool, elements: &[(ElementKind, usize)]) -> bool {
     match world.rounds {
         RoundPlacement::Gpu => true,
         RoundPlacement::Auto if first => true,
         RoundPlacement::Auto => {
-            let threads = rayon::current_num_threads() as f64;
+            let threads = if world.software() { REFERENCE_CORES } else { rayon::current_num_threads() as f64 };
             elements.iter().map(|&(kind, n)| n as f64 * cpu_seconds_per_element(kind)).sum::<f64>() / threads >= DEVICE_PASS_SECONDS
         }
     }

@@ -41,7 +41,11 @@ pub(super) fn newton_in_lockstep(groups: &mut [Group], world: &mut GpuWorld, c: 
         }
         let wanted = |_: &Body| true;
         let evaluating: Vec<bool> = live.iter().zip(&iterating).map(|(&l, &i)| l && !i).collect();
-        let others_on_device = device_residual && on_device(groups, &evaluating, &wanted, world, first);
+        // The step's first pass is every body's, in the large dispatches a GPU is for, unless
+        // the bodies iterating on the device make it: then the others (mostly a few grains in
+        // contact, which the host iterates) go by their work as in a later round, and need not
+        // send their states across and their forces back.
+        let others_on_device = device_residual && on_device(groups, &evaluating, &wanted, world, first && !iterating.contains(&true));
         let mut evaluated = if others_on_device || iterating.contains(&true) {
             device_pass(groups, if others_on_device { &evaluating } else { &none }, PassKind { tangent: false, iterating: &iterating, unevaluated: first }, world, c, &wanted, times)
         } else {
