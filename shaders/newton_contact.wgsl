@@ -16,9 +16,8 @@
 struct ContactGroup {
     member_start: u32,
     member_count: u32,
-    // Newton iterations the group took on the host this step, before the call.
-    iterations_before: u32,
-    pad: u32,
+    pad0: u32,
+    pad1: u32,
     // contact.tolerance: the contact forces' change must be below it.
     tolerance: real,
 }
@@ -254,7 +253,7 @@ fn judge(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) 
         verdict = CONVERGED;
     } else if c.uzawa == UZAWA_LIVE || c.stalls >= UZAWA_STALLS || iterations >= newton[lead].budget || slow {
         verdict = HOST;
-    } else if grp.iterations_before + iterations >= TIGHTEN_AFTER && settled && all_balanced {
+    } else if iterations >= TIGHTEN_AFTER && settled && all_balanced {
         problems[k].tolerance = max(real(0.1) * problems[k].tolerance, real(TIGHTEST_INNER) * grp.tolerance);
         contact_states[k].tightened += 1u;
     }

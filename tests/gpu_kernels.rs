@@ -197,13 +197,13 @@ fn newton_structs_match_the_shader_layout() {
             Precision::F32 => [size_of::<ContactGroup<f32>>(), size_of::<ContactState<f32>>(), size_of::<ContactCall<f32>>()],
         };
         let (members, span) = naga_layout(&module, "ContactGroup");
-        assert_eq!((members, span as usize), (expect(&["member_start", "member_count", "iterations_before", "pad"], &["tolerance"]), sizes[0]), "{}", precision.name());
+        assert_eq!((members, span as usize), (expect(&["member_start", "member_count", "pad0", "pad1"], &["tolerance"]), sizes[0]), "{}", precision.name());
         let (members, span) = naga_layout(&module, "ContactState");
         assert_eq!((members, span as usize), (expect(&["sweeps", "uzawa", "tightened", "stalls"], &["change"]), sizes[1]), "{}", precision.name());
         let (members, span) = naga_layout(&module, "ContactCall");
         assert_eq!((members, span as usize), (expect(&["problems", "dim", "pad0", "pad1"], &["theta_dt"]), sizes[2]), "{}", precision.name());
     }
-    let g = ContactGroup::<f64> { member_start: 1, member_count: 2, iterations_before: 3, pad: 4, tolerance: 5.0 };
+    let g = ContactGroup::<f64> { member_start: 1, member_count: 2, pad0: 3, pad1: 4, tolerance: 5.0 };
     assert_eq!(bytemuck::cast::<_, [u32; 6]>(g)[..4], [1, 2, 3, 4], "field order");
     assert_eq!(bytemuck::cast::<_, [f64; 3]>(g)[2], 5.0, "field order");
     let m = NewtonMember::<f64> { inverse_start: 1, free_start: 2, free_count: 3, budget: 4, residual_tolerance: 5.0, floor: 6.0, floor_per_travel: 7.0, increment_tolerance: 8.0, increment_floor: 9.0, round_off: 10.0 };
@@ -1156,6 +1156,7 @@ fn newton_kernels_match_their_cpu_twins() {
                 .enumerate()
                 .map(|(b, (u, dof_out))| NewtonCall {
                     body: b,
+                    taken: 0,
                     factor: 1,
                     inverse: Some(Inverse::Dense(inverses[b].clone())),
                     member: member(b),
@@ -1237,6 +1238,7 @@ fn a_device_newton_call_for_one_body_of_a_large_batch_reads_back_only_its_own() 
     let (mut u, mut out) = (c.u.clone(), first.clone());
     let call = NewtonCall {
         body: 399,
+        taken: 0,
         factor: 1,
         inverse: Some(Inverse::Dense(inverse.clone())),
         member,
@@ -1291,6 +1293,7 @@ fn a_device_newton_increment_that_inverts_an_element_fails_the_body() {
     let member = NewtonMember { free_count: free as u32, budget: 5, ..NewtonMember::default() };
     let mut calls = [NewtonCall {
         body: 0,
+        taken: 0,
         factor: 1,
         inverse: Some(Inverse::Dense(inverse)),
         member,
@@ -1428,7 +1431,7 @@ fn newton_contact_kernels_match_their_cpu_twins() {
                 NodeGather::of(std::slice::from_ref(&p))
             };
             let gather = problem_of(&local, &mut r0);
-            let group = |calls: Vec<usize>| GroupContact { calls, slot_nodes: &slot_nodes, obstacle: vec![[0.0; 3]; n_points], u_base: bases.clone(), iterations_before: 0, tolerance: contact_tolerance, outcome: ContactState::default() };
+            let group = |calls: Vec<usize>| GroupContact { calls, slot_nodes: &slot_nodes, obstacle: vec![[0.0; 3]; n_points], u_base: bases.clone(), tolerance: contact_tolerance, outcome: ContactState::default() };
             let layout = {
                 let mut r = vec![[0.0; 3]; n_points];
                 let p = Problem { w: &w, colours: &colours, local: &local, nodal: &nodal, r: &mut r, tolerance, floor, max_iterations: max_sweeps as usize, acceleration: Acceleration::None, fallback: Fallback::None, dim: 3 };
@@ -1491,6 +1494,7 @@ fn newton_contact_kernels_match_their_cpu_twins() {
                 .enumerate()
                 .map(|(b, (u, dof_out))| NewtonCall {
                     body: b,
+                    taken: 0,
                     factor: 1,
                     inverse: Some(Inverse::Dense(inverses[b].clone())),
                     member: member(b, 0, 0),

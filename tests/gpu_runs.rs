@@ -764,6 +764,23 @@ fn grains_that_land_on_a_software_adapter_take_at_most_three_submits_a_step() {
 }
 
 #[test]
+fn a_grain_in_flight_sends_its_newton_row_once() {
+    // Issue 59: a member's Newton row (`NewtonMember`, 64 bytes) held what was left of its
+    // step's iteration budget, so the first step (one iteration on the host, before the device
+    // held the grain's factorisation) left every row a budget one short, and the second step
+    // sent all of them again (144 bytes a grain at step 2, 80 at step 3). The budget is the
+    // step's now and the device counts on from the iterations the call's step took before it.
+    let test = "a_grain_in_flight_sends_its_newton_row_once";
+    if !gpu_available(test) {
+        return;
+    }
+    let (_, steps) = falling_grain_steps(400, 3, Some(RoundPlacement::Auto), true);
+    let per_grain: Vec<u64> = steps.iter().map(|&(b, _)| b / 400).collect();
+    eprintln!("bytes a grain per step: {per_grain:?}");
+    assert!(per_grain[1] < per_grain[2] + 32, "the second step sends no row again: {per_grain:?}");
+}
+
+#[test]
 fn grains_that_step_on_the_device_retry_their_rejected_steps_as_the_cpu_backend_does() {
     // Issue 59: a step rejected after its Newton iterations (an overlap deeper than
     // `solver.max_overlap` here) commits nothing on the device either: its retry begins again

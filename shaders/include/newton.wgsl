@@ -11,8 +11,8 @@ struct NewtonMember {
     // Where its free dofs (indices into the member's dofs, ascending) start in `free`.
     free_start: u32,
     free_count: u32,
-    // Increments it may take before the host must judge it (what is left of
-    // `solver.max_iterations`).
+    // The most Newton iterations of its step (`solver.max_iterations`): `NewtonState.iterations`
+    // counts the step's, on from those it took before the call.
     budget: u32,
     // The residual's tolerance: residual_tolerance x force scale + floor + floor_per_travel x
     // the largest |u|.

@@ -77,6 +77,7 @@ pub(super) fn newton_rows(options: &BenchOptions, gpus: &[Arc<Gpu>], peaks: &[Pe
                     let inverse = (!world.newton_inverse_current(b, 1)).then(|| crate::gpu::Inverse::Dense(inverse.clone()));
                     NewtonCall {
                         body: b,
+                        taken: 0,
                         factor: 1,
                         inverse,
                         member,

@@ -567,7 +567,7 @@ pub fn newton_contact_judge(newton: &[NewtonMember<Real>], state: &mut [NewtonSt
     } else if cs.uzawa == JUDGE_LIVE || cs.stalls as usize >= UZAWA_STALLS || iterations >= newton[lead].budget || slow {
         NEWTON_HOST
     } else {
-        if (grp.iterations_before + iterations) as usize >= TIGHTEN_AFTER && settled && all_balanced {
+        if iterations as usize >= TIGHTEN_AFTER && settled && all_balanced {
             let p = &mut problems[k];
             p.tolerance = (0.1 * p.tolerance).max(TIGHTEST_INNER * grp.tolerance);
             contact_states[k].tightened += 1;

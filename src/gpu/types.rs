@@ -273,7 +273,10 @@ pub struct NewtonMember<R> {
     pub inverse_start: u32,
     pub free_start: u32,
     pub free_count: u32,
-    /// Increments the member may take before the host must judge it.
+    /// The most Newton iterations of the member's step (`solver.max_iterations`): the device
+    /// stops it when its count reaches it (`NewtonState::iterations`, which counts on from the
+    /// iterations the step took before the call). The same from step to step, so that a
+    /// member's row stays put.
     pub budget: u32,
     pub residual_tolerance: R,
     pub floor: R,
@@ -332,9 +335,8 @@ pub const NEWTON_WORKGROUP: usize = 64;
 pub struct ContactGroup<R> {
     pub member_start: u32,
     pub member_count: u32,
-    /// Newton iterations the group took on the host in this step, before the call.
-    pub iterations_before: u32,
-    pub pad: u32,
+    pub pad0: u32,
+    pub pad1: u32,
     /// `contact.tolerance`, the bound on the contact forces' change.
     pub tolerance: R,
 }

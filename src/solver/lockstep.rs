@@ -453,7 +453,7 @@ fn evaluations_share<'a>(g: &'a mut Group, chosen: &[bool], kind: PassKind, c: &
 /// The calls of a group that iterates on the device, with its contact problem if it has one.
 fn iterations_share<'a>(g: &'a mut Group, inverses: Vec<Option<Inverse>>, kind: PassKind, c: &Context) -> PassShare<'a> {
     let p = c.p;
-    let budget = p.max_iterations - g.newton.report.iterations;
+    let taken = g.newton.report.iterations;
     let Group { ids, bodies, contact, newton, .. } = g;
     let u_base: Vec<Vec<Real>> = if contact.is_some() { bodies.iter().map(|b| b.trial_velocity_base(p)).collect() } else { Vec::new() };
     // A free body that nothing is near may leave its step's end on the device.
@@ -465,7 +465,7 @@ fn iterations_share<'a>(g: &'a mut Group, inverses: Vec<Option<Inverse>>, kind: 
         .zip(inverses)
         .map(|((body, &id), inverse)| {
             let hold = if body.may_step_on_device() { hold(id) } else { Hold::No };
-            let mut call = body.newton_call(id, p, budget, inverse, !kind.unevaluated);
+            let mut call = body.newton_call(id, p, taken, inverse, !kind.unevaluated);
             (call.keep, call.positions) = (hold != Hold::No, hold == Hold::AllButPositions);
             call
         })
@@ -474,8 +474,7 @@ fn iterations_share<'a>(g: &'a mut Group, inverses: Vec<Option<Inverse>>, kind: 
         let settings = c.settings.expect("contact points need contact settings");
         let obstacle = contact.obstacle_velocities();
         let (problem, slot_nodes) = contact.problem_and_slots(settings);
-        let group =
-            GroupContact { calls: Vec::new(), slot_nodes, obstacle, u_base, iterations_before: newton.report.iterations as u32, tolerance: settings.tolerance, outcome: ContactState { stalls: newton.uzawa_stalls as u32, ..ContactState::default() } };
+        let group = GroupContact { calls: Vec::new(), slot_nodes, obstacle, u_base, tolerance: settings.tolerance, outcome: ContactState { stalls: newton.uzawa_stalls as u32, ..ContactState::default() } };
         (problem, group)
     });
     (calls, contact, Vec::new())

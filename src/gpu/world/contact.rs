@@ -26,7 +26,6 @@ pub struct GroupContact<'a> {
     /// Per body (group order), `u_t + dt (1 - θ) v_t`: the trial velocity is
     /// `(u - u_base) / θdt`.
     pub u_base: Vec<Vec<Real>>,
-    pub iterations_before: u32,
     /// `contact.tolerance`.
     pub tolerance: Real,
     /// In: its Uzawa stalls so far in the step (`stalls`, the rest zero); out: where its
@@ -63,7 +62,7 @@ impl ContactLayout {
     pub fn of(contacts: &[GroupContact], staged: &[Problem], nodes: &NodeGather, member_of: &dyn Fn(usize) -> u32, dof_start: &dyn Fn(u32) -> u32, dim: usize, theta_dt: Real) -> Self {
         let mut l = ContactLayout { term_start: vec![0], ..Default::default() };
         for (k, g) in contacts.iter().enumerate() {
-            l.groups.push(ContactGroup { member_start: l.group_members.len() as u32, member_count: g.calls.len() as u32, iterations_before: g.iterations_before, pad: 0, tolerance: g.tolerance });
+            l.groups.push(ContactGroup { member_start: l.group_members.len() as u32, member_count: g.calls.len() as u32, pad0: 0, pad1: 0, tolerance: g.tolerance });
             l.group_members.extend(g.calls.iter().map(|&c| member_of(c)));
             l.states.push(ContactState { stalls: g.outcome.stalls, ..ContactState::default() });
             let slot0 = nodes.node_offsets[k];

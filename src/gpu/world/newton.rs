@@ -94,6 +94,7 @@ fn unpack_calls(precision: Precision, calls: &mut [NewtonCall], (landing, coeffi
             }
             (None, None) => unreachable!("a call reads its state or its summary"),
         }
+        call.outcome.iterations -= call.taken;
         if let Some(iterate) = at.iterate {
             unpack_iterate(precision, call, iterate, coefficients, bytes);
         }
@@ -221,12 +222,15 @@ impl NewInverses {
 /// One body's share of [`GpuWorld::newton`].
 pub struct NewtonCall<'a> {
     pub body: usize,
+    /// Newton iterations the body's step took before this call: the device counts on from
+    /// them (`NewtonMember::budget` is the step's), and `outcome` counts this call's only.
+    pub taken: u32,
     /// The version of the body's factorisation, and its `K̄⁻¹` of the free dofs when the device
     /// does not hold that version's yet ([`GpuWorld::newton_inverse_current`]).
     pub factor: u64,
     pub inverse: Option<Inverse>,
-    /// The body's tolerances and budget (`inverse_start`, `free_start` and `free_count` are the
-    /// world's to set).
+    /// The body's tolerances and the step's budget (`inverse_start`, `free_start` and
+    /// `free_count` are the world's to set).
     pub member: NewtonMember<Real>,
     /// The residual norm of the evaluation at `u`; `None`: `u` is not evaluated yet (the first
     /// round of a step), and the device evaluates and judges it before the first increment, as
@@ -582,7 +586,7 @@ impl GpuWorld {
         let target = self.newton_target(&work, list, contact.as_ref().map(|(batch, _)| (*batch, &in_contact[..], points, contacts.len())));
         let plan = CallPlan { work: &work, contact: contact.as_ref(), solves, contacts: contacts.len() };
         let mut t0 = started;
-        let mut iterations = calls.iter().map(|c| c.member.budget).max().unwrap_or(0).min(ITERATIONS_PER_SUBMIT);
+        let mut iterations = calls.iter().map(|c| c.member.budget.saturating_sub(c.taken)).max().unwrap_or(0).min(ITERATIONS_PER_SUBMIT);
         let evaluate_first = calls.first().is_some_and(|c| c.residual.is_none());
         assert!(calls.iter().all(|c| c.residual.is_none() == evaluate_first), "a call's members are all evaluated, or none");
         let mut first = true;
@@ -634,7 +638,7 @@ impl GpuWorld {
             if !iterating || interrupt.is_some_and(|f| f.load(Ordering::SeqCst)) {
                 break;
             }
-            iterations = calls.iter().filter(|c| c.outcome.status == NEWTON_ITERATING).map(|c| c.member.budget - c.outcome.iterations).max().unwrap_or(1);
+            iterations = calls.iter().filter(|c| c.outcome.status == NEWTON_ITERATING).map(|c| c.member.budget - c.taken - c.outcome.iterations).max().unwrap_or(1);
             t0 = Instant::now();
         }
         self.take_unconverged(&work, calls, coefficients, times)?;
@@ -894,6 +898,7 @@ impl GpuWorld {
                 calls[i].keep = false;
                 // The whole state: the host goes on from the device's last increment.
                 calls[i].outcome = bytemuck::pod_read_unaligned(&bytes[state..state + std::mem::size_of::<NewtonState<Real>>()]);
+                calls[i].outcome.iterations -= calls[i].taken;
                 calls[i].strain_energy = Some(super::from_device(precision, &bytes[energy..energy + precision.size()])[0]);
                 unpack_iterate(precision, &mut calls[i], at, coefficients, bytes);
             }
@@ -1022,7 +1027,9 @@ impl GpuWorld {
                 changed.push(m);
             }
             let residual = call.residual.unwrap_or(Real::MAX);
-            states.push(NewtonState { status: NEWTON_ITERATING, residual, previous_residual: residual, ..NewtonState::default() });
+            // (an unevaluated call starts its step: the device's template counts none)
+            debug_assert!(call.residual.is_some() || call.taken == 0);
+            states.push(NewtonState { status: NEWTON_ITERATING, iterations: call.taken, residual, previous_residual: residual, ..NewtonState::default() });
         }
         let members: Vec<usize> = mine.iter().map(|&(_, m)| m).collect();
         let member_size = std::mem::size_of::<NewtonMember<Real>>() as u64;

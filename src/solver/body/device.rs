@@ -131,14 +131,15 @@ impl Body {
 
     /// The body's share of device Newton iterations from its evaluated iterate: the tolerances
     /// of [`Body::converged`] (the parts that do not change while it iterates; the scene's
-    /// motion, the increment bound's floor, is the call's `Coefficients::motion`), at most
-    /// `budget` increments, `inverse` when the device does not hold this factorisation's;
+    /// motion, the increment bound's floor, is the call's `Coefficients::motion`), on from the
+    /// `taken` iterations of its step (at most `solver.max_iterations` in all), `inverse` when
+    /// the device does not hold this factorisation's;
     /// `evaluated`: the trial displacement's evaluation is the body's (else the device evaluates
     /// it first).
-    pub fn newton_call(&mut self, body: usize, p: &StepParams, budget: usize, inverse: Option<Inverse>, evaluated: bool) -> NewtonCall<'_> {
+    pub fn newton_call(&mut self, body: usize, p: &StepParams, taken: usize, inverse: Option<Inverse>, evaluated: bool) -> NewtonCall<'_> {
         let [constant, per_travel, stiffness] = self.residual_floor_terms(p);
         let member = NewtonMember {
-            budget: budget as u32,
+            budget: p.max_iterations as u32,
             residual_tolerance: p.residual_tolerance,
             floor: constant + stiffness,
             floor_per_travel: per_travel,
@@ -155,6 +156,7 @@ impl Body {
         }
         NewtonCall {
             body,
+            taken: taken as u32,
             factor: self.work.factor_version,
             inverse,
             member,
