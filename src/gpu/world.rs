@@ -162,8 +162,11 @@ struct Batch {
     tangent_elements_per_group: usize,
     /// The displacements of every dof of the batch, as last uploaded.
     u_host: Vec<Real>,
-    /// The step inputs (`DofStep`, 4 reals) of every dof, as last uploaded.
+    /// The step inputs (`DofStep`, 4 reals) of every dof, as the host last gave them.
     step_host: Vec<Real>,
+    /// Per member: its step inputs in `step_host` have not gone up yet. They go with its next
+    /// evaluation (a grain in contact that the host iterates on the CPU sends none).
+    step_pending: Vec<bool>,
     u: Buffer,
     reference: Vec<Real>,
     /// The distinct stiffness patterns of the members (column starts, then row indices; grains
@@ -558,8 +561,39 @@ impl GpuWorld {
         members
     }
 
+    /// Takes the listed members' step inputs (`(member, inputs)`, in member order) into the
+    /// batch's mirror; those that changed go up with the member's next evaluation
+    /// ([`GpuWorld::stage_displacements_but`]).
+    fn stage_step_inputs(&mut self, batch: usize, mine: &[(usize, &[Real])]) {
+        let b = &mut self.batches[batch];
+        let starts: Vec<usize> = mine.iter().map(|&(m, _)| 4 * b.members[m].dof_start as usize).collect();
+        let changed = update_mirrors(&mut b.step_host, starts.into_iter().zip(mine).map(|(start, &(_, values))| (start, values)).collect());
+        for (&(m, _), changed) in mine.iter().zip(changed) {
+            b.step_pending[m] |= changed;
+        }
+    }
+
+    /// Uploads the step inputs of the listed members that have not gone up yet, one write per
+    /// run of consecutive members.
+    fn flush_step_inputs(&mut self, batch: usize, members: &[usize]) {
+        let b = &mut self.batches[batch];
+        let pending: Vec<usize> = members.iter().copied().filter(|&m| std::mem::take(&mut b.step_pending[m])).collect();
+        if pending.is_empty() {
+            return;
+        }
+        self.settle_prologue(batch, &pending);
+        let (host, buffer, per_dof) = self.batches[batch].mirror(Mirror::Step);
+        let (host, buffer) = (std::mem::take(host), buffer);
+        for run in runs(&pending) {
+            let dofs = dof_span(&self.batches[batch].members, &run);
+            self.upload_reals(&buffer, per_dof * dofs.start, &host[per_dof * dofs.start..per_dof * dofs.end]);
+        }
+        *self.batches[batch].mirror(Mirror::Step).0 = host;
+    }
+
     /// Copies the displacements of the listed bodies (`(body, u)`) into their batches' mirrors
-    /// and uploads them; returns, per batch with any of them, the list indices in member order.
+    /// and uploads them, with the step inputs still waiting to go up; returns, per batch with any
+    /// of them, the list indices in member order.
     fn stage_displacements(&mut self, list: &[(usize, &[Real])]) -> Vec<(usize, Vec<usize>)> {
         self.stage_displacements_but(list, &|_| false)
     }
@@ -578,6 +612,8 @@ impl GpuWorld {
             }
         }
         for (batch, mine) in &by_batch {
+            let all: Vec<usize> = mine.iter().map(|&i| self.place[list[i].0].1).collect();
+            self.flush_step_inputs(*batch, &all);
             let members: Vec<(usize, &[Real])> = mine.iter().filter(|&&i| !kept(i)).map(|&i| (self.place[list[i].0].1, list[i].1)).collect();
             let sent = self.stage_mirror(*batch, Mirror::Displacement, &members);
             if let Some(n) = self.batches[*batch].newton.as_mut() {
@@ -1045,6 +1081,7 @@ impl Batch {
             tangent_elements_per_group: super::shaders::tangent_workgroup(gpu.precision, gpu.device.limits().max_compute_workgroup_storage_size) as usize / crate::element::shape::quadrature(kind).len(),
             u_host: vec![0.0; dofs],
             step_host: vec![0.0; 4 * dofs],
+            step_pending: vec![false; members.len()],
             u,
             reference,
             patterns,

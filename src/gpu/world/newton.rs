@@ -350,8 +350,9 @@ pub(super) struct NewtonBuffers {
     initial_state: Buffer,
     no_failure: Buffer,
     start_runs: Vec<(usize, usize)>,
-    /// The call's list as last uploaded.
+    /// The call's list as last uploaded, and how many of its first are kept.
     call_host: Vec<Active>,
+    call_kept: usize,
     /// Host copies: each member's parameters and start displacements as last uploaded, and the
     /// factorisation whose inverse its slot holds.
     newton_host: Vec<NewtonMember<Real>>,
@@ -380,6 +381,35 @@ pub(super) fn inverse_slots(free_counts: &[usize], real: usize, max_bytes: u64) 
         })
         .collect();
     (slots, total)
+}
+
+/// A call's list: the `kept` members first, then the `others`, each part's members in the slots
+/// they held in its part of the `previous` list (its first `previous_kept` the kept part) where
+/// they can: a member that left gives its slot to its part's last, one that joined goes last.
+/// A list that changes by a few members (a grain that lands leaves the kept part) then changes
+/// in a few slots.
+fn arrange((previous, previous_kept): (&[Active], usize), kept: &[usize], others: &[usize]) -> Vec<Active> {
+    let count = previous.iter().map(|a| a.member as usize + 1).chain(kept.iter().chain(others).map(|&m| m + 1)).max().unwrap_or(0);
+    let mut list = Vec::with_capacity(kept.len() + others.len());
+    for (was, wanted) in [(&previous[..previous_kept], kept), (&previous[previous_kept..], others)] {
+        let mut listed = vec![false; count];
+        for &m in wanted {
+            listed[m] = true;
+        }
+        let mut part: Vec<u32> = was.iter().map(|a| a.member).collect();
+        let mut k = 0;
+        while k < part.len() {
+            if listed[part[k] as usize] {
+                listed[part[k] as usize] = false;
+                k += 1;
+            } else {
+                part.swap_remove(k);
+            }
+        }
+        part.extend(wanted.iter().filter(|&&m| listed[m]).map(|&m| m as u32));
+        list.extend(part.into_iter().map(|member| Active { member, mode: MODE_FORCES }));
+    }
+    list
 }
 
 /// The pipelines of `newton_update`, `newton_judge` and `newton_compact`, compiled once per
@@ -482,6 +512,7 @@ impl NewtonBuffers {
             no_failure,
             start_runs: Vec::new(),
             call_host: Vec::new(),
+            call_kept: 0,
             summarise,
             summary,
             boxes,
@@ -1054,15 +1085,18 @@ impl GpuWorld {
             }
             k += run.len();
         }
-        // The list goes up when it changed (a packing in flight calls the same grains step after
-        // step); the device copies it into the iterations' list. The kept calls come first:
-        // `newton_summary` and `newton_tally` take those.
+        // The slots of the list that changed go up (a packing in flight calls the same grains
+        // step after step); the device copies it into the iterations' list. The kept calls come
+        // first: `newton_summary` and `newton_tally` take those.
         let (kept, others): (Vec<_>, Vec<_>) = mine.iter().partition(|&&(i, _)| calls[i].keep);
-        let list: Vec<Active> = kept.iter().chain(&others).map(|&&(_, m)| Active { member: m as u32, mode: MODE_FORCES }).collect();
-        if !same_bits(&list, &n.call_host) {
-            uploads.push((n.call.clone(), 0, bytemuck::cast_slice(&list).to_vec()));
-            n.call_host.clone_from(&list);
+        let (kept, others): (Vec<usize>, Vec<usize>) = (kept.iter().map(|&&(_, m)| m).collect(), others.iter().map(|&&(_, m)| m).collect());
+        let list = arrange((&n.call_host, n.call_kept), &kept, &others);
+        let changed: Vec<usize> = (0..list.len()).filter(|&k| n.call_host.get(k) != Some(&list[k])).collect();
+        for run in super::runs(&changed) {
+            uploads.push((n.call.clone(), 8 * run[0] as u64, bytemuck::cast_slice(&list[run[0]..=run[run.len() - 1]]).to_vec()));
         }
+        (n.call_host, n.call_kept) = (list, kept.len());
+        let list = &n.call_host;
         let count = list.len() as u32;
         let most = |f: fn(&crate::gpu::types::MemberRange) -> u32| members.iter().map(|&m| f(&b.members[m]) as usize).max().unwrap_or(0);
         let (fx, fy) = crate::gpu::dispatch_rows(most(|r| r.elements).div_ceil(WORKGROUP));
@@ -1129,4 +1163,32 @@ pub fn run_newton_invert(gpu: &Gpu, newton: &[NewtonMember<Real>], inverse_len: 
     encoder.copy_buffer_to_buffer(&inverse, 0, &staging, 0, bytes);
     gpu.submit(encoder)?;
     Ok(bytemuck::pod_collect_to_vec(&gpu.read_range("newton_invert", &staging, bytes)?))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn members(list: &[Active]) -> Vec<u32> {
+        list.iter().map(|a| a.member).collect()
+    }
+
+    #[test]
+    fn a_call_list_that_loses_and_gains_members_changes_in_their_slots_only() {
+        // Issue 59: the call's list went up whole when a grain left it (a grain that lands),
+        // 8 bytes a grain of the batch. Kept members first, each part keeping its slots.
+        let previous = arrange((&[], 0), &[0, 1, 2, 3, 4, 5], &[6]);
+        assert_eq!(members(&previous), [0, 1, 2, 3, 4, 5, 6]);
+        // Member 1 lands (no longer kept, not called), 7 joins the others.
+        let next = arrange((&previous, 6), &[0, 2, 3, 4, 5], &[6, 7]);
+        assert_eq!(members(&next), [0, 5, 2, 3, 4, 6, 7], "the kept part's last takes the slot that was left");
+        let changed = (0..next.len()).filter(|&k| previous.get(k) != Some(&next[k])).count();
+        assert_eq!(changed, 3, "slot 1, and the two of the others, which moved up by one and grew");
+        // The same members again: nothing changes.
+        assert_eq!(arrange((&next, 5), &[0, 2, 3, 4, 5], &[6, 7]), next);
+        // A kept member becomes one of the others.
+        let moved = arrange((&next, 5), &[0, 2, 3, 4], &[5, 6, 7]);
+        assert_eq!(members(&moved), [0, 4, 2, 3, 6, 7, 5]);
+        assert!(moved.iter().all(|a| a.mode == MODE_FORCES));
+    }
 }

@@ -11,7 +11,7 @@
 //! or a body the host moved since) drops it, and the next step's inputs go up from the host
 //! again.
 
-use super::{buffer, Batch, GpuWorld, Mirror, Pass, WORKGROUP};
+use super::{buffer, Batch, GpuWorld, Pass, WORKGROUP};
 use crate::gpu::types::{summary_len, Active, Coefficients, DofOut, DofState, DofStep, MemberRange, NewtonState, StepMotion, StepTally, MODE_FORCES, NO_MEMBER, TALLY_LEN, TALLY_ROW};
 use crate::gpu::{Gpu, GpuError};
 use crate::policy::PhaseTimes;
@@ -236,13 +236,13 @@ impl Resident {
 }
 
 impl GpuWorld {
-    /// The step inputs of the listed bodies as the host computed them, up with the next submit
-    /// (where they changed): a step whose inputs the device does not compute.
+    /// The step inputs of the listed bodies as the host computed them, up with their next
+    /// evaluation (where they changed): a step whose inputs the device does not compute.
     pub fn set_step_inputs(&mut self, steps: &[(usize, &[DofStep<Real>])]) {
         for batch in 0..self.batches.len() {
             let mut mine: Vec<(usize, &[Real])> = steps.iter().filter(|(body, _)| self.place[*body].0 == batch).map(|&(body, step)| (self.place[body].1, bytemuck::cast_slice(step))).collect();
             mine.sort_unstable_by_key(|&(m, _)| m);
-            self.stage_mirror(batch, Mirror::Step, &mine);
+            self.stage_step_inputs(batch, &mine);
         }
     }
 
@@ -260,7 +260,7 @@ impl GpuWorld {
             let on_device = |s: &StepStart| s.on_device && self.batches[batch].newton.as_ref().is_some_and(|n| n.resident.valid[self.place[s.body].1]);
             let (device, host): (Vec<&StepStart>, Vec<&StepStart>) = mine.into_iter().partition(|s| on_device(s));
             let host: Vec<(usize, &[Real])> = host.iter().map(|s| (self.place[s.body].1, bytemuck::cast_slice(s.inputs))).collect();
-            self.stage_mirror(batch, Mirror::Step, &host);
+            self.stage_step_inputs(batch, &host);
             let members: Vec<usize> = device.iter().map(|s| self.place[s.body].1).collect();
             let b = &mut self.batches[batch];
             let Some(n) = b.newton.as_mut() else { continue };
@@ -270,6 +270,7 @@ impl GpuWorld {
             for (s, &m) in device.iter().zip(&members) {
                 let dofs = super::dof_span(&b.members, &[m]);
                 b.step_host[4 * dofs.start..4 * dofs.end].fill(Real::NAN);
+                b.step_pending[m] = false;
                 b.u_host[dofs.clone()].fill(Real::NAN);
                 n.start_host[dofs].copy_from_slice(s.u);
                 r.predicted[m] = true;
