@@ -641,6 +641,17 @@ fn falling_grains(count: usize, steps: usize, device: Option<RoundPlacement>, ho
     (sim, steps.iter().map(|s| s.0).collect())
 }
 
+/// [`falling_grain_steps`] on the device with `--rounds auto` on two threads, as CI has; the
+/// CPU backend's energies (asserted).
+fn falling_on_two_threads(count: usize, steps: usize) -> (bifirst::solver::Simulation, Vec<(u64, u64)>) {
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().expect("a pool");
+    let (held, per_step) = pool.install(|| falling_grain_steps(count, steps, Some(RoundPlacement::Auto), true));
+    let (cpu, _) = falling_grains(count, steps, None, false);
+    let scale = cpu.energies().total.abs();
+    assert!((held.energies().total - cpu.energies().total).abs() <= 1e-9 * scale, "the CPU backend's energies");
+    (held, per_step)
+}
+
 /// [`falling_grains`], with the submits of each step beside its bytes.
 fn falling_grain_steps(count: usize, steps: usize, device: Option<RoundPlacement>, hold: bool) -> (bifirst::solver::Simulation, Vec<(u64, u64)>) {
     let sets: Vec<String> = [format!("packing.count={count}"), "time.end=1.0".into(), "gravity=[0.0,-9.81]".into()].to_vec();
@@ -726,16 +737,12 @@ fn auto_rounds_keep_falling_grains_on_the_device_of_a_software_adapter_as_on_har
     if !gpu_available(test) {
         return;
     }
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().expect("a pool");
-    let (held, bytes) = pool.install(|| falling_grains(400, 5, Some(RoundPlacement::Auto), true));
-    let (cpu, _) = falling_grains(400, 5, None, false);
-    let mut later: Vec<f64> = bytes[1..].iter().map(|&b| b as f64 / 400.0).collect();
+    let (held, steps) = falling_on_two_threads(400, 5);
+    let mut later: Vec<f64> = steps[1..].iter().map(|&(b, _)| b as f64 / 400.0).collect();
     later.sort_by(f64::total_cmp);
     let dofs_per_grain = held.bodies().iter().map(|b| b.state().u.len()).sum::<usize>() as f64 / 400.0;
     eprintln!("bytes a grain moves per step after the first: {later:?}; {dofs_per_grain:.0} dofs a grain");
     assert!(later[later.len() / 2] < 8.0 * dofs_per_grain, "less than a grain's displacements alone: {later:?}");
-    let scale = cpu.energies().total.abs();
-    assert!((held.energies().total - cpu.energies().total).abs() <= 1e-9 * scale, "the CPU backend's energies");
 }
 
 #[test]
@@ -752,15 +759,11 @@ fn grains_that_land_on_a_software_adapter_take_at_most_three_submits_a_step() {
     if !gpu_available(test) {
         return;
     }
-    let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().expect("a pool");
-    let (held, steps) = pool.install(|| falling_grain_steps(900, 10, Some(RoundPlacement::Auto), true));
-    let (cpu, _) = falling_grains(900, 10, None, false);
+    let (held, steps) = falling_on_two_threads(900, 10);
     let landed = held.bodies().iter().filter(|b| b.held_state().is_none()).count();
     eprintln!("{landed} of 900 grains landed; per step (bytes a grain, submits): {:?}", steps.iter().map(|&(b, s)| (b / 900, s)).collect::<Vec<_>>());
     assert!(landed > 10, "grains land in these steps: {landed}");
     assert!(steps[1..].iter().all(|&(_, s)| s <= 3), "{steps:?}");
-    let scale = cpu.energies().total.abs();
-    assert!((held.energies().total - cpu.energies().total).abs() <= 1e-9 * scale, "the CPU backend's energies");
 }
 
 #[test]
