@@ -544,32 +544,42 @@ impl GpuWorld {
     /// member by member on every thread, and uploads those that changed since they last went
     /// up, one write per run of consecutive members. Returns the members that went up.
     fn stage_mirror(&mut self, batch: usize, mirror: Mirror, mine: &[(usize, &[Real])]) -> Vec<usize> {
+        let members = self.take_into_mirror(batch, mirror, mine);
+        self.upload_mirror(batch, mirror, &members);
+        members
+    }
+
+    /// Takes the listed members' values (`(member, values)`, in member order) into a mirror's
+    /// host copy, member by member on every thread; returns those that changed.
+    fn take_into_mirror(&mut self, batch: usize, mirror: Mirror, mine: &[(usize, &[Real])]) -> Vec<usize> {
         let b = &mut self.batches[batch];
         let starts: Vec<usize> = mine.iter().map(|&(m, _)| b.members[m].dof_start as usize).collect();
-        let (host, buffer, per_dof) = b.mirror(mirror);
+        let (host, _, per_dof) = b.mirror(mirror);
         let changed = update_mirrors(host, starts.iter().zip(mine).map(|(&start, &(_, values))| (per_dof * start, values)).collect());
-        let host = std::mem::take(host);
-        let members: Vec<usize> = mine.iter().zip(changed).filter(|(_, c)| *c).map(|(&(m, _), _)| m).collect();
+        mine.iter().zip(changed).filter(|(_, c)| *c).map(|(&(m, _), _)| m).collect()
+    }
+
+    /// Uploads the listed members' values of a mirror as its host copy holds them, one write per
+    /// run of consecutive members (after the step's start, if it waits for any of them).
+    fn upload_mirror(&mut self, batch: usize, mirror: Mirror, members: &[usize]) {
         if !matches!(mirror, Mirror::NewtonContact) {
-            self.settle_prologue(batch, &members);
+            self.settle_prologue(batch, members);
         }
-        for run in runs(&members) {
+        let (host, buffer, per_dof) = self.batches[batch].mirror(mirror);
+        let host = std::mem::take(host);
+        for run in runs(members) {
             let dofs = dof_span(&self.batches[batch].members, &run);
             self.upload_reals(&buffer, per_dof * dofs.start, &host[per_dof * dofs.start..per_dof * dofs.end]);
         }
         *self.batches[batch].mirror(mirror).0 = host;
-        members
     }
 
     /// Takes the listed members' step inputs (`(member, inputs)`, in member order) into the
     /// batch's mirror; those that changed go up with the member's next evaluation
     /// ([`GpuWorld::stage_displacements_but`]).
     fn stage_step_inputs(&mut self, batch: usize, mine: &[(usize, &[Real])]) {
-        let b = &mut self.batches[batch];
-        let starts: Vec<usize> = mine.iter().map(|&(m, _)| 4 * b.members[m].dof_start as usize).collect();
-        let changed = update_mirrors(&mut b.step_host, starts.into_iter().zip(mine).map(|(start, &(_, values))| (start, values)).collect());
-        for (&(m, _), changed) in mine.iter().zip(changed) {
-            b.step_pending[m] |= changed;
+        for m in self.take_into_mirror(batch, Mirror::Step, mine) {
+            self.batches[batch].step_pending[m] = true;
         }
     }
 
@@ -578,17 +588,7 @@ impl GpuWorld {
     fn flush_step_inputs(&mut self, batch: usize, members: &[usize]) {
         let b = &mut self.batches[batch];
         let pending: Vec<usize> = members.iter().copied().filter(|&m| std::mem::take(&mut b.step_pending[m])).collect();
-        if pending.is_empty() {
-            return;
-        }
-        self.settle_prologue(batch, &pending);
-        let (host, buffer, per_dof) = self.batches[batch].mirror(Mirror::Step);
-        let (host, buffer) = (std::mem::take(host), buffer);
-        for run in runs(&pending) {
-            let dofs = dof_span(&self.batches[batch].members, &run);
-            self.upload_reals(&buffer, per_dof * dofs.start, &host[per_dof * dofs.start..per_dof * dofs.end]);
-        }
-        *self.batches[batch].mirror(Mirror::Step).0 = host;
+        self.upload_mirror(batch, Mirror::Step, &pending);
     }
 
     /// Copies the displacements of the listed bodies (`(body, u)`) into their batches' mirrors
