@@ -1,6 +1,7 @@
 // The start of a step of each listed member from the committed state the device keeps
 // (`step_commit`), so that nothing per dof goes up for a body that steps on the device:
 //   u_pred = u_t + dt v_t,   step = (m, u_pred, f_int,t, f_ext),   u = u_pred,   u_start = u_t,
+//   u_base = u_t + dt (1 - θ) v_t (the base of the trial velocity `newton_contact` takes),
 // the mass and external force kept from the member's last uploaded step (a body with neither
 // surface loads nor prescribed dofs: they do not change). One dof per invocation, over the
 // members as `assemble_residual`. CPU twin: `cpu::step_begin`.
@@ -14,6 +15,7 @@ const WORKGROUP = 64u;
 @group(0) @binding(4) var<storage, read_write> u_start: array<real>;
 @group(0) @binding(5) var<storage, read> members: array<MemberRange>;
 @group(0) @binding(6) var<storage, read> jobs: array<Active>;
+@group(0) @binding(7) var<storage, read_write> u_base: array<real>;
 
 @compute @workgroup_size(WORKGROUP)
 fn main(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workgroup: vec3<u32>) {
@@ -34,4 +36,5 @@ fn main(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workg
     step[d].f_int_t = c.f_int;
     u[d] = u_pred;
     u_start[d] = c.u;
+    u_base[d] = c.u + motion.dt_explicit * c.v;
 }

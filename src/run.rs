@@ -347,6 +347,7 @@ impl Logger {
             kept_beyond_bounds: r.kept_beyond_bounds,
             wall_s: r.wall,
             bytes_moved: r.bytes_moved,
+            bytes_up: r.bytes_up,
             device_submits: r.device_submits,
             status: status.to_string(),
             message,

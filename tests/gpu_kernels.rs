@@ -582,17 +582,17 @@ fn step_kernels_match_their_cpu_twins() {
     let (commit, begin) = ([0usize, NO_MEMBER as usize, 2], [0usize, 1, 2]);
     let (commit_motion, begin_motion) = (StepMotion::of(1e-3, 0.55, 2), StepMotion::of(5e-4, 1.0, 2));
     let got = bifirst::gpu::world::run_step_kernels(&gpu, &members, (&commit, commit_motion), (&begin, begin_motion), &committed, &step, (&u, &dof_out), (&committed_energy, &member_energy)).expect("the step kernels run");
-    let (mut c, mut s, mut x, mut x0, mut e) = (committed.clone(), step.clone(), u.clone(), vec![0.0; n], committed_energy.clone());
+    let (mut c, mut s, mut x, mut x0, mut e, mut base) = (committed.clone(), step.clone(), u.clone(), vec![0.0; n], committed_energy.clone(), vec![0.0; n]);
     for &m in commit.iter().filter(|&&m| m != NO_MEMBER as usize) {
         cpu::step_commit(commit_motion, (&mut c, &mut e), (&x, &dof_out, &member_energy), m, members[m]);
     }
     for &m in &begin {
-        cpu::step_begin(begin_motion, &c, &mut s, &mut x, &mut x0, members[m]);
+        cpu::step_begin(begin_motion, &c, &mut s, &mut x, (&mut x0, &mut base), members[m]);
     }
     let flat = |c: &[DofState<f64>]| c.iter().flat_map(|d| [d.u, d.v, d.f_int]).collect::<Vec<f64>>();
     let flat_step = |s: &[DofStep<f64>]| s.iter().flat_map(|d| [d.mass, d.u_pred, d.f_int_t, d.f_ext]).collect::<Vec<f64>>();
-    let errors = [relative_error(&flat(&got.0), &flat(&c)), relative_error(&flat_step(&got.1), &flat_step(&s)), relative_error(&got.2, &x), relative_error(&got.3, &x0)];
-    eprintln!("committed, step, u, u_start: relative errors {errors:?}");
+    let errors = [relative_error(&flat(&got.0), &flat(&c)), relative_error(&flat_step(&got.1), &flat_step(&s)), relative_error(&got.2, &x), relative_error(&got.3, &x0), relative_error(&got.5, &base)];
+    eprintln!("committed, step, u, u_start, u_base: relative errors {errors:?}");
     assert!(errors.iter().all(|&e| e <= 1e-12), "{errors:?}");
     let last = members[3].dof_start as usize..n;
     assert_eq!(flat(&got.0[last.clone()]), flat(&committed[last.clone()]), "a member outside both lists keeps its committed state");

@@ -543,6 +543,31 @@ fn groups_in_contact_on_the_device_cost_a_submit_per_refactorisation_round_not_p
 }
 
 #[test]
+fn pressed_grains_in_contact_begin_and_commit_their_steps_on_the_device() {
+    // Issue 59: a grain with contact points whose step ended with a device Newton call the host
+    // took began its next step from the host's inputs, so its committed state went up again
+    // at the step's end (56 bytes a dof up a step, and the trial velocity's base, 8 more):
+    // 400 grains pressed by the wall with every round and the sweeps on the device sent 10 934
+    // bytes a grain up over steps 6 to 30, 5 820 once such a grain begins and commits on the
+    // device as a grain in flight does. The same Newton iterations and energies as the CPU's.
+    let test = "pressed_grains_in_contact_begin_and_commit_their_steps_on_the_device";
+    if !gpu_available(test) {
+        return;
+    }
+    let sets = ["packing.count=400", "time.end=0.15", "contact.max_iterations=400", "output.every=1", "output.scene_every=0"];
+    let path = scene_path("grains_many");
+    let cpu = run_with(&path, &sets, &format!("{test}_cpu"), &options(BackendChoice::Cpu, None));
+    let mut o = every_round_on_the_gpu();
+    o.backend.uzawa = UzawaPlacement::Gpu;
+    let device = run_with(&path, &sets, &format!("{test}_device"), &o);
+    let up: f64 = device.series("/solver", "bytes_up")[5..].iter().sum::<f64>() / 400.0;
+    eprintln!("{up:.0} bytes a grain up over steps 6-30; energies differ by {:.2e}", energy_difference(&cpu, &device));
+    assert!(device.series("/contact", "active").iter().any(|&a| a > 2.0), "the grains touch");
+    assert!(energy_difference(&cpu, &device) <= 1e-9);
+    assert!(up <= 8000.0, "{up:.0} bytes a grain up over steps 6-30");
+}
+
+#[test]
 fn a_solve_cut_short_by_a_software_adapter_finishes_on_the_host_and_is_no_stall() {
     // On lavapipe a device Newton increment's solve takes at most SOFTWARE_SOLVE_DISPATCHES
     // dispatches, fewer sweeps than a hard problem may need. 400 grains pressed to t = 0.3 with

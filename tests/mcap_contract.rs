@@ -53,6 +53,7 @@ fn run_log_has_every_channel_of_the_contract() {
                 "kept_beyond_bounds",
                 "wall_s",
                 "bytes_moved",
+                "bytes_up",
                 "device_submits",
                 "status",
                 "message",

@@ -8,7 +8,7 @@ use crate::precision::Real;
 /// `step_begin` for member `range`: per dof the predictor `u_t + dt v_t` from the committed
 /// state, into the step inputs (mass and external force kept), the trial displacement and the
 /// start displacement.
-pub fn step_begin(motion: StepMotion<Real>, committed: &[DofState<Real>], step: &mut [DofStep<Real>], u: &mut [Real], u_start: &mut [Real], range: MemberRange) {
+pub fn step_begin(motion: StepMotion<Real>, committed: &[DofState<Real>], step: &mut [DofStep<Real>], u: &mut [Real], (u_start, u_base): (&mut [Real], &mut [Real]), range: MemberRange) {
     for local in 0..range.dofs as usize {
         let d = range.dof_start as usize + local;
         let c = committed[d];
@@ -17,6 +17,7 @@ pub fn step_begin(motion: StepMotion<Real>, committed: &[DofState<Real>], step: 
         step[d].f_int_t = c.f_int;
         u[d] = u_pred;
         u_start[d] = c.u;
+        u_base[d] = c.u + motion.dt_explicit * c.v;
     }
 }
 

@@ -339,6 +339,9 @@ pub struct GpuWorld {
     pub rounds: RoundPlacement,
     /// The read-back of device Newton calls and its size, grown on demand.
     newton_readback: Option<(Buffer, u64)>,
+    /// Uploads that wait for the step's start recorded at the head of the next submission
+    /// ([`GpuWorld::settle_prologue`]): `(staging, target, offset, size)`, copied after it.
+    deferred: Option<Vec<(Buffer, Buffer, u64, u64)>>,
     /// Compiled by the first device Newton call.
     newton_pipelines: Option<newton::NewtonPipelines>,
     /// Compiled by the first device Newton call with groups in contact.
@@ -423,6 +426,7 @@ impl GpuWorld {
             uzawa: UzawaPlacement::default(),
             rounds: RoundPlacement::default(),
             newton_readback: None,
+            deferred: None,
             newton_pipelines: None,
             contact_pipelines: None,
             step_tally: StepTally::default(),
@@ -477,8 +481,24 @@ impl GpuWorld {
     }
 
     fn upload(&mut self, buffer: &Buffer, offset: u64, bytes: &[u8]) {
-        self.traffic.up += bytes.len() as u64;
-        self.gpu.queue.write_buffer(buffer, offset, bytes);
+        self.upload_pieces(buffer, offset, &[bytes]);
+    }
+
+    /// An upload that must land after the step's start waiting for the next submission: the
+    /// bytes go into a staging buffer now and are copied in that submission's encoder, after
+    /// the start's passes (a write would land before them).
+    fn defer_upload(&mut self, buffer: &Buffer, offset: u64, pieces: &[&[u8]], total: usize) {
+        let staging = self.gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some("deferred upload"), size: total as u64, usage: BufferUsages::COPY_SRC, mapped_at_creation: true });
+        {
+            let mut view = staging.get_mapped_range_mut(..).expect("a staging buffer mapped at creation");
+            let mut starts = vec![0];
+            for piece in pieces {
+                starts.push(starts.last().expect("a start") + piece.len());
+            }
+            copy_joined(&mut view.slice(..), 0, pieces, &starts);
+        }
+        staging.unmap();
+        self.deferred.as_mut().expect("deferring").push((staging, buffer.clone(), offset, total as u64));
     }
 
     /// Uploads `pieces` one after the other from `offset`, in one write: each piece is copied
@@ -490,6 +510,9 @@ impl GpuWorld {
         let total: usize = pieces.iter().map(|p| p.len()).sum();
         let Some(size) = wgpu::BufferSize::new(total as u64) else { return };
         self.traffic.up += total as u64;
+        if self.deferred.is_some() {
+            return self.defer_upload(buffer, offset, pieces, total);
+        }
         let mut view = self.gpu.queue.write_buffer_with(buffer, offset, size).expect("a write inside the buffer");
         let mut starts = Vec::with_capacity(pieces.len() + 1);
         starts.push(0);
@@ -775,10 +798,14 @@ impl GpuWorld {
     }
 
     /// A command encoder with the step's start at its head when it is waiting
-    /// ([`GpuWorld::begin_step`]): every submission of the world's batches starts from one.
+    /// ([`GpuWorld::begin_step`]), and the uploads deferred behind it: every submission of the
+    /// world's batches starts from one.
     fn encoder(&mut self, label: &str) -> wgpu::CommandEncoder {
         let mut encoder = self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(label) });
         self.record_prologue(&mut encoder);
+        for (staging, target, offset, size) in self.deferred.take().unwrap_or_default() {
+            encoder.copy_buffer_to_buffer(&staging, 0, &target, offset, size);
+        }
         encoder
     }
 

@@ -89,6 +89,8 @@ pub struct SolverMessage {
     pub wall_s: PhaseTimes,
     /// Bytes between host and GPU in the step (0 on the CPU).
     pub bytes_moved: u64,
+    /// Of `bytes_moved`, those from host to GPU.
+    pub bytes_up: u64,
     /// GPU queue submits in the step, one per device pass over all bodies (0 on the CPU).
     pub device_submits: u64,
     #[schemars(extend("enum" = ["converged", "failed", "interrupted"]))]

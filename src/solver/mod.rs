@@ -72,6 +72,8 @@ pub struct StepReport {
     pub wall: PhaseTimes,
     /// Bytes moved between host and GPU (zero on the CPU backend).
     pub bytes_moved: u64,
+    /// Of `bytes_moved`, those that went up, host to GPU.
+    pub bytes_up: u64,
     /// Queue submits to the GPU (zero on the CPU backend): one per device pass, whatever the
     /// number of bodies.
     pub device_submits: u64,
@@ -552,7 +554,8 @@ impl Simulation {
         }
         report.wall.total = started.elapsed().as_secs_f64();
         if let Some(world) = &mut self.world {
-            report.bytes_moved = world.take_traffic().total();
+            let traffic = world.take_traffic();
+            (report.bytes_moved, report.bytes_up) = (traffic.total(), traffic.up);
             report.device_submits = world.submits() - submits;
         }
         match result {
@@ -635,7 +638,7 @@ impl Simulation {
         let gravity = self.gravity;
         let t = self.t;
         self.bodies.par_iter_mut().for_each(|body| body.begin_step(&p, &gravity, t));
-        self.begin_device_step(&points, &p)?;
+        self.begin_device_step(&p)?;
         let stop = self.interrupt.as_deref();
         let hold = self.hold(&points);
         let (points, groups) = solve_groups(&mut self.bodies, points, &p, settings.as_ref(), &warm, velocity_scale, self.world.as_mut(), stop, hold.as_deref(), &mut report.wall);
@@ -709,16 +712,13 @@ impl Simulation {
         Ok(())
     }
 
-    /// Begins the step of every body on the device, if there is one. A body with contact
-    /// points iterates with the host's step inputs mostly: its step begins there, so that
-    /// nothing the device began is overwritten by its uploads.
-    fn begin_device_step(&mut self, points: &[ContactPoint], p: &StepParams) -> Result<(), StepFailure> {
+    /// Begins the step of every body on the device, if there is one. A body whose committed
+    /// state the device keeps begins there, in contact or not: its inputs and, at the step's end,
+    /// its committed state need not go up (a body the host iterates takes the same inputs, which
+    /// it computed from the same state).
+    fn begin_device_step(&mut self, p: &StepParams) -> Result<(), StepFailure> {
         let Some(world) = &mut self.world else { return Ok(()) };
-        let mut touching = vec![false; self.bodies.len()];
-        for t in points.iter().flat_map(|c| c.terms()) {
-            touching[t.body as usize] = true;
-        }
-        let starts: Vec<StepStart> = self.bodies.iter().enumerate().map(|(b, body)| body.step_start(b, !touching[b])).collect();
+        let starts: Vec<StepStart> = self.bodies.iter().enumerate().map(|(b, body)| body.step_start(b)).collect();
         world.begin_step(&starts, StepMotion::of(p.dt, p.theta, self.dim)).map_err(|e| self.bodies[0].device_failure(&e))?;
         for (b, relaxation) in self.bodies.iter().enumerate().filter_map(|(b, body)| Some((b, body.relaxation()?))) {
             world.set_relaxation(b, relaxation);

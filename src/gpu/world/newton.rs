@@ -467,7 +467,7 @@ impl NewtonBuffers {
         let judge = Pass::bound(gpu, pipelines.judge.clone(), ("newton_judge", "main"), None, &[&common[..], &[("u_start", &u_start), ("step", &b.step), ("coefficients", coefficients), ("failure", &b.failure)]].concat());
         let compact = Pass::bound(gpu, pipelines.compact.clone(), ("newton_compact", "main"), None, &[("call", &call), ("state", &state), ("jobs", &jobs), ("dispatch", &dispatch)]);
         let member_energy = buffer(gpu, "member energy", members * real, storage | BufferUsages::COPY_SRC);
-        let resident = super::step::Resident::new(gpu, &pipelines.step, b, &u_start, &member_energy);
+        let resident = super::step::Resident::new(gpu, &pipelines.step, b, (&u_start, &u_base), &member_energy);
         let packed_forces = buffer(gpu, "newton forces", dofs * real, storage | BufferUsages::COPY_SRC);
         let finish = Pass::bound(
             gpu,
@@ -992,7 +992,9 @@ impl GpuWorld {
         // packing in contact: one write, not one per grain). Device Newton iterations run in
         // f64 only: the host's reals are the device's bytes.
         debug_assert_eq!(precision, Precision::F64);
-        let mut bases: Vec<(usize, &[u8])> = contacts.iter().flat_map(|g| g.calls.iter().zip(&g.u_base).map(|(&c, base)| (self.place[calls[c].body].1, bytemuck::cast_slice(base)))).collect();
+        // A member whose step began on the device has the step's there already.
+        let based = &n.resident.based;
+        let mut bases: Vec<(usize, &[u8])> = contacts.iter().flat_map(|g| g.calls.iter().zip(&g.u_base).map(|(&c, base)| (self.place[calls[c].body].1, bytemuck::cast_slice(base)))).filter(|&(m, _)| !based[m]).collect();
         bases.sort_unstable_by_key(|&(m, _)| m);
         let u_base = n.u_base.clone();
         self.upload_member_runs(batch, &u_base, real, &bases);

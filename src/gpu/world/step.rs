@@ -78,7 +78,7 @@ impl StepPipelines {
     /// resources.
     fn passes(&self, gpu: &Gpu, b: &StepBindings) -> [Pass; 2] {
         let common = [("committed", b.committed), ("u", b.u), ("members", b.members)];
-        let begin = [&common[..], &[("motion", b.motions[0]), ("jobs", b.jobs[0]), ("step", b.step), ("u_start", b.u_start)]].concat();
+        let begin = [&common[..], &[("motion", b.motions[0]), ("jobs", b.jobs[0]), ("step", b.step), ("u_start", b.u_start), ("u_base", b.u_base)]].concat();
         let commit = [&common[..], &[("motion", b.motions[1]), ("jobs", b.jobs[1]), ("dof_out", b.dof_out), ("member_energy", b.member_energy), ("committed_energy", b.committed_energy)]].concat();
         [Pass::bound(gpu, self.begin.clone(), ("step_begin", "main"), None, &begin), Pass::bound(gpu, self.commit.clone(), ("step_commit", "main"), None, &commit)]
     }
@@ -96,6 +96,7 @@ struct StepBindings<'a> {
     step: &'a Buffer,
     u: &'a Buffer,
     u_start: &'a Buffer,
+    u_base: &'a Buffer,
     dof_out: &'a Buffer,
     members: &'a Buffer,
 }
@@ -117,6 +118,9 @@ pub(super) struct Resident {
     /// The device's `u` is its own predictor (`step_begin`), which the host's mirror does not
     /// hold: the step's first Newton call starts from it instead of uploading the host's.
     pub(super) predicted: Vec<bool>,
+    /// The device's `u_base` is the step's (`step_begin` computed it from the committed state):
+    /// a Newton call in contact need not send the host's.
+    pub(super) based: Vec<bool>,
     /// The members whose kept step `step_commit` commits before the next `step_begin`, and
     /// that step's motion.
     pending: Option<(Vec<usize>, StepMotion<Real>)>,
@@ -178,7 +182,7 @@ impl Slots {
 
 impl Resident {
     /// `member_energy`: the strain energies where device Newton calls ended (`newton_finish`).
-    pub(super) fn new(gpu: &Gpu, pipelines: &StepPipelines, b: &Batch, u_start: &Buffer, member_energy: &Buffer) -> Self {
+    pub(super) fn new(gpu: &Gpu, pipelines: &StepPipelines, b: &Batch, (u_start, u_base): (&Buffer, &Buffer), member_energy: &Buffer) -> Self {
         let real = gpu.precision.size();
         let (dofs, members) = (b.u_host.len(), b.members.len());
         let committed = buffer(gpu, "committed state", dofs * 3 * real, BufferUsages::STORAGE | BufferUsages::COPY_DST | BufferUsages::COPY_SRC);
@@ -186,8 +190,19 @@ impl Resident {
         let motion = || buffer(gpu, "step motion", 4 * real, BufferUsages::UNIFORM | BufferUsages::COPY_DST);
         let jobs = || buffer(gpu, "step jobs", members * 8, BufferUsages::STORAGE | BufferUsages::COPY_DST);
         let (motions, jobs) = ([motion(), motion()], [jobs(), jobs()]);
-        let bindings =
-            StepBindings { motions: [&motions[0], &motions[1]], jobs: [&jobs[0], &jobs[1]], committed: &committed, member_energy, committed_energy: &committed_energy, step: &b.step, u: &b.u, u_start, dof_out: &b.dof_out, members: &b.member_buffer };
+        let bindings = StepBindings {
+            motions: [&motions[0], &motions[1]],
+            jobs: [&jobs[0], &jobs[1]],
+            committed: &committed,
+            member_energy,
+            committed_energy: &committed_energy,
+            step: &b.step,
+            u: &b.u,
+            u_start,
+            u_base,
+            dof_out: &b.dof_out,
+            members: &b.member_buffer,
+        };
         let passes = pipelines.passes(gpu, &bindings);
         Self {
             committed,
@@ -198,6 +213,7 @@ impl Resident {
             valid: vec![false; members],
             current: vec![false; members],
             predicted: vec![false; members],
+            based: vec![false; members],
             pending: None,
             lists: [Vec::new(), Vec::new()],
             involved: vec![false; members],
@@ -267,6 +283,7 @@ impl GpuWorld {
             let r = &mut n.resident;
             r.current.fill(false);
             r.predicted.fill(false);
+            r.based.fill(false);
             for (s, &m) in device.iter().zip(&members) {
                 let dofs = super::dof_span(&b.members, &[m]);
                 b.step_host[4 * dofs.start..4 * dofs.end].fill(Real::NAN);
@@ -274,6 +291,7 @@ impl GpuWorld {
                 b.u_host[dofs.clone()].fill(Real::NAN);
                 n.start_host[dofs].copy_from_slice(s.u);
                 r.predicted[m] = true;
+                r.based[m] = true;
             }
             // A member that steps with the host's inputs drops its device state (its step's
             // uploads would come before a commit waiting for it): it is set up again from the
@@ -430,20 +448,18 @@ impl GpuWorld {
         }
     }
 
-    /// Submits the step's start alone if it is waiting and an upload is about to change what it
-    /// reads or writes of `members` of `batch`. A submission that fails here leaves the device's
-    /// committed states untrusted, and the next submission reports the failure.
+    /// Defers the uploads from here to the next submission's encoder, behind the step's start,
+    /// if it is waiting and an upload is about to change what it reads or writes of `members`
+    /// of `batch` (a write lands before the commands of the submission it goes with): so the
+    /// start costs no submission of its own.
     pub(super) fn settle_prologue(&mut self, batch: usize, members: &[usize]) {
         let Some(r) = self.batches[batch].newton.as_ref().map(|n| &n.resident) else { return };
         if !members.iter().any(|&m| r.involved[m]) {
             return;
         }
-        // Uploads apply before the commands of the submission they go with: once the step's
-        // start is recorded, none may touch its members until it is submitted.
+        // Once the step's start is recorded, nothing may touch its members until it is submitted.
         assert!(r.lists.iter().any(|l| !l.is_empty()), "an upload to a member of a step's start recorded but not submitted");
-        if self.flush_prologue().is_err() {
-            self.forget_committed();
-        }
+        self.deferred.get_or_insert_with(Vec::new);
     }
 
     /// Submits the step's start alone if any of it is waiting.
@@ -516,13 +532,14 @@ impl GpuWorld {
             r.lists = [Vec::new(), Vec::new()];
             r.involved.fill(false);
             r.predicted.fill(false);
+            r.based.fill(false);
         }
     }
 }
 
 /// What the step kernels leave: the committed states, the step inputs, the trial and the start
-/// displacements, the committed strain energies.
-pub type StepKernelsOut = (Vec<DofState<Real>>, Vec<DofStep<Real>>, Vec<Real>, Vec<Real>, Vec<Real>);
+/// displacements, the committed strain energies, the trial velocities' bases.
+pub type StepKernelsOut = (Vec<DofState<Real>>, Vec<DofStep<Real>>, Vec<Real>, Vec<Real>, Vec<Real>, Vec<Real>);
 
 /// `step_commit` over the members `commit` lists, then `step_begin` over those `begin` lists,
 /// alone on an f64 device from the given buffers (`energies`: the committed and the members'
@@ -544,6 +561,7 @@ pub fn run_step_kernels(
     let rw = BufferUsages::STORAGE | BufferUsages::COPY_SRC | BufferUsages::COPY_DST;
     let init = |label: &str, bytes: &[u8], usage: BufferUsages| super::buffer_init(gpu, label, bytes, usage);
     let (committed_b, step_b, u_b, u_start_b) = (init("committed", bytemuck::cast_slice(committed), rw), init("step", bytemuck::cast_slice(step), rw), init("u", bytemuck::cast_slice(u), rw), buffer(gpu, "u start", u.len() * 8, rw));
+    let u_base_b = buffer(gpu, "u base", u.len() * 8, rw);
     let (dof_out_b, members_b) = (init("dof out", bytemuck::cast_slice(dof_out), BufferUsages::STORAGE), init("members", bytemuck::cast_slice(members), BufferUsages::STORAGE));
     let (committed_energy_b, member_energy_b) = (init("committed energy", bytemuck::cast_slice(committed_energy), rw), init("member energy", bytemuck::cast_slice(member_energy), BufferUsages::STORAGE));
     let uniform = BufferUsages::UNIFORM;
@@ -559,6 +577,7 @@ pub fn run_step_kernels(
         step: &step_b,
         u: &u_b,
         u_start: &u_start_b,
+        u_base: &u_base_b,
         dof_out: &dof_out_b,
         members: &members_b,
     };
@@ -567,9 +586,10 @@ pub fn run_step_kernels(
     let most = |list: &[usize]| list.iter().filter(|&&m| m != NO_MEMBER as usize).map(|&m| members[m].dofs as usize).max().unwrap_or(0);
     commit_pass.record(gpu, &mut encoder, WORKGROUP, most(commit), commit.len());
     begin_pass.record(gpu, &mut encoder, WORKGROUP, most(begin), begin.len());
-    let sizes = [std::mem::size_of_val(committed), std::mem::size_of_val(step), u.len() * 8, u.len() * 8, committed_energy.len() * 8];
-    let bytes = read_buffers(gpu, encoder, &[&committed_b, &step_b, &u_b, &u_start_b, &committed_energy_b], &sizes)?;
-    Ok((bytemuck::pod_collect_to_vec(&bytes[0]), bytemuck::pod_collect_to_vec(&bytes[1]), bytemuck::pod_collect_to_vec(&bytes[2]), bytemuck::pod_collect_to_vec(&bytes[3]), bytemuck::pod_collect_to_vec(&bytes[4])))
+    let sizes = [std::mem::size_of_val(committed), std::mem::size_of_val(step), u.len() * 8, u.len() * 8, committed_energy.len() * 8, u.len() * 8];
+    let bytes = read_buffers(gpu, encoder, &[&committed_b, &step_b, &u_b, &u_start_b, &committed_energy_b, &u_base_b], &sizes)?;
+    let reals = |k: usize| bytemuck::pod_collect_to_vec(&bytes[k]);
+    Ok((bytemuck::pod_collect_to_vec(&bytes[0]), bytemuck::pod_collect_to_vec(&bytes[1]), reals(2), reals(3), reals(4), reals(5)))
 }
 
 /// Copies the first `sizes[k]` bytes of each buffer into mappable ones after the commands of

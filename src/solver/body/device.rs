@@ -21,11 +21,10 @@ impl Body {
         &self.work.step_inputs
     }
 
-    /// What the device takes at the start of the body's step ([`crate::gpu::GpuWorld::begin_step`]);
-    /// `free`: the step has no contact point on the body.
-    pub fn step_start(&self, body: usize, free: bool) -> StepStart<'_> {
-        assert!(self.committed.state_held.is_none() || (free && self.may_step_on_device()), "a body with contact points starts from the host's state");
-        StepStart { body, inputs: &self.work.step_inputs, u: &self.committed.state.u, on_device: free && self.may_step_on_device() }
+    /// What the device takes at the start of the body's step ([`crate::gpu::GpuWorld::begin_step`]).
+    pub fn step_start(&self, body: usize) -> StepStart<'_> {
+        assert!(self.committed.state_held.is_none() || self.may_step_on_device(), "a body whose state the device keeps steps there");
+        StepStart { body, inputs: &self.work.step_inputs, u: &self.committed.state.u, on_device: self.may_step_on_device() }
     }
 
     /// The committed state the device follows after a kept step ([`crate::gpu::GpuWorld::commit_step`]).
