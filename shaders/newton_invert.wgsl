@@ -3,17 +3,21 @@
 // each member's slot of `inverse` as the lower triangle row by row (`packed`): a dense Cholesky
 // factorisation K̄ = L Lᵀ in the slot, L⁻¹ in place, then K̄⁻¹ = L⁻ᵀ L⁻¹ in place. So the host
 // sends a grain's non-zeros instead of its inverse (a tenth of the bytes for a 2D grain) and
-// computes no inverse. A K̄ that is not positive definite leaves NaN, which the iterations'
+// computes no inverse. Where the device still holds the stiffness values ξ K the host read back
+// and factorised (`diagonal_only`), only K̄'s diagonal goes up, a value per free dof: the other
+// entries are those of `values`. A K̄ that is not positive definite leaves NaN, which the iterations'
 // residual hands to the host. One workgroup per listed member; each entry is summed by one
 // invocation in a fixed order. CPU twin: `cpu::newton_invert`.
 
 struct Inversion {
     member: u32,
-    // Where its K̄ values start in `effective`.
+    // Where its K̄ values start in `effective` (its diagonal, one per free dof, if
+    // `diagonal_only`).
     values_start: u32,
     // Where its pattern starts in `patterns`: column starts (free + 1), then row indices.
     pattern_start: u32,
-    pad: u32,
+    // 1: the entries off the diagonal are the member's `values`.
+    diagonal_only: u32,
 }
 
 @group(0) @binding(0) var<storage, read_write> inverse: array<real>;
@@ -21,6 +25,8 @@ struct Inversion {
 @group(0) @binding(2) var<storage, read> effective: array<real>;
 @group(0) @binding(3) var<storage, read> patterns: array<u32>;
 @group(0) @binding(4) var<storage, read> inversions: array<Inversion>;
+@group(0) @binding(5) var<storage, read> values: array<real>;
+@group(0) @binding(6) var<storage, read> members: array<MemberRange>;
 
 var<workgroup> column: array<real, MAX_FREE>;
 var<workgroup> pivot: real;
@@ -36,9 +42,19 @@ fn main(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workg
         inverse[at + e] = real(0.0);
     }
     storageBarrier();
+    let own = members[job.member].nonzero_start;
     for (var j = lane; j < n; j += NEWTON_WORKGROUP) {
         for (var k = patterns[job.pattern_start + j]; k < patterns[job.pattern_start + j + 1u]; k++) {
-            inverse[at + packed(patterns[rows + k], j)] = effective[job.values_start + k];
+            let i = patterns[rows + k];
+            var value: real;
+            if job.diagonal_only == 0u {
+                value = effective[job.values_start + k];
+            } else if i == j {
+                value = effective[job.values_start + j];
+            } else {
+                value = values[own + k];
+            }
+            inverse[at + packed(i, j)] = value;
         }
     }
     storageBarrier();

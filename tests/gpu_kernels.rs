@@ -184,7 +184,7 @@ fn newton_structs_match_the_shader_layout() {
     // `newton_invert`'s job: four u32.
     for precision in PRECISIONS {
         let module = validate("newton_invert", precision, None).unwrap();
-        let fields = ["member", "values_start", "pattern_start", "pad"].iter().enumerate().map(|(i, f)| (f.to_string(), 4 * i as u32)).collect::<Vec<_>>();
+        let fields = ["member", "values_start", "pattern_start", "diagonal_only"].iter().enumerate().map(|(i, f)| (f.to_string(), 4 * i as u32)).collect::<Vec<_>>();
         assert_eq!(naga_layout(&module, "Inversion"), (fields, size_of::<Inversion>() as u32), "newton_invert {}", precision.name());
     }
     // `newton_contact`'s own structs: four u32, then reals.
@@ -1027,7 +1027,9 @@ fn cpu_residual(c: &Case, u: &[f64], step: &[DofStep<f64>], coefficients: Coeffi
 
 /// `newton_invert` makes `K̄⁻¹` from `K̄`'s values in its pattern as its CPU twin does (1e-12 of
 /// the largest entry), and that is the inverse the host's dense factorisation gives (1e-10):
-/// two bodies of each element kind at once, in slots and patterns of their own.
+/// two bodies of each element kind at once, in slots and patterns of their own. Each again from
+/// `K̄`'s diagonal and the stiffness values `ξ K` the device holds (`diagonal_only`, the bytes a
+/// refactorised grain sends): the same inverse, bit for bit on the twin.
 #[test]
 fn newton_invert_kernel_matches_its_cpu_twin_and_the_dense_inverse() {
     let Some(gpu) = gpu_or_skip("newton_invert_kernel_matches_its_cpu_twin_and_the_dense_inverse", Precision::F64) else { return };
@@ -1045,24 +1047,48 @@ fn newton_invert_kernel_matches_its_cpu_twin_and_the_dense_inverse() {
             c.gather = GatherMap::new(&c.mesh, 3, &c.pattern);
         }
         let (mut newton, mut effective, mut patterns, mut inversions, mut slots) = (Vec::new(), Vec::new(), Vec::new(), Vec::new(), 0usize);
-        for (m, c) in cases.iter().enumerate() {
+        // The stiffness values `ξ K` the device holds, members placed in them as a batch's.
+        let (mut stiffness, mut members) = (Vec::new(), Vec::new());
+        for c in &cases {
             let n = c.pattern.n;
-            let mut values = stiffness_values(c, &c.u, coefficients);
+            let held = stiffness_values(c, &c.u, coefficients);
+            let mut values = held.clone();
             for &at in &c.pattern.diagonal {
                 values[at as usize] += coefficients.c1;
             }
-            newton.push(NewtonMember { inverse_start: slots as u32, free_count: n as u32, ..NewtonMember::default() });
-            inversions.push(Inversion { member: m as u32, values_start: effective.len() as u32, pattern_start: patterns.len() as u32, pad: 0 });
-            effective.extend_from_slice(&values);
+            let pattern_start = patterns.len() as u32;
             patterns.extend_from_slice(&c.pattern.col_ptr);
             patterns.extend_from_slice(&c.pattern.row_idx);
-            slots += packed_len(n);
+            let diagonal: Vec<f64> = c.pattern.diagonal.iter().map(|&at| values[at as usize]).collect();
+            for (diagonal_only, given) in [(0, &values), (1, &diagonal)] {
+                let m = newton.len() as u32;
+                newton.push(NewtonMember { inverse_start: slots as u32, free_count: n as u32, ..NewtonMember::default() });
+                members.push(MemberRange { nonzero_start: stiffness.len() as u32, nonzeros: held.len() as u32, ..MemberRange::default() });
+                stiffness.extend_from_slice(&held);
+                inversions.push(Inversion { member: m, values_start: effective.len() as u32, pattern_start, diagonal_only });
+                effective.extend_from_slice(given);
+                slots += packed_len(n);
+            }
         }
         let mut twin = vec![0.0; slots];
         for job in &inversions {
-            cpu::newton_invert(&mut twin, &newton, &effective, &patterns, job);
+            cpu::newton_invert(&mut twin, &newton, &effective, (&stiffness, &members), &patterns, job);
         }
-        let dense: Vec<f64> = cases.iter().flat_map(|c| bifirst::bench::dense_inverse(&c.pattern, &stiffness_values(c, &c.u, coefficients), &vec![coefficients.c1; c.pattern.n])).collect();
+        for pair in inversions.chunks(2) {
+            let span = |job: &Inversion| {
+                let row = newton[job.member as usize];
+                row.inverse_start as usize..row.inverse_start as usize + packed_len(row.free_count as usize)
+            };
+            assert_eq!(twin[span(&pair[0])], twin[span(&pair[1])], "{}: from K̄'s diagonal and the values held, the same inverse", kind.name());
+        }
+        let dense: Vec<f64> = cases
+            .iter()
+            .flat_map(|c| {
+                // (each case's slots: from all of K̄, then from its diagonal)
+                let inverse = bifirst::bench::dense_inverse(&c.pattern, &stiffness_values(c, &c.u, coefficients), &vec![coefficients.c1; c.pattern.n]);
+                [inverse.clone(), inverse].concat()
+            })
+            .collect();
         let largest = dense.iter().fold(0.0f64, |m, x| m.max(x.abs()));
         let gap = |a: &[f64], b: &[f64]| a.iter().zip(b).fold(0.0f64, |m, (x, y)| m.max((x - y).abs())) / largest;
         assert!(gap(&twin, &dense) <= 1e-10, "{}: the twin and the host's dense inverse: {:.2e}", kind.name(), gap(&twin, &dense));
@@ -1071,7 +1097,7 @@ fn newton_invert_kernel_matches_its_cpu_twin_and_the_dense_inverse() {
         let fits = |m: &NewtonMember<f64>| !gpu.adapter.software() || bifirst::gpu::world::invert_loops(m.free_count as usize) <= bifirst::gpu::uzawa_sweep::SOFTWARE_LOOP_BUDGET;
         let jobs: Vec<Inversion> = inversions.iter().copied().filter(|j| fits(&newton[j.member as usize])).collect();
         assert!(!jobs.is_empty(), "{}: a member within every adapter's loops", kind.name());
-        let got = bifirst::gpu::world::run_newton_invert(&gpu, &newton, slots, &effective, &patterns, &jobs).expect("the inversion kernel runs");
+        let got = bifirst::gpu::world::run_newton_invert(&gpu, &newton, slots, &effective, (&stiffness, &members), &patterns, &jobs).expect("the inversion kernel runs");
         for job in &jobs {
             let row = newton[job.member as usize];
             let span = row.inverse_start as usize..row.inverse_start as usize + packed_len(row.free_count as usize);

@@ -549,7 +549,8 @@ fn pressed_grains_in_contact_begin_and_commit_their_steps_on_the_device() {
     // at the step's end (56 bytes a dof up a step, and the trial velocity's base, 8 more):
     // 400 grains pressed by the wall with every round and the sweeps on the device sent 10 934
     // bytes a grain up over steps 6 to 30, 5 820 once such a grain begins and commits on the
-    // device as a grain in flight does. The same Newton iterations and energies as the CPU's.
+    // device as a grain in flight does, 5 096 once a grain that refactorises from the stiffness
+    // values the device holds sends `K̄`'s diagonal only. The CPU's energies.
     let test = "pressed_grains_in_contact_begin_and_commit_their_steps_on_the_device";
     if !gpu_available(test) {
         return;
@@ -564,7 +565,7 @@ fn pressed_grains_in_contact_begin_and_commit_their_steps_on_the_device() {
     eprintln!("{up:.0} bytes a grain up over steps 6-30; energies differ by {:.2e}", energy_difference(&cpu, &device));
     assert!(device.series("/contact", "active").iter().any(|&a| a > 2.0), "the grains touch");
     assert!(energy_difference(&cpu, &device) <= 1e-9);
-    assert!(up <= 8000.0, "{up:.0} bytes a grain up over steps 6-30");
+    assert!(up <= 5500.0, "{up:.0} bytes a grain up over steps 6-30");
 }
 
 #[test]

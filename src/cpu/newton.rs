@@ -42,17 +42,27 @@ fn inverse_times(inverse: &[Real], row: &NewtonMember<Real>, f: usize, rhs: &[Re
 }
 
 /// `newton_invert` for one listed member: its `K̄⁻¹` (lower triangle, [`packed`]) into its slot
-/// of `inverse`, from its `K̄` values in `effective` and its pattern in `patterns`, by the
-/// shader's steps in the shader's order of every sum.
-pub fn newton_invert(inverse: &mut [Real], newton: &[NewtonMember<Real>], effective: &[Real], patterns: &[u32], job: &Inversion) {
+/// of `inverse`, from its `K̄` values in `effective` (its diagonal only if `diagonal_only`, the
+/// other entries from the member's stiffness `values`, where `members` places them) and its
+/// pattern in `patterns`, by the shader's steps in the shader's order of every sum.
+pub fn newton_invert(inverse: &mut [Real], newton: &[NewtonMember<Real>], effective: &[Real], (values, members): (&[Real], &[MemberRange]), patterns: &[u32], job: &Inversion) {
     let row = newton[job.member as usize];
     let n = row.free_count as usize;
     let slot = &mut inverse[row.inverse_start as usize..][..packed_len(n)];
     let (starts, rows) = (&patterns[job.pattern_start as usize..][..n + 1], &patterns[job.pattern_start as usize + n + 1..]);
+    let own = members[job.member as usize].nonzero_start as usize;
     slot.fill(0.0);
     for j in 0..n {
         for k in starts[j] as usize..starts[j + 1] as usize {
-            slot[packed(rows[k] as usize, j)] = effective[job.values_start as usize + k];
+            let i = rows[k] as usize;
+            let value = if job.diagonal_only == 0 {
+                effective[job.values_start as usize + k]
+            } else if i == j {
+                effective[job.values_start as usize + j]
+            } else {
+                values[own + k]
+            };
+            slot[packed(i, j)] = value;
         }
     }
     for k in 0..n {

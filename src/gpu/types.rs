@@ -310,7 +310,9 @@ pub struct Inversion {
     pub member: u32,
     pub values_start: u32,
     pub pattern_start: u32,
-    pub pad: u32,
+    /// 1: `effective` holds the diagonal only, one value per free dof; the entries off it are
+    /// the member's stiffness values (`ξ K`) the device holds.
+    pub diagonal_only: u32,
 }
 
 /// A member's `failure` entry (its lowest inverted element, its lowest non-finite one) when

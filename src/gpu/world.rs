@@ -190,6 +190,11 @@ struct Batch {
     /// their total entries.
     inverse_slot: Vec<Option<u32>>,
     inverse_entries: usize,
+    /// Per member, the fingerprint of the stiffness values off the diagonal that `values` holds
+    /// and the host last read back (`newton::off_diagonal_print`); `None` while the device
+    /// computes others or the host has not read them. A `K̄` made from them goes up by its
+    /// diagonal only.
+    handed: Vec<Option<u64>>,
     /// Made by the first device Newton call that needs them.
     newton: Option<newton::NewtonBuffers>,
     forces: Pass,
@@ -661,7 +666,23 @@ impl GpuWorld {
         let landing = self.record_evaluation(list, &mut encoder, &mut readback)?;
         let encoder = encoder.expect("made by the evaluation");
         let precision = self.gpu.precision;
-        self.read_back(encoder, &readback, "element_force_tangent", times, t0, |bytes| unpack_evaluation(precision, list, &landing, bytes))
+        self.read_back(encoder, &readback, "element_force_tangent", times, t0, |bytes| unpack_evaluation(precision, list, &landing, bytes))?;
+        self.note_handed_evaluations(list);
+        Ok(())
+    }
+
+    /// The stiffness values an evaluation pass read back, as the device holds them.
+    fn note_handed_evaluations(&mut self, list: &[Evaluation]) {
+        for e in list.iter().filter(|e| e.tangent && e.failure.is_none() && !e.values.is_empty()) {
+            self.note_handed(e.body, e.values);
+        }
+    }
+
+    /// Body `body`'s stiffness values `ξ K` as the device holds them and the host read them.
+    fn note_handed(&mut self, body: usize, values: &[Real]) {
+        let (b, m) = self.place[body];
+        let b = &mut self.batches[b];
+        b.handed[m] = Some(newton::off_diagonal_print(values, &b.patterns, b.pattern_start[m], b.free_range[m].1 as usize));
     }
 
     /// Uploads the displacements and active lists of an evaluation pass and records its
@@ -683,6 +704,11 @@ impl GpuWorld {
                 mine.iter().for_each(|&(_, m)| n.resident.touched(m));
             }
             let active: Vec<Active> = mine.iter().map(|&(i, m)| Active { member: m as u32, mode: if list[i].tangent { MODE_TANGENT } else { MODE_FORCES } }).collect();
+            for &(i, m) in &mine {
+                if list[i].tangent {
+                    self.batches[batch].handed[m] = None;
+                }
+            }
             let members: Vec<usize> = mine.iter().map(|&(_, m)| m).collect();
             let b = &self.batches[batch];
             let (active_buffer, failure_buffer) = (b.active.clone(), b.failure.clone());
@@ -763,6 +789,9 @@ impl GpuWorld {
             }
         }
         let mut encoder = self.encoder("replay");
+        for b in &mut self.batches {
+            b.handed.fill(None);
+        }
         for b in &self.batches {
             let all = b.members.len();
             let most = |f: fn(&MemberRange) -> u32| b.members.iter().map(|m| f(m) as usize).max().unwrap_or(0);
@@ -1124,6 +1153,7 @@ impl Batch {
             member_buffer,
             free_dofs,
             free_range,
+            handed: vec![None; inverse_slot.len()],
             inverse_slot,
             inverse_entries,
             newton: None,

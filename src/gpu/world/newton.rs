@@ -16,7 +16,7 @@ use super::contact::{ContactLayout, ContactPasses, ContactPipelines, GroupContac
 use super::{buffer, to_device, Batch, Evaluation, GpuWorld, Pass, ReadBack, Source, WORKGROUP};
 use crate::contact::uzawa::Problem;
 use crate::gpu::types::{
-    packed_len, summary_len, Active, Coefficients, ContactState, DofOut, DofStep, Inversion, NewtonMember, NewtonState, StepSummary, StepTally, MODE_FORCES, MODE_TANGENT, NEWTON_CONVERGED, NEWTON_FAILED, NEWTON_HOST, NEWTON_ITERATING,
+    packed_len, summary_len, Active, Coefficients, ContactState, DofOut, DofStep, Inversion, MemberRange, NewtonMember, NewtonState, StepSummary, StepTally, MODE_FORCES, MODE_TANGENT, NEWTON_CONVERGED, NEWTON_FAILED, NEWTON_HOST, NEWTON_ITERATING,
     NEWTON_MAX_FREE, NO_FAILURE, TALLY_LEN, TALLY_ROW,
 };
 use crate::gpu::uzawa_sweep::UzawaSweeps;
@@ -147,10 +147,35 @@ type ContactTarget<'a> = (usize, &'a [(usize, usize)], usize, usize);
 /// A factorisation's `K̄⁻¹` for a device that does not hold it yet.
 pub enum Inverse {
     /// `K̄` itself, the values factorised in the body's stiffness pattern: the device makes
-    /// `K̄⁻¹` (`newton_invert`), and the bytes that go up are the non-zeros.
+    /// `K̄⁻¹` (`newton_invert`), and the bytes that go up are the non-zeros, or the diagonal
+    /// alone where the others are the stiffness values the device holds and the host read back
+    /// (`Batch::handed`).
     Effective(Vec<Real>),
     /// `K̄⁻¹` made on the host, its lower triangle row by row (`gpu::types::packed`).
     Dense(Vec<Real>),
+}
+
+/// A fingerprint of a member's stiffness values off the diagonal (its pattern at
+/// `pattern_start` of `patterns`, `n` free dofs): the bits of each in order, mixed (FNV-1a over
+/// the words), so that two sets of values match only if they are the same, bit for bit, but
+/// for a collision once in 2⁶⁴.
+pub(super) fn off_diagonal_print(values: &[Real], patterns: &[u32], pattern_start: u32, n: usize) -> u64 {
+    let (starts, rows) = (&patterns[pattern_start as usize..][..n + 1], &patterns[pattern_start as usize + n + 1..]);
+    let mut print: u64 = 0xcbf2_9ce4_8422_2325;
+    for j in 0..n {
+        for k in starts[j] as usize..starts[j + 1] as usize {
+            if rows[k] as usize != j {
+                print = (print ^ values[k].to_bits()).wrapping_mul(0x0000_0100_0000_01b3);
+            }
+        }
+    }
+    print
+}
+
+/// A member's values on the diagonal, one per free dof, from its values in its pattern.
+fn diagonal_of(values: &[Real], patterns: &[u32], pattern_start: u32, n: usize) -> Vec<Real> {
+    let (starts, rows) = (&patterns[pattern_start as usize..][..n + 1], &patterns[pattern_start as usize + n + 1..]);
+    (0..n).map(|j| (starts[j] as usize..starts[j + 1] as usize).find(|&k| rows[k] as usize == j).map_or(0.0, |k| values[k])).collect()
 }
 
 /// The most loop iterations an invocation of `newton_invert` runs for a member of `n` free dofs
@@ -188,7 +213,9 @@ struct NewInverses {
 impl NewInverses {
     /// Member `m`'s (its pattern at `pattern_start`; `sizes`: its triangle's and its pattern's
     /// reals), its slot at byte `offset`.
-    fn add(&mut self, inverse: Inverse, [triangle, nonzeros]: [usize; 2], offset: u64, (m, pattern_start): (usize, u32)) {
+    /// `diagonal`: `K̄`'s diagonal, where the device holds its other entries (the stiffness
+    /// values the host read back): only those go up.
+    fn add(&mut self, inverse: Inverse, [triangle, nonzeros]: [usize; 2], offset: u64, (m, pattern_start): (usize, u32), diagonal: Option<Vec<Real>>) {
         match inverse {
             Inverse::Dense(inverse) => {
                 assert_eq!(inverse.len(), triangle, "the lower triangle of K̄⁻¹ of the member's free dofs");
@@ -203,18 +230,19 @@ impl NewInverses {
             }
             Inverse::Effective(values) => {
                 assert_eq!(values.len(), nonzeros, "K̄ in the member's pattern");
-                self.inversions.push(Inversion { member: m as u32, values_start: self.effective.len() as u32, pattern_start, pad: 0 });
-                self.effective.extend_from_slice(&values);
+                let diagonal_only = diagonal.is_some() as u32;
+                self.inversions.push(Inversion { member: m as u32, values_start: self.effective.len() as u32, pattern_start, diagonal_only });
+                self.effective.extend_from_slice(diagonal.as_deref().unwrap_or(&values));
             }
         }
     }
 
-    /// The `newton_invert` pass of the inversions, and the buffers of `K̄` and of the jobs it
-    /// binds (for the uploads).
-    fn invert_pass(&self, gpu: &Gpu, pipeline: ComputePipeline, n: &NewtonBuffers) -> (Pass, Buffer, Buffer) {
+    /// The `newton_invert` pass of the inversions (with the batch's stiffness values and
+    /// members), and the buffers of `K̄` and of the jobs it binds (for the uploads).
+    fn invert_pass(&self, gpu: &Gpu, pipeline: ComputePipeline, n: &NewtonBuffers, (stiffness, members): (&Buffer, &Buffer)) -> (Pass, Buffer, Buffer) {
         let storage = BufferUsages::STORAGE | BufferUsages::COPY_DST;
         let (values, jobs) = (buffer(gpu, "effective stiffness", std::mem::size_of_val(&self.effective[..]), storage), buffer(gpu, "inversions", std::mem::size_of_val(&self.inversions[..]), storage));
-        let pass = Pass::bound(gpu, pipeline, ("newton_invert", "main"), None, &[("inverse", &n.inverse), ("newton", &n.newton), ("effective", &values), ("patterns", &n.patterns), ("inversions", &jobs)]);
+        let pass = Pass::bound(gpu, pipeline, ("newton_invert", "main"), None, &[("inverse", &n.inverse), ("newton", &n.newton), ("effective", &values), ("patterns", &n.patterns), ("inversions", &jobs), ("values", stiffness), ("members", members)]);
         (pass, values, jobs)
     }
 }
@@ -665,6 +693,12 @@ impl GpuWorld {
                     unpack_contact(precision, problems, contacts, at, bytes);
                 }
             })?;
+            if evaluated.is_some() {
+                self.note_handed_evaluations(list);
+            }
+            for call in calls.iter().filter(|c| c.tangent.is_some()) {
+                self.note_handed(call.body, call.tangent.as_deref().expect("filtered"));
+            }
             first = false;
             if !iterating || interrupt.is_some_and(|f| f.load(Ordering::SeqCst)) {
                 break;
@@ -1049,7 +1083,13 @@ impl GpuWorld {
             let slot = b.inverse_slot[m].expect("a capable body has an inverse slot");
             let (free_start, free_count) = b.free_range[m];
             if let Some(inverse) = call.inverse.take() {
-                new.add(inverse, [packed_len(free_count as usize), b.members[m].nonzeros as usize], slot as u64 * real, (m, b.pattern_start[m]));
+                // `K̄ = ξ K + c1 M` differs from the stiffness values the device holds on the
+                // diagonal only: where those are the ones the host read back, the rest stays.
+                let diagonal = match (&inverse, b.handed[m]) {
+                    (Inverse::Effective(values), Some(print)) if off_diagonal_print(values, &b.patterns, b.pattern_start[m], free_count as usize) == print => Some(diagonal_of(values, &b.patterns, b.pattern_start[m], free_count as usize)),
+                    _ => None,
+                };
+                new.add(inverse, [packed_len(free_count as usize), b.members[m].nonzeros as usize], slot as u64 * real, (m, b.pattern_start[m]), diagonal);
                 n.inverse_version[m] = Some(call.factor);
             }
             let member = NewtonMember { inverse_start: slot, free_start, free_count, ..call.member };
@@ -1109,7 +1149,7 @@ impl GpuWorld {
         let (inverse, residuals) = (n.inverse.clone(), b.dof_out.clone());
         if !new.inversions.is_empty() {
             let pipeline = self.newton_pipelines.as_ref().expect("made with the batch's buffers").invert.clone();
-            let (pass, values, jobs) = new.invert_pass(&self.gpu, pipeline, n);
+            let (pass, values, jobs) = new.invert_pass(&self.gpu, pipeline, n, (&b.values, &b.member_buffer));
             n.invert = Some((pass, new.inversions.len() as u32));
             uploads.push((values, 0, bytemuck::cast_slice(&new.effective).to_vec()));
             uploads.push((jobs, 0, bytemuck::cast_slice(&new.inversions).to_vec()));
@@ -1141,7 +1181,7 @@ impl GpuWorld {
 
 /// `newton_invert` alone on an f64 device: the `inverse` buffer (`inverse_len` reals, zero
 /// first) after the listed inversions, for the parity tests with the CPU twin.
-pub fn run_newton_invert(gpu: &Gpu, newton: &[NewtonMember<Real>], inverse_len: usize, effective: &[Real], patterns: &[u32], inversions: &[Inversion]) -> Result<Vec<Real>, GpuError> {
+pub fn run_newton_invert(gpu: &Gpu, newton: &[NewtonMember<Real>], inverse_len: usize, effective: &[Real], (values, members): (&[Real], &[MemberRange]), patterns: &[u32], inversions: &[Inversion]) -> Result<Vec<Real>, GpuError> {
     assert_eq!(gpu.precision, Precision::F64, "device Newton iterations need f64 kernels");
     let storage = BufferUsages::STORAGE;
     let init = |label: &str, bytes: &[u8], usage: BufferUsages| super::buffer_init(gpu, label, bytes, usage);
@@ -1151,6 +1191,8 @@ pub fn run_newton_invert(gpu: &Gpu, newton: &[NewtonMember<Real>], inverse_len: 
         ("effective", init("effective", bytemuck::cast_slice(effective), storage)),
         ("patterns", init("patterns", bytemuck::cast_slice(patterns), storage)),
         ("inversions", init("inversions", bytemuck::cast_slice(inversions), storage)),
+        ("values", init("values", bytemuck::cast_slice(values), storage)),
+        ("members", init("members", bytemuck::cast_slice(members), storage)),
     ];
     let mut bindings: Vec<(&str, &Buffer)> = buffers.iter().map(|(name, b)| (*name, b)).collect();
     bindings.push(("inverse", &inverse));
