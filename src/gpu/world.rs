@@ -489,46 +489,31 @@ impl GpuWorld {
         self.upload_pieces(buffer, offset, &[bytes]);
     }
 
-    /// An upload that must land after the step's start waiting for the next submission: the
-    /// bytes go into a staging buffer now and are copied in that submission's encoder, after
-    /// the start's passes (a write would land before them).
-    fn defer_upload(&mut self, buffer: &Buffer, offset: u64, pieces: &[&[u8]], total: usize) {
-        let staging = self.gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some("deferred upload"), size: total as u64, usage: BufferUsages::COPY_SRC, mapped_at_creation: true });
-        {
-            let mut view = staging.get_mapped_range_mut(..).expect("a staging buffer mapped at creation");
-            let mut starts = vec![0];
-            for piece in pieces {
-                starts.push(starts.last().expect("a start") + piece.len());
-            }
-            copy_joined(&mut view.slice(..), 0, pieces, &starts);
-        }
-        staging.unmap();
-        self.deferred.as_mut().expect("deferring").push((staging, buffer.clone(), offset, total as u64));
-    }
-
     /// Uploads `pieces` one after the other from `offset`, in one write: each piece is copied
     /// once, into the staging memory (a write costs a staging allocation, and building one
     /// vector of the pieces first costs another copy), in stretches of at most
     /// [`COPY_STRETCH`] bytes on every thread (after a step that refactorised 100 000 grains,
-    /// 3.5 GB of inverses).
+    /// 3.5 GB of inverses). While uploads are deferred ([`GpuWorld::settle_prologue`]) the
+    /// staging memory is a buffer of its own, copied in the next submission's encoder after the
+    /// step's start (a write would land before it).
     fn upload_pieces(&mut self, buffer: &Buffer, offset: u64, pieces: &[&[u8]]) {
         let total: usize = pieces.iter().map(|p| p.len()).sum();
         let Some(size) = wgpu::BufferSize::new(total as u64) else { return };
         self.traffic.up += total as u64;
-        if self.deferred.is_some() {
-            return self.defer_upload(buffer, offset, pieces, total);
-        }
-        let mut view = self.gpu.queue.write_buffer_with(buffer, offset, size).expect("a write inside the buffer");
         let mut starts = Vec::with_capacity(pieces.len() + 1);
         starts.push(0);
         for piece in pieces {
             starts.push(starts.last().expect("a start") + piece.len());
         }
-        let (stretches, mut tail) = view.slice(..).into_chunks::<COPY_STRETCH>();
-        let stretches: Vec<wgpu::WriteOnly<[u8; COPY_STRETCH]>> = stretches.into_iter().collect();
-        let whole = stretches.len() * COPY_STRETCH;
-        stretches.into_par_iter().enumerate().for_each(|(k, stretch)| copy_joined(&mut stretch.into(), k * COPY_STRETCH, pieces, &starts));
-        copy_joined(&mut tail, whole, pieces, &starts);
+        if let Some(deferred) = &mut self.deferred {
+            let staging = self.gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some("deferred upload"), size: total as u64, usage: BufferUsages::COPY_SRC, mapped_at_creation: true });
+            copy_pieces(staging.get_mapped_range_mut(..).expect("a staging buffer mapped at creation").slice(..), pieces, &starts);
+            staging.unmap();
+            deferred.push((staging, buffer.clone(), offset, total as u64));
+            return;
+        }
+        let mut view = self.gpu.queue.write_buffer_with(buffer, offset, size).expect("a write inside the buffer");
+        copy_pieces(view.slice(..), pieces, &starts);
     }
 
     /// Uploads reals from `offset` (in reals) in the device's precision: straight from them in
@@ -939,6 +924,16 @@ fn failure_of(flags: [u32; 2]) -> Option<ElementFailure> {
     }
 }
 
+/// Copies `pieces` one after the other into `target` (`starts`: where each begins, then their
+/// total), in stretches of at most [`COPY_STRETCH`] bytes on every thread.
+fn copy_pieces(target: wgpu::WriteOnly<[u8]>, pieces: &[&[u8]], starts: &[usize]) {
+    let (stretches, mut tail) = target.into_chunks::<COPY_STRETCH>();
+    let stretches: Vec<wgpu::WriteOnly<[u8; COPY_STRETCH]>> = stretches.into_iter().collect();
+    let whole = stretches.len() * COPY_STRETCH;
+    stretches.into_par_iter().enumerate().for_each(|(k, stretch)| copy_joined(&mut stretch.into(), k * COPY_STRETCH, pieces, starts));
+    copy_joined(&mut tail, whole, pieces, starts);
+}
+
 /// Fills `target` with the bytes from `from` on of the pieces laid end to end (`starts`: where
 /// each begins, then their total).
 fn copy_joined(target: &mut wgpu::WriteOnly<[u8]>, from: usize, pieces: &[&[u8]], starts: &[usize]) {
@@ -1153,7 +1148,7 @@ impl Batch {
             member_buffer,
             free_dofs,
             free_range,
-            handed: vec![None; inverse_slot.len()],
+            handed: vec![None; members.len()],
             inverse_slot,
             inverse_entries,
             newton: None,
