@@ -160,7 +160,7 @@ pub enum Inverse {
 /// the words), so that two sets of values match only if they are the same, bit for bit, but
 /// for a collision once in 2⁶⁴.
 pub(super) fn off_diagonal_print(values: &[Real], patterns: &[u32], pattern_start: u32, n: usize) -> u64 {
-    let (starts, rows) = (&patterns[pattern_start as usize..][..n + 1], &patterns[pattern_start as usize + n + 1..]);
+    let (starts, rows) = columns(patterns, pattern_start, n);
     let mut print: u64 = 0xcbf2_9ce4_8422_2325;
     for j in 0..n {
         for k in starts[j] as usize..starts[j + 1] as usize {
@@ -172,9 +172,16 @@ pub(super) fn off_diagonal_print(values: &[Real], patterns: &[u32], pattern_star
     print
 }
 
+/// A member's pattern of `n` free dofs at `pattern_start` of `patterns`: its column starts and
+/// row indices.
+fn columns(patterns: &[u32], pattern_start: u32, n: usize) -> (&[u32], &[u32]) {
+    let at = pattern_start as usize;
+    (&patterns[at..][..n + 1], &patterns[at + n + 1..])
+}
+
 /// A member's values on the diagonal, one per free dof, from its values in its pattern.
 fn diagonal_of(values: &[Real], patterns: &[u32], pattern_start: u32, n: usize) -> Vec<Real> {
-    let (starts, rows) = (&patterns[pattern_start as usize..][..n + 1], &patterns[pattern_start as usize + n + 1..]);
+    let (starts, rows) = columns(patterns, pattern_start, n);
     (0..n).map(|j| (starts[j] as usize..starts[j + 1] as usize).find(|&k| rows[k] as usize == j).map_or(0.0, |k| values[k])).collect()
 }
 
@@ -1027,8 +1034,8 @@ impl GpuWorld {
         // f64 only: the host's reals are the device's bytes.
         debug_assert_eq!(precision, Precision::F64);
         // A member whose step began on the device has the step's there already.
-        let based = &n.resident.based;
-        let mut bases: Vec<(usize, &[u8])> = contacts.iter().flat_map(|g| g.calls.iter().zip(&g.u_base).map(|(&c, base)| (self.place[calls[c].body].1, bytemuck::cast_slice(base)))).filter(|&(m, _)| !based[m]).collect();
+        let resident = &n.resident;
+        let mut bases: Vec<(usize, &[u8])> = contacts.iter().flat_map(|g| g.calls.iter().zip(&g.u_base).map(|(&c, base)| (self.place[calls[c].body].1, bytemuck::cast_slice(base)))).filter(|&(m, _)| !resident.began_on_device(m)).collect();
         bases.sort_unstable_by_key(|&(m, _)| m);
         let u_base = n.u_base.clone();
         self.upload_member_runs(batch, &u_base, real, &bases);

@@ -118,9 +118,6 @@ pub(super) struct Resident {
     /// The device's `u` is its own predictor (`step_begin`), which the host's mirror does not
     /// hold: the step's first Newton call starts from it instead of uploading the host's.
     pub(super) predicted: Vec<bool>,
-    /// The device's `u_base` is the step's (`step_begin` computed it from the committed state):
-    /// a Newton call in contact need not send the host's.
-    pub(super) based: Vec<bool>,
     /// The members whose kept step `step_commit` commits before the next `step_begin`, and
     /// that step's motion.
     pending: Option<(Vec<usize>, StepMotion<Real>)>,
@@ -213,7 +210,6 @@ impl Resident {
             valid: vec![false; members],
             current: vec![false; members],
             predicted: vec![false; members],
-            based: vec![false; members],
             pending: None,
             lists: [Vec::new(), Vec::new()],
             involved: vec![false; members],
@@ -235,6 +231,13 @@ impl Resident {
     /// The motion of the step `step_begin` begins (the step the Newton calls solve).
     pub(super) fn begin_motion(&self) -> &Buffer {
         &self.motions[0]
+    }
+
+    /// Whether the member's step began on the device (`step_begin`, which also computed its
+    /// trial velocity's base there): from a step's start to its commit, the device's committed
+    /// state is the host's for those members only.
+    pub(super) fn began_on_device(&self, m: usize) -> bool {
+        self.valid[m]
     }
 
     /// A member's `u` or `dof_out` changed on the device by other means than a Newton call the
@@ -283,7 +286,6 @@ impl GpuWorld {
             let r = &mut n.resident;
             r.current.fill(false);
             r.predicted.fill(false);
-            r.based.fill(false);
             for (s, &m) in device.iter().zip(&members) {
                 let dofs = super::dof_span(&b.members, &[m]);
                 b.step_host[4 * dofs.start..4 * dofs.end].fill(Real::NAN);
@@ -291,7 +293,6 @@ impl GpuWorld {
                 b.u_host[dofs.clone()].fill(Real::NAN);
                 n.start_host[dofs].copy_from_slice(s.u);
                 r.predicted[m] = true;
-                r.based[m] = true;
             }
             // A member that steps with the host's inputs drops its device state (its step's
             // uploads would come before a commit waiting for it): it is set up again from the
@@ -532,7 +533,6 @@ impl GpuWorld {
             r.lists = [Vec::new(), Vec::new()];
             r.involved.fill(false);
             r.predicted.fill(false);
-            r.based.fill(false);
         }
     }
 }
