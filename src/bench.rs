@@ -593,7 +593,7 @@ pub struct ContactProblem {
 impl ContactProblem {
     /// The problem starting from the reactions `r` (a copy of `self.r`) with this stopping rule.
     pub fn with<'a>(&'a self, r: &'a mut [[Real; 3]], tolerance: Real, floor: Real, max_iterations: usize) -> Problem<'a> {
-        Problem { w: &self.w, colours: &self.colours, local: &self.local, nodal: &self.nodal, r, tolerance, floor, max_iterations, acceleration: Acceleration::None, fallback: Fallback::None, dim: 3 }
+        Problem { w: &self.w, colours: &self.colours, local: &self.local, nodal: &self.nodal, r, tolerance, floor, max_iterations, acceleration: Acceleration::None, fallback: Fallback::None, dim: 3, pairs: &[] }
     }
 }
 

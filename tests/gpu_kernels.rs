@@ -1453,14 +1453,14 @@ fn newton_contact_kernels_match_their_cpu_twins() {
             let mut staged = [UzawaProblem { point_start: 0, point_end: n_points as u32, node_start: 0, node_end: 2 * n_points as u32, max_iterations: max_sweeps, colour_first: 0, colours: colours.count() as u32, pad: 0, tolerance, floor }];
             let mut r0 = vec![[0.0; 3]; n_points];
             let problem_of = |local: &[Local], r: &mut Vec<[f64; 3]>| -> NodeGather {
-                let p = Problem { w: &w, colours: &colours, local, nodal: &nodal, r, tolerance, floor, max_iterations: max_sweeps as usize, acceleration: Acceleration::None, fallback: Fallback::None, dim: 3 };
+                let p = Problem { w: &w, colours: &colours, local, nodal: &nodal, r, tolerance, floor, max_iterations: max_sweeps as usize, acceleration: Acceleration::None, fallback: Fallback::None, dim: 3, pairs: &[] };
                 NodeGather::of(std::slice::from_ref(&p))
             };
             let gather = problem_of(&local, &mut r0);
             let group = |calls: Vec<usize>| GroupContact { calls, slot_nodes: &slot_nodes, obstacle: vec![[0.0; 3]; n_points], u_base: bases.clone(), tolerance: contact_tolerance, outcome: ContactState::default() };
             let layout = {
                 let mut r = vec![[0.0; 3]; n_points];
-                let p = Problem { w: &w, colours: &colours, local: &local, nodal: &nodal, r: &mut r, tolerance, floor, max_iterations: max_sweeps as usize, acceleration: Acceleration::None, fallback: Fallback::None, dim: 3 };
+                let p = Problem { w: &w, colours: &colours, local: &local, nodal: &nodal, r: &mut r, tolerance, floor, max_iterations: max_sweeps as usize, acceleration: Acceleration::None, fallback: Fallback::None, dim: 3, pairs: &[] };
                 ContactLayout::of(&[group(vec![0, 1])], std::slice::from_ref(&p), &gather, &|c| c as u32, &|m| members[m as usize].dof_start, dim, theta_dt)
             };
             let mut locals: Vec<UzawaLocal<f64>> = local.iter().map(|l| UzawaLocal { v_free: l.v_free, shift: l.shift, mu: l.mu, rho: l.rho, floor, settle: SETTLE * tolerance }).collect();
@@ -1488,7 +1488,7 @@ fn newton_contact_kernels_match_their_cpu_twins() {
                     l.v_free = d.v_free;
                 }
                 let mut scratch = vec![[0.0; 3]; n_points];
-                let p = Problem { w: &w, colours: &colours, local: &local, nodal: &nodal, r: &mut scratch, tolerance, floor, max_iterations: max_sweeps as usize, acceleration: Acceleration::None, fallback: Fallback::None, dim: 3 };
+                let p = Problem { w: &w, colours: &colours, local: &local, nodal: &nodal, r: &mut scratch, tolerance, floor, max_iterations: max_sweeps as usize, acceleration: Acceleration::None, fallback: Fallback::None, dim: 3, pairs: &[] };
                 cpu::uzawa_solve(&p, &staged, &mut ustates, &gather, &mut r, &mut dr, max_sweeps, 0);
                 cpu::newton_contact_forces(&state, &mut contact, &layout, &staged, &gather, &ustates, &r, &mut cstates, 0);
                 for m in 0..2 {
@@ -1543,7 +1543,8 @@ fn newton_contact_kernels_match_their_cpu_twins() {
                 l.v_free = [0.0; 3];
             }
             let mut device_r = vec![[0.0; 3]; n_points];
-            let mut problems = [Problem { w: &w, colours: &colours, local: &local, nodal: &nodal, r: &mut device_r, tolerance, floor, max_iterations: max_sweeps as usize, acceleration: Acceleration::None, fallback: Fallback::None, dim: 3 }];
+            let mut problems =
+                [Problem { w: &w, colours: &colours, local: &local, nodal: &nodal, r: &mut device_r, tolerance, floor, max_iterations: max_sweeps as usize, acceleration: Acceleration::None, fallback: Fallback::None, dim: 3, pairs: &[] }];
             let mut contacts = [group(vec![0, 1])];
             world.newton(&mut calls, &mut problems, &mut contacts, &mut [], coefficients, (dim, theta_dt), None, &mut Default::default()).expect("device Newton with contact");
             let got: Vec<NewtonState<f64>> = calls.iter().map(|c| c.outcome).collect();

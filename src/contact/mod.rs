@@ -13,6 +13,7 @@ pub mod detect;
 pub mod geometry;
 pub mod grid;
 pub mod law;
+pub mod mirrored;
 pub mod obstacle;
 pub mod overlap;
 pub mod pairs;

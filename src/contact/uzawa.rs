@@ -15,6 +15,7 @@
 use super::anderson::Anderson;
 use super::geometry::norm;
 use super::law::uzawa_step;
+use super::mirrored::solve_mirrored_pair;
 use super::semismooth::semismooth_solve;
 use crate::precision::Real;
 use rayon::prelude::*;
@@ -229,6 +230,23 @@ pub fn uzawa_sweep(w: &Delassus, local: &[Local], points: &[u32], r: &mut [[Real
     }
 }
 
+/// Each mirrored pair solved as one against the others' reactions, in turn (a pair without a
+/// regime that satisfies the law is visited point by point, as the sweeps do); `dr` takes its
+/// points' changes.
+fn solve_pairs(w: &Delassus, local: &[Local], pairs: &[[u32; 2]], r: &mut [[Real; 3]], dr: &mut [[Real; 3]], settle: Real, floor: Real) {
+    for &pair in pairs {
+        let before = pair.map(|i| r[i as usize]);
+        if !solve_mirrored_pair(w, local, pair, r, floor) {
+            for i in pair.map(|i| i as usize) {
+                r[i] = gauss_seidel_point(w, &local[i], i, r, settle, floor);
+            }
+        }
+        for (k, i) in pair.map(|i| i as usize).into_iter().enumerate() {
+            dr[i] = [r[i][0] - before[k][0], r[i][1] - before[k][1], r[i][2] - before[k][2]];
+        }
+    }
+}
+
 /// Per-point data of the local problem.
 #[derive(Debug, Clone, Copy)]
 pub struct Local {
@@ -380,20 +398,30 @@ pub struct Problem<'a> {
     pub fallback: Fallback,
     /// The scene's dimension (the components of a reaction in use).
     pub dim: usize,
+    /// Mirrored two-pass pairs: in 2D each is solved as one in place of its points' visits,
+    /// after the colours of every Gauss-Seidel sweep ([`super::mirrored`]; the device's sweeps
+    /// visit them point by point).
+    pub pairs: &'a [[u32; 2]],
 }
 
 /// Uzawa iterations from the reactions in `p.r` until the estimated distance to the fixed
 /// point, in nodal forces, is below `tolerance * max(largest nodal force, floor)` ([`Judge`]),
 /// or `max_iterations`, or until `stop` is set (an interrupt: then not converged). Gauss-Seidel
-/// sweeps visit the points by `colours`, with Anderson mixing between them if `p.acceleration`
-/// says so; with `p.fallback` Newton, sweeps that stall hand their iterate to
+/// sweeps visit the points by `colours` and then the mirrored pairs (2D), with Anderson mixing
+/// between them if `p.acceleration` says so; with `p.fallback` Newton, sweeps that stall hand their iterate to
 /// [`semismooth_solve`]. The reactions returned are those of a sweep, or of a Newton solve that
 /// converged.
 pub fn solve(p: &mut Problem, sweep: Sweep, stop: Option<&AtomicBool>) -> Outcome {
-    let Problem { w, colours, local, nodal, ref mut r, tolerance, floor, max_iterations, acceleration, fallback, dim } = *p;
+    let Problem { w, colours, local, nodal, ref mut r, tolerance, floor, max_iterations, acceleration, fallback, dim, pairs } = *p;
     let n = local.len();
     let mut next = vec![[0.0; 3]; n];
     let mut dr = vec![[0.0; 3]; n];
+    // In 2D the paired points are visited with their pair, after the colours.
+    let unpaired = (dim == 2 && !pairs.is_empty()).then(|| {
+        let mut paired = vec![false; n];
+        pairs.iter().flatten().for_each(|&i| paired[i as usize] = true);
+        (0..colours.count()).map(|c| colours.colour(c).iter().copied().filter(|&i| !paired[i as usize]).collect::<Vec<u32>>()).collect::<Vec<_>>()
+    });
     let mut scratch = Vec::new();
     let mut outcome = Outcome::default();
     let mut judge = Judge::new(tolerance, floor);
@@ -427,7 +455,11 @@ pub fn solve(p: &mut Problem, sweep: Sweep, stop: Option<&AtomicBool>) -> Outcom
                     start.extend_from_slice(r);
                 }
                 for c in 0..colours.count() {
-                    uzawa_sweep(w, local, colours.colour(c), r, &mut dr, SETTLE * tolerance, floor);
+                    let points = unpaired.as_ref().map_or(colours.colour(c), |u| &u[c][..]);
+                    uzawa_sweep(w, local, points, r, &mut dr, SETTLE * tolerance, floor);
+                }
+                if unpaired.is_some() {
+                    solve_pairs(w, local, pairs, r, &mut dr, SETTLE * tolerance, floor);
                 }
             }
         }

@@ -7,6 +7,7 @@
 //! local law; a last solve applies the reactions, `Δu = K̄⁻¹(-g + Hᵀ r)`.
 
 use super::body::{Body, StepParams};
+use crate::contact::mirrored::mirrored_pairs;
 use crate::contact::uzawa::{self, Colours, Delassus, Local, NodalMap, Outcome, Problem};
 use crate::contact::{uzawa_step, ContactPoint, Settings, Status, WarmStart};
 use crate::gpu::uzawa_sweep::{self, solve_loops_per_sweep};
@@ -29,6 +30,8 @@ const COLUMN_BATCH: usize = 64;
 /// The contact points of a step with what the Newton iterations need of them.
 pub struct ContactStep {
     pub points: Vec<ContactPoint>,
+    /// The mirrored two-pass pairs among `points`, solved as one ([`crate::contact::mirrored`]).
+    pairs: Vec<[u32; 2]>,
     pub delassus: Delassus,
     /// The order of the Gauss-Seidel sweeps (from the pattern of `delassus`).
     pub colours: Colours,
@@ -156,7 +159,9 @@ impl ContactStep {
         }
         nodal.nodes = slots.len();
         let responses = bodies.iter().map(|_| None).collect();
-        Self { points, delassus, colours, per_body, h, r, local, nodal, slot_nodes, dim, velocity_scale, floor, inner: INNER_TOLERANCE, shares: Vec::new(), free_increment: Vec::new(), responses }
+        // Solved as one in 2D only ([`Problem::pairs`]).
+        let pairs = if dim == 2 { mirrored_pairs(&points) } else { Vec::new() };
+        Self { points, pairs, delassus, colours, per_body, h, r, local, nodal, slot_nodes, dim, velocity_scale, floor, inner: INNER_TOLERANCE, shares: Vec::new(), free_increment: Vec::new(), responses }
     }
 
     /// Builds the Delassus blocks with the bodies' current factorisations, for a device that takes
@@ -319,6 +324,7 @@ impl ContactStep {
             acceleration: settings.acceleration,
             fallback: settings.fallback,
             dim: self.dim,
+            pairs: &self.pairs,
         };
         (problem, &self.slot_nodes)
     }
