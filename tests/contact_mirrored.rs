@@ -60,7 +60,7 @@ impl Mirrored {
     }
 
     fn solve(&self, r: &mut [[f64; 3]], pairs: &[[u32; 2]], max_iterations: usize) -> Outcome {
-        let mut p = Problem { w: &self.w, colours: &self.colours, local: &self.local, nodal: &self.nodal, r, tolerance: 1e-8, floor: 1e-12, max_iterations, acceleration: Acceleration::None, fallback: Fallback::None, dim: 2, pairs };
+        let mut p = Problem { w: &self.w, colours: &self.colours, local: &self.local, nodal: &self.nodal, r, tolerance: 1e-8, floor: 1e-12, max_iterations, acceleration: Acceleration::Anderson, fallback: Fallback::None, dim: 2, pairs };
         solve(&mut p, Sweep::GaussSeidel, None)
     }
 

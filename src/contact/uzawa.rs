@@ -100,10 +100,11 @@ pub enum Sweep {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Deserialize, serde::Serialize)]
 #[serde(rename_all = "snake_case")]
 pub enum Acceleration {
-    /// Anderson mixing of the last sweeps, safeguarded ([`super::anderson`]).
+    /// Anderson mixing of the last sweeps, safeguarded ([`super::anderson`]), and in 2D the
+    /// mirrored two-pass pairs solved as one ([`super::mirrored`]).
     #[default]
     Anderson,
-    /// Plain sweeps.
+    /// Plain sweeps, as the device's.
     None,
 }
 
@@ -398,17 +399,17 @@ pub struct Problem<'a> {
     pub fallback: Fallback,
     /// The scene's dimension (the components of a reaction in use).
     pub dim: usize,
-    /// Mirrored two-pass pairs: in 2D each is solved as one in place of its points' visits,
-    /// after the colours of every Gauss-Seidel sweep ([`super::mirrored`]; the device's sweeps
-    /// visit them point by point).
+    /// Mirrored two-pass pairs: with Anderson acceleration, in 2D, each is solved as one in
+    /// place of its points' visits, after the colours of every Gauss-Seidel sweep
+    /// ([`super::mirrored`]); plain sweeps, as the device's, visit them point by point.
     pub pairs: &'a [[u32; 2]],
 }
 
 /// Uzawa iterations from the reactions in `p.r` until the estimated distance to the fixed
 /// point, in nodal forces, is below `tolerance * max(largest nodal force, floor)` ([`Judge`]),
 /// or `max_iterations`, or until `stop` is set (an interrupt: then not converged). Gauss-Seidel
-/// sweeps visit the points by `colours` and then the mirrored pairs (2D), with Anderson mixing
-/// between them if `p.acceleration` says so; with `p.fallback` Newton, sweeps that stall hand their iterate to
+/// sweeps visit the points by `colours`, with Anderson mixing between them and the mirrored
+/// pairs solved as one (2D) if `p.acceleration` says so; with `p.fallback` Newton, sweeps that stall hand their iterate to
 /// [`semismooth_solve`]. The reactions returned are those of a sweep, or of a Newton solve that
 /// converged.
 pub fn solve(p: &mut Problem, sweep: Sweep, stop: Option<&AtomicBool>) -> Outcome {
@@ -416,8 +417,10 @@ pub fn solve(p: &mut Problem, sweep: Sweep, stop: Option<&AtomicBool>) -> Outcom
     let n = local.len();
     let mut next = vec![[0.0; 3]; n];
     let mut dr = vec![[0.0; 3]; n];
-    // In 2D the paired points are visited with their pair, after the colours.
-    let unpaired = (dim == 2 && !pairs.is_empty()).then(|| {
+    // Accelerated 2D sweeps visit the paired points with their pair, after the colours; plain
+    // sweeps (the device's) one by one.
+    let accelerate = sweep == Sweep::GaussSeidel && acceleration == Acceleration::Anderson;
+    let unpaired = (accelerate && dim == 2 && !pairs.is_empty()).then(|| {
         let mut paired = vec![false; n];
         pairs.iter().flatten().for_each(|&i| paired[i as usize] = true);
         (0..colours.count()).map(|c| colours.colour(c).iter().copied().filter(|&i| !paired[i as usize]).collect::<Vec<u32>>()).collect::<Vec<_>>()
@@ -425,7 +428,6 @@ pub fn solve(p: &mut Problem, sweep: Sweep, stop: Option<&AtomicBool>) -> Outcom
     let mut scratch = Vec::new();
     let mut outcome = Outcome::default();
     let mut judge = Judge::new(tolerance, floor);
-    let accelerate = sweep == Sweep::GaussSeidel && acceleration == Acceleration::Anderson;
     let mut anderson = Anderson::new();
     let mut start = Vec::new();
     let (mut mixed, mut best_change, mut rejections) = (false, Real::INFINITY, 0);
