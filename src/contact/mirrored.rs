@@ -14,8 +14,9 @@
 //! checked by the law's own fixed point (the Uzawa step leaves them where they are). This is a
 //! block of the Gauss-Seidel sweep, the law unchanged.
 
+use super::geometry::{norm, sub};
 use super::law::uzawa_step;
-use super::uzawa::{Delassus, Local};
+use super::uzawa::{add_block_times, Delassus, Local};
 use super::{ContactPoint, Master};
 use crate::precision::Real;
 use std::collections::HashMap;
@@ -87,11 +88,7 @@ pub fn solve_mirrored_pair(w: &Delassus, local: &[Local], [p, q]: [u32; 2], r: &
             match j as usize {
                 j if j == p => a[k][0] = *block,
                 j if j == q => a[k][1] = *block,
-                j => {
-                    for (row, out) in base.iter_mut().enumerate() {
-                        *out += block[3 * row] * r[j][0] + block[3 * row + 1] * r[j][1] + block[3 * row + 2] * r[j][2];
-                    }
-                }
+                j => add_block_times(&mut base, block, &r[j]),
             }
         }
         c[k] = [base[0], base[1]];
@@ -99,9 +96,7 @@ pub fn solve_mirrored_pair(w: &Delassus, local: &[Local], [p, q]: [u32; 2], r: &
     let velocity = |x: &[Real; 4], k: usize| -> [Real; 3] {
         let mut v = [c[k][0], c[k][1], 0.0];
         for (l, block) in a[k].iter().enumerate() {
-            for (row, out) in v.iter_mut().take(2).enumerate() {
-                *out += block[3 * row] * x[2 * l] + block[3 * row + 1] * x[2 * l + 1];
-            }
+            add_block_times(&mut v, block, &[x[2 * l], x[2 * l + 1], 0.0]);
         }
         v
     };
@@ -112,8 +107,7 @@ pub fn solve_mirrored_pair(w: &Delassus, local: &[Local], [p, q]: [u32; 2], r: &
             .map(|(k, &i)| {
                 let ri = [x[2 * k], x[2 * k + 1], 0.0];
                 let stepped = uzawa_step(ri, velocity(x, k), local[i].mu, local[i].rho).0;
-                let moved = ((stepped[0] - ri[0]).powi(2) + (stepped[1] - ri[1]).powi(2)).sqrt();
-                moved / (ri[0] * ri[0] + ri[1] * ri[1]).sqrt().max(floor).max(Real::MIN_POSITIVE)
+                norm(sub(stepped, ri)) / norm(ri).max(floor).max(Real::MIN_POSITIVE)
             })
             .fold(0.0, Real::max)
     };

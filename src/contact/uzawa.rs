@@ -82,7 +82,7 @@ impl Delassus {
 }
 
 /// `out += w r` for a row-major `3 x 3` block.
-fn add_block_times(out: &mut [Real; 3], w: &[Real; 9], r: &[Real; 3]) {
+pub(super) fn add_block_times(out: &mut [Real; 3], w: &[Real; 9], r: &[Real; 3]) {
     for a in 0..3 {
         out[a] += w[3 * a] * r[0] + w[3 * a + 1] * r[1] + w[3 * a + 2] * r[2];
     }
@@ -409,8 +409,8 @@ pub struct Problem<'a> {
 /// point, in nodal forces, is below `tolerance * max(largest nodal force, floor)` ([`Judge`]),
 /// or `max_iterations`, or until `stop` is set (an interrupt: then not converged). Gauss-Seidel
 /// sweeps visit the points by `colours`, with Anderson mixing between them and the mirrored
-/// pairs solved as one (2D) if `p.acceleration` says so; with `p.fallback` Newton, sweeps that stall hand their iterate to
-/// [`semismooth_solve`]. The reactions returned are those of a sweep, or of a Newton solve that
+/// pairs solved as one (2D) if `p.acceleration` says so; with `p.fallback` Newton, sweeps that
+/// stall hand their iterate to [`semismooth_solve`]. The reactions returned are those of a sweep, or of a Newton solve that
 /// converged.
 pub fn solve(p: &mut Problem, sweep: Sweep, stop: Option<&AtomicBool>) -> Outcome {
     let Problem { w, colours, local, nodal, ref mut r, tolerance, floor, max_iterations, acceleration, fallback, dim, pairs } = *p;
