@@ -93,7 +93,7 @@ pub(super) fn newton_rows(options: &BenchOptions, gpus: &[Arc<Gpu>], peaks: &[Pe
                         outcome: NewtonState::default(),
                         strain_energy: None,
                         failure: None,
-                        tangent: None,
+                        tangent_held: false,
                     }
                 })
                 .collect();

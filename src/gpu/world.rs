@@ -190,11 +190,9 @@ struct Batch {
     /// their total entries.
     inverse_slot: Vec<Option<u32>>,
     inverse_entries: usize,
-    /// Per member, the fingerprint of the stiffness values off the diagonal that `values` holds
-    /// and the host last read back (`newton::off_diagonal_print`); `None` while the device
-    /// computes others or the host has not read them. A `K̄` made from them goes up by its
-    /// diagonal only.
-    handed: Vec<Option<u64>>,
+    /// Per member, what the stiffness values that `values` holds are to the host; `None` while
+    /// the device computes others. A `K̄` made from them goes up by its diagonal only.
+    handed: Vec<Option<Held>>,
     /// Made by the first device Newton call that needs them.
     newton: Option<newton::NewtonBuffers>,
     forces: Pass,
@@ -259,6 +257,17 @@ struct Copy {
     /// Byte range in the source buffer, and where it lands.
     source: std::ops::Range<u64>,
     target: u64,
+}
+
+/// A member's stiffness values `ξ K` on the device, as the host knows them (`Batch::handed`).
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Held {
+    /// Those the host read back: the fingerprint of their entries off the diagonal
+    /// (`newton::off_diagonal_print`).
+    Read(u64),
+    /// The tangent at the iterate where a device Newton call handed the member back, which the
+    /// host did not read: it assembles its own there ([`newton::Inverse::AtHandBack`]).
+    HandBack,
 }
 
 #[derive(Clone, Copy, PartialEq, Eq)]
@@ -667,7 +676,7 @@ impl GpuWorld {
     fn note_handed(&mut self, body: usize, values: &[Real]) {
         let (b, m) = self.place[body];
         let b = &mut self.batches[b];
-        b.handed[m] = Some(newton::off_diagonal_print(values, &b.patterns, b.pattern_start[m], b.free_range[m].1 as usize));
+        b.handed[m] = Some(Held::Read(newton::off_diagonal_print(values, &b.patterns, b.pattern_start[m], b.free_range[m].1 as usize)));
     }
 
     /// Uploads the displacements and active lists of an evaluation pass and records its
@@ -837,6 +846,21 @@ impl GpuWorld {
         self.submit(encoder)?;
         self.traffic.down += size;
         Ok(from_device(self.gpu.precision, &self.gpu.read_range("element_force_tangent", &staging, size)?))
+    }
+
+    /// A body's stiffness values `ξ K` as the device holds them (the last tangent pass or a
+    /// device Newton call's hand-back left them): for the parity tests.
+    pub fn stiffness_values(&mut self, body: usize) -> Result<Vec<Real>, GpuError> {
+        let (b, m) = self.place[body];
+        let range = self.batches[b].members[m];
+        let real = self.gpu.precision.size() as u64;
+        let (start, size) = (range.nonzero_start as u64 * real, range.nonzeros as u64 * real);
+        let staging = self.gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some("stiffness values"), size: size.max(8), usage: BufferUsages::MAP_READ | BufferUsages::COPY_DST, mapped_at_creation: false });
+        let mut encoder = self.encoder("stiffness values");
+        encoder.copy_buffer_to_buffer(&self.batches[b].values, start, &staging, 0, size);
+        self.submit(encoder)?;
+        self.traffic.down += size;
+        Ok(from_device(self.gpu.precision, &self.gpu.read_range("assemble_csr", &staging, size)?))
     }
 
     /// Records the read-back's copies, submits once, maps once and hands the

@@ -265,11 +265,13 @@ pub struct Workspace {
     pub(super) factor_version: u64,
     /// Whether `values` hold `ξ K` at the current trial displacement.
     pub(super) tangent_current: bool,
-    /// `ξ K` that a device Newton call computed when it handed the body back, and the
-    /// displacement it is the tangent at: the next refactorisation there takes it
-    /// ([`Body::refresh_factor`]) instead of assembling its own (`values` keep the factorised
-    /// `K̄` meanwhile).
-    pub(super) device_tangent: Option<(Vec<Real>, Vec<Real>)>,
+    /// The displacement at which a device Newton call that handed the body back holds its
+    /// tangent `ξ K`: a refactorisation there assembles the host's own on the CPU (not read
+    /// back) and sends `K̄` by its diagonal ([`Body::refresh_factor`]).
+    pub(super) device_tangent: Option<Vec<Real>>,
+    /// Whether the factorisation was made where the device held its tangent (the last
+    /// [`Body::refresh_factor`] took `device_tangent`).
+    pub(super) factored_at_hand_back: bool,
     /// Residual norm of the previous evaluation in this step, and the ratio of the last one to it.
     pub(super) previous_residual: Option<Real>,
     pub(super) contraction: Option<Real>,
@@ -376,6 +378,7 @@ impl Body {
                 factor_version: 0,
                 tangent_current: false,
                 device_tangent: None,
+                factored_at_hand_back: false,
                 previous_residual: None,
                 contraction: None,
                 trial_held: None,
@@ -893,15 +896,16 @@ impl Body {
         if !self.needs_factorization(p) {
             return Ok(false);
         }
-        if let Some(values) = self.device_tangent_here() {
-            self.work.values = values;
-        } else if !self.work.tangent_current {
+        let at_hand_back = self.holds_device_tangent();
+        self.work.device_tangent = None;
+        if !self.work.tangent_current {
             let u = std::mem::take(&mut self.work.trial.u);
             let result = self.assemble_with(&u, coefficients(p), true, times);
             self.work.trial.u = u;
             result?;
         }
         self.factorize_effective(c1, times)?;
+        self.work.factored_at_hand_back = at_hand_back;
         Ok(true)
     }
 
@@ -923,21 +927,17 @@ impl Body {
     }
 
     /// Whether [`Body::refresh_factor`] needs a tangent it does not have: a GPU world computes
-    /// those of all such bodies in one pass first.
+    /// those of all such bodies in one pass first. Where a device Newton call handed the body
+    /// back, the device holds its tangent, and the host assembles its own, which it would
+    /// otherwise read: the device's values stay there for `K̄`.
     pub fn needs_tangent(&self, p: &StepParams) -> bool {
         self.needs_factorization(p) && !self.work.tangent_current && !self.holds_device_tangent()
     }
 
-    /// Whether a device Newton call left a tangent ([`Body::finish_device_newton`]) at the
+    /// Whether a device Newton call holds a tangent ([`Body::finish_device_newton`]) at the
     /// trial displacement, bit for bit.
     fn holds_device_tangent(&self) -> bool {
-        self.work.device_tangent.as_ref().is_some_and(|(u, _)| same_bits(u, &self.work.trial.u))
-    }
-
-    /// The tangent a device Newton call left, if it is one at the trial displacement; taken.
-    fn device_tangent_here(&mut self) -> Option<Vec<Real>> {
-        let here = self.holds_device_tangent();
-        self.work.device_tangent.take().filter(|_| here).map(|(_, values)| values)
+        self.work.device_tangent.as_ref().is_some_and(|u| same_bits(u, &self.work.trial.u))
     }
 
     /// Adds `c1 M` to the assembled `ξ K` and factorises `K̄ = ξ K + c1 M` (eq. 17).
@@ -952,6 +952,7 @@ impl Body {
         let result = self.work.solver.factorize(&self.work.values).map_err(|e| StepFailure::Linear { body: self.def.name.clone(), error: self.factor_failure(e) });
         times.factorization += t0.elapsed().as_secs_f64();
         self.work.factor_version += 1;
+        self.work.factored_at_hand_back = false;
         self.work.factor_c1 = result.is_ok().then_some(c1);
         result
     }
@@ -985,6 +986,7 @@ impl Body {
         self.work.values.copy_from_slice(values);
         self.work.tangent_current = false;
         self.work.factor_version += 1;
+        self.work.factored_at_hand_back = false;
         self.work.solver.factorize(&self.work.values).map_err(|e| e.to_string())?;
         self.work.factor_c1 = Some(c1);
         Ok(())

@@ -321,12 +321,13 @@ struct PassLayout<'a> {
     evaluations_start: Vec<usize>,
 }
 
-/// A call's state, strain energy, element failure, the tangent it handed back, and its summary
-/// if the device kept its end (with whether its displacements came back).
-type CallEnd = (NewtonState<Real>, Option<Real>, Option<ElementFailure>, Option<Vec<Real>>, Option<(StepSummary, bool)>);
+/// A call's state, strain energy, element failure, whether the device holds the tangent where
+/// it handed the body back, and its summary if the device kept its end (with whether its
+/// displacements came back).
+type CallEnd = (NewtonState<Real>, Option<Real>, Option<ElementFailure>, bool, Option<(StepSummary, bool)>);
 
 /// What a pass leaves a group that iterated on the device: per call its state, strain energy,
-/// element failure and the tangent it handed back; per contact its outcome.
+/// element failure and whether the device holds its tangent; per contact its outcome.
 struct IterationEnds {
     calls: Vec<CallEnd>,
     contacts: Vec<ContactState<Real>>,
@@ -360,7 +361,7 @@ fn device_pass(groups: &mut [Group], live: &[bool], kind: PassKind, world: &mut 
     let passed =
         if calls.is_empty() { world.evaluate(list, coefficients(p), times) } else { world.newton(calls, problems, contacts, list, Coefficients { motion: c.velocity_scale * p.dt, ..coefficients(p) }, (dim, p.theta * p.dt), c.interrupt, times) };
     let failures: Vec<Option<ElementFailure>> = list.iter().map(|e| e.failure).collect();
-    let ends = IterationEnds { calls: calls.iter_mut().map(|call| (call.outcome, call.strain_energy, call.failure, call.tangent.take(), call.summary.map(|s| (s, call.positions)))).collect(), contacts: contacts.iter().map(|g| g.outcome).collect() };
+    let ends = IterationEnds { calls: calls.iter_mut().map(|call| (call.outcome, call.strain_energy, call.failure, call.tangent_held, call.summary.map(|s| (s, call.positions)))).collect(), contacts: contacts.iter().map(|g| g.outcome).collect() };
     // The calls that were to keep their step's end on the device and did not converge there.
     let unkept: Vec<usize> = calls.iter().zip(&asked).filter(|(call, &asked)| asked && call.summary.is_none()).map(|(call, _)| call.body).collect();
     let PassLayout { call_ranges, evaluations_start, .. } = layout;
@@ -514,8 +515,8 @@ fn finish_iterations(g: &mut Group, (range, index): (std::ops::Range<usize>, Opt
     state.report.device_iterations += iterations;
     state.report.bodies_iterated += if kind.unevaluated { iterations } else { iterations.saturating_sub(1) } * g.bodies.len();
     let mut result = Ok(());
-    for (body, (end, strain, failure, tangent, summary)) in g.bodies.iter_mut().zip(&ends.calls[range]) {
-        if let (Ok(()), Err(e)) = (&result, body.finish_device_newton(c.p, end, *strain, *failure, tangent.as_deref(), *summary)) {
+    for (body, (end, strain, failure, tangent_held, summary)) in g.bodies.iter_mut().zip(&ends.calls[range]) {
+        if let (Ok(()), Err(e)) = (&result, body.finish_device_newton(c.p, end, *strain, *failure, *tangent_held, *summary)) {
             result = Err(e);
         }
     }

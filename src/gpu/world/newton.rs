@@ -73,10 +73,9 @@ struct Landing {
 }
 
 /// Takes every call's state, displacements, residuals and strain energy from a submission's
-/// read-back (`landing` from `GpuWorld::queue_states`), in parallel (100 000 grains a call), and
-/// the stiffness values of the members in contact handed back (`tangents`: call, where,
-/// entries). A kept call takes its state, energy and summary only.
-fn unpack_calls(precision: Precision, calls: &mut [NewtonCall], (landing, coefficients, dim): (&[Landing], Coefficients<Real>, usize), tangents: &[(usize, usize, usize)], bytes: &[u8]) {
+/// read-back (`landing` from `GpuWorld::queue_states`), in parallel (100 000 grains a call). A
+/// kept call takes its state, energy and summary only.
+fn unpack_calls(precision: Precision, calls: &mut [NewtonCall], (landing, coefficients, dim): (&[Landing], Coefficients<Real>, usize), bytes: &[u8]) {
     let real = precision.size();
     calls.par_iter_mut().zip(landing).for_each(|(call, at)| {
         match (at.state_and_energy, at.summary) {
@@ -103,10 +102,6 @@ fn unpack_calls(precision: Precision, calls: &mut [NewtonCall], (landing, coeffi
             super::copy_from_device(precision, &bytes[u_at..u_at + n * real], call.u);
         }
     });
-    for &(i, at, entries) in tangents {
-        let call = &mut calls[i];
-        call.tangent = (call.outcome.status == NEWTON_HOST).then(|| super::from_device(precision, &bytes[at..at + entries * real]));
-    }
 }
 
 /// Takes a call's failure flags, displacements and internal forces (`[flags, u, forces]`: where
@@ -140,9 +135,8 @@ fn unpack_contact(precision: Precision, problems: &mut [Problem], contacts: &mut
     }
 }
 
-/// What the read-back of a call's groups in contact holds: their batch, their members `(call,
-/// member)`, points and groups.
-type ContactTarget<'a> = (usize, &'a [(usize, usize)], usize, usize);
+/// What the read-back of a call's groups in contact holds: their points and groups.
+type ContactTarget = (usize, usize);
 
 /// A factorisation's `K̄⁻¹` for a device that does not hold it yet.
 pub enum Inverse {
@@ -151,6 +145,12 @@ pub enum Inverse {
     /// alone where the others are the stiffness values the device holds and the host read back
     /// (`Batch::handed`).
     Effective(Vec<Real>),
+    /// `K̄` as [`Inverse::Effective`], made at the iterate where a device Newton call handed
+    /// the body back ([`NewtonCall::tangent_held`]) from the host's own tangent there: while
+    /// the device still holds its tangent of that iterate, only the diagonal goes up and
+    /// `newton_invert` takes the rest from the device's values (the two tangents, of the same
+    /// displacements, agree to round-off).
+    AtHandBack(Vec<Real>),
     /// `K̄⁻¹` made on the host, its lower triangle row by row (`gpu::types::packed`).
     Dense(Vec<Real>),
 }
@@ -235,7 +235,7 @@ impl NewInverses {
                     _ => self.runs.push((offset, end, vec![inverse])),
                 }
             }
-            Inverse::Effective(values) => {
+            Inverse::Effective(values) | Inverse::AtHandBack(values) => {
                 assert_eq!(values.len(), nonzeros, "K̄ in the member's pattern");
                 let diagonal_only = diagonal.is_some() as u32;
                 self.inversions.push(Inversion { member: m as u32, values_start: self.effective.len() as u32, pattern_start, diagonal_only });
@@ -297,16 +297,19 @@ pub struct NewtonCall<'a> {
     pub strain_energy: Option<Real>,
     pub failure: Option<ElementFailure>,
     /// Out, for a member of a group in contact that the device hands back to the host
-    /// ([`NEWTON_HOST`]): the stiffness values `ξ K` at the `u` returned (the tangent the host
-    /// would assemble to renew its factorisation there).
-    pub tangent: Option<Vec<Real>>,
+    /// ([`NEWTON_HOST`]): the device holds its stiffness values `ξ K` at the `u` returned
+    /// (computed after the iterations, not read back), so that the `K̄` the host makes there
+    /// goes up by its diagonal ([`Inverse::AtHandBack`]).
+    pub tangent_held: bool,
 }
 
 /// The tangents of the members of groups in contact that a call hands back to the host
 /// (mostly a factorisation that contracts too slowly, which the host renews at that iterate):
-/// `newton_compact`'s `host` entry lists them, the tangent kernel and `assemble_csr` run over
-/// that list after the iterations, and their stiffness values come back with the states, so
-/// that the host factorises without a tangent pass and a submission of its own.
+/// `newton_compact`'s `host` entry lists them, and the tangent kernel and `assemble_csr` run
+/// over that list after the iterations. Their stiffness values stay on the device
+/// ([`NewtonCall::tangent_held`]): the host assembles its own to factorise (a grain's tangent
+/// costs the CPU less than its factorisation, and reading them cost half the bytes of a
+/// pressed packing's steps), and `K̄` goes back up by its diagonal.
 struct HostTangents {
     /// The members of the call's groups in contact (mode TANGENT); those handed back go into
     /// a list the passes are bound to.
@@ -649,7 +652,7 @@ impl GpuWorld {
             None => Vec::new(),
         };
         let points = problems.iter().map(|p| p.local.len()).sum::<usize>();
-        let target = self.newton_target(&work, list, contact.as_ref().map(|(batch, _)| (*batch, &in_contact[..], points, contacts.len())));
+        let target = self.newton_target(&work, list, contact.as_ref().map(|_| (points, contacts.len())));
         let plan = CallPlan { work: &work, contact: contact.as_ref(), solves, contacts: contacts.len() };
         let mut t0 = started;
         let mut iterations = calls.iter().map(|c| c.member.budget.saturating_sub(c.taken)).max().unwrap_or(0).min(ITERATIONS_PER_SUBMIT);
@@ -669,18 +672,6 @@ impl GpuWorld {
             }
             self.record_iterations(&mut encoder, &plan, first && evaluate_first, iterations);
             let (landing, tallies) = self.queue_states(&mut readback, &work, calls, dim);
-            // The stiffness values of the members in contact, `(call, where, entries)`: taken
-            // for those handed back.
-            let tangent_landing: Vec<(usize, usize, usize)> = match &contact {
-                Some((batch, _)) => {
-                    let (b, real) = (&self.batches[*batch], precision.size() as u64);
-                    let members: Vec<usize> = in_contact.iter().map(|&(_, m)| m).collect();
-                    let value_span = |m: usize| b.members[m].nonzero_start as u64 * real..(b.members[m].nonzero_start + b.members[m].nonzeros) as u64 * real;
-                    let at = readback.queue_runs(*batch, Source::Values, &members, &value_span);
-                    in_contact.iter().zip(at).map(|(&(i, m), at)| (i, at, b.members[m].nonzeros as usize)).collect()
-                }
-                None => Vec::new(),
-            };
             let contact_landing = contact.as_ref().map(|(_, passes)| {
                 let r = readback.queue_buffer(&self.contact.as_ref().expect("staged").buffers().r, (points * 3 * precision.size()) as u64);
                 (r, readback.queue_buffer(&passes.states, (contacts.len() * std::mem::size_of::<ContactState<Real>>()) as u64))
@@ -690,7 +681,7 @@ impl GpuWorld {
                 if let Some(landing) = &evaluated {
                     super::unpack_evaluation(precision, list, landing, bytes);
                 }
-                unpack_calls(precision, calls, (&landing, coefficients, dim), &tangent_landing, bytes);
+                unpack_calls(precision, calls, (&landing, coefficients, dim), bytes);
                 tally = StepTally::default();
                 for &at in &tallies {
                     tally.add(&StepTally::of(&super::from_device(precision, &bytes[at..at + TALLY_LEN * precision.size()])));
@@ -703,8 +694,8 @@ impl GpuWorld {
             if evaluated.is_some() {
                 self.note_handed_evaluations(list);
             }
-            for call in calls.iter().filter(|c| c.tangent.is_some()) {
-                self.note_handed(call.body, call.tangent.as_deref().expect("filtered"));
+            if let Some((batch, _)) = &contact {
+                self.note_held_tangents(*batch, calls, &in_contact);
             }
             first = false;
             if !iterating || interrupt.is_some_and(|f| f.load(Ordering::SeqCst)) {
@@ -717,6 +708,17 @@ impl GpuWorld {
         self.step_tally.add(&tally);
         self.after_newton(&work, calls, contacts);
         Ok(())
+    }
+
+    /// Marks the members of groups in contact (`(call, member)` of `batch`) that the device
+    /// handed back: it holds their tangents at the `u` returned ([`NewtonCall::tangent_held`]).
+    fn note_held_tangents(&mut self, batch: usize, calls: &mut [NewtonCall], in_contact: &[(usize, usize)]) {
+        for &(i, m) in in_contact {
+            if calls[i].outcome.status == NEWTON_HOST {
+                calls[i].tangent_held = true;
+                self.batches[batch].handed[m] = Some(super::Held::HandBack);
+            }
+        }
     }
 
     /// Makes each batch's Newton buffers when a call first needs them and stages the calls,
@@ -757,17 +759,13 @@ impl GpuWorld {
     /// The read-back buffer of a call, grown when its submissions need more: per member its
     /// failure flags and state, per dof its displacement and internal force, its strain energy
     /// (every span a multiple of 8 bytes), after an evaluation pass's read-back when one shares
-    /// it; with groups in contact (`(batch, members, points, groups)`) their reactions, states
-    /// and the stiffness values of their members.
+    /// it; with groups in contact (`(points, groups)`) their reactions and states.
     fn newton_target(&mut self, work: &[BatchCalls], list: &[Evaluation], contact: Option<ContactTarget>) -> Buffer {
         let real = self.gpu.precision.size();
         let total = |f: fn(&crate::gpu::types::MemberRange) -> u32| -> usize { work.iter().map(|(b, mine, _)| mine.iter().map(|&(_, m)| f(&self.batches[*b].members[m]) as usize).sum::<usize>()).sum() };
         let total_dofs = total(|r| r.dofs);
         let total_members: usize = work.iter().map(|(_, mine, _)| mine.len()).sum();
-        let contact_bytes = contact.map_or(0, |(batch, members, points, groups)| {
-            let entries: usize = members.iter().map(|&(_, m)| self.batches[batch].members[m].nonzeros as usize).sum();
-            (points * 3 * real + groups * std::mem::size_of::<ContactState<Real>>() + 16 + entries * real) as u64
-        });
+        let contact_bytes = contact.map_or(0, |(points, groups)| (points * 3 * real + groups * std::mem::size_of::<ContactState<Real>>() + 16) as u64);
         let per_member = 16 + std::mem::size_of::<NewtonState<Real>>() + summary_len(3) * real + 6 * 4;
         // (a kept call's displacements fit in the room of another's displacements and forces)
         let tallies = work.len() * TALLY_LEN * real;
@@ -1093,7 +1091,10 @@ impl GpuWorld {
                 // `K̄ = ξ K + c1 M` differs from the stiffness values the device holds on the
                 // diagonal only: where those are the ones the host read back, the rest stays.
                 let diagonal = match (&inverse, b.handed[m]) {
-                    (Inverse::Effective(values), Some(print)) if off_diagonal_print(values, &b.patterns, b.pattern_start[m], free_count as usize) == print => Some(diagonal_of(values, &b.patterns, b.pattern_start[m], free_count as usize)),
+                    (Inverse::Effective(values), Some(super::Held::Read(print))) if off_diagonal_print(values, &b.patterns, b.pattern_start[m], free_count as usize) == print => {
+                        Some(diagonal_of(values, &b.patterns, b.pattern_start[m], free_count as usize))
+                    }
+                    (Inverse::AtHandBack(values), Some(super::Held::HandBack)) => Some(diagonal_of(values, &b.patterns, b.pattern_start[m], free_count as usize)),
                     _ => None,
                 };
                 new.add(inverse, [packed_len(free_count as usize), b.members[m].nonzeros as usize], slot as u64 * real, (m, b.pattern_start[m]), diagonal);

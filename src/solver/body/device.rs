@@ -99,7 +99,11 @@ impl Body {
     /// [`Body::kept_factor`]); else `K̄⁻¹` ([`Body::effective_inverse`]).
     pub fn device_inverse(&mut self, inverts: bool, times: &mut PhaseTimes) -> Inverse {
         if inverts && !self.work.tangent_current {
-            Inverse::Effective(self.work.values.clone())
+            if self.work.factored_at_hand_back {
+                Inverse::AtHandBack(self.work.values.clone())
+            } else {
+                Inverse::Effective(self.work.values.clone())
+            }
         } else {
             Inverse::Dense(self.effective_inverse(times))
         }
@@ -171,7 +175,7 @@ impl Body {
             outcome: NewtonState::default(),
             strain_energy: None,
             failure: None,
-            tangent: None,
+            tangent_held: false,
         }
     }
 
@@ -180,9 +184,9 @@ impl Body {
     /// test ([`Body::converged`], the host's word) sees the last increment and the residual
     /// before the last. A call that evaluated the body first and stopped there took no increment:
     /// the test then sees a first evaluation.
-    /// A `tangent` that came back ([`NewtonCall::tangent`]) is kept for a refactorisation at
-    /// this iterate.
-    pub fn finish_device_newton(&mut self, p: &StepParams, outcome: &NewtonState<Real>, strain_energy: Option<Real>, failure: Option<ElementFailure>, tangent: Option<&[Real]>, summary: Option<(StepSummary, bool)>) -> Result<(), StepFailure> {
+    /// Where the device holds the tangent at this iterate ([`NewtonCall::tangent_held`]), a
+    /// refactorisation here sends its `K̄` by its diagonal ([`Inverse::AtHandBack`]).
+    pub fn finish_device_newton(&mut self, p: &StepParams, outcome: &NewtonState<Real>, strain_energy: Option<Real>, failure: Option<ElementFailure>, tangent_held: bool, summary: Option<(StepSummary, bool)>) -> Result<(), StepFailure> {
         if let Some((summary, positions)) = summary {
             // Converged and kept on the device: the host's vectors are not the step's (but for
             // the displacements, when they came back).
@@ -193,7 +197,7 @@ impl Body {
             self.work.evaluated.valid = false;
             return Ok(());
         }
-        self.work.device_tangent = tangent.map(|values| (self.work.trial.u.clone(), values.to_vec()));
+        self.work.device_tangent = tangent_held.then(|| self.work.trial.u.clone());
         if let Some(failure) = failure {
             return Err(self.element_failure(&self.work.trial.u, failure));
         }
