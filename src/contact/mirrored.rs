@@ -75,7 +75,19 @@ const FIXED: Real = 1e-9;
 /// Solves the 2D local problem of pair `[p, q]` against the other points' reactions in `r`, and
 /// writes its reactions there. Returns false (and leaves `r`) when no regime's reactions satisfy
 /// the law, as when a singular system leaves the split undetermined.
-pub fn solve_mirrored_pair(w: &Delassus, local: &[Local], [p, q]: [u32; 2], r: &mut [[Real; 3]], floor: Real) -> bool {
+pub fn solve_mirrored_pair(w: &Delassus, local: &[Local], pair: [u32; 2], r: &mut [[Real; 3]], floor: Real) -> bool {
+    match mirrored_pair_reactions(w, local, pair, r, floor) {
+        Some([rp, rq]) => {
+            (r[pair[0] as usize], r[pair[1] as usize]) = (rp, rq);
+            true
+        }
+        None => false,
+    }
+}
+
+/// [`solve_mirrored_pair`]'s reactions of the pair, `None` where it finds none, without
+/// writing them: pairs that no row of W couples are solved side by side.
+pub fn mirrored_pair_reactions(w: &Delassus, local: &[Local], [p, q]: [u32; 2], r: &[[Real; 3]], floor: Real) -> Option<[[Real; 3]; 2]> {
     let (p, q) = (p as usize, q as usize);
     // v_k = c_k + Σ_l A_kl r_l over the pair, in the first two components.
     let mut c = [[0.0; 2]; 2];
@@ -118,12 +130,42 @@ pub fn solve_mirrored_pair(w: &Delassus, local: &[Local], [p, q]: [u32; 2], r: &
     for regimes in std::iter::once(current).chain(others) {
         let Some(x) = regime_reactions(regimes, &c, &a, mu) else { continue };
         if residual(&x) <= FIXED {
-            r[p] = [x[0], x[1], 0.0];
-            r[q] = [x[2], x[3], 0.0];
-            return true;
+            return Some([[x[0], x[1], 0.0], [x[2], x[3], 0.0]]);
         }
     }
-    false
+    None
+}
+
+/// The pairs in colours: no row of `w` couples two pairs of a colour (each point's row read
+/// for its pair's neighbours), greedily, in the pairs' order; `n` points in all.
+pub fn colour_pairs(w: &Delassus, pairs: &[[u32; 2]], n: usize) -> Vec<Vec<[u32; 2]>> {
+    let mut owner = vec![u32::MAX; n];
+    for (k, pair) in pairs.iter().enumerate() {
+        pair.iter().for_each(|&i| owner[i as usize] = k as u32);
+    }
+    let mut colour_of = vec![usize::MAX; pairs.len()];
+    let mut colours: Vec<Vec<[u32; 2]>> = Vec::new();
+    let mut taken = Vec::new();
+    for (k, pair) in pairs.iter().enumerate() {
+        taken.clear();
+        taken.resize(colours.len(), false);
+        for &i in pair {
+            for &(j, _) in &w.rows[i as usize] {
+                match owner[j as usize] {
+                    other if other == u32::MAX || other as usize == k => {}
+                    other if colour_of[other as usize] != usize::MAX => taken[colour_of[other as usize]] = true,
+                    _ => {}
+                }
+            }
+        }
+        let c = taken.iter().position(|&t| !t).unwrap_or(colours.len());
+        if c == colours.len() {
+            colours.push(Vec::new());
+        }
+        colours[c].push(*pair);
+        colour_of[k] = c;
+    }
+    colours
 }
 
 /// The regime reaction `r` is in.

@@ -15,7 +15,7 @@
 use super::anderson::Anderson;
 use super::geometry::norm;
 use super::law::uzawa_step;
-use super::mirrored::solve_mirrored_pair;
+use super::mirrored::{colour_pairs, mirrored_pair_reactions};
 use super::semismooth::semismooth_solve;
 use crate::precision::Real;
 use rayon::prelude::*;
@@ -234,16 +234,28 @@ pub fn uzawa_sweep(w: &Delassus, local: &[Local], points: &[u32], r: &mut [[Real
 /// Each mirrored pair solved as one against the others' reactions, in turn (a pair without a
 /// regime that satisfies the law is visited point by point, as the sweeps do); `dr` takes its
 /// points' changes.
-fn solve_pairs(w: &Delassus, local: &[Local], pairs: &[[u32; 2]], r: &mut [[Real; 3]], dr: &mut [[Real; 3]], settle: Real, floor: Real) {
-    for &pair in pairs {
-        let before = pair.map(|i| r[i as usize]);
-        if !solve_mirrored_pair(w, local, pair, r, floor) {
-            for i in pair.map(|i| i as usize) {
-                r[i] = gauss_seidel_point(w, &local[i], i, r, settle, floor);
+fn solve_pairs(w: &Delassus, local: &[Local], colours: &[Vec<[u32; 2]>], r: &mut [[Real; 3]], dr: &mut [[Real; 3]], settle: Real, floor: Real) {
+    for pairs in colours {
+        // No pair of a colour reads another's reactions: solved side by side, then written.
+        let solved: Vec<Option<[[Real; 3]; 2]>> = if pairs.len() < PARALLEL_COLOUR / 2 {
+            pairs.iter().map(|&pair| mirrored_pair_reactions(w, local, pair, r, floor)).collect()
+        } else {
+            pairs.par_iter().with_min_len(PARALLEL_COLOUR / 8).map(|&pair| mirrored_pair_reactions(w, local, pair, r, floor)).collect()
+        };
+        for (&pair, solved) in pairs.iter().zip(solved) {
+            let before = pair.map(|i| r[i as usize]);
+            match solved {
+                Some([rp, rq]) => (r[pair[0] as usize], r[pair[1] as usize]) = (rp, rq),
+                // No regime fits (a split the law leaves undetermined): the points one by one.
+                None => {
+                    for i in pair.map(|i| i as usize) {
+                        r[i] = gauss_seidel_point(w, &local[i], i, r, settle, floor);
+                    }
+                }
             }
-        }
-        for (k, i) in pair.map(|i| i as usize).into_iter().enumerate() {
-            dr[i] = [r[i][0] - before[k][0], r[i][1] - before[k][1], r[i][2] - before[k][2]];
+            for (k, i) in pair.map(|i| i as usize).into_iter().enumerate() {
+                dr[i] = [r[i][0] - before[k][0], r[i][1] - before[k][1], r[i][2] - before[k][2]];
+            }
         }
     }
 }
@@ -423,7 +435,8 @@ pub fn solve(p: &mut Problem, sweep: Sweep, stop: Option<&AtomicBool>) -> Outcom
     let unpaired = (accelerate && dim == 2 && !pairs.is_empty()).then(|| {
         let mut paired = vec![false; n];
         pairs.iter().flatten().for_each(|&i| paired[i as usize] = true);
-        (0..colours.count()).map(|c| colours.colour(c).iter().copied().filter(|&i| !paired[i as usize]).collect::<Vec<u32>>()).collect::<Vec<_>>()
+        let points = (0..colours.count()).map(|c| colours.colour(c).iter().copied().filter(|&i| !paired[i as usize]).collect::<Vec<u32>>()).collect::<Vec<_>>();
+        (points, colour_pairs(w, pairs, n))
     });
     let mut scratch = Vec::new();
     let mut outcome = Outcome::default();
@@ -457,11 +470,11 @@ pub fn solve(p: &mut Problem, sweep: Sweep, stop: Option<&AtomicBool>) -> Outcom
                     start.extend_from_slice(r);
                 }
                 for c in 0..colours.count() {
-                    let points = unpaired.as_ref().map_or(colours.colour(c), |u| &u[c][..]);
+                    let points = unpaired.as_ref().map_or(colours.colour(c), |(u, _)| &u[c][..]);
                     uzawa_sweep(w, local, points, r, &mut dr, SETTLE * tolerance, floor);
                 }
-                if unpaired.is_some() {
-                    solve_pairs(w, local, pairs, r, &mut dr, SETTLE * tolerance, floor);
+                if let Some((_, pair_colours)) = &unpaired {
+                    solve_pairs(w, local, pair_colours, r, &mut dr, SETTLE * tolerance, floor);
                 }
             }
         }

@@ -13,6 +13,7 @@ use crate::contact::{uzawa_step, ContactPoint, Settings, Status, WarmStart};
 use crate::gpu::uzawa_sweep::{self, solve_loops_per_sweep};
 use crate::policy::{PhaseTimes, TIGHTEST_INNER};
 use crate::precision::Real;
+use rayon::prelude::*;
 use std::collections::HashMap;
 use std::sync::atomic::AtomicBool;
 
@@ -253,17 +254,22 @@ impl ContactStep {
         let theta_dt = p.theta * p.dt;
         let started = std::time::Instant::now();
         let solve_before = times.solve;
-        let mut x0: Vec<Vec<Real>> = Vec::with_capacity(bodies.len());
-        for body in bodies.iter_mut() {
-            let mut rhs = vec![0.0; body.def.dofs.free_count];
-            for (d, f) in body.def.dofs.free_pairs() {
-                rhs[f] = -body.work.g[d];
-            }
-            if !rhs.is_empty() {
-                body.solve_effective(&mut rhs, times);
-            }
-            x0.push(rhs);
-        }
+        // The bodies' contact-free increments on the thread pool, their wall time counted as solves.
+        let solving = std::time::Instant::now();
+        let x0: Vec<Vec<Real>> = bodies
+            .par_iter_mut()
+            .map(|body| {
+                let mut rhs = vec![0.0; body.def.dofs.free_count];
+                for (d, f) in body.def.dofs.free_pairs() {
+                    rhs[f] = -body.work.g[d];
+                }
+                if !rhs.is_empty() {
+                    body.solve_effective(&mut rhs, &mut PhaseTimes::default());
+                }
+                rhs
+            })
+            .collect();
+        times.solve += solving.elapsed().as_secs_f64();
         for (i, c) in self.points.iter().enumerate() {
             let v = local_velocity(
                 c,
@@ -370,47 +376,27 @@ impl ContactStep {
     /// factorisation, a batch of columns at a time, and each point's Uzawa step length. Only the
     /// `changed` bodies' columns are solved again: the others' share of the blocks is kept (in a
     /// group of tens of grains, one refactorising grain used to solve the columns of all).
-    fn build_delassus(&mut self, bodies: &mut [&mut Body], changed: impl Fn(usize) -> bool, theta_dt: Real, settings: &Settings, times: &mut PhaseTimes) {
+    fn build_delassus(&mut self, bodies: &mut [&mut Body], changed: impl Fn(usize) -> bool + Sync, theta_dt: Real, settings: &Settings, times: &mut PhaseTimes) {
         let dim = self.dim;
         self.shares.resize_with(bodies.len(), Vec::new);
-        for (b, body) in bodies.iter_mut().enumerate().filter(|(b, _)| changed(*b)) {
-            let (list, blocks) = &self.per_body[b];
-            let n = body.def.dofs.free_count;
-            let share = &mut self.shares[b];
-            share.clear();
-            if list.is_empty() || n == 0 {
-                continue;
-            }
-            // A frictionless point needs only its normal column: its tangential reaction stays zero.
-            let points = &self.points;
-            let directions = |k: usize| if points[list[k] as usize].friction == 0.0 { 1 } else { dim };
-            let columns: Vec<(usize, usize)> = (0..list.len()).flat_map(|k| (0..directions(k)).map(move |a| (k, a))).collect();
-            let keep = n * columns.len() <= KEPT_COLUMNS;
-            let mut kept = Vec::with_capacity(if keep { n * columns.len() } else { 0 });
-            for batch in columns.chunks(COLUMN_BATCH) {
-                let mut x = vec![0.0; n * batch.len()];
-                for (j, &(k, a)) in batch.iter().enumerate() {
-                    for &(f, val) in &self.h[b][k][a] {
-                        x[j * n + f as usize] += val;
-                    }
-                }
-                body.solve_effective(&mut x, times);
-                for (j, &(k, a)) in batch.iter().enumerate() {
-                    let col = &x[j * n..(j + 1) * n];
-                    for l in 0..list.len() {
-                        let block = blocks[l * list.len() + k];
-                        for c in 0..dim {
-                            let s: Real = self.h[b][l][c].iter().map(|&(f, val)| val * col[f as usize]).sum();
-                            share.push((block, (3 * c + a) as u8, s / theta_dt));
-                        }
-                    }
-                }
-                if keep {
-                    kept.extend_from_slice(&x);
-                }
-            }
-            self.responses[b] = keep.then_some(Response { of: columns, columns: kept });
-        }
+        let (points, per_body, h) = (&self.points, &self.per_body, &self.h);
+        // Body by body on the thread pool (a jammed packing is one group of hundreds of grains);
+        // the back-substitutions' share of the wall time counted as solves.
+        let started = std::time::Instant::now();
+        let seconds: Vec<(f64, f64)> = bodies
+            .par_iter_mut()
+            .zip(self.shares.par_iter_mut())
+            .zip(self.responses.par_iter_mut())
+            .enumerate()
+            .filter(|(b, _)| changed(*b))
+            .map(|(b, ((body, share), response))| {
+                let (t0, mut own) = (std::time::Instant::now(), PhaseTimes::default());
+                *response = body_share(body, (&per_body[b], &h[b], points), dim, theta_dt, share, &mut own);
+                (own.solve, t0.elapsed().as_secs_f64())
+            })
+            .collect();
+        let (solving, busy) = seconds.iter().fold((0.0, 0.0), |(s, t), &(a, b)| (s + a, t + b));
+        times.solve += started.elapsed().as_secs_f64() * if busy > 0.0 { solving / busy } else { 0.0 };
         // Summed body after body, as one pass over every body would.
         self.delassus.blocks.iter_mut().for_each(|b| *b = [0.0; 9]);
         for share in &self.shares {
@@ -435,6 +421,49 @@ impl ContactStep {
             c.end_gap = c.predicted_gap + p.theta * p.dt * c.v[0];
         }
     }
+}
+
+/// A body's listed points and their blocks (`ContactStep::per_body`), its rows of `H`, and the
+/// step's points.
+type BodyRows<'a> = (&'a (Vec<u32>, Vec<u32>), &'a [[SparseRow; 3]], &'a [ContactPoint]);
+
+/// Body `body`'s share of the Delassus blocks into `share` (`(block, entry, value)`), from its
+/// listed points and their blocks, its rows of `H` and the step's points: `K̄⁻¹ Hᵀ` column batch
+/// by column batch, then `H` times it. Returns the columns when the body keeps them.
+fn body_share(body: &mut Body, ((list, blocks), h, points): BodyRows, dim: usize, theta_dt: Real, share: &mut Vec<(u32, u8, Real)>, times: &mut PhaseTimes) -> Option<Response> {
+    let n = body.def.dofs.free_count;
+    share.clear();
+    if list.is_empty() || n == 0 {
+        return None;
+    }
+    // A frictionless point needs only its normal column: its tangential reaction stays zero.
+    let directions = |k: usize| if points[list[k] as usize].friction == 0.0 { 1 } else { dim };
+    let columns: Vec<(usize, usize)> = (0..list.len()).flat_map(|k| (0..directions(k)).map(move |a| (k, a))).collect();
+    let keep = n * columns.len() <= KEPT_COLUMNS;
+    let mut kept = Vec::with_capacity(if keep { n * columns.len() } else { 0 });
+    for batch in columns.chunks(COLUMN_BATCH) {
+        let mut x = vec![0.0; n * batch.len()];
+        for (j, &(k, a)) in batch.iter().enumerate() {
+            for &(f, val) in &h[k][a] {
+                x[j * n + f as usize] += val;
+            }
+        }
+        body.solve_effective(&mut x, times);
+        for (j, &(k, a)) in batch.iter().enumerate() {
+            let col = &x[j * n..(j + 1) * n];
+            for l in 0..list.len() {
+                let block = blocks[l * list.len() + k];
+                for c in 0..dim {
+                    let s: Real = h[l][c].iter().map(|&(f, val)| val * col[f as usize]).sum();
+                    share.push((block, (3 * c + a) as u8, s / theta_dt));
+                }
+            }
+        }
+        if keep {
+            kept.extend_from_slice(&x);
+        }
+    }
+    keep.then_some(Response { of: columns, columns: kept })
 }
 
 /// Share of a penetration that the drift correction removes in one step.

@@ -315,8 +315,12 @@ pub const THINNED_PENETRATION: Real = 0.01;
 /// times deeper than the step before it did.
 pub const OVERLAP_GROWTH: Real = 1.25;
 
-/// Steps in a row without a retry after which the sub-step doubles back.
-pub const GROW_AFTER: usize = 4;
+/// Sub-steps in a row without a retry after which the sub-step doubles back. Counted in
+/// sub-steps: the issue-55 compression of 200 grains at ten times the wall speed (t ≤ 0.3)
+/// took 1 657 sub-steps counting 4 scene steps (256 at dt / 64 after each sub-step rejected
+/// at dt / 32), 641 with 16 sub-steps, and 409 with 4 but a node 1.2 % of its element deep
+/// (doc/benchmarks.md).
+pub const GROW_AFTER: usize = 16;
 
 /// Relative round-off allowed between the time left and a whole step (see `step_dt`).
 const GRID_ROUND_OFF: Real = 1e-9;
@@ -359,8 +363,9 @@ pub struct Simulation {
     /// [`StepFailure::EnergyGain`]).
     max_overlap: Real,
     max_step_energy_gain: Real,
-    /// Cut-back level the next step starts at (its sub-steps are `dt / 2^level`), and the easy
-    /// steps taken at it since: after [`GROW_AFTER`] the level drops by one (dt doubles back).
+    /// Cut-back level the next sub-step is taken at (`dt / 2^level`), and the easy sub-steps
+    /// taken at it since: after [`GROW_AFTER`] the level drops by one (the sub-step doubles
+    /// back) where the sub-steps so far tile the longer one.
     level: usize,
     easy_steps: usize,
     /// The deepest overlap the last committed sub-step left, in element sizes.
@@ -530,10 +535,7 @@ impl Simulation {
         self.step >= self.step_count()
     }
 
-    /// Advances one scene step in `2^level` sub-steps, halving the time step of a failed or
-    /// rejected attempt up to `max_cutbacks` levels (each half is itself retried the same way).
-    /// A step that needed a retry sets the level the next one starts at to the deepest it
-    /// used; [`GROW_AFTER`] steps in a row without one take the level back up by one.
+    /// Advances one scene step in sub-steps of `dt / 2^level` ([`Simulation::advance_substeps`]).
     pub fn advance(&mut self) -> Result<StepReport, Box<RunFailure>> {
         let started = std::time::Instant::now();
         let dt = self.step_dt();
@@ -541,17 +543,7 @@ impl Simulation {
         let submits = self.world.as_ref().map_or(0, GpuWorld::submits);
         let level = self.level.min(self.max_cutbacks);
         let energy_scale = if self.max_step_energy_gain.is_finite() { self.energy_scale() } else { Real::INFINITY };
-        let mut deepest = level;
-        let result = (0..1usize << level).try_for_each(|_| self.advance_by(dt / (1u64 << level) as Real, level, energy_scale, &mut report, &mut deepest));
-        let retried = report.cutbacks + report.overlap_retries + report.energy_retries > 0;
-        if retried {
-            (self.level, self.easy_steps) = (deepest, 0);
-        } else {
-            self.easy_steps += 1;
-            if self.easy_steps >= GROW_AFTER && self.level > 0 {
-                (self.level, self.easy_steps) = (self.level - 1, 0);
-            }
-        }
+        let result = self.advance_substeps(dt, energy_scale, &mut report);
         report.wall.total = started.elapsed().as_secs_f64();
         if let Some(world) = &mut self.world {
             let traffic = world.take_traffic();
@@ -567,6 +559,36 @@ impl Simulation {
             }
             Err((failure, sub_dt)) => Err(Box::new(RunFailure { step: self.step + 1, t: self.t, dt: sub_dt, cutbacks: report.cutbacks, level, failure, report })),
         }
+    }
+
+    /// Takes the scene step `dt` in sub-steps of `dt / 2^level`, halving a failed or rejected
+    /// attempt up to `max_cutbacks` levels (each half is itself retried the same way). A
+    /// sub-step that needed a retry sets the level of the next to the deepest it used;
+    /// [`GROW_AFTER`] sub-steps in a row without one double the sub-step where those taken so
+    /// far tile the longer one. Counted in sub-steps, not scene steps: a jammed packing that
+    /// rejected one sub-step for overlap at dt / 32 took 4 scene steps, 256 sub-steps, at
+    /// dt / 64 before trying dt / 32 again.
+    fn advance_substeps(&mut self, dt: Real, energy_scale: Real, report: &mut StepReport) -> Result<(), (StepFailure, Real)> {
+        let mut level = self.level.min(self.max_cutbacks);
+        // Sub-steps of the current level taken so far.
+        let mut taken: u64 = 0;
+        while taken < 1u64 << level {
+            let retries = report.cutbacks + report.overlap_retries + report.energy_retries;
+            let mut deepest = level;
+            self.advance_by(dt / (1u64 << level) as Real, level, energy_scale, report, &mut deepest)?;
+            taken += 1;
+            if report.cutbacks + report.overlap_retries + report.energy_retries > retries {
+                taken <<= deepest - level;
+                (level, self.easy_steps) = (deepest, 0);
+            } else {
+                self.easy_steps += 1;
+                if self.easy_steps >= GROW_AFTER && level > 0 && taken.is_multiple_of(2) {
+                    (level, taken, self.easy_steps) = (level - 1, taken / 2, 0);
+                }
+            }
+            self.level = level;
+        }
+        Ok(())
     }
 
     /// The energy scale a step's gain is measured against, now ([`Energies::scale`]).
