@@ -2,7 +2,7 @@
 //! matching vertices, solved as one, with the law of the sweeps.
 
 use bifirst::contact::detect::detect;
-use bifirst::contact::mirrored::{mirrored_pairs, solve_mirrored_pair};
+use bifirst::contact::mirrored::{colour_pairs, mirrored_pairs, solve_mirrored_pair};
 use bifirst::contact::pairs::{BodyPairs, Rank};
 use bifirst::contact::semismooth::natural_map;
 use bifirst::contact::uzawa::{solve, Acceleration, Colours, Delassus, Fallback, Local, NodalMap, Outcome, Problem, Sweep};
@@ -60,6 +60,7 @@ impl Mirrored {
     }
 
     fn solve(&self, r: &mut [[f64; 3]], pairs: &[[u32; 2]], max_iterations: usize) -> Outcome {
+        let pairs = &colour_pairs(&self.w, pairs, self.local.len());
         let mut p = Problem { w: &self.w, colours: &self.colours, local: &self.local, nodal: &self.nodal, r, tolerance: 1e-8, floor: 1e-12, max_iterations, acceleration: Acceleration::Anderson, fallback: Fallback::None, dim: 2, pairs };
         solve(&mut p, Sweep::GaussSeidel, None)
     }
@@ -165,6 +166,7 @@ impl Stored {
     }
 
     fn solve(&self, r: &mut [[f64; 3]], pairs: &[[u32; 2]], max_iterations: usize) -> Outcome {
+        let pairs = &colour_pairs(&self.w, pairs, self.local.len());
         let mut p =
             Problem { w: &self.w, colours: &self.colours, local: &self.local, nodal: &self.nodal, r, tolerance: self.tolerance, floor: self.floor, max_iterations, acceleration: Acceleration::Anderson, fallback: Fallback::None, dim: 2, pairs };
         solve(&mut p, Sweep::GaussSeidel, None)

@@ -15,7 +15,7 @@
 use super::anderson::Anderson;
 use super::geometry::norm;
 use super::law::uzawa_step;
-use super::mirrored::{colour_pairs, mirrored_pair_reactions};
+use super::mirrored::mirrored_pair_reactions;
 use super::semismooth::semismooth_solve;
 use crate::precision::Real;
 use rayon::prelude::*;
@@ -231,9 +231,9 @@ pub fn uzawa_sweep(w: &Delassus, local: &[Local], points: &[u32], r: &mut [[Real
     }
 }
 
-/// Each mirrored pair solved as one against the others' reactions, in turn (a pair without a
-/// regime that satisfies the law is visited point by point, as the sweeps do); `dr` takes its
-/// points' changes.
+/// Each mirrored pair solved as one against the others' reactions, colour by colour, the pairs
+/// of a colour side by side (a pair without a regime that satisfies the law is visited point by
+/// point, as the sweeps do); `dr` takes its points' changes.
 fn solve_pairs(w: &Delassus, local: &[Local], colours: &[Vec<[u32; 2]>], r: &mut [[Real; 3]], dr: &mut [[Real; 3]], settle: Real, floor: Real) {
     for pairs in colours {
         // No pair of a colour reads another's reactions: solved side by side, then written.
@@ -413,8 +413,9 @@ pub struct Problem<'a> {
     pub dim: usize,
     /// Mirrored two-pass pairs: with Anderson acceleration, in 2D, each is solved as one in
     /// place of its points' visits, after the colours of every Gauss-Seidel sweep
-    /// ([`super::mirrored`]); plain sweeps, as the device's, visit them point by point.
-    pub pairs: &'a [[u32; 2]],
+    /// ([`super::mirrored`]); plain sweeps, as the device's, visit them point by point. In
+    /// colours: no row of `w` couples two pairs of one ([`super::mirrored::colour_pairs`]).
+    pub pairs: &'a [Vec<[u32; 2]>],
 }
 
 /// Uzawa iterations from the reactions in `p.r` until the estimated distance to the fixed
@@ -434,9 +435,8 @@ pub fn solve(p: &mut Problem, sweep: Sweep, stop: Option<&AtomicBool>) -> Outcom
     let accelerate = sweep == Sweep::GaussSeidel && acceleration == Acceleration::Anderson;
     let unpaired = (accelerate && dim == 2 && !pairs.is_empty()).then(|| {
         let mut paired = vec![false; n];
-        pairs.iter().flatten().for_each(|&i| paired[i as usize] = true);
-        let points = (0..colours.count()).map(|c| colours.colour(c).iter().copied().filter(|&i| !paired[i as usize]).collect::<Vec<u32>>()).collect::<Vec<_>>();
-        (points, colour_pairs(w, pairs, n))
+        pairs.iter().flatten().flatten().for_each(|&i| paired[i as usize] = true);
+        (0..colours.count()).map(|c| colours.colour(c).iter().copied().filter(|&i| !paired[i as usize]).collect::<Vec<u32>>()).collect::<Vec<_>>()
     });
     let mut scratch = Vec::new();
     let mut outcome = Outcome::default();
@@ -470,11 +470,11 @@ pub fn solve(p: &mut Problem, sweep: Sweep, stop: Option<&AtomicBool>) -> Outcom
                     start.extend_from_slice(r);
                 }
                 for c in 0..colours.count() {
-                    let points = unpaired.as_ref().map_or(colours.colour(c), |(u, _)| &u[c][..]);
+                    let points = unpaired.as_ref().map_or(colours.colour(c), |u| &u[c][..]);
                     uzawa_sweep(w, local, points, r, &mut dr, SETTLE * tolerance, floor);
                 }
-                if let Some((_, pair_colours)) = &unpaired {
-                    solve_pairs(w, local, pair_colours, r, &mut dr, SETTLE * tolerance, floor);
+                if unpaired.is_some() {
+                    solve_pairs(w, local, pairs, r, &mut dr, SETTLE * tolerance, floor);
                 }
             }
         }

@@ -7,7 +7,7 @@
 //! local law; a last solve applies the reactions, `Δu = K̄⁻¹(-g + Hᵀ r)`.
 
 use super::body::{Body, StepParams};
-use crate::contact::mirrored::mirrored_pairs;
+use crate::contact::mirrored::{colour_pairs, mirrored_pairs};
 use crate::contact::uzawa::{self, Colours, Delassus, Local, NodalMap, Outcome, Problem};
 use crate::contact::{uzawa_step, ContactPoint, Settings, Status, WarmStart};
 use crate::gpu::uzawa_sweep::{self, solve_loops_per_sweep};
@@ -31,8 +31,9 @@ const COLUMN_BATCH: usize = 64;
 /// The contact points of a step with what the Newton iterations need of them.
 pub struct ContactStep {
     pub points: Vec<ContactPoint>,
-    /// The mirrored two-pass pairs among `points`, solved as one ([`crate::contact::mirrored`]).
-    pairs: Vec<[u32; 2]>,
+    /// The mirrored two-pass pairs among `points`, solved as one ([`crate::contact::mirrored`]),
+    /// in colours of W's pattern, which is the step's.
+    pairs: Vec<Vec<[u32; 2]>>,
     pub delassus: Delassus,
     /// The order of the Gauss-Seidel sweeps (from the pattern of `delassus`).
     pub colours: Colours,
@@ -161,7 +162,7 @@ impl ContactStep {
         nodal.nodes = slots.len();
         let responses = bodies.iter().map(|_| None).collect();
         // Solved as one in 2D only ([`Problem::pairs`]).
-        let pairs = if dim == 2 { mirrored_pairs(&points) } else { Vec::new() };
+        let pairs = if dim == 2 { colour_pairs(&delassus, &mirrored_pairs(&points), points.len()) } else { Vec::new() };
         Self { points, pairs, delassus, colours, per_body, h, r, local, nodal, slot_nodes, dim, velocity_scale, floor, inner: INNER_TOLERANCE, shares: Vec::new(), free_increment: Vec::new(), responses }
     }
 
