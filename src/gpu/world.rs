@@ -836,16 +836,9 @@ impl GpuWorld {
     /// for the parity tests and `bifirst bench`.
     pub fn element_results(&mut self, body: usize) -> Result<Vec<Real>, GpuError> {
         let (b, m) = self.place[body];
-        let range = self.batches[b].members[m];
-        let real = self.gpu.precision.size() as u64;
-        let stride = self.batches[b].stride as u64;
-        let (start, size) = (range.element_start as u64 * stride * real, range.elements as u64 * stride * real);
-        let staging = self.gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some("element results"), size: size.max(8), usage: BufferUsages::MAP_READ | BufferUsages::COPY_DST, mapped_at_creation: false });
-        let mut encoder = self.encoder("element results");
-        encoder.copy_buffer_to_buffer(&self.batches[b].element_out, start, &staging, 0, size);
-        self.submit(encoder)?;
-        self.traffic.down += size;
-        Ok(from_device(self.gpu.precision, &self.gpu.read_range("element_force_tangent", &staging, size)?))
+        let (range, stride) = (self.batches[b].members[m], self.batches[b].stride as u64);
+        let source = self.batches[b].element_out.clone();
+        self.read_reals(("element_force_tangent", &source), range.element_start as u64 * stride, range.elements as u64 * stride)
     }
 
     /// A body's stiffness values `ξ K` as the device holds them (the last tangent pass or a
@@ -853,14 +846,21 @@ impl GpuWorld {
     pub fn stiffness_values(&mut self, body: usize) -> Result<Vec<Real>, GpuError> {
         let (b, m) = self.place[body];
         let range = self.batches[b].members[m];
+        let source = self.batches[b].values.clone();
+        self.read_reals(("assemble_csr", &source), range.nonzero_start as u64, range.nonzeros as u64)
+    }
+
+    /// `count` reals of `source` from real `first`, read back in a submission of their own
+    /// (`kernel` names the buffer's writer in an error).
+    fn read_reals(&mut self, (kernel, source): (&str, &Buffer), first: u64, count: u64) -> Result<Vec<Real>, GpuError> {
         let real = self.gpu.precision.size() as u64;
-        let (start, size) = (range.nonzero_start as u64 * real, range.nonzeros as u64 * real);
-        let staging = self.gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some("stiffness values"), size: size.max(8), usage: BufferUsages::MAP_READ | BufferUsages::COPY_DST, mapped_at_creation: false });
-        let mut encoder = self.encoder("stiffness values");
-        encoder.copy_buffer_to_buffer(&self.batches[b].values, start, &staging, 0, size);
+        let (start, size) = (first * real, count * real);
+        let staging = self.gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some(kernel), size: size.max(8), usage: BufferUsages::MAP_READ | BufferUsages::COPY_DST, mapped_at_creation: false });
+        let mut encoder = self.encoder(kernel);
+        encoder.copy_buffer_to_buffer(source, start, &staging, 0, size);
         self.submit(encoder)?;
         self.traffic.down += size;
-        Ok(from_device(self.gpu.precision, &self.gpu.read_range("assemble_csr", &staging, size)?))
+        Ok(from_device(self.gpu.precision, &self.gpu.read_range(kernel, &staging, size)?))
     }
 
     /// Records the read-back's copies, submits once, maps once and hands the
