@@ -33,6 +33,10 @@ const WORKGROUP: u32 = 64;
 /// warm-started problem often converges in a few sweeps, a hard one needs hundreds.
 const FIRST_CHUNK: usize = 4;
 const LAST_CHUNK: usize = 64;
+/// Dispatches of a whole solve in the last submission; the first has one, each further one
+/// doubles: a solve that a software adapter's loop guard cuts into a few hundred sweeps a
+/// dispatch took a submission per dispatch, 27-36 in a step of a pressed packing.
+pub const LAST_DISPATCHES: usize = 16;
 
 /// The largest colour (points) that a round's problems may have to be solved whole, one
 /// workgroup per problem (`uzawa_solve`): beyond it, a colour's points are better spread over
@@ -624,30 +628,34 @@ impl UzawaSweeps {
         std::mem::take(&mut self.traffic)
     }
 
-    /// Submits until no problem is live: each a dispatch of `uzawa_solve` if `whole`, else a
-    /// chunk of sweeps colour by colour, each followed by the device's judgement; after each
-    /// the host reads back where each problem stands and the reactions.
+    /// Submits until no problem is live: each 1, 2, 4, … dispatches of `uzawa_solve` if
+    /// `whole` (a problem that has stopped returns at once), else a chunk of sweeps colour by
+    /// colour, each followed by the device's judgement; after each the host reads back where
+    /// each problem stands and the reactions.
     #[allow(clippy::too_many_arguments)]
     fn iterate(&mut self, b: &Buffers, m: &Layout, whole: bool, problems: &mut [Problem], outcomes: &mut [Outcome], stop: Option<&AtomicBool>) -> Result<(), GpuError> {
         let n = m.points();
         let r_bytes = (n * 3 * std::mem::size_of::<Real>()) as u64;
         let state_bytes = (problems.len() * std::mem::size_of::<UzawaJudgeState<Real>>()) as u64;
-        let (mut swept, mut chunk) = (0usize, FIRST_CHUNK);
+        let (mut swept, mut chunk, mut dispatches) = (0usize, FIRST_CHUNK, 1usize);
         let most = problems.iter().map(|p| p.max_iterations).max().unwrap_or(0);
         let (judge_x, judge_y) = super::dispatch_rows(problems.len());
         let mut live = true;
         while live && swept < most && !stop.is_some_and(|s| s.load(Ordering::Relaxed)) {
             let mut encoder = self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some(KERNEL) });
-            let sweeps = if whole { self.whole_sweeps } else { chunk.min(most - swept) };
+            let recorded = dispatches.min((most - swept).div_ceil(self.whole_sweeps.max(1)));
+            let sweeps = if whole { recorded * self.whole_sweeps } else { chunk.min(most - swept) };
             {
                 let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(KERNEL), timestamp_writes: None });
                 let gpu = &self.gpu;
                 if whole {
-                    gpu.dispatch(&mut pass, (SOLVE, "main"), |pass| {
-                        pass.set_pipeline(&self.solve);
-                        pass.set_bind_group(0, &b.solve_group, &[]);
-                        pass.dispatch_workgroups(judge_x, judge_y, 1);
-                    });
+                    for _ in 0..recorded {
+                        gpu.dispatch(&mut pass, (SOLVE, "main"), |pass| {
+                            pass.set_pipeline(&self.solve);
+                            pass.set_bind_group(0, &b.solve_group, &[]);
+                            pass.dispatch_workgroups(judge_x, judge_y, 1);
+                        });
+                    }
                 } else {
                     // Colour by colour: each sweep's dispatches, then its judgement.
                     for _ in 0..sweeps {
@@ -686,6 +694,7 @@ impl UzawaSweeps {
             }
             swept += sweeps;
             chunk = (2 * chunk).min(LAST_CHUNK);
+            dispatches = (2 * dispatches).min(LAST_DISPATCHES);
         }
         Ok(())
     }
