@@ -100,7 +100,7 @@ pub fn mirrored_pair_reactions(w: &Delassus, local: &[Local], [p, q]: [u32; 2], 
             match j as usize {
                 j if j == p => a[k][0] = *block,
                 j if j == q => a[k][1] = *block,
-                j => add_block_times(&mut base, block, &r[j]),
+                j => add_planar_block_times(&mut base, block, &r[j]),
             }
         }
         c[k] = [base[0], base[1]];
@@ -134,6 +134,15 @@ pub fn mirrored_pair_reactions(w: &Delassus, local: &[Local], [p, q]: [u32; 2], 
         }
     }
     None
+}
+
+/// `out += w r` in the plane (the first two components): in 2D a reaction's third component is
+/// zero, so the block's third column adds exact zeros, and the third row is not read. The rows
+/// of a jammed packing's pairs are most of its contact solve (41 % of a 30-grain compression's
+/// samples, in this product).
+fn add_planar_block_times(out: &mut [Real; 3], w: &[Real; 9], r: &[Real; 3]) {
+    out[0] += w[0] * r[0] + w[1] * r[1];
+    out[1] += w[3] * r[0] + w[4] * r[1];
 }
 
 /// The pairs in colours: no row of `w` couples two pairs of a colour (each point's row read
