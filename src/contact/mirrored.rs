@@ -16,7 +16,7 @@
 
 use super::geometry::{norm, sub};
 use super::law::uzawa_step;
-use super::uzawa::{add_block_times, Delassus, Local};
+use super::uzawa::{add_block_times, Blocks, Delassus, Local};
 use super::{ContactPoint, Master};
 use crate::precision::Real;
 use std::collections::HashMap;
@@ -87,7 +87,12 @@ pub fn solve_mirrored_pair(w: &Delassus, local: &[Local], pair: [u32; 2], r: &mu
 
 /// [`solve_mirrored_pair`]'s reactions of the pair, `None` where it finds none, without
 /// writing them: pairs that no row of W couples are solved side by side.
-pub fn mirrored_pair_reactions(w: &Delassus, local: &[Local], [p, q]: [u32; 2], r: &[[Real; 3]], floor: Real) -> Option<[[Real; 3]; 2]> {
+pub fn mirrored_pair_reactions(w: &Delassus, local: &[Local], pair: [u32; 2], r: &[[Real; 3]], floor: Real) -> Option<[[Real; 3]; 2]> {
+    pair_reactions(&w.rows, &w.blocks[..], local, pair, r, floor)
+}
+
+/// [`mirrored_pair_reactions`] over `blocks`.
+pub(super) fn pair_reactions<B: Blocks + ?Sized>(rows: &[Vec<(u32, u32)>], blocks: &B, local: &[Local], [p, q]: [u32; 2], r: &[[Real; 3]], floor: Real) -> Option<[[Real; 3]; 2]> {
     let (p, q) = (p as usize, q as usize);
     // v_k = c_k + Σ_l A_kl r_l over the pair, in the first two components.
     let mut c = [[0.0; 2]; 2];
@@ -95,12 +100,11 @@ pub fn mirrored_pair_reactions(w: &Delassus, local: &[Local], [p, q]: [u32; 2], 
     for (k, &i) in [p, q].iter().enumerate() {
         let l = &local[i];
         let mut base = [l.v_free[0] + l.shift, l.v_free[1], l.v_free[2]];
-        for &(j, b) in &w.rows[i] {
-            let block = &w.blocks[b as usize];
+        for &(j, b) in &rows[i] {
             match j as usize {
-                j if j == p => a[k][0] = *block,
-                j if j == q => a[k][1] = *block,
-                j => add_planar_block_times(&mut base, block, &r[j]),
+                j if j == p => a[k][0] = blocks.whole(b),
+                j if j == q => a[k][1] = blocks.whole(b),
+                j => blocks.add_times(&mut base, b, &r[j]),
             }
         }
         c[k] = [base[0], base[1]];
@@ -134,15 +138,6 @@ pub fn mirrored_pair_reactions(w: &Delassus, local: &[Local], [p, q]: [u32; 2], 
         }
     }
     None
-}
-
-/// `out += w r` in the plane (the first two components): in 2D a reaction's third component is
-/// zero, so the block's third column adds exact zeros, and the third row is not read. The rows
-/// of a jammed packing's pairs are most of its contact solve (41 % of a 30-grain compression's
-/// samples, in this product).
-fn add_planar_block_times(out: &mut [Real; 3], w: &[Real; 9], r: &[Real; 3]) {
-    out[0] += w[0] * r[0] + w[1] * r[1];
-    out[1] += w[3] * r[0] + w[4] * r[1];
 }
 
 /// The pairs in colours: no row of `w` couples two pairs of a colour (each point's row read

@@ -15,7 +15,7 @@
 use super::anderson::Anderson;
 use super::geometry::norm;
 use super::law::uzawa_step;
-use super::mirrored::mirrored_pair_reactions;
+use super::mirrored::pair_reactions;
 use super::semismooth::semismooth_solve;
 use crate::precision::Real;
 use rayon::prelude::*;
@@ -66,19 +66,64 @@ impl Delassus {
         }
     }
 
-    /// `W r` for point `i` without its own block.
-    fn others_times(&self, i: usize, r: &[[Real; 3]]) -> ([Real; 3], Option<u32>) {
-        let mut out = [0.0; 3];
-        let mut own = None;
-        for &(j, b) in &self.rows[i] {
-            if j as usize == i {
-                own = Some(b);
-                continue;
-            }
-            add_block_times(&mut out, &self.blocks[b as usize], &r[j as usize]);
-        }
-        (out, own)
+}
+
+/// The blocks of W as the CPU's sweeps read them: whole, or their planar part ([`Planar`]).
+pub trait Blocks: Sync {
+    /// `out += W_b r`.
+    fn add_times(&self, out: &mut [Real; 3], b: u32, r: &[Real; 3]);
+    /// Block `b`, `3 x 3`.
+    fn whole(&self, b: u32) -> [Real; 9];
+}
+
+impl Blocks for [[Real; 9]] {
+    fn add_times(&self, out: &mut [Real; 3], b: u32, r: &[Real; 3]) {
+        add_block_times(out, &self[b as usize], r);
     }
+
+    fn whole(&self, b: u32) -> [Real; 9] {
+        self[b as usize]
+    }
+}
+
+/// The upper-left `2 x 2` of each block of W: in 2D the third row and column are zeros, and a
+/// reaction's third component is zero, so the products are those of the whole blocks (but for
+/// the sign of a zero) from less than half the bytes. A jammed packing's sweeps spend most of
+/// their time reading blocks (a 30-grain compression: two thirds of its samples in the row
+/// products).
+pub struct Planar(Vec<[Real; 4]>);
+
+impl Planar {
+    pub fn of(w: &Delassus) -> Self {
+        Self(w.blocks.iter().map(|b| [b[0], b[1], b[3], b[4]]).collect())
+    }
+}
+
+impl Blocks for Planar {
+    fn add_times(&self, out: &mut [Real; 3], b: u32, r: &[Real; 3]) {
+        let w = &self.0[b as usize];
+        out[0] += w[0] * r[0] + w[1] * r[1];
+        out[1] += w[2] * r[0] + w[3] * r[1];
+    }
+
+    fn whole(&self, b: u32) -> [Real; 9] {
+        let w = &self.0[b as usize];
+        [w[0], w[1], 0.0, w[2], w[3], 0.0, 0.0, 0.0, 0.0]
+    }
+}
+
+/// `W r` for point `i` (its row `row`) without its own block.
+fn others_times<B: Blocks + ?Sized>(row: &[(u32, u32)], blocks: &B, i: usize, r: &[[Real; 3]]) -> ([Real; 3], Option<u32>) {
+    let mut out = [0.0; 3];
+    let mut own = None;
+    for &(j, b) in row {
+        if j as usize == i {
+            own = Some(b);
+            continue;
+        }
+        blocks.add_times(&mut out, b, &r[j as usize]);
+    }
+    (out, own)
 }
 
 /// `out += w r` for a row-major `3 x 3` block.
@@ -190,13 +235,19 @@ impl Colours {
 /// the others' reactions in `r`, until a step moves the reaction by at most
 /// `settle max(|r_i|, floor)`. The body of the `uzawa_sweep` kernel.
 pub fn gauss_seidel_point(w: &Delassus, l: &Local, i: usize, r: &[[Real; 3]], settle: Real, floor: Real) -> [Real; 3] {
-    let (wr, own) = w.others_times(i, r);
+    visit_point(&w.rows, &w.blocks[..], l, i, r, settle, floor)
+}
+
+/// [`gauss_seidel_point`] over `blocks`.
+#[allow(clippy::too_many_arguments)]
+fn visit_point<B: Blocks + ?Sized>(rows: &[Vec<(u32, u32)>], blocks: &B, l: &Local, i: usize, r: &[[Real; 3]], settle: Real, floor: Real) -> [Real; 3] {
+    let (wr, own) = others_times(&rows[i], blocks, i, r);
     let base = [l.v_free[0] + wr[0] + l.shift, l.v_free[1] + wr[1], l.v_free[2] + wr[2]];
     let mut ri = r[i];
     for _ in 0..LOCAL_STEPS {
         let mut v = base;
         if let Some(b) = own {
-            add_block_times(&mut v, &w.blocks[b as usize], &ri);
+            blocks.add_times(&mut v, b, &ri);
         }
         let stepped = uzawa_step(ri, v, l.mu, l.rho).0;
         let moved = norm([stepped[0] - ri[0], stepped[1] - ri[1], stepped[2] - ri[2]]);
@@ -213,6 +264,12 @@ pub fn gauss_seidel_point(w: &Delassus, l: &Local, i: usize, r: &[[Real; 3]], se
 /// into `dr`. A large colour is visited on the thread pool.
 #[allow(clippy::too_many_arguments)]
 pub fn uzawa_sweep(w: &Delassus, local: &[Local], points: &[u32], r: &mut [[Real; 3]], dr: &mut [[Real; 3]], settle: Real, floor: Real) {
+    sweep_colour(&w.rows, &w.blocks[..], local, points, r, dr, settle, floor);
+}
+
+/// [`uzawa_sweep`] over `blocks`.
+#[allow(clippy::too_many_arguments)]
+fn sweep_colour<B: Blocks + ?Sized>(rows: &[Vec<(u32, u32)>], blocks: &B, local: &[Local], points: &[u32], r: &mut [[Real; 3]], dr: &mut [[Real; 3]], settle: Real, floor: Real) {
     let mut update = |i: usize, next: [Real; 3], r: &mut [[Real; 3]]| {
         dr[i] = [next[0] - r[i][0], next[1] - r[i][1], next[2] - r[i][2]];
         r[i] = next;
@@ -220,12 +277,12 @@ pub fn uzawa_sweep(w: &Delassus, local: &[Local], points: &[u32], r: &mut [[Real
     if points.len() < PARALLEL_COLOUR {
         // In place: no point of the colour reads another's reaction.
         for &i in points {
-            let next = gauss_seidel_point(w, &local[i as usize], i as usize, r, settle, floor);
+            let next = visit_point(rows, blocks, &local[i as usize], i as usize, r, settle, floor);
             update(i as usize, next, r);
         }
         return;
     }
-    let stepped: Vec<[Real; 3]> = points.par_iter().with_min_len(PARALLEL_COLOUR / 4).map(|&i| gauss_seidel_point(w, &local[i as usize], i as usize, r, settle, floor)).collect();
+    let stepped: Vec<[Real; 3]> = points.par_iter().with_min_len(PARALLEL_COLOUR / 4).map(|&i| visit_point(rows, blocks, &local[i as usize], i as usize, r, settle, floor)).collect();
     for (&i, next) in points.iter().zip(stepped) {
         update(i as usize, next, r);
     }
@@ -234,13 +291,14 @@ pub fn uzawa_sweep(w: &Delassus, local: &[Local], points: &[u32], r: &mut [[Real
 /// Each mirrored pair solved as one against the others' reactions, colour by colour, the pairs
 /// of a colour side by side (a pair without a regime that satisfies the law is visited point by
 /// point, as the sweeps do); `dr` takes its points' changes.
-fn solve_pairs(w: &Delassus, local: &[Local], colours: &[Vec<[u32; 2]>], r: &mut [[Real; 3]], dr: &mut [[Real; 3]], settle: Real, floor: Real) {
+#[allow(clippy::too_many_arguments)]
+fn solve_pairs<B: Blocks + ?Sized>(rows: &[Vec<(u32, u32)>], blocks: &B, local: &[Local], colours: &[Vec<[u32; 2]>], r: &mut [[Real; 3]], dr: &mut [[Real; 3]], settle: Real, floor: Real) {
     for pairs in colours {
         // No pair of a colour reads another's reactions: solved side by side, then written.
         let solved: Vec<Option<[[Real; 3]; 2]>> = if pairs.len() < PARALLEL_COLOUR / 2 {
-            pairs.iter().map(|&pair| mirrored_pair_reactions(w, local, pair, r, floor)).collect()
+            pairs.iter().map(|&pair| pair_reactions(rows, blocks, local, pair, r, floor)).collect()
         } else {
-            pairs.par_iter().with_min_len(PARALLEL_COLOUR / 8).map(|&pair| mirrored_pair_reactions(w, local, pair, r, floor)).collect()
+            pairs.par_iter().with_min_len(PARALLEL_COLOUR / 8).map(|&pair| pair_reactions(rows, blocks, local, pair, r, floor)).collect()
         };
         for (&pair, solved) in pairs.iter().zip(solved) {
             let before = pair.map(|i| r[i as usize]);
@@ -249,7 +307,7 @@ fn solve_pairs(w: &Delassus, local: &[Local], colours: &[Vec<[u32; 2]>], r: &mut
                 // No regime fits (a split the law leaves undetermined): the points one by one.
                 None => {
                     for i in pair.map(|i| i as usize) {
-                        r[i] = gauss_seidel_point(w, &local[i], i, r, settle, floor);
+                        r[i] = visit_point(rows, blocks, &local[i], i, r, settle, floor);
                     }
                 }
             }
@@ -438,6 +496,8 @@ pub fn solve(p: &mut Problem, sweep: Sweep, stop: Option<&AtomicBool>) -> Outcom
         pairs.iter().flatten().flatten().for_each(|&i| paired[i as usize] = true);
         (0..colours.count()).map(|c| colours.colour(c).iter().copied().filter(|&i| !paired[i as usize]).collect::<Vec<u32>>()).collect::<Vec<_>>()
     });
+    // The CPU's own 2D sweeps read the planar blocks (the device's twin, the whole ones).
+    let planar = (accelerate && dim == 2).then(|| Planar::of(w));
     let mut scratch = Vec::new();
     let mut outcome = Outcome::default();
     let mut judge = Judge::new(tolerance, floor);
@@ -471,10 +531,13 @@ pub fn solve(p: &mut Problem, sweep: Sweep, stop: Option<&AtomicBool>) -> Outcom
                 }
                 for c in 0..colours.count() {
                     let points = unpaired.as_ref().map_or(colours.colour(c), |u| &u[c][..]);
-                    uzawa_sweep(w, local, points, r, &mut dr, SETTLE * tolerance, floor);
+                    match &planar {
+                        Some(planar) => sweep_colour(&w.rows, planar, local, points, r, &mut dr, SETTLE * tolerance, floor),
+                        None => uzawa_sweep(w, local, points, r, &mut dr, SETTLE * tolerance, floor),
+                    }
                 }
-                if unpaired.is_some() {
-                    solve_pairs(w, local, pairs, r, &mut dr, SETTLE * tolerance, floor);
+                if let (Some(planar), Some(_)) = (&planar, &unpaired) {
+                    solve_pairs(&w.rows, planar, local, pairs, r, &mut dr, SETTLE * tolerance, floor);
                 }
             }
         }
