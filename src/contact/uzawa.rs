@@ -65,7 +65,6 @@ impl Delassus {
             0.0
         }
     }
-
 }
 
 /// The blocks of W as the CPU's sweeps read them: whole, or their planar part ([`Planar`]).
