@@ -76,7 +76,7 @@ const FIXED: Real = 1e-9;
 /// writes its reactions there. Returns false (and leaves `r`) when no regime's reactions satisfy
 /// the law, as when a singular system leaves the split undetermined.
 pub fn solve_mirrored_pair(w: &Delassus, local: &[Local], pair: [u32; 2], r: &mut [[Real; 3]], floor: Real) -> bool {
-    match mirrored_pair_reactions(w, local, pair, r, floor) {
+    match pair_reactions(&w.rows, &w.blocks[..], local, pair, r, floor) {
         Some([rp, rq]) => {
             (r[pair[0] as usize], r[pair[1] as usize]) = (rp, rq);
             true
@@ -85,13 +85,8 @@ pub fn solve_mirrored_pair(w: &Delassus, local: &[Local], pair: [u32; 2], r: &mu
     }
 }
 
-/// [`solve_mirrored_pair`]'s reactions of the pair, `None` where it finds none, without
-/// writing them: pairs that no row of W couples are solved side by side.
-pub fn mirrored_pair_reactions(w: &Delassus, local: &[Local], pair: [u32; 2], r: &[[Real; 3]], floor: Real) -> Option<[[Real; 3]; 2]> {
-    pair_reactions(&w.rows, &w.blocks[..], local, pair, r, floor)
-}
-
-/// [`mirrored_pair_reactions`] over `blocks`.
+/// [`solve_mirrored_pair`]'s reactions of the pair over `blocks` (W's rows `rows`), `None` where
+/// it finds none, without writing them: pairs that no row of W couples are solved side by side.
 pub(super) fn pair_reactions<B: Blocks + ?Sized>(rows: &[Vec<(u32, u32)>], blocks: &B, local: &[Local], [p, q]: [u32; 2], r: &[[Real; 3]], floor: Real) -> Option<[[Real; 3]; 2]> {
     let (p, q) = (p as usize, q as usize);
     // v_k = c_k + Σ_l A_kl r_l over the pair, in the first two components.

@@ -535,7 +535,8 @@ pub fn solve(p: &mut Problem, sweep: Sweep, stop: Option<&AtomicBool>) -> Outcom
                         None => uzawa_sweep(w, local, points, r, &mut dr, SETTLE * tolerance, floor),
                     }
                 }
-                if let (Some(planar), Some(_)) = (&planar, &unpaired) {
+                // Pairs are solved as one only where the planar blocks are read (2D, accelerated).
+                if let (Some(_), Some(planar)) = (&unpaired, &planar) {
                     solve_pairs(&w.rows, planar, local, pairs, r, &mut dr, SETTLE * tolerance, floor);
                 }
             }
