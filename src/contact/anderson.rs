@@ -33,6 +33,11 @@ pub struct Anderson {
     /// `G(r_k)` and `f_k`, oldest first, flattened over the points.
     outputs: Vec<Vec<Real>>,
     residuals: Vec<Vec<Real>>,
+    /// `ΔF`: `f_{k+1} - f_k`, oldest first, and their inner products `gram[i][j] = Δ_i · Δ_j`
+    /// (`j <= i`), each taken once, when `Δ_i` is made (recomputed every sweep, the normal
+    /// matrix cost a twentieth of a jammed packing's run).
+    deltas: Vec<Vec<Real>>,
+    gram: Vec<Vec<Real>>,
     /// The longest step, in plain sweeps (`|f_k|`), a mixed iterate may take.
     reach: Real,
 }
@@ -49,6 +54,9 @@ impl Anderson {
         if self.outputs.len() > MEMORY {
             self.outputs.remove(0);
             self.residuals.remove(0);
+            self.deltas.remove(0);
+            self.gram.remove(0);
+            self.gram.iter_mut().for_each(|row| _ = row.remove(0));
         }
         self.outputs.push(swept.iter().flatten().copied().collect());
         self.residuals.push(swept.iter().flatten().zip(start.iter().flatten()).map(|(g, r)| g - r).collect());
@@ -56,10 +64,10 @@ impl Anderson {
         if m == 0 {
             return false;
         }
+        self.push_delta();
         let Some(gamma) = self.coefficients(m) else {
             // Keep only the newest sweep: the others no longer say anything usable.
-            self.outputs.drain(..m);
-            self.residuals.drain(..m);
+            self.restart_from_newest();
             return false;
         };
         let step: Vec<Real> = (0..self.outputs[m].len()).map(|k| -gamma.iter().enumerate().map(|(j, g)| g * (self.outputs[j + 1][k] - self.outputs[j][k])).sum::<Real>()).collect();
@@ -85,7 +93,28 @@ impl Anderson {
         }
         self.outputs.clear();
         self.residuals.clear();
+        self.deltas.clear();
+        self.gram.clear();
         self.reach = (self.reach / 4.0).max(1.0);
+    }
+
+    /// Keeps only the newest sweep.
+    fn restart_from_newest(&mut self) {
+        let m = self.outputs.len() - 1;
+        self.outputs.drain(..m);
+        self.residuals.drain(..m);
+        self.deltas.clear();
+        self.gram.clear();
+    }
+
+    /// Records `Δ` of the two newest residuals and its inner products with the earlier ones.
+    fn push_delta(&mut self) {
+        let m = self.residuals.len() - 1;
+        let delta: Vec<Real> = self.residuals[m].iter().zip(&self.residuals[m - 1]).map(|(a, b)| a - b).collect();
+        self.deltas.push(delta);
+        let newest = &self.deltas[m - 1];
+        let row = self.deltas.iter().map(|d| newest.iter().zip(d).fold(0.0, |s, (a, b)| s + a * b)).collect();
+        self.gram.push(row);
     }
 
     /// Widens the trust region after a mixed iterate was kept.
@@ -96,23 +125,12 @@ impl Anderson {
     /// `γ = argmin |f_m - ΔF γ|` by the normal equations (m is small), `None` when they are
     /// too ill-conditioned.
     fn coefficients(&self, m: usize) -> Option<Vec<Real>> {
-        let f = &self.residuals;
-        let delta = |j: usize, k: usize| f[j + 1][k] - f[j][k];
-        let len = f[m].len();
+        let newest = &self.residuals[m];
+        let mut b: Vec<Real> = self.deltas.iter().map(|d| d.iter().zip(newest).fold(0.0, |s, (a, b)| s + a * b)).collect();
         let mut a = vec![0.0; m * m];
-        let mut b = vec![0.0; m];
-        for k in 0..len {
-            for i in 0..m {
-                let di = delta(i, k);
-                b[i] += di * f[m][k];
-                for j in 0..=i {
-                    a[i * m + j] += di * delta(j, k);
-                }
-            }
-        }
         for i in 0..m {
-            for j in 0..i {
-                a[j * m + i] = a[i * m + j];
+            for j in 0..=i {
+                (a[i * m + j], a[j * m + i]) = (self.gram[i][j], self.gram[i][j]);
             }
         }
         let scale = (0..m).map(|i| a[i * m + i]).fold(0.0, Real::max);

@@ -94,12 +94,10 @@ pub(super) fn pair_reactions<B: Blocks + ?Sized>(rows: &[Vec<(u32, u32)>], block
     let mut a = [[[0.0; 9]; 2]; 2];
     for (k, &i) in [p, q].iter().enumerate() {
         let l = &local[i];
-        let mut base = [l.v_free[0] + l.shift, l.v_free[1], l.v_free[2]];
-        for &(j, b) in &rows[i] {
-            match j as usize {
-                j if j == p => a[k][0] = blocks.whole(b),
-                j if j == q => a[k][1] = blocks.whole(b),
-                j => blocks.add_times(&mut base, b, &r[j]),
+        let (base, own) = others_sum(&rows[i], blocks, [p, q], r, [l.v_free[0] + l.shift, l.v_free[1], l.v_free[2]]);
+        for (block, b) in a[k].iter_mut().zip(own) {
+            if let Some(b) = b {
+                *block = blocks.whole(b);
             }
         }
         c[k] = [base[0], base[1]];
@@ -133,6 +131,26 @@ pub(super) fn pair_reactions<B: Blocks + ?Sized>(rows: &[Vec<(u32, u32)>], block
         }
     }
     None
+}
+
+/// `start + Σ_j W_ij r_j` over row `row` without the columns `pair`, and the blocks of those.
+/// Not inlined: inlined into [`pair_reactions`], the sum went through the stack at every block
+/// (a third of a jammed packing's samples).
+#[inline(never)]
+fn others_sum<B: Blocks + ?Sized>(row: &[(u32, u32)], blocks: &B, pair: [usize; 2], r: &[[Real; 3]], start: [Real; 3]) -> ([Real; 3], [Option<u32>; 2]) {
+    let mut out = start;
+    let mut own = [None, None];
+    for &(j, b) in row {
+        let j = j as usize;
+        if j == pair[0] {
+            own[0] = Some(b);
+        } else if j == pair[1] {
+            own[1] = Some(b);
+        } else {
+            blocks.add_times(&mut out, b, &r[j]);
+        }
+    }
+    (out, own)
 }
 
 /// The pairs in colours: no row of `w` couples two pairs of a colour (each point's row read
