@@ -289,3 +289,32 @@ fn a_node_on_a_concave_edge_is_held_by_both_sides_in_3d() {
         }
     }
 }
+
+/// A slave node inside the corner of a box (behind the top by 0.03, behind the side by 0.01)
+/// is held by the side, which is askew to the node's downward normal, and not by the top that
+/// faces it: out through the nearer facet. A node as far behind the top but farther behind the
+/// side stays on the top.
+#[test]
+fn a_node_inside_a_box_corner_is_held_by_the_nearer_askew_facet() {
+    for (side, askew_holds) in [(0.01, true), (0.025, false)] {
+        let lower = cuboid([0.0, 0.0, 0.0], [1.0, 1.0, 1.0], [2, 2, 2], ElementKind::Hex8);
+        // The slave's bottom middle node (normal straight down) at x = 1 - side, 0.03 below the top.
+        let mut upper = cuboid([0.0, 0.0, 0.0], [0.2, 0.2, 0.1], [2, 2, 1], ElementKind::Hex8);
+        for x in &mut upper.nodes {
+            (x[0], x[1], x[2]) = (x[0] + 0.9 - side, x[1] + 0.4, x[2] + 0.97);
+        }
+        let meshes = [lower, upper];
+        let middle = meshes[1].nodes.iter().position(|x| (x[0] - (1.0 - side)).abs() < 1e-12 && (x[1] - 0.5).abs() < 1e-12 && (x[2] - 0.97).abs() < 1e-12).expect("the middle node") as u32;
+        let (model, positions) = upper_on_lower_model(&meshes);
+        let mut config = Configuration::new(&model, positions);
+        let found = detect(&model, &mut config, &|_, _| unreachable!("every body is placed"), 3, 0.0, 0.1, 0.01, &mut Default::default());
+        let here: Vec<_> = found.iter().filter(|c| c.slave_node == middle).collect();
+        assert_eq!(here.len(), 1, "side {side}: {} points", here.len());
+        let (n, gap) = (here[0].frame[0], here[0].gap);
+        if askew_holds {
+            assert!((n[0] - 1.0).abs() < 1e-12 && (gap + side).abs() < 1e-12, "side {side}: normal {n:?}, gap {gap}");
+        } else {
+            assert!((n[2] - 1.0).abs() < 1e-12 && (gap + 0.03).abs() < 1e-12, "side {side}: normal {n:?}, gap {gap}");
+        }
+    }
+}

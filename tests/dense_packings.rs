@@ -352,6 +352,26 @@ fn grains_3d_keeps_every_node_out_of_other_grains() {
     assert!(balance < 1e-8, "energy balance error {balance:e}");
 }
 
+/// Caught by issue 55's 3D command (`grains_3d`, 64 grains, the wall at ten times its speed):
+/// at t = 0.166 a node inside a box's corner was held by the facet facing it, whose plane it
+/// was 1.3e-2 behind, and went in through the askew facet 2.4e-3 away; the sub-step was kept
+/// at the smallest step with the node 1.29 % of an element deep. The nearer askew facet holds
+/// such a node now, and an askew facet across a dent's edge holds it as the second facet.
+#[test]
+fn a_node_inside_a_box_corner_is_held_by_the_nearer_askew_facet_at_ten_times_the_wall_speed() {
+    let mut sim = simulation("grains_3d", &["packing.count=64", "packing.wall_velocity=10.0", "time.end=0.17"]);
+    sim.start();
+    let (mut ratio, mut kept) = (0.0_f64, 0);
+    while !sim.finished() {
+        let report = sim.advance().unwrap_or_else(|f| panic!("step {} at t = {:.4} failed: {}", f.step, f.t, f.failure));
+        ratio = ratio.max(report.contact.max_overlap_ratio);
+        kept += report.kept_beyond_bounds;
+    }
+    println!("64 grains at ten times the wall speed to t = 0.17: deepest overlap {ratio:.3e} of an element, {kept} sub-steps kept beyond bounds");
+    assert_eq!(kept, 0, "sub-steps kept beyond bounds");
+    assert!(ratio < 0.01, "a node went {ratio:.3e} of an element into another grain");
+}
+
 /// Caught by pouring `grains_3d` under gravity (it stopped at t = 0.78 with a node 47 % of an
 /// element deep; 27 grains ended with 13 % and energy created): detection took a facet only if
 /// the slave node's averaged normal faced it, and a coarse grain's corner or an edge sliding

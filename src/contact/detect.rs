@@ -374,9 +374,12 @@ impl PairSearch {
                 let mut normals: Option<Vec<Vec3>> = None;
                 // Best facet per master body for the current node, among this slave's masters: one
                 // that faces the node's own surface, else one that does not (`Candidate`).
-                let mut best: Vec<[Option<(Real, usize, Projection)>; 2]> = vec![[None, None]; masters[s].len()];
-                // Every facing facet of the current node, by master: a second one holds it in a
-                // concave corner (2D) or edge (3D) of the master ([`concave`]).
+                let mut best: Vec<[Option<Found>; 2]> = vec![[None, None]; masters[s].len()];
+                // Every facing facet of the current node, by master (in 3D also every askew one
+                // it lies over): a second one holds it in a concave corner (2D) or edge (3D) of
+                // the master ([`concave`]). In 3D the facet across a dent's edge can be askew to a
+                // node pressed along the other one: unheld, the node slid over the edge and into
+                // it (`grains_3d` at ten times the wall speed, with `nearer_askew`).
                 let mut facing: Vec<(usize, usize, Projection)> = Vec::new();
                 let mut xs: Vec<Vec3> = Vec::with_capacity(4);
                 for &node in &surfaces[s].nodes {
@@ -401,20 +404,26 @@ impl PairSearch {
                                     facing.push((k, f, p));
                                     0
                                 }
-                                Candidate::Askew => 1,
+                                Candidate::Askew => {
+                                    if dim == 3 {
+                                        facing.push((k, f, p));
+                                    }
+                                    1
+                                }
                                 Candidate::Extension => return,
                             };
                             let slot = &mut best[k][tier];
-                            if slot.as_ref().is_none_or(|(g, _, _)| p.gap.abs() < g.abs()) {
-                                *slot = Some((p.gap, f, p));
+                            if slot.as_ref().is_none_or(|found| p.gap.abs() < found.p.gap.abs()) {
+                                *slot = Some(Found { f, p, size });
                             }
                         });
                     }
                     for (k, &m) in masters[s].iter().enumerate() {
-                        let [first, askew] = std::mem::take(&mut best[k]);
-                        let held_facing = first.is_some();
-                        let Some((_, f, p)) = first.or(askew) else { continue };
                         let m = m as usize;
+                        let [first, askew] = std::mem::take(&mut best[k]);
+                        let first = first.filter(|a| dim == 2 || askew.as_ref().is_none_or(|b| !nearer_askew(a, b, &surfaces[m], &positions[m])));
+                        let held_facing = first.is_some();
+                        let Some(Found { f, p, .. }) = first.or(askew) else { continue };
                         let mu = model.pairs.friction(s, m).expect("pair checked");
                         let second = model.pairs.second(s, m);
                         points.push(body_point(s, node, m, surfaces[m].facet(f), &p, dim, mu, second));
@@ -435,6 +444,32 @@ impl PairSearch {
             .collect();
         found.into_iter().flatten().collect()
     }
+}
+
+/// A master facet a node projects onto, and its size.
+#[derive(Clone, Copy)]
+struct Found {
+    f: usize,
+    p: Projection,
+    size: Real,
+}
+
+/// How much nearer (relative to its size) the plane of an askew facet a node lies over must
+/// be than that of the nearest facing facet for the askew one to hold the node: well beyond
+/// round-off and the sweeps' tolerance, so that the corner of a bar pressed flush on another's
+/// end (on the plane of the end's side facet) stays held by the end. At 1e-3 the 3D packing
+/// below took five times as long (doc/benchmarks.md).
+const NEARER_ASKEW: Real = 1e-2;
+
+/// Whether the askew facet `askew` a node lies over is nearer the node than the facing facet
+/// `facing`, by [`NEARER_ASKEW`], where the two do not meet concavely: the 3D choice of the
+/// facet that holds a node (in 2D the facing one holds it). Near a grain's convex edge or
+/// vertex the facing facet's plane no longer bounds the master: a node inside a box's corner,
+/// held by the facing facet whose plane it was 1.3e-2 behind, went in through the askew one,
+/// 2.4e-3 away, unheld (`grains_3d`, 64 grains at ten times the wall speed: a sub-step kept at
+/// the smallest step with a node 1.29 % of an element deep).
+fn nearer_askew(facing: &Found, askew: &Found, surface: &super::Surface, x: &[Vec3]) -> bool {
+    askew.p.gap.abs() + NEARER_ASKEW * askew.size < facing.p.gap.abs() && !concave(surface.facet(facing.f), surface.facet(askew.f), &facing.p.normal, x)
 }
 
 /// The point of slave node `node` of body `s` on the facet `facet` of body `m`, projected as `p`.
