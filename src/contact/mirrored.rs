@@ -16,7 +16,7 @@
 
 use super::geometry::{norm, sub};
 use super::law::uzawa_step;
-use super::uzawa::{add_block_times, Blocks, Delassus, Local};
+use super::uzawa::{add_block_times, others_sum, Blocks, Delassus, Local};
 use super::{ContactPoint, Master};
 use crate::precision::Real;
 use std::collections::HashMap;
@@ -131,26 +131,6 @@ pub(super) fn pair_reactions<B: Blocks + ?Sized>(rows: &[Vec<(u32, u32)>], block
         }
     }
     None
-}
-
-/// `start + Σ_j W_ij r_j` over row `row` without the columns `pair`, and the blocks of those.
-/// Not inlined: inlined into [`pair_reactions`], the sum went through the stack at every block
-/// (a third of a jammed packing's samples).
-#[inline(never)]
-fn others_sum<B: Blocks + ?Sized>(row: &[(u32, u32)], blocks: &B, pair: [usize; 2], r: &[[Real; 3]], start: [Real; 3]) -> ([Real; 3], [Option<u32>; 2]) {
-    let mut out = start;
-    let mut own = [None, None];
-    for &(j, b) in row {
-        let j = j as usize;
-        if j == pair[0] {
-            own[0] = Some(b);
-        } else if j == pair[1] {
-            own[1] = Some(b);
-        } else {
-            blocks.add_times(&mut out, b, &r[j]);
-        }
-    }
-    (out, own)
 }
 
 /// The pairs in colours: no row of `w` couples two pairs of a colour (each point's row read
