@@ -129,6 +129,9 @@ fn uzawa_problem_structs_match_the_shader_layout() {
             let (members, span) = naga_layout(&module, "SolveCount");
             assert_eq!((members, span as usize), (layout(&["problems", "sweeps", "pad0", "pad1"], &[]), size_of::<SolveCount>()), "{kernel}");
         }
+        let module = validate("delassus_unpack", precision, None).unwrap();
+        let (members, span) = naga_layout(&module, "UnpackCount");
+        assert_eq!((members, span as usize), (layout(&["blocks", "pad0", "pad1", "pad2"], &[]), size_of::<bifirst::gpu::uzawa_sweep::UnpackCount>()));
     }
     let p = UzawaProblem::<f64> { point_start: 1, point_end: 2, node_start: 3, node_end: 4, max_iterations: 5, colour_first: 6, colours: 7, pad: 8, tolerance: 9.0, floor: 10.0 };
     let words: [u32; 12] = bytemuck::cast(p);
@@ -434,6 +437,84 @@ fn uzawa_solve_kernel_matches_its_cpu_twin() {
     let scale = cpu[0].1.iter().flatten().fold(1e-300, |m: f64, x| m.max(x.abs()));
     let worst = r.iter().flatten().zip(cpu[0].1.iter().flatten()).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max) / scale;
     assert!(worst <= 1e-12, "{worst:.3e}");
+}
+
+#[test]
+fn delassus_unpack_kernel_matches_its_cpu_twin() {
+    // More blocks than a workgroup, not a multiple of it; planar entries with signed zeros; the
+    // blocks' buffer filled with NaN first, so that every entry must be written. Bit for bit.
+    use wgpu::util::DeviceExt;
+    for precision in PRECISIONS {
+        let Some(gpu) = gpu_or_skip("delassus_unpack_kernel_matches_its_cpu_twin", precision) else { continue };
+        let count = 1000usize;
+        let planar: Vec<f64> = (0..4 * count).map(|i| if i % 7 == 3 { -0.0 } else { (i as f64 * 0.61).sin() * 1e3 }).collect();
+        let mut expected = vec![f64::NAN; 9 * count];
+        cpu::delassus_unpack(&planar, &mut expected);
+        let storage = wgpu::BufferUsages::STORAGE;
+        let init = |label, contents: &[u8], usage| gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage });
+        let planar_buffer = init("planar", &bifirst::gpu::world::to_device(precision, &planar), storage);
+        let blocks = init("blocks", &bifirst::gpu::world::to_device(precision, &vec![f64::NAN; 9 * count]), storage | wgpu::BufferUsages::COPY_SRC);
+        let count_buffer = init("count", bytemuck::bytes_of(&bifirst::gpu::uzawa_sweep::UnpackCount { blocks: count as u32, pad: [0; 3] }), wgpu::BufferUsages::UNIFORM);
+        let read = gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some("read"), size: blocks.size(), usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST, mapped_at_creation: false });
+        let pipeline = gpu.pipeline("delassus_unpack", None).unwrap();
+        let group = gpu.bind_named(&pipeline, ("delassus_unpack", "main", None), &[("planar", &planar_buffer), ("blocks", &blocks), ("count", &count_buffer)]);
+        let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes: None });
+            pass.set_pipeline(&pipeline);
+            pass.set_bind_group(0, &group, &[]);
+            pass.dispatch_workgroups(count.div_ceil(64) as u32, 1, 1);
+        }
+        encoder.copy_buffer_to_buffer(&blocks, 0, &read, 0, blocks.size());
+        gpu.submit(encoder).unwrap();
+        let on_gpu = bifirst::gpu::world::from_device(precision, &gpu.read("delassus_unpack", &read).unwrap());
+        let expected: Vec<f64> = bifirst::gpu::world::from_device(precision, &bifirst::gpu::world::to_device(precision, &expected));
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        assert_eq!(bits(&on_gpu), bits(&expected), "{}", precision.name());
+    }
+}
+
+#[test]
+fn a_planar_round_uploads_four_reals_a_block_and_sweeps_as_the_cpu() {
+    // A problem whose blocks' third rows and columns are zeros (a 2D round) goes up as the
+    // blocks' upper-left 2 x 2, and the device's sweeps over the blocks `delassus_unpack` writes
+    // out are the CPU's over the whole blocks. The same problem with one such entry not zero goes
+    // up whole: 5 reals a block more, less the unpack count.
+    use bifirst::gpu::uzawa_sweep::{UnpackCount, UzawaSweeps};
+    let Some(gpu) = gpu_or_skip("a_planar_round_uploads_four_reals_a_block_and_sweeps_as_the_cpu", Precision::F64) else { return };
+    let mut sweeps = UzawaSweeps::new(Arc::new(gpu)).expect("pipelines");
+    let mut planar = bifirst::bench::bench_contact_problem(31, 40, 60);
+    for w in &mut planar.w.blocks {
+        for e in [2, 5, 6, 7, 8] {
+            w[e] = 0.0;
+        }
+    }
+    for (l, r) in planar.local.iter_mut().zip(&mut planar.r) {
+        l.v_free[2] = 0.0;
+        r[2] = 0.0;
+    }
+    let (tolerance, floor, most) = (1e-10, 1e-3, 500);
+    let on_cpu = cpu_solves(std::slice::from_ref(&planar), &[(tolerance, most)], floor);
+    let mut uploads = Vec::new();
+    let mut whole = bifirst::bench::bench_contact_problem(31, 40, 60);
+    whole.w = planar.w.clone();
+    whole.w.blocks[0][8] = 1e-300;
+    whole.w.version = planar.w.version + 1;
+    for problem in [&planar, &whole] {
+        let mut r = problem.r.clone();
+        let up = sweeps.traffic.up;
+        let outcome = sweeps.solve(&mut [problem.with(&mut r, tolerance, floor, most)], None).expect("device sweeps").expect("fits")[0];
+        uploads.push(sweeps.traffic.up - up);
+        if std::ptr::eq(problem, &planar) {
+            assert_eq!((outcome.iterations, outcome.converged), (on_cpu[0].0.iterations, on_cpu[0].0.converged));
+            assert!(outcome.converged && outcome.iterations > 1);
+            let scale = on_cpu[0].1.iter().flatten().fold(1e-300, |m: f64, x| m.max(x.abs()));
+            let worst = r.iter().flatten().zip(on_cpu[0].1.iter().flatten()).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max) / scale;
+            assert!(worst <= 1e-12, "{worst:.3e}");
+        }
+    }
+    let blocks = planar.w.blocks.len() as u64;
+    assert_eq!(uploads[1] - uploads[0], 5 * 8 * blocks - std::mem::size_of::<UnpackCount>() as u64, "{uploads:?} bytes up for {blocks} blocks");
 }
 
 /// The material's example (`Law::EXAMPLE`): every model the registry lists is tested.

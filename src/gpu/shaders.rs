@@ -16,6 +16,7 @@ use crate::precision::Precision;
 pub const SHADERS: &[(&str, &str)] = &[
     ("assemble_csr", include_str!("../../shaders/assemble_csr.wgsl")),
     ("assemble_residual", include_str!("../../shaders/assemble_residual.wgsl")),
+    ("delassus_unpack", include_str!("../../shaders/delassus_unpack.wgsl")),
     ("element_energy", include_str!("../../shaders/element_energy.wgsl")),
     ("element_force_tangent", include_str!("../../shaders/element_force_tangent.wgsl")),
     ("newton_compact", include_str!("../../shaders/newton_compact.wgsl")),

@@ -21,13 +21,14 @@ use super::{Gpu, GpuError};
 use crate::contact::uzawa::{Colours, Delassus, NodalMap, Outcome, Problem, LOCAL_STEPS, SETTLE};
 use crate::precision::{Precision, Real};
 use bytemuck::{Pod, Zeroable};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use std::sync::Arc;
 use wgpu::{BindGroup, Buffer, BufferUsages};
 
 const KERNEL: &str = "uzawa_sweep";
 const JUDGE: &str = "uzawa_judge";
 const SOLVE: &str = "uzawa_solve";
+const UNPACK: &str = "delassus_unpack";
 const WORKGROUP: u32 = 64;
 /// Sweeps in the first chunk of a solve; each further chunk doubles, up to [`LAST_CHUNK`]: a
 /// warm-started problem often converges in a few sweeps, a hard one needs hundreds.
@@ -183,6 +184,14 @@ pub struct SolveCount {
     pub pad: [u32; 2],
 }
 
+/// The number of blocks `delassus_unpack` writes (`struct UnpackCount` in the shader).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
+pub struct UnpackCount {
+    pub blocks: u32,
+    pub pad: [u32; 3],
+}
+
 /// Where the reactions of a solve's problems land, for `uzawa_judge`: per node (numbered over
 /// all problems, each problem's in a run), the points that act on it in ascending order, each
 /// with its coefficient, and every point's frame.
@@ -242,6 +251,11 @@ struct Layout {
     /// Each problem's W version and points: the layout serves a round with the same key.
     key: Vec<(u64, usize)>,
     blocks: Vec<Real>,
+    /// The blocks' planar upper-left 2 x 2 where every block's third row and column are
+    /// zeros (+0.0; a 2D round): what goes up, 4 reals a block, which `delassus_unpack` writes
+    /// out whole on the device. W's blocks were a third of the bytes a pressed packing moved
+    /// a step on lavapipe.
+    planar: Option<Vec<Real>>,
     row_start: Vec<u32>,
     row_entries: Vec<[u32; 2]>,
     order: Vec<u32>,
@@ -274,6 +288,8 @@ impl Layout {
             }
             m.offsets.push(point0 as usize + p.local.len());
         }
+        let flat = m.blocks.chunks_exact(9).all(|w| [2, 5, 6, 7, 8].iter().all(|&e| w[e].to_bits() == 0));
+        m.planar = flat.then(|| m.blocks.chunks_exact(9).flat_map(|w| [w[0], w[1], w[3], w[4]]).collect());
         let colours = problems.iter().map(|p| p.colours.count()).max().unwrap_or(0);
         for c in 0..colours {
             let start = m.order.len() as u32;
@@ -339,6 +355,10 @@ pub(crate) struct Buffers {
     node_entries: usize,
     colour_entries: usize,
     block: Buffer,
+    /// Planar blocks as uploaded, and their count, for `delassus_unpack`.
+    planar: Buffer,
+    unpack_count: Buffer,
+    unpack_group: BindGroup,
     row_start: Buffer,
     row_entries: Buffer,
     pub(crate) locals: Buffer,
@@ -369,6 +389,10 @@ pub struct UzawaSweeps {
     pipeline: wgpu::ComputePipeline,
     judge: wgpu::ComputePipeline,
     solve: wgpu::ComputePipeline,
+    unpack: wgpu::ComputePipeline,
+    /// How many planar blocks went up and are not yet written out whole (0: none): the first
+    /// pass recorded after staging writes them ([`UzawaSweeps::record_unpack`]).
+    unpack_pending: AtomicU32,
     buffers: Option<Buffers>,
     /// What the device holds of the last round.
     layout: Layout,
@@ -390,8 +414,9 @@ impl UzawaSweeps {
         let pipeline = gpu.pipeline(KERNEL, None)?;
         let judge = gpu.pipeline(JUDGE, None)?;
         let solve = gpu.pipeline(SOLVE, None)?;
+        let unpack = gpu.pipeline(UNPACK, None)?;
         let range_stride = (gpu.device.limits().min_uniform_buffer_offset_alignment as u64).max(std::mem::size_of::<ColourRange>() as u64);
-        Ok(Self { gpu, pipeline, judge, solve, buffers: None, layout: Layout::default(), range_stride, whole_sweeps: 0, submits: 0, traffic: Traffic::default() })
+        Ok(Self { gpu, pipeline, judge, solve, unpack, unpack_pending: Default::default(), buffers: None, layout: Layout::default(), range_stride, whole_sweeps: 0, submits: 0, traffic: Traffic::default() })
     }
 
     /// The most items of `bytes` each that one buffer of the device can bind.
@@ -432,6 +457,9 @@ impl UzawaSweeps {
         let none = BufferUsages::empty();
         let state_bytes = problems * std::mem::size_of::<UzawaJudgeState<Real>>();
         let block = storage(gpu, "uzawa blocks", blocks * 9 * real, none);
+        let planar = storage(gpu, "uzawa planar blocks", blocks * 4 * real, none);
+        let unpack_count = buffer(gpu, "uzawa unpack count", std::mem::size_of::<UnpackCount>(), BufferUsages::UNIFORM | BufferUsages::COPY_DST);
+        let unpack_group = gpu.bind_named(&self.unpack, (UNPACK, "main", None), &[("planar", &planar), ("blocks", &block), ("count", &unpack_count)]);
         let row_start = storage(gpu, "uzawa row starts", (points + 1) * 4, none);
         let row_entries = storage(gpu, "uzawa row entries", entries * 8, none);
         let locals = storage(gpu, "uzawa points", points * local_bytes, none);
@@ -475,6 +503,9 @@ impl UzawaSweeps {
             node_entries,
             colour_entries,
             block,
+            planar,
+            unpack_count,
+            unpack_group,
             row_start,
             row_entries,
             locals,
@@ -542,7 +573,15 @@ impl UzawaSweeps {
         };
         let b = self.buffers.take().expect("reserved");
         if !resident || reallocated {
-            self.upload(&b.block, 0, bytemuck::cast_slice(&layout.blocks));
+            if let Some(planar) = &layout.planar {
+                let blocks = (planar.len() / 4) as u32;
+                self.upload(&b.planar, 0, bytemuck::cast_slice(planar));
+                self.upload(&b.unpack_count, 0, bytemuck::bytes_of(&UnpackCount { blocks, pad: [0; 3] }));
+                self.unpack_pending.store(blocks, Ordering::Relaxed);
+            } else {
+                self.upload(&b.block, 0, bytemuck::cast_slice(&layout.blocks));
+                self.unpack_pending.store(0, Ordering::Relaxed);
+            }
             self.upload(&b.row_start, 0, bytemuck::cast_slice(&layout.row_start));
             self.upload(&b.row_entries, 0, bytemuck::cast_slice(&layout.row_entries));
             self.upload(&b.order, 0, bytemuck::cast_slice(&layout.order));
@@ -613,6 +652,24 @@ impl UzawaSweeps {
         }
     }
 
+    /// Records `delassus_unpack` if the staged blocks went up planar and are not written out yet:
+    /// in the first pass after staging, before its sweeps.
+    pub(crate) fn record_unpack(&self, pass: &mut wgpu::ComputePass) {
+        self.record_unpack_in(pass, self.buffers());
+    }
+
+    fn record_unpack_in(&self, pass: &mut wgpu::ComputePass, b: &Buffers) {
+        let blocks = self.unpack_pending.swap(0, Ordering::Relaxed);
+        if blocks > 0 {
+            let (x, y) = super::dispatch_rows((blocks as usize).div_ceil(WORKGROUP as usize));
+            self.gpu.dispatch(pass, (UNPACK, "main"), |pass| {
+                pass.set_pipeline(&self.unpack);
+                pass.set_bind_group(0, &b.unpack_group, &[]);
+                pass.dispatch_workgroups(x, y, 1);
+            });
+        }
+    }
+
     /// Records one dispatch of `uzawa_solve` over `problems` staged problems.
     pub(crate) fn record_solve(&self, pass: &mut wgpu::ComputePass, problems: usize) {
         let (x, y) = super::dispatch_rows(problems);
@@ -647,6 +704,7 @@ impl UzawaSweeps {
             let sweeps = if whole { recorded * self.whole_sweeps } else { chunk.min(most - swept) };
             {
                 let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some(KERNEL), timestamp_writes: None });
+                self.record_unpack_in(&mut pass, b);
                 let gpu = &self.gpu;
                 if whole {
                     for _ in 0..recorded {

@@ -428,7 +428,7 @@ impl GpuWorld {
             batches.push(batch);
         }
         let readback = buffer(&gpu, "readback", readback_bytes, BufferUsages::MAP_READ | BufferUsages::COPY_DST);
-        Ok(Self {
+        let mut world = Self {
             gpu,
             batches,
             place,
@@ -445,7 +445,13 @@ impl GpuWorld {
             contact_pipelines: None,
             step_tally: StepTally::default(),
             held: (0, 0.0),
-        })
+        };
+        for batch in 0..world.batches.len() {
+            if world.batches[batch].inverse_entries > 0 {
+                world.make_newton_buffers(batch)?;
+            }
+        }
+        Ok(world)
     }
 
     pub fn precision(&self) -> Precision {

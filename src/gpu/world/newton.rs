@@ -335,8 +335,9 @@ impl HostTangents {
     }
 }
 
-/// A batch's buffers and pipelines for device Newton iterations, made when a call first needs
-/// them (a scene that never iterates on the device pays nothing).
+/// A batch's buffers and pipelines for device Newton iterations, made with the world where its
+/// members can iterate on the device ([`GpuWorld::make_newton_buffers`]; a batch of large
+/// bodies pays nothing).
 pub(super) struct NewtonBuffers {
     pub(super) inverse: Buffer,
     /// The batch's distinct stiffness patterns (`Batch::patterns`), for `newton_invert`.
@@ -721,6 +722,25 @@ impl GpuWorld {
         }
     }
 
+    /// Makes a batch's Newton buffers unless it has them: with the world for a batch whose
+    /// members can iterate on the device (so that their upload is the first step's, not that
+    /// of the step in which a call first needs them), else when a call first needs them.
+    pub(super) fn make_newton_buffers(&mut self, batch: usize) -> Result<(), GpuError> {
+        if self.batches[batch].newton.is_some() {
+            return Ok(());
+        }
+        if self.newton_pipelines.is_none() {
+            self.newton_pipelines = Some(NewtonPipelines::new(&self.gpu)?);
+        }
+        let pipelines = self.newton_pipelines.as_ref().expect("made above");
+        let made = NewtonBuffers::new(&self.gpu, pipelines, &self.batches[batch], &self.coefficients)?;
+        // The templates of a call's start and the reference coordinates, once.
+        let b = &self.batches[batch];
+        self.traffic.up += (b.members.len() * (std::mem::size_of::<NewtonState<Real>>() + 8) + b.reference.len() * self.gpu.precision.size()) as u64;
+        self.batches[batch].newton = Some(made);
+        Ok(())
+    }
+
     /// Makes each batch's Newton buffers when a call first needs them and stages the calls,
     /// batch by batch.
     fn stage_calls(&mut self, calls: &mut [NewtonCall]) -> Result<Vec<BatchCalls>, GpuError> {
@@ -738,17 +758,7 @@ impl GpuWorld {
         let by_batch = self.stage_displacements_but(&calls.iter().map(|c| (c.body, &*c.u)).collect::<Vec<_>>(), &|i| kept[i]);
         let mut work: Vec<BatchCalls> = Vec::with_capacity(by_batch.len());
         for (batch, mine) in by_batch {
-            if self.batches[batch].newton.is_none() {
-                if self.newton_pipelines.is_none() {
-                    self.newton_pipelines = Some(NewtonPipelines::new(&self.gpu)?);
-                }
-                let pipelines = self.newton_pipelines.as_ref().expect("made above");
-                let made = NewtonBuffers::new(&self.gpu, pipelines, &self.batches[batch], &self.coefficients)?;
-                // The templates of a call's start and the reference coordinates, once.
-                let b = &self.batches[batch];
-                self.traffic.up += (b.members.len() * (std::mem::size_of::<NewtonState<Real>>() + 8) + b.reference.len() * self.gpu.precision.size()) as u64;
-                self.batches[batch].newton = Some(made);
-            }
+            self.make_newton_buffers(batch)?;
             let mine: Vec<(usize, usize)> = mine.into_iter().map(|i| (i, self.place[calls[i].body].1)).collect();
             let energy = self.stage_newton(batch, &mine, calls);
             work.push((batch, mine, energy));
@@ -844,6 +854,7 @@ impl GpuWorld {
                 let mine = contact_of(*batch);
                 if let (Some(c), Some(p)) = (mine, pipelines) {
                     c.record_prepare(&self.gpu, &mut pass, p);
+                    self.contact.as_ref().expect("staged").record_unpack(&mut pass);
                     for _ in 0..plan.solves {
                         self.contact.as_ref().expect("staged").record_solve(&mut pass, plan.contacts);
                     }
