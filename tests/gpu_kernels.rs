@@ -129,6 +129,9 @@ fn uzawa_problem_structs_match_the_shader_layout() {
             let (members, span) = naga_layout(&module, "SolveCount");
             assert_eq!((members, span as usize), (layout(&["problems", "sweeps", "pad0", "pad1"], &[]), size_of::<SolveCount>()), "{kernel}");
         }
+        let module = validate("scatter_reals", precision, None).unwrap();
+        let (members, span) = naga_layout(&module, "ScatterCount");
+        assert_eq!((members, span as usize), (layout(&["count", "pad0", "pad1", "pad2"], &[]), size_of::<bifirst::gpu::world::ScatterCount>()));
         let module = validate("delassus_unpack", precision, None).unwrap();
         let (members, span) = naga_layout(&module, "UnpackCount");
         assert_eq!((members, span as usize), (layout(&["blocks", "pad0", "pad1", "pad2"], &[]), size_of::<bifirst::gpu::uzawa_sweep::UnpackCount>()));
@@ -471,6 +474,44 @@ fn delassus_unpack_kernel_matches_its_cpu_twin() {
         let expected: Vec<f64> = bifirst::gpu::world::from_device(precision, &bifirst::gpu::world::to_device(precision, &expected));
         let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
         assert_eq!(bits(&on_gpu), bits(&expected), "{}", precision.name());
+    }
+}
+
+#[test]
+fn scatter_reals_kernel_matches_its_cpu_twin() {
+    // More entries than a workgroup, in no order, into a buffer whose other values must stay.
+    use wgpu::util::DeviceExt;
+    for precision in PRECISIONS {
+        let Some(gpu) = gpu_or_skip("scatter_reals_kernel_matches_its_cpu_twin", precision) else { continue };
+        let size = 5000usize;
+        let before: Vec<f64> = (0..size).map(|i| i as f64 * 0.25).collect();
+        // 7919 is prime to the size: 700 distinct indices, every 7919th mod the size.
+        let indices: Vec<u32> = (0..700u32).map(|k| k * 7919 % size as u32).collect();
+        let values: Vec<f64> = indices.iter().map(|&i| -(i as f64).sqrt()).collect();
+        let mut expected = before.clone();
+        cpu::scatter_reals(&indices, &values, &mut expected);
+        let storage = wgpu::BufferUsages::STORAGE;
+        let init = |label, contents: &[u8], usage| gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage });
+        let index_buffer = init("indices", bytemuck::cast_slice(&indices), storage);
+        let value_buffer = init("values", &bifirst::gpu::world::to_device(precision, &values), storage);
+        let destination = init("destination", &bifirst::gpu::world::to_device(precision, &before), storage | wgpu::BufferUsages::COPY_SRC);
+        let count = init("count", bytemuck::bytes_of(&bifirst::gpu::world::ScatterCount { count: indices.len() as u32, pad: [0; 3] }), wgpu::BufferUsages::UNIFORM);
+        let read = gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some("read"), size: destination.size(), usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST, mapped_at_creation: false });
+        let pipeline = gpu.pipeline("scatter_reals", None).unwrap();
+        let group = gpu.bind_named(&pipeline, ("scatter_reals", "main", None), &[("indices", &index_buffer), ("values", &value_buffer), ("destination", &destination), ("count", &count)]);
+        let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes: None });
+            pass.set_pipeline(&pipeline);
+            pass.set_bind_group(0, &group, &[]);
+            pass.dispatch_workgroups(indices.len().div_ceil(64) as u32, 1, 1);
+        }
+        encoder.copy_buffer_to_buffer(&destination, 0, &read, 0, destination.size());
+        gpu.submit(encoder).unwrap();
+        let on_gpu = bifirst::gpu::world::from_device(precision, &gpu.read("scatter_reals", &read).unwrap());
+        let expected = bifirst::gpu::world::from_device(precision, &bifirst::gpu::world::to_device(precision, &expected));
+        assert!(indices.len() > 600 && on_gpu != bifirst::gpu::world::from_device(precision, &bifirst::gpu::world::to_device(precision, &before)));
+        assert_eq!(on_gpu.iter().map(|x| x.to_bits()).collect::<Vec<_>>(), expected.iter().map(|x| x.to_bits()).collect::<Vec<_>>(), "{}", precision.name());
     }
 }
 

@@ -15,6 +15,7 @@
 //! | `newton_update`, `newton_judge`, `newton_compact` (`main`, `host`), `newton_finish`, `newton_summary`, `newton_tally`, `newton_invert` | [`newton_update`], [`newton_judge`], [`newton_compact`], [`newton_compact_host`], [`newton_finish`], [`newton_summary`], [`newton_tally`], [`newton_invert`] |
 //! | `newton_contact` (`prepare`, `forces`, `judge`, `first_forces`, `first_judge`) | [`newton_contact_prepare`], [`newton_contact_forces`], [`newton_contact_judge`], [`newton_contact_first_forces`], [`newton_contact_first_judge`] |
 //! | `step_begin`, `step_commit` | [`step_begin`], [`step_commit`] |
+//! | `scatter_reals` | [`scatter_reals`] |
 //! | `peak_copy` | [`peak_copy`] |
 //! | `peak_fma` | [`peak_fma`] |
 
@@ -120,6 +121,13 @@ fn gather_sum(element_out: &[Real], gather_start: &[u32], gather: &[u32], k: usi
         f += element_out[gather[j as usize] as usize];
     }
     f
+}
+
+/// `scatter_reals`: each of `values` into `target` at its index.
+pub fn scatter_reals(indices: &[u32], values: &[Real], destination: &mut [Real]) {
+    for (&i, &v) in indices.iter().zip(values) {
+        destination[i as usize] = v;
+    }
 }
 
 /// `peak_copy`: every value of `source` into `destination` (the kernel copies vec4s).

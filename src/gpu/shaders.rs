@@ -28,6 +28,7 @@ pub const SHADERS: &[(&str, &str)] = &[
     ("newton_tally", include_str!("../../shaders/newton_tally.wgsl")),
     ("newton_update", include_str!("../../shaders/newton_update.wgsl")),
     ("peak_copy", include_str!("../../shaders/peak_copy.wgsl")),
+    ("scatter_reals", include_str!("../../shaders/scatter_reals.wgsl")),
     ("step_begin", include_str!("../../shaders/step_begin.wgsl")),
     ("step_commit", include_str!("../../shaders/step_commit.wgsl")),
     ("peak_fma", include_str!("../../shaders/peak_fma.wgsl")),

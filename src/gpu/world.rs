@@ -11,10 +11,12 @@
 
 mod contact;
 mod newton;
+mod scatter;
 mod step;
 
 pub use contact::{ContactLayout, GroupContact};
 pub use newton::{invert_loops, run_newton_invert, Inverse, NewtonCall};
+pub use scatter::ScatterCount;
 pub use step::{run_newton_summary, run_step_kernels, KeptIterate, KeptState, StepEnd, StepKernelsOut, StepStart, SummaryBuffers, SummaryOut};
 
 use super::types::{Active, Coefficients, DofOut, MaterialParams, MemberRange, StepTally, MODE_FORCES, MODE_TANGENT, NEWTON_MAX_FREE, NO_FAILURE, NO_HISTORY};
@@ -164,6 +166,11 @@ struct Batch {
     u_host: Vec<Real>,
     /// The step inputs (`DofStep`, 4 reals) of every dof, as the host last gave them.
     step_host: Vec<Real>,
+    /// The residuals (`DofOut`, 2 reals) of every dof as the device holds them, where the host
+    /// knows them (NaN elsewhere): those it read back, and those it computed from a device Newton
+    /// call's forces as `assemble_residual` does. A residual the host evaluated on the device
+    /// does not go up again.
+    dof_out_host: Vec<Real>,
     /// Per member: its step inputs in `step_host` have not gone up yet. They go with its next
     /// evaluation (a grain in contact that the host iterates on the CPU sends none).
     step_pending: Vec<bool>,
@@ -242,10 +249,11 @@ pub enum WorldKernel {
 /// The per-dof inputs a batch keeps a host copy of, uploaded by runs of members: its
 /// displacements and step inputs, and its device Newton calls' start displacements and contact
 /// forces.
-#[derive(Clone, Copy)]
+#[derive(Clone, Copy, PartialEq, Eq)]
 enum Mirror {
     Displacement,
     Step,
+    Residual,
     NewtonStart,
     NewtonContact,
 }
@@ -356,6 +364,11 @@ pub struct GpuWorld {
     /// Uploads that wait for the step's start recorded at the head of the next submission
     /// ([`GpuWorld::settle_prologue`]): `(staging, target, offset, size)`, copied after it.
     deferred: Option<Vec<(Buffer, Buffer, u64, u64)>>,
+    /// Mirror values that go up with their indices ([`GpuWorld::stage_mirror_by_dof`]), written
+    /// at the head of the next submission, and the kernel that writes them (compiled on first
+    /// use).
+    scattered: Vec<scatter::Scattered>,
+    scatter_pipeline: Option<ComputePipeline>,
     /// Compiled by the first device Newton call.
     newton_pipelines: Option<newton::NewtonPipelines>,
     /// Compiled by the first device Newton call with groups in contact.
@@ -441,6 +454,8 @@ impl GpuWorld {
             rounds: RoundPlacement::default(),
             newton_readback: None,
             deferred: None,
+            scattered: Vec::new(),
+            scatter_pipeline: None,
             newton_pipelines: None,
             contact_pipelines: None,
             step_tally: StepTally::default(),
@@ -597,6 +612,9 @@ impl GpuWorld {
         let host = std::mem::take(host);
         for run in runs(members) {
             let dofs = dof_span(&self.batches[batch].members, &run);
+            if !self.scattered.is_empty() {
+                self.drop_scattered(batch, mirror, per_dof * dofs.start..per_dof * dofs.end);
+            }
             self.upload_reals(&buffer, per_dof * dofs.start, &host[per_dof * dofs.start..per_dof * dofs.end]);
         }
         *self.batches[batch].mirror(mirror).0 = host;
@@ -671,10 +689,27 @@ impl GpuWorld {
         Ok(())
     }
 
-    /// The stiffness values an evaluation pass read back, as the device holds them.
+    /// The stiffness values and residuals an evaluation pass read back, as the device holds
+    /// them (a residual it did not read back: unknown).
     fn note_handed_evaluations(&mut self, list: &[Evaluation]) {
         for e in list.iter().filter(|e| e.tangent && e.failure.is_none() && !e.values.is_empty()) {
             self.note_handed(e.body, e.values);
+        }
+        for e in list {
+            let out = e.dof_out.as_deref().filter(|_| e.failure.is_none());
+            self.note_residuals(e.body, out);
+        }
+    }
+
+    /// Body `body`'s residuals as the device holds them: `out`, or unknown.
+    pub(super) fn note_residuals(&mut self, body: usize, out: Option<&[DofOut<Real>]>) {
+        let (b, m) = self.place[body];
+        let b = &mut self.batches[b];
+        let dofs = dof_span(&b.members, &[m]);
+        let host = &mut b.dof_out_host[2 * dofs.start..2 * dofs.end];
+        match out {
+            Some(out) => host.copy_from_slice(bytemuck::cast_slice(out)),
+            None => host.fill(Real::NAN),
         }
     }
 
@@ -791,6 +826,7 @@ impl GpuWorld {
         let mut encoder = self.encoder("replay");
         for b in &mut self.batches {
             b.handed.fill(None);
+            b.dof_out_host.fill(Real::NAN);
         }
         for b in &self.batches {
             let all = b.members.len();
@@ -816,6 +852,13 @@ impl GpuWorld {
     /// Submits `encoder`'s commands, counted in [`GpuWorld::submits`]. A submission that fails
     /// may have lost a step's start: the device's committed states are not trusted after it.
     fn submit(&mut self, encoder: wgpu::CommandEncoder) -> Result<(), GpuError> {
+        if !self.scattered.iter().all(|s| s.is_empty()) {
+            // Queued after this submission's encoder was made: they go first, in one of their own.
+            let mut first = self.gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("scatter_reals") });
+            self.record_scattered(&mut first);
+            self.gpu.submit(first)?;
+            self.submits += 1;
+        }
         let submitted = self.gpu.submit(encoder);
         self.prologue_submitted();
         if let Err(e) = submitted {
@@ -835,6 +878,7 @@ impl GpuWorld {
         for (staging, target, offset, size) in self.deferred.take().unwrap_or_default() {
             encoder.copy_buffer_to_buffer(&staging, 0, &target, offset, size);
         }
+        self.record_scattered(&mut encoder);
         encoder
     }
 
@@ -1162,6 +1206,7 @@ impl Batch {
             tangent_elements_per_group: super::shaders::tangent_workgroup(gpu.precision, gpu.device.limits().max_compute_workgroup_storage_size) as usize / crate::element::shape::quadrature(kind).len(),
             u_host: vec![0.0; dofs],
             step_host: vec![0.0; 4 * dofs],
+            dof_out_host: vec![Real::NAN; 2 * dofs],
             step_pending: vec![false; members.len()],
             u,
             reference,
@@ -1195,6 +1240,7 @@ impl Batch {
         match mirror {
             Mirror::Displacement => (&mut self.u_host, self.u.clone(), 1),
             Mirror::Step => (&mut self.step_host, self.step.clone(), 4),
+            Mirror::Residual => (&mut self.dof_out_host, self.dof_out.clone(), 2),
             Mirror::NewtonStart | Mirror::NewtonContact => {
                 let n = self.newton.as_mut().expect("a batch whose Newton mirrors are staged has them");
                 match mirror {

@@ -105,6 +105,9 @@ pub(super) struct ContactPasses {
     first_judge: BindGroup,
     pub(super) states: Buffer,
     problems: u32,
+    /// The dofs `forces` and `first_forces` write in the contact forces: `dim` from each node
+    /// slot's first (`ContactLayout::node_dof`).
+    pub(super) written: (Vec<u32>, usize),
 }
 
 impl ContactPasses {
@@ -160,7 +163,7 @@ impl ContactPasses {
         let bind = |pipeline: &ComputePipeline, entry: &str| gpu.bind_named(pipeline, ("newton_contact", entry, None), &all);
         let (prepare, forces, judge) = (bind(&pipelines.prepare, "prepare"), bind(&pipelines.forces, "forces"), bind(&pipelines.judge, "judge"));
         let (first_forces, first_judge) = (bind(&pipelines.first_forces, "first_forces"), bind(&pipelines.first_judge, "first_judge"));
-        Self { prepare, forces, judge, first_forces, first_judge, states, problems: l.groups.len() as u32 }
+        Self { prepare, forces, judge, first_forces, first_judge, states, problems: l.groups.len() as u32, written: (l.node_dof.clone(), l.call.dim as usize) }
     }
 
     fn dispatch(gpu: &Gpu, pass: &mut wgpu::ComputePass, entry: &'static str, pipeline: &ComputePipeline, group: &BindGroup, workgroups: usize) {

@@ -707,7 +707,7 @@ impl GpuWorld {
         }
         self.take_unconverged(&work, calls, coefficients, times)?;
         self.step_tally.add(&tally);
-        self.after_newton(&work, calls, contacts);
+        self.after_newton(&work, calls, contact.as_ref());
         Ok(())
     }
 
@@ -988,8 +988,9 @@ impl GpuWorld {
 
     /// After a call: the device's displacements are the host's now, and the mirror follows, so
     /// that the next pass does not send them back. The contact forces the device computed for
-    /// the groups in contact are not the host's: theirs go up again next time.
-    fn after_newton(&mut self, work: &[BatchCalls], calls: &[NewtonCall], contacts: &[GroupContact]) {
+    /// the groups in contact (`contact`: their batch and passes) are not the host's: those at
+    /// their nodes in contact go up again next time, the rest are as they went up.
+    fn after_newton(&mut self, work: &[BatchCalls], calls: &[NewtonCall], contact: Option<&(usize, ContactPasses)>) {
         for (batch, mine, _) in work {
             let b = &mut self.batches[*batch];
             let known = |c: &NewtonCall| !c.keep || c.positions;
@@ -1000,6 +1001,16 @@ impl GpuWorld {
                 let dofs = super::dof_span(&b.members, &[m]);
                 b.u_host[dofs].fill(Real::NAN);
             }
+            // The residuals at an iterate that came back are the host's from the device's forces,
+            // as `assemble_residual` computed them there; a kept call's are the device's alone.
+            for &(i, m) in mine {
+                let dofs = super::dof_span(&b.members, &[m]);
+                let host = &mut b.dof_out_host[2 * dofs.start..2 * dofs.end];
+                match calls[i].failure {
+                    None if !calls[i].keep => host.copy_from_slice(bytemuck::cast_slice(&*calls[i].dof_out)),
+                    _ => host.fill(Real::NAN),
+                }
+            }
             let n = b.newton.as_mut().expect("staged");
             for &(i, m) in mine {
                 match calls[i].failure {
@@ -1008,10 +1019,12 @@ impl GpuWorld {
                 }
             }
         }
-        for &c in contacts.iter().flat_map(|g| &g.calls) {
-            let (batch, m) = self.place[calls[c].body];
-            let dofs = super::dof_span(&self.batches[batch].members, &[m]);
-            self.batches[batch].newton.as_mut().expect("staged").contact_host[dofs].fill(Real::NAN);
+        if let Some((batch, passes)) = contact {
+            let (written, dim) = &passes.written;
+            let host = &mut self.batches[*batch].newton.as_mut().expect("staged").contact_host;
+            for &d in written {
+                host[d as usize..d as usize + dim].fill(Real::NAN);
+            }
         }
     }
 
@@ -1165,7 +1178,7 @@ impl GpuWorld {
         let dispatch: [u32; DISPATCH_WORDS] = [1, 1, count, fx, fy, count, rx, ry, count, 1, 1, count, count, kept.len() as u32];
         debug_assert_eq!((DISPATCHES * 3, DISPATCHES * 3 + 2), (CALL_COUNT, DISPATCH_WORDS));
         uploads.push((n.dispatch.clone(), 0, bytemuck::cast_slice(&dispatch).to_vec()));
-        let (inverse, residuals) = (n.inverse.clone(), b.dof_out.clone());
+        let inverse = n.inverse.clone();
         if !new.inversions.is_empty() {
             let pipeline = self.newton_pipelines.as_ref().expect("made with the batch's buffers").invert.clone();
             let (pass, values, jobs) = new.invert_pass(&self.gpu, pipeline, n, (&b.values, &b.member_buffer));
@@ -1182,7 +1195,7 @@ impl GpuWorld {
         let starts: Vec<(usize, &[Real])> = mine.iter().map(|&(i, m)| (m, calls[i].u_start)).collect();
         let contacts: Vec<(usize, &[Real])> = mine.iter().map(|&(i, m)| (m, calls[i].contact_force.unwrap_or_else(|| &zeros[..calls[i].u.len()]))).collect();
         self.stage_mirror(batch, super::Mirror::NewtonStart, &starts);
-        self.stage_mirror(batch, super::Mirror::NewtonContact, &contacts);
+        self.stage_mirror_by_dof(batch, super::Mirror::NewtonContact, &contacts);
         // Device Newton iterations run in f64 only (asserted by `newton`): the host's reals are
         // the device's bytes.
         debug_assert_eq!(precision, Precision::F64);
@@ -1190,10 +1203,10 @@ impl GpuWorld {
             self.upload_pieces(&inverse, offset, &run.iter().map(|x| bytemuck::cast_slice(x)).collect::<Vec<&[u8]>>());
         }
         // Members evaluated on the host side of the call: their results; the others' the
-        // device computes first.
-        let evaluated: Vec<(usize, &[u8])> = mine.iter().filter(|&&(i, _)| calls[i].residual.is_some()).map(|&(i, m)| (m, bytemuck::cast_slice::<DofOut<Real>, u8>(calls[i].dof_out))).collect();
-        self.settle_prologue(batch, &evaluated.iter().map(|&(m, _)| m).collect::<Vec<_>>());
-        self.upload_member_runs(batch, &residuals, 2 * real, &evaluated);
+        // device computes first. Those the device holds already (its own evaluation, read back or
+        // taken from its last call's forces) stay.
+        let evaluated: Vec<(usize, &[Real])> = mine.iter().filter(|&&(i, _)| calls[i].residual.is_some()).map(|&(i, m)| (m, bytemuck::cast_slice::<DofOut<Real>, Real>(calls[i].dof_out))).collect();
+        self.stage_mirror(batch, super::Mirror::Residual, &evaluated);
         [fx, fy, count]
     }
 }
