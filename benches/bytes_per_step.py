@@ -37,6 +37,7 @@ def main():
             print(f"{name:8s} step 1 {steps[0][0] / n:8.0f} B/grain, steps 2-10 median {statistics.median(b for b, _ in later) / n:6.0f} B/grain, "
                   f"submits/step median {statistics.median(s for _, s in later)} max {max(s for _, s in later)}, peak {peak} MB, wall {summary['wall_s']:.1f} s, "
                   f"Newton {summary['newton_iterations']}, energy {e['total']!r}, kinetic {e['kinetic']!r}")
+            print(f"{'':8s} steps 2-10 B/grain {' '.join(str(round(b / n)) for b, _ in later)}; steps over 3 submits {sum(s > 3 for _, s in steps[1:])} of {len(steps) - 1}")
 
 if __name__ == '__main__':
     main()

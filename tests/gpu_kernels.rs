@@ -132,7 +132,7 @@ fn uzawa_problem_structs_match_the_shader_layout() {
         let module = validate("scatter_reals", precision, None).unwrap();
         let (members, span) = naga_layout(&module, "ScatterCount");
         assert_eq!((members, span as usize), (layout(&["count", "pad0", "pad1", "pad2"], &[]), size_of::<bifirst::gpu::world::ScatterCount>()));
-        let module = validate("delassus_unpack", precision, None).unwrap();
+        let module = validate("planar_unpack", precision, None).unwrap();
         let (members, span) = naga_layout(&module, "UnpackCount");
         assert_eq!((members, span as usize), (layout(&["blocks", "pad0", "pad1", "pad2"], &[]), size_of::<bifirst::gpu::uzawa_sweep::UnpackCount>()));
     }
@@ -443,24 +443,24 @@ fn uzawa_solve_kernel_matches_its_cpu_twin() {
 }
 
 #[test]
-fn delassus_unpack_kernel_matches_its_cpu_twin() {
+fn planar_unpack_kernel_matches_its_cpu_twin() {
     // More blocks than a workgroup, not a multiple of it; planar entries with signed zeros; the
     // blocks' buffer filled with NaN first, so that every entry must be written. Bit for bit.
     use wgpu::util::DeviceExt;
     for precision in PRECISIONS {
-        let Some(gpu) = gpu_or_skip("delassus_unpack_kernel_matches_its_cpu_twin", precision) else { continue };
+        let Some(gpu) = gpu_or_skip("planar_unpack_kernel_matches_its_cpu_twin", precision) else { continue };
         let count = 1000usize;
         let planar: Vec<f64> = (0..4 * count).map(|i| if i % 7 == 3 { -0.0 } else { (i as f64 * 0.61).sin() * 1e3 }).collect();
         let mut expected = vec![f64::NAN; 9 * count];
-        cpu::delassus_unpack(&planar, &mut expected);
+        cpu::planar_unpack(&planar, &mut expected);
         let storage = wgpu::BufferUsages::STORAGE;
         let init = |label, contents: &[u8], usage| gpu.device.create_buffer_init(&wgpu::util::BufferInitDescriptor { label: Some(label), contents, usage });
         let planar_buffer = init("planar", &bifirst::gpu::world::to_device(precision, &planar), storage);
         let blocks = init("blocks", &bifirst::gpu::world::to_device(precision, &vec![f64::NAN; 9 * count]), storage | wgpu::BufferUsages::COPY_SRC);
         let count_buffer = init("count", bytemuck::bytes_of(&bifirst::gpu::uzawa_sweep::UnpackCount { blocks: count as u32, pad: [0; 3] }), wgpu::BufferUsages::UNIFORM);
         let read = gpu.device.create_buffer(&wgpu::BufferDescriptor { label: Some("read"), size: blocks.size(), usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST, mapped_at_creation: false });
-        let pipeline = gpu.pipeline("delassus_unpack", None).unwrap();
-        let group = gpu.bind_named(&pipeline, ("delassus_unpack", "main", None), &[("planar", &planar_buffer), ("blocks", &blocks), ("count", &count_buffer)]);
+        let pipeline = gpu.pipeline("planar_unpack", None).unwrap();
+        let group = gpu.bind_named(&pipeline, ("planar_unpack", "main", None), &[("planar", &planar_buffer), ("blocks", &blocks), ("count", &count_buffer)]);
         let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: None });
         {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: None, timestamp_writes: None });
@@ -470,7 +470,7 @@ fn delassus_unpack_kernel_matches_its_cpu_twin() {
         }
         encoder.copy_buffer_to_buffer(&blocks, 0, &read, 0, blocks.size());
         gpu.submit(encoder).unwrap();
-        let on_gpu = bifirst::gpu::world::from_device(precision, &gpu.read("delassus_unpack", &read).unwrap());
+        let on_gpu = bifirst::gpu::world::from_device(precision, &gpu.read("planar_unpack", &read).unwrap());
         let expected: Vec<f64> = bifirst::gpu::world::from_device(precision, &bifirst::gpu::world::to_device(precision, &expected));
         let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
         assert_eq!(bits(&on_gpu), bits(&expected), "{}", precision.name());
@@ -518,7 +518,7 @@ fn scatter_reals_kernel_matches_its_cpu_twin() {
 #[test]
 fn a_planar_round_uploads_four_reals_a_block_and_sweeps_as_the_cpu() {
     // A problem whose blocks' third rows and columns are zeros (a 2D round) goes up as the
-    // blocks' upper-left 2 x 2, and the device's sweeps over the blocks `delassus_unpack` writes
+    // blocks' upper-left 2 x 2, and the device's sweeps over the blocks `planar_unpack` writes
     // out are the CPU's over the whole blocks. The same problem with one such entry not zero goes
     // up whole: 5 reals a block more, less the unpack count.
     use bifirst::gpu::uzawa_sweep::{UnpackCount, UzawaSweeps};

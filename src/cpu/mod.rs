@@ -11,7 +11,7 @@
 //! | `uzawa_step` | [`uzawa_step`] |
 //! | `uzawa_sweep` | [`uzawa_sweep`] |
 //! | `uzawa_judge`, `uzawa_solve` | [`uzawa_judge`], [`uzawa_solve`] |
-//! | `delassus_unpack` | [`delassus_unpack`] |
+//! | `planar_unpack` | [`planar_unpack`] |
 //! | `newton_update`, `newton_judge`, `newton_compact` (`main`, `host`), `newton_finish`, `newton_summary`, `newton_tally`, `newton_invert` | [`newton_update`], [`newton_judge`], [`newton_compact`], [`newton_compact_host`], [`newton_finish`], [`newton_summary`], [`newton_tally`], [`newton_invert`] |
 //! | `newton_contact` (`prepare`, `forces`, `judge`, `first_forces`, `first_judge`) | [`newton_contact_prepare`], [`newton_contact_forces`], [`newton_contact_judge`], [`newton_contact_first_forces`], [`newton_contact_first_judge`] |
 //! | `step_begin`, `step_commit` | [`step_begin`], [`step_commit`] |
@@ -31,7 +31,7 @@ pub use newton::{
     newton_update, SummaryInputs,
 };
 pub use step::{step_begin, step_commit};
-pub use uzawa::{delassus_unpack, uzawa_judge, uzawa_solve};
+pub use uzawa::{planar_unpack, uzawa_judge, uzawa_solve};
 
 use crate::assembly::element_out_stride;
 use crate::element::{ElementError, ElementOutput, Formulation, ReferenceGeometry};

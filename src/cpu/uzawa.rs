@@ -1,7 +1,7 @@
 //! The CPU twins of `shaders/uzawa_judge.wgsl` and `shaders/uzawa_solve.wgsl` (with their
 //! includes `uzawa.wgsl` and `uzawa_nodal.wgsl`): the stopping rule of the device's Uzawa
 //! iterations, and a problem's whole iterations in one workgroup, written as the shaders spread
-//! them over a workgroup; and of `shaders/delassus_unpack.wgsl`, the blocks those read. The
+//! them over a workgroup; and of `shaders/planar_unpack.wgsl`, the blocks those read. The
 //! engine's CPU sweeps judge with [`crate::contact::uzawa::Judge`] on
 //! [`crate::contact::uzawa::NodalMap::change`], the same rule; these are the oracle of the
 //! parity tests.
@@ -11,9 +11,9 @@ use crate::contact::uzawa::{gauss_seidel_point, Problem, SETTLE};
 use crate::gpu::uzawa_sweep::{NodeGather, UzawaJudgeState, UzawaProblem, JUDGE_CONVERGED, JUDGE_LIVE, JUDGE_SPENT, JUDGE_WORKGROUP};
 use crate::precision::Real;
 
-/// `delassus_unpack`: the first `blocks.len() / 9` blocks, 3 x 3 row-major, from their planar
+/// `planar_unpack`: the first `blocks.len() / 9` blocks, 3 x 3 row-major, from their planar
 /// upper-left 2 x 2 in `planar` (4 reals each), the third row and column zeros.
-pub fn delassus_unpack(planar: &[Real], blocks: &mut [Real]) {
+pub fn planar_unpack(planar: &[Real], blocks: &mut [Real]) {
     for (w, p) in blocks.chunks_exact_mut(9).zip(planar.chunks_exact(4)) {
         let zero = 0.0;
         w.copy_from_slice(&[p[0], p[1], zero, p[2], p[3], zero, zero, zero, zero]);

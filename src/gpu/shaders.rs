@@ -16,7 +16,6 @@ use crate::precision::Precision;
 pub const SHADERS: &[(&str, &str)] = &[
     ("assemble_csr", include_str!("../../shaders/assemble_csr.wgsl")),
     ("assemble_residual", include_str!("../../shaders/assemble_residual.wgsl")),
-    ("delassus_unpack", include_str!("../../shaders/delassus_unpack.wgsl")),
     ("element_energy", include_str!("../../shaders/element_energy.wgsl")),
     ("element_force_tangent", include_str!("../../shaders/element_force_tangent.wgsl")),
     ("newton_compact", include_str!("../../shaders/newton_compact.wgsl")),
@@ -27,6 +26,7 @@ pub const SHADERS: &[(&str, &str)] = &[
     ("newton_summary", include_str!("../../shaders/newton_summary.wgsl")),
     ("newton_tally", include_str!("../../shaders/newton_tally.wgsl")),
     ("newton_update", include_str!("../../shaders/newton_update.wgsl")),
+    ("planar_unpack", include_str!("../../shaders/planar_unpack.wgsl")),
     ("peak_copy", include_str!("../../shaders/peak_copy.wgsl")),
     ("scatter_reals", include_str!("../../shaders/scatter_reals.wgsl")),
     ("step_begin", include_str!("../../shaders/step_begin.wgsl")),

@@ -28,7 +28,7 @@ use wgpu::{BindGroup, Buffer, BufferUsages};
 const KERNEL: &str = "uzawa_sweep";
 const JUDGE: &str = "uzawa_judge";
 const SOLVE: &str = "uzawa_solve";
-const UNPACK: &str = "delassus_unpack";
+const UNPACK: &str = "planar_unpack";
 const WORKGROUP: u32 = 64;
 /// Sweeps in the first chunk of a solve; each further chunk doubles, up to [`LAST_CHUNK`]: a
 /// warm-started problem often converges in a few sweeps, a hard one needs hundreds.
@@ -184,7 +184,7 @@ pub struct SolveCount {
     pub pad: [u32; 2],
 }
 
-/// The number of blocks `delassus_unpack` writes (`struct UnpackCount` in the shader).
+/// The number of blocks `planar_unpack` writes (`struct UnpackCount` in the shader).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, Default, PartialEq, Pod, Zeroable)]
 pub struct UnpackCount {
@@ -252,10 +252,12 @@ struct Layout {
     key: Vec<(u64, usize)>,
     blocks: Vec<Real>,
     /// The blocks' planar upper-left 2 x 2 where every block's third row and column are
-    /// zeros (+0.0; a 2D round): what goes up, 4 reals a block, which `delassus_unpack` writes
+    /// zeros (+0.0; a 2D round: [`planar_of`]): what goes up, 4 reals a block, which `planar_unpack` writes
     /// out whole on the device. W's blocks were a third of the bytes a pressed packing moved
     /// a step on lavapipe.
     planar: Option<Vec<Real>>,
+    /// The same of the points' frames (in 2D `[n, t1, 0]`, rows `(x, y, 0)`).
+    planar_frames: Option<Vec<Real>>,
     row_start: Vec<u32>,
     row_entries: Vec<[u32; 2]>,
     order: Vec<u32>,
@@ -270,6 +272,14 @@ struct Layout {
     colour_start: Vec<u32>,
     colour_first: Vec<u32>,
     widest: usize,
+}
+
+/// The planar upper-left 2 x 2 of each 3 x 3 block of `whole` (row-major), where every third
+/// row and column holds +0.0 only, bit for bit: what `planar_unpack` writes out again as they
+/// were.
+fn planar_of(whole: &[Real]) -> Option<Vec<Real>> {
+    let flat = whole.chunks_exact(9).all(|w| [2, 5, 6, 7, 8].iter().all(|&e| w[e].to_bits() == 0));
+    flat.then(|| whole.chunks_exact(9).flat_map(|w| [w[0], w[1], w[3], w[4]]).collect())
 }
 
 fn key_of(problems: &[Problem]) -> Vec<(u64, usize)> {
@@ -288,8 +298,8 @@ impl Layout {
             }
             m.offsets.push(point0 as usize + p.local.len());
         }
-        let flat = m.blocks.chunks_exact(9).all(|w| [2, 5, 6, 7, 8].iter().all(|&e| w[e].to_bits() == 0));
-        m.planar = flat.then(|| m.blocks.chunks_exact(9).flat_map(|w| [w[0], w[1], w[3], w[4]]).collect());
+        m.planar = planar_of(&m.blocks);
+        m.planar_frames = planar_of(&m.nodes.frames);
         let colours = problems.iter().map(|p| p.colours.count()).max().unwrap_or(0);
         for c in 0..colours {
             let start = m.order.len() as u32;
@@ -355,10 +365,8 @@ pub(crate) struct Buffers {
     node_entries: usize,
     colour_entries: usize,
     block: Buffer,
-    /// Planar blocks as uploaded, and their count, for `delassus_unpack`.
-    planar: Buffer,
-    unpack_count: Buffer,
-    unpack_group: BindGroup,
+    /// The blocks and the frames as they go up planar, for `planar_unpack`.
+    unpacked: [Unpacked; 2],
     row_start: Buffer,
     row_entries: Buffer,
     pub(crate) locals: Buffer,
@@ -383,6 +391,18 @@ pub(crate) struct Buffers {
     solve_group: BindGroup,
 }
 
+/// A buffer of 3 x 3 blocks that may go up planar: the planar staging, the count, and
+/// `planar_unpack`'s bind group that writes them out into the buffer.
+struct Unpacked {
+    planar: Buffer,
+    count: Buffer,
+    group: BindGroup,
+}
+
+/// Which of [`Buffers::unpacked`].
+const BLOCKS: usize = 0;
+const FRAMES: usize = 1;
+
 /// The pipelines and buffers of the device's Uzawa sweeps.
 pub struct UzawaSweeps {
     gpu: Arc<Gpu>,
@@ -390,9 +410,9 @@ pub struct UzawaSweeps {
     judge: wgpu::ComputePipeline,
     solve: wgpu::ComputePipeline,
     unpack: wgpu::ComputePipeline,
-    /// How many planar blocks went up and are not yet written out whole (0: none): the first
-    /// pass recorded after staging writes them ([`UzawaSweeps::record_unpack`]).
-    unpack_pending: AtomicU32,
+    /// How many planar blocks and frames went up and are not yet written out whole (0: none):
+    /// the first pass recorded after staging writes them ([`UzawaSweeps::record_unpack`]).
+    unpack_pending: [AtomicU32; 2],
     buffers: Option<Buffers>,
     /// What the device holds of the last round.
     layout: Layout,
@@ -457,9 +477,6 @@ impl UzawaSweeps {
         let none = BufferUsages::empty();
         let state_bytes = problems * std::mem::size_of::<UzawaJudgeState<Real>>();
         let block = storage(gpu, "uzawa blocks", blocks * 9 * real, none);
-        let planar = storage(gpu, "uzawa planar blocks", blocks * 4 * real, none);
-        let unpack_count = buffer(gpu, "uzawa unpack count", std::mem::size_of::<UnpackCount>(), BufferUsages::UNIFORM | BufferUsages::COPY_DST);
-        let unpack_group = gpu.bind_named(&self.unpack, (UNPACK, "main", None), &[("planar", &planar), ("blocks", &block), ("count", &unpack_count)]);
         let row_start = storage(gpu, "uzawa row starts", (points + 1) * 4, none);
         let row_entries = storage(gpu, "uzawa row entries", entries * 8, none);
         let locals = storage(gpu, "uzawa points", points * local_bytes, none);
@@ -474,6 +491,12 @@ impl UzawaSweeps {
         let node_points = storage(gpu, "uzawa node points", node_entries * 4, none);
         let node_coefs = storage(gpu, "uzawa node coefficients", node_entries * real, none);
         let frames = storage(gpu, "uzawa frames", points * 9 * real, none);
+        let unpacked = [(&block, blocks), (&frames, points)].map(|(whole, count)| {
+            let planar = storage(gpu, "uzawa planar blocks", count * 4 * real, none);
+            let count = buffer(gpu, "uzawa unpack count", std::mem::size_of::<UnpackCount>(), BufferUsages::UNIFORM | BufferUsages::COPY_DST);
+            let group = gpu.bind_named(&self.unpack, (UNPACK, "main", None), &[("planar", &planar), ("blocks", whole), ("count", &count)]);
+            Unpacked { planar, count, group }
+        });
         let solve_order = storage(gpu, "uzawa problem colours", points * 4, none);
         let colour_start = storage(gpu, "uzawa colour starts", colour_entries * 4, none);
         let count = buffer(gpu, "uzawa problem count", std::mem::size_of::<SolveCount>(), BufferUsages::UNIFORM | BufferUsages::COPY_DST);
@@ -503,9 +526,7 @@ impl UzawaSweeps {
             node_entries,
             colour_entries,
             block,
-            planar,
-            unpack_count,
-            unpack_group,
+            unpacked,
             row_start,
             row_entries,
             locals,
@@ -573,15 +594,7 @@ impl UzawaSweeps {
         };
         let b = self.buffers.take().expect("reserved");
         if !resident || reallocated {
-            if let Some(planar) = &layout.planar {
-                let blocks = (planar.len() / 4) as u32;
-                self.upload(&b.planar, 0, bytemuck::cast_slice(planar));
-                self.upload(&b.unpack_count, 0, bytemuck::bytes_of(&UnpackCount { blocks, pad: [0; 3] }));
-                self.unpack_pending.store(blocks, Ordering::Relaxed);
-            } else {
-                self.upload(&b.block, 0, bytemuck::cast_slice(&layout.blocks));
-                self.unpack_pending.store(0, Ordering::Relaxed);
-            }
+            self.upload_blocks(&b, BLOCKS, (&b.block, &layout.blocks), layout.planar.as_deref());
             self.upload(&b.row_start, 0, bytemuck::cast_slice(&layout.row_start));
             self.upload(&b.row_entries, 0, bytemuck::cast_slice(&layout.row_entries));
             self.upload(&b.order, 0, bytemuck::cast_slice(&layout.order));
@@ -592,7 +605,7 @@ impl UzawaSweeps {
             self.upload(&b.node_start, 0, bytemuck::cast_slice(&nodes.start));
             self.upload(&b.node_points, 0, bytemuck::cast_slice(&nodes.points));
             self.upload(&b.node_coefs, 0, bytemuck::cast_slice(&nodes.coefs));
-            self.upload(&b.frames, 0, bytemuck::cast_slice(&nodes.frames));
+            self.upload_blocks(&b, FRAMES, (&b.frames, &nodes.frames), layout.planar_frames.as_deref());
             self.upload(&b.solve_order, 0, bytemuck::cast_slice(&layout.solve_order));
             self.upload(&b.colour_start, 0, bytemuck::cast_slice(&layout.colour_start));
         }
@@ -652,21 +665,40 @@ impl UzawaSweeps {
         }
     }
 
-    /// Records `delassus_unpack` if the staged blocks went up planar and are not written out yet:
-    /// in the first pass after staging, before its sweeps.
+    /// Uploads 3 x 3 blocks (`whole`, into `buffer`) planar where they can ([`planar_of`]), for
+    /// `planar_unpack` to write out ([`UzawaSweeps::record_unpack`]), else whole.
+    fn upload_blocks(&mut self, b: &Buffers, which: usize, (buffer, whole): (&Buffer, &[Real]), planar: Option<&[Real]>) {
+        match planar {
+            Some(planar) => {
+                let blocks = (planar.len() / 4) as u32;
+                self.upload(&b.unpacked[which].planar, 0, bytemuck::cast_slice(planar));
+                self.upload(&b.unpacked[which].count, 0, bytemuck::bytes_of(&UnpackCount { blocks, pad: [0; 3] }));
+                self.unpack_pending[which].store(blocks, Ordering::Relaxed);
+            }
+            None => {
+                self.upload(buffer, 0, bytemuck::cast_slice(whole));
+                self.unpack_pending[which].store(0, Ordering::Relaxed);
+            }
+        }
+    }
+
+    /// Records `planar_unpack` for the staged blocks and frames that went up planar and are not
+    /// written out yet: in the first pass after staging, before its sweeps.
     pub(crate) fn record_unpack(&self, pass: &mut wgpu::ComputePass) {
         self.record_unpack_in(pass, self.buffers());
     }
 
     fn record_unpack_in(&self, pass: &mut wgpu::ComputePass, b: &Buffers) {
-        let blocks = self.unpack_pending.swap(0, Ordering::Relaxed);
-        if blocks > 0 {
-            let (x, y) = super::dispatch_rows((blocks as usize).div_ceil(WORKGROUP as usize));
-            self.gpu.dispatch(pass, (UNPACK, "main"), |pass| {
-                pass.set_pipeline(&self.unpack);
-                pass.set_bind_group(0, &b.unpack_group, &[]);
-                pass.dispatch_workgroups(x, y, 1);
-            });
+        for (pending, unpacked) in self.unpack_pending.iter().zip(&b.unpacked) {
+            let blocks = pending.swap(0, Ordering::Relaxed);
+            if blocks > 0 {
+                let (x, y) = super::dispatch_rows((blocks as usize).div_ceil(WORKGROUP as usize));
+                self.gpu.dispatch(pass, (UNPACK, "main"), |pass| {
+                    pass.set_pipeline(&self.unpack);
+                    pass.set_bind_group(0, &unpacked.group, &[]);
+                    pass.dispatch_workgroups(x, y, 1);
+                });
+            }
         }
     }
 

@@ -826,6 +826,10 @@ impl GpuWorld {
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("newton"), timestamp_writes: None });
         let pipelines = self.contact_pipelines.as_ref();
         let contact_of = |batch: usize| plan.contact.filter(|(at, _)| *at == batch).map(|(_, passes)| passes);
+        // W's blocks and the frames, where they went up planar, before anything reads them.
+        if plan.contact.is_some() {
+            self.contact.as_ref().expect("staged").record_unpack(&mut pass);
+        }
         // The members' first evaluation and its convergence test: `newton_judge` from a state
         // without a residual before (`Real::MAX`) and without an increment tests it as
         // `Body::converged` tests a step's first evaluation. Groups in contact:
@@ -854,7 +858,6 @@ impl GpuWorld {
                 let mine = contact_of(*batch);
                 if let (Some(c), Some(p)) = (mine, pipelines) {
                     c.record_prepare(&self.gpu, &mut pass, p);
-                    self.contact.as_ref().expect("staged").record_unpack(&mut pass);
                     for _ in 0..plan.solves {
                         self.contact.as_ref().expect("staged").record_solve(&mut pass, plan.contacts);
                     }

@@ -1,8 +1,8 @@
-// The 3 x 3 Delassus blocks the Uzawa kernels read, from the planar upper-left 2 x 2 of each
-// that a 2D round uploads (4 reals a block, not 9). The third row and column are zeros, written
-// here so that the sweeps read them from memory and their products keep the signs of zero of
-// the host's sweeps over whole blocks (a planar product in the sweeps did not). CPU twin:
-// `cpu::delassus_unpack`.
+// 3 x 3 blocks that a 2D round uploads as their planar upper-left 2 x 2 (4 reals a block, not
+// 9), written out whole: the Delassus blocks the Uzawa kernels read, and the points' frames
+// (`[n, t1, 0]`, rows `(x, y, 0)`). The third row and column are zeros, written here so that the
+// kernels read them from memory and their products keep the signs of zero of the host's sweeps
+// over whole blocks (a planar product in the sweeps did not). CPU twin: `cpu::planar_unpack`.
 
 const WORKGROUP = 64u;
 
