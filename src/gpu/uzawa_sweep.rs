@@ -252,9 +252,9 @@ struct Layout {
     key: Vec<(u64, usize)>,
     blocks: Vec<Real>,
     /// The blocks' planar upper-left 2 x 2 where every block's third row and column are
-    /// zeros (+0.0; a 2D round: [`planar_of`]): what goes up, 4 reals a block, which `planar_unpack` writes
-    /// out whole on the device. W's blocks were a third of the bytes a pressed packing moved
-    /// a step on lavapipe.
+    /// zeros (+0.0; a 2D round: [`planar_of`]): what goes up, 4 reals a block, which
+    /// `planar_unpack` writes out whole on the device. W's blocks were a third of the bytes a
+    /// pressed packing moved a step on lavapipe.
     planar: Option<Vec<Real>>,
     /// The same of the points' frames (in 2D `[n, t1, 0]`, rows `(x, y, 0)`).
     planar_frames: Option<Vec<Real>>,

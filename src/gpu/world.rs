@@ -247,8 +247,8 @@ pub enum WorldKernel {
 }
 
 /// The per-dof inputs a batch keeps a host copy of, uploaded by runs of members: its
-/// displacements and step inputs, and its device Newton calls' start displacements and contact
-/// forces.
+/// displacements, step inputs and residuals, and its device Newton calls' start displacements
+/// and contact forces (those dof by dof, [`GpuWorld::stage_mirror_by_dof`]).
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum Mirror {
     Displacement,
@@ -702,7 +702,7 @@ impl GpuWorld {
     }
 
     /// Body `body`'s residuals as the device holds them: `out`, or unknown.
-    pub(super) fn note_residuals(&mut self, body: usize, out: Option<&[DofOut<Real>]>) {
+    fn note_residuals(&mut self, body: usize, out: Option<&[DofOut<Real>]>) {
         let (b, m) = self.place[body];
         let b = &mut self.batches[b];
         let dofs = dof_span(&b.members, &[m]);
