@@ -704,13 +704,7 @@ impl GpuWorld {
     /// Body `body`'s residuals as the device holds them: `out`, or unknown.
     fn note_residuals(&mut self, body: usize, out: Option<&[DofOut<Real>]>) {
         let (b, m) = self.place[body];
-        let b = &mut self.batches[b];
-        let dofs = dof_span(&b.members, &[m]);
-        let host = &mut b.dof_out_host[2 * dofs.start..2 * dofs.end];
-        match out {
-            Some(out) => host.copy_from_slice(bytemuck::cast_slice(out)),
-            None => host.fill(Real::NAN),
-        }
+        self.batches[b].note_residuals(m, out);
     }
 
     /// Body `body`'s stiffness values `ξ K` as the device holds them and the host read them.
@@ -1026,17 +1020,23 @@ fn copy_joined(target: &mut wgpu::WriteOnly<[u8]>, from: usize, pieces: &[&[u8]]
 /// [`update_mirror`] of the spans `(start, values)` of one mirror (sorted by start, disjoint), on
 /// every thread: whether each changed.
 fn update_mirrors(mirror: &mut [Real], spans: Vec<(usize, &[Real])>) -> Vec<bool> {
+    split_spans(mirror, &spans).into_par_iter().map(|(_, mine, values)| update_mirror(mine, values)).collect()
+}
+
+/// The spans `(start, values)` of one mirror (sorted by start, disjoint), each with its part of
+/// the mirror: `(start, part, values)`, to be compared on every thread.
+fn split_spans<'m, 'v>(mirror: &'m mut [Real], spans: &[(usize, &'v [Real])]) -> Vec<(usize, &'m mut [Real], &'v [Real])> {
     let mut rest = mirror;
     let mut consumed = 0;
-    let mut pairs = Vec::with_capacity(spans.len());
-    for (start, values) in spans {
+    let mut parts = Vec::with_capacity(spans.len());
+    for &(start, values) in spans {
         let (_, tail) = std::mem::take(&mut rest).split_at_mut(start - consumed);
         let (mine, after) = tail.split_at_mut(values.len());
-        pairs.push((mine, values));
+        parts.push((start, mine, values));
         rest = after;
         consumed = start + values.len();
     }
-    pairs.into_par_iter().map(|(mine, values)| update_mirror(mine, values)).collect()
+    parts
 }
 
 /// Copies `values` into a host mirror if they differ from it, bit for bit; whether they did (and
@@ -1233,6 +1233,16 @@ impl Batch {
             residual,
             element_energy,
         })
+    }
+
+    /// Member `m`'s residuals as the device holds them (`dof_out_host`): `out`, or unknown.
+    fn note_residuals(&mut self, m: usize, out: Option<&[DofOut<Real>]>) {
+        let dofs = dof_span(&self.members, &[m]);
+        let host = &mut self.dof_out_host[2 * dofs.start..2 * dofs.end];
+        match out {
+            Some(out) => host.copy_from_slice(bytemuck::cast_slice(out)),
+            None => host.fill(Real::NAN),
+        }
     }
 
     /// A mirror's host copy, its device buffer, and its reals per dof.

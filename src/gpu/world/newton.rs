@@ -1007,18 +1007,12 @@ impl GpuWorld {
             // The residuals at an iterate that came back are the host's from the device's forces,
             // as `assemble_residual` computed them there; a kept call's are the device's alone.
             for &(i, m) in mine {
-                let dofs = super::dof_span(&b.members, &[m]);
-                let host = &mut b.dof_out_host[2 * dofs.start..2 * dofs.end];
+                let came_back = calls[i].failure.is_none() && !calls[i].keep;
+                b.note_residuals(m, came_back.then_some(&*calls[i].dof_out));
+                let resident = &mut b.newton.as_mut().expect("staged").resident;
                 match calls[i].failure {
-                    None if !calls[i].keep => host.copy_from_slice(bytemuck::cast_slice(&*calls[i].dof_out)),
-                    _ => host.fill(Real::NAN),
-                }
-            }
-            let n = b.newton.as_mut().expect("staged");
-            for &(i, m) in mine {
-                match calls[i].failure {
-                    None => n.resident.took(m),
-                    Some(_) => n.resident.touched(m),
+                    None => resident.took(m),
+                    Some(_) => resident.touched(m),
                 }
             }
         }

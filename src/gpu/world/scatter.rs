@@ -4,7 +4,7 @@
 //! contact are nonzero at its nodes in contact only, and only those change from call to call:
 //! whole spans of them were a tenth of the bytes a pressed packing moved a step on lavapipe.
 
-use super::{buffer_init, GpuWorld, Mirror};
+use super::{buffer_init, split_spans, GpuWorld, Mirror};
 use crate::gpu::Gpu;
 use crate::precision::Real;
 use bytemuck::{Pod, Zeroable};
@@ -32,22 +32,18 @@ impl Scattered {
     pub(super) fn is_empty(&self) -> bool {
         self.indices.is_empty()
     }
+
+    /// Keeps the entries whose index `keep` takes.
+    fn retain(&mut self, keep: impl Fn(u32) -> bool) {
+        let kept: Vec<(u32, Real)> = self.indices.iter().zip(&self.values).filter(|(&i, _)| keep(i)).map(|(&i, &v)| (i, v)).collect();
+        (self.indices, self.values) = kept.into_iter().unzip();
+    }
 }
 
 /// Per span `(start, values)` of a host mirror (sorted, disjoint): the positions where the
 /// values differ from the mirror, bit for bit, which take the values.
 fn changed_positions(mirror: &mut [Real], spans: &[(usize, &[Real])]) -> Vec<Vec<u32>> {
-    let mut rest = mirror;
-    let mut consumed = 0;
-    let mut pairs = Vec::with_capacity(spans.len());
-    for &(start, values) in spans {
-        let (_, tail) = std::mem::take(&mut rest).split_at_mut(start - consumed);
-        let (mine, after) = tail.split_at_mut(values.len());
-        pairs.push((start, mine, values));
-        rest = after;
-        consumed = start + values.len();
-    }
-    pairs
+    split_spans(mirror, spans)
         .into_par_iter()
         .map(|(start, mine, values)| {
             let mut changed = Vec::new();
@@ -103,8 +99,9 @@ impl GpuWorld {
             Some(s) => {
                 let mut newer = indices.clone();
                 newer.sort_unstable();
-                let kept: Vec<(u32, Real)> = s.indices.iter().zip(&s.values).filter(|(i, _)| newer.binary_search(i).is_err()).map(|(&i, &v)| (i, v)).collect();
-                (s.indices, s.values) = kept.into_iter().chain(indices.into_iter().zip(values)).unzip();
+                s.retain(|i| newer.binary_search(&i).is_err());
+                s.indices.extend(indices);
+                s.values.extend(values);
             }
             None => self.scattered.push(Scattered { batch, mirror, destination, indices, values }),
         }
@@ -114,8 +111,7 @@ impl GpuWorld {
     /// goes up after them is newer.
     pub(super) fn drop_scattered(&mut self, batch: usize, mirror: Mirror, range: std::ops::Range<usize>) {
         for s in self.scattered.iter_mut().filter(|s| s.batch == batch && s.mirror == mirror) {
-            let kept: Vec<(u32, Real)> = s.indices.iter().zip(&s.values).filter(|(&i, _)| !range.contains(&(i as usize))).map(|(&i, &v)| (i, v)).collect();
-            (s.indices, s.values) = kept.into_iter().unzip();
+            s.retain(|i| !range.contains(&(i as usize)));
         }
     }
 
@@ -123,7 +119,7 @@ impl GpuWorld {
     /// bytes as sent.
     pub(super) fn record_scattered(&mut self, encoder: &mut wgpu::CommandEncoder) {
         let scattered = std::mem::take(&mut self.scattered);
-        if scattered.iter().all(|s| s.indices.is_empty()) {
+        if scattered.iter().all(Scattered::is_empty) {
             return;
         }
         let pipeline = match &self.scatter_pipeline {
@@ -135,7 +131,7 @@ impl GpuWorld {
             }
         };
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("scatter_reals"), timestamp_writes: None });
-        for s in scattered.iter().filter(|s| !s.indices.is_empty()) {
+        for s in scattered.iter().filter(|s| !s.is_empty()) {
             let up = record_one(&self.gpu, &mut pass, &pipeline, s);
             self.traffic.up += up;
         }
