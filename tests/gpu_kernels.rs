@@ -687,11 +687,15 @@ fn step_kernels_match_their_cpu_twins() {
     // Issue 59: a body that steps on the device begins each step from the committed state the
     // device keeps (`step_begin`) and commits a kept step there (`step_commit`). Members of 5,
     // 70 and 131 dofs (one, two and three workgroups), one left out of the commit and one out
-    // of both: its values must stay as they were. The commit's list has a slot no member holds
-    // (`NO_MEMBER`, where one left the list): nothing is done for it.
+    // of both (its `adopt_at` the pass's number: it adopts only if it begins), a fifth begun
+    // only: their values must stay as they were. The commit's list has a slot no member holds
+    // (`NO_MEMBER`, where one left the list): nothing is done for it. Member 1 adopts in this
+    // begin (its `adopt_at` is the pass's number): its committed state becomes the device's
+    // iterate and forces with the `adopted` velocity before it begins from it; member 2's
+    // `adopt_at` is an earlier pass's: it begins from its committed state.
     let Some(gpu) = gpu_or_skip("step_kernels_match_their_cpu_twins", Precision::F64) else { return };
     let mut rng = random::rng(59);
-    let sizes = [5u32, 70, 131, 9];
+    let sizes = [5u32, 70, 131, 9, 12];
     let members: Vec<MemberRange> = sizes
         .iter()
         .scan(0, |start, &dofs| {
@@ -707,25 +711,32 @@ fn step_kernels_match_their_cpu_twins() {
     let u: Vec<f64> = (0..n).map(|_| value()).collect();
     let dof_out: Vec<DofOut<f64>> = (0..n).map(|_| DofOut { f_int: value(), g: value() }).collect();
     let (committed_energy, member_energy): (Vec<f64>, Vec<f64>) = (0..sizes.len()).map(|_| (value(), value())).unzip();
-    let (commit, begin) = ([0usize, NO_MEMBER as usize, 2], [0usize, 1, 2]);
+    let (commit, begin) = ([0usize, NO_MEMBER as usize, 2], [0usize, 1, 2, 4]);
     let (commit_motion, begin_motion) = (StepMotion::of(1e-3, 0.55, 2), StepMotion::of(5e-4, 1.0, 2));
-    let got = bifirst::gpu::world::run_step_kernels(&gpu, &members, (&commit, commit_motion), (&begin, begin_motion), &committed, &step, (&u, &dof_out), (&committed_energy, &member_energy)).expect("the step kernels run");
+    let adopted: Vec<f64> = (0..n).map(|_| value()).collect();
+    let (epoch, adopt_at) = (7, [0, 7, 6, 7, 0]);
+    let got =
+        bifirst::gpu::world::run_step_kernels(&gpu, &members, (&commit, commit_motion), (&begin, begin_motion, epoch), &committed, &step, (&u, &dof_out), (&committed_energy, &member_energy), (&adopted, &adopt_at)).expect("the step kernels run");
     let (mut c, mut s, mut x, mut x0, mut e, mut base) = (committed.clone(), step.clone(), u.clone(), vec![0.0; n], committed_energy.clone(), vec![0.0; n]);
     for &m in commit.iter().filter(|&&m| m != NO_MEMBER as usize) {
         cpu::step_commit(commit_motion, (&mut c, &mut e), (&x, &dof_out, &member_energy), m, members[m]);
     }
+    let adoption = cpu::Adoption { dof_out: &dof_out, adopted: &adopted, adopt_at: &adopt_at, epoch };
     for &m in &begin {
-        cpu::step_begin(begin_motion, &c, &mut s, &mut x, (&mut x0, &mut base), members[m]);
+        cpu::step_begin(begin_motion, &mut c, &mut s, &mut x, (&mut x0, &mut base), &adoption, (m, members[m]));
     }
+    let adopting = members[1].dof_start as usize..members[2].dof_start as usize;
+    assert!(adopting.clone().all(|d| c[d] == DofState { u: u[d], v: adopted[d], f_int: dof_out[d].f_int }), "member 1 adopts");
     let flat = |c: &[DofState<f64>]| c.iter().flat_map(|d| [d.u, d.v, d.f_int]).collect::<Vec<f64>>();
     let flat_step = |s: &[DofStep<f64>]| s.iter().flat_map(|d| [d.mass, d.u_pred, d.f_int_t, d.f_ext]).collect::<Vec<f64>>();
     let errors = [relative_error(&flat(&got.0), &flat(&c)), relative_error(&flat_step(&got.1), &flat_step(&s)), relative_error(&got.2, &x), relative_error(&got.3, &x0), relative_error(&got.5, &base)];
     eprintln!("committed, step, u, u_start, u_base: relative errors {errors:?}");
     assert!(errors.iter().all(|&e| e <= 1e-12), "{errors:?}");
-    let last = members[3].dof_start as usize..n;
+    let last = members[3].dof_start as usize..members[4].dof_start as usize;
     assert_eq!(flat(&got.0[last.clone()]), flat(&committed[last.clone()]), "a member outside both lists keeps its committed state");
     assert_eq!(got.2[last.clone()], u[last.clone()], "and its displacements");
-    let moved = members[1].dof_start as usize..members[2].dof_start as usize;
+    assert!(adopting.clone().all(|d| got.0[d] == DofState { u: u[d], v: adopted[d], f_int: dof_out[d].f_int }), "member 1 adopts on the device");
+    let moved = members[4].dof_start as usize..n;
     assert_eq!(flat(&got.0[moved.clone()]), flat(&committed[moved]), "a member begun but not committed keeps its committed state");
     assert_eq!(got.4, e, "the committed strain energies: the members' where committed, else as they were");
     assert_eq!((got.4[0], got.4[1]), (member_energy[0], committed_energy[1]));

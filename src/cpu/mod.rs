@@ -30,7 +30,7 @@ pub use newton::{
     newton_compact, newton_compact_host, newton_contact_first_forces, newton_contact_first_judge, newton_contact_forces, newton_contact_judge, newton_contact_prepare, newton_finish, newton_invert, newton_judge, newton_summary, newton_tally,
     newton_update, SummaryInputs,
 };
-pub use step::{step_begin, step_commit};
+pub use step::{step_begin, step_commit, Adoption};
 pub use uzawa::{planar_unpack, uzawa_judge, uzawa_solve};
 
 use crate::assembly::element_out_stride;

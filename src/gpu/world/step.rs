@@ -78,15 +78,17 @@ impl StepPipelines {
     /// resources.
     fn passes(&self, gpu: &Gpu, b: &StepBindings) -> [Pass; 2] {
         let common = [("committed", b.committed), ("u", b.u), ("members", b.members)];
-        let begin = [&common[..], &[("motion", b.motions[0]), ("jobs", b.jobs[0]), ("step", b.step), ("u_start", b.u_start), ("u_base", b.u_base)]].concat();
-        let commit = [&common[..], &[("motion", b.motions[1]), ("jobs", b.jobs[1]), ("dof_out", b.dof_out), ("member_energy", b.member_energy), ("committed_energy", b.committed_energy)]].concat();
+        let common = [&common[..], &[("dof_out", b.dof_out)]].concat();
+        let adoption = [("adopted", b.adoption.velocities), ("adopt_at", b.adoption.at), ("epoch", b.adoption.epoch)];
+        let begin = [&common[..], &adoption, &[("motion", b.motions[0]), ("jobs", b.jobs[0]), ("step", b.step), ("u_start", b.u_start), ("u_base", b.u_base)]].concat();
+        let commit = [&common[..], &[("motion", b.motions[1]), ("jobs", b.jobs[1]), ("member_energy", b.member_energy), ("committed_energy", b.committed_energy)]].concat();
         [Pass::bound(gpu, self.begin.clone(), ("step_begin", "main"), None, &begin), Pass::bound(gpu, self.commit.clone(), ("step_commit", "main"), None, &commit)]
     }
 }
 
 /// The buffers the step kernels bind: the motions and job lists of the begin (`[0]`) and of the
-/// commit (`[1]`), the per-dof and per-member buffers they share, and the strain energies the
-/// commit takes.
+/// commit (`[1]`), the per-dof and per-member buffers they share, the strain energies the
+/// commit takes, and what the begin's adopting members take.
 struct StepBindings<'a> {
     motions: [&'a Buffer; 2],
     jobs: [&'a Buffer; 2],
@@ -99,6 +101,15 @@ struct StepBindings<'a> {
     u_base: &'a Buffer,
     dof_out: &'a Buffer,
     members: &'a Buffer,
+    adoption: AdoptionBuffers<'a>,
+}
+
+/// `step_begin`'s `adopted` (a velocity per dof), `adopt_at` (a pass number per member) and
+/// `epoch` (its own number).
+struct AdoptionBuffers<'a> {
+    velocities: &'a Buffer,
+    at: &'a Buffer,
+    epoch: &'a Buffer,
 }
 
 /// A batch's committed states on the device and what the host knows of them, per member.
@@ -106,6 +117,11 @@ pub(super) struct Resident {
     committed: Buffer,
     /// The committed states' strain energies, one per member.
     committed_energy: Buffer,
+    /// `step_begin`'s `adopted`, `adopt_at` and `epoch`.
+    adoption: [Buffer; 3],
+    /// The number of the last `step_begin` pass queued, and `adopt_at` as the device holds it.
+    epoch: u32,
+    adopt_at: Vec<u32>,
     motions: [Buffer; 2],
     jobs: [Buffer; 2],
     /// `step_begin` (`[0]`) and `step_commit` (`[1]`), as `motions` and `jobs`.
@@ -184,6 +200,8 @@ impl Resident {
         let (dofs, members) = (b.u_host.len(), b.members.len());
         let committed = buffer(gpu, "committed state", dofs * 3 * real, BufferUsages::STORAGE | BufferUsages::COPY_DST | BufferUsages::COPY_SRC);
         let committed_energy = buffer(gpu, "committed energy", members * real, BufferUsages::STORAGE | BufferUsages::COPY_DST | BufferUsages::COPY_SRC);
+        let at = |label: &str, bytes: usize, usage: BufferUsages| buffer(gpu, label, bytes, usage | BufferUsages::COPY_DST);
+        let adoption = [at("adopted velocities", dofs * real, BufferUsages::STORAGE), at("adopt at", members * 4, BufferUsages::STORAGE), at("adoption epoch", 16, BufferUsages::UNIFORM)];
         let motion = || buffer(gpu, "step motion", 4 * real, BufferUsages::UNIFORM | BufferUsages::COPY_DST);
         let jobs = || buffer(gpu, "step jobs", members * 8, BufferUsages::STORAGE | BufferUsages::COPY_DST);
         let (motions, jobs) = ([motion(), motion()], [jobs(), jobs()]);
@@ -199,11 +217,15 @@ impl Resident {
             u_base,
             dof_out: &b.dof_out,
             members: &b.member_buffer,
+            adoption: AdoptionBuffers { velocities: &adoption[0], at: &adoption[1], epoch: &adoption[2] },
         };
         let passes = pipelines.passes(gpu, &bindings);
         Self {
             committed,
             committed_energy,
+            adoption,
+            epoch: 0,
+            adopt_at: vec![0; members],
             motions,
             jobs,
             passes,
@@ -251,6 +273,26 @@ impl Resident {
     pub(super) fn took(&mut self, m: usize) {
         self.current[m] = true;
         self.predicted[m] = false;
+    }
+
+    /// Sets the members of `adopting` (in order) to adopt in the next `step_begin`, and sets
+    /// back any other set to adopt there by an earlier call; returns the `adopt_at` entries that
+    /// changed, `(member, pass)`.
+    fn mark_adoptions(&mut self, adopting: &[usize]) -> Vec<(usize, u32)> {
+        let next = self.epoch + 1;
+        let mut marks = Vec::new();
+        for (m, at) in self.adopt_at.iter_mut().enumerate() {
+            let wanted = match adopting.binary_search(&m) {
+                Ok(_) => next,
+                Err(_) if *at == next => 0,
+                Err(_) => *at,
+            };
+            if wanted != *at {
+                marks.push((m, wanted));
+                *at = wanted;
+            }
+        }
+        marks
     }
 }
 
@@ -327,6 +369,14 @@ impl GpuWorld {
         }
         for (first, entries) in changed {
             self.upload(&jobs, (first * std::mem::size_of::<Active>()) as u64, bytemuck::cast_slice(&entries));
+        }
+        if k == 0 {
+            // A new number for each begin, so that a member adopts in the one it was meant for
+            // (a retried step begins again from the state it adopted).
+            let r = &mut self.batches[batch].newton.as_mut().expect("a batch with committed states").resident;
+            r.epoch += 1;
+            let (epoch, buffer) = (r.epoch, r.adoption[2].clone());
+            self.upload(&buffer, 0, bytemuck::cast_slice(&[epoch, 0, 0, 0]));
         }
         let r = &mut self.batches[batch].newton.as_mut().expect("a batch with committed states").resident;
         for &m in &list {
@@ -475,8 +525,9 @@ impl GpuWorld {
     /// After the host kept a step (`motion` its theta rule): each listed body's committed state
     /// on the device follows the host's. One whose step ended with a device Newton call the host
     /// took, at the displacements the host kept, commits on the device before the next step
-    /// begins (or, the first time, takes the host's state: one upload); the others' device state
-    /// is dropped.
+    /// begins (or, the first time, takes the host's state: its velocity alone where the device's
+    /// iterate and forces are the host's, set up by the next `step_begin`, else all of it); the
+    /// others' device state is dropped.
     pub fn commit_step(&mut self, ends: &[StepEnd], motion: StepMotion<Real>) {
         if self.gpu.precision != Precision::F64 {
             return;
@@ -491,35 +542,55 @@ impl GpuWorld {
             let b = &mut self.batches[batch];
             let Some(n) = b.newton.as_mut() else { continue };
             let r = &mut n.resident;
-            let (mut commits, mut uploads) = (Vec::new(), Vec::new());
+            let (mut commits, mut adopts, mut uploads) = (Vec::new(), Vec::new(), Vec::new());
             for e in mine {
                 let m = self.place[e.body].1;
                 let dofs = super::dof_span(&b.members, &[m]);
-                let current = e.on_device && r.current[m] && (e.held || same_bits(&b.u_host[dofs], e.u));
+                let current = e.on_device && r.current[m] && (e.held || same_bits(&b.u_host[dofs.clone()], e.u));
                 assert!(!e.held || (current && r.valid[m]), "a body whose step end the device keeps commits there");
+                // Where the device's forces are the host's too, it holds all of the host's
+                // committed state but the velocity.
+                let forces_held = || b.dof_out_host[2 * dofs.start..2 * dofs.end].chunks(2).zip(e.f_int).all(|(out, f)| out[0].to_bits() == f.to_bits());
                 match (current, r.valid[m]) {
                     (true, true) => commits.push(m),
+                    (true, false) if forces_held() => adopts.push((m, e)),
                     (true, false) => uploads.push((m, e)),
                     (false, _) => r.valid[m] = false,
                 }
                 r.current[m] = false;
             }
             r.pending = (!commits.is_empty()).then_some((commits, motion));
+            let adopting: Vec<usize> = adopts.iter().map(|&(m, _)| m).collect();
             let members: Vec<usize> = uploads.iter().map(|&(m, _)| m).collect();
-            for &m in &members {
+            for &m in adopting.iter().chain(&members) {
                 r.valid[m] = true;
             }
-            let (committed, energy) = (r.committed.clone(), r.committed_energy.clone());
-            self.settle_prologue(batch, &members);
+            let (committed, energy, [velocities, at, _]) = (r.committed.clone(), r.committed_energy.clone(), r.adoption.clone());
+            let marks = r.mark_adoptions(&adopting);
+            self.settle_prologue(batch, &[&adopting[..], &members[..]].concat());
+            let pieces: Vec<(usize, &[u8])> = adopts.iter().map(|&(m, e)| (m, bytemuck::cast_slice(e.v))).collect();
+            self.upload_member_runs(batch, &velocities, 8, &pieces);
+            self.upload_per_member(&at, &marks);
             let states: Vec<(usize, Vec<DofState<Real>>)> = uploads.iter().map(|&(m, e)| (m, (0..e.u.len()).map(|d| DofState { u: e.u[d], v: e.v[d], f_int: e.f_int[d] }).collect())).collect();
             let pieces: Vec<(usize, &[u8])> = states.iter().map(|(m, s)| (*m, bytemuck::cast_slice(s))).collect();
             self.upload_member_runs(batch, &committed, 3 * 8, &pieces);
-            let strains: Vec<Real> = uploads.iter().map(|(_, e)| e.strain).collect();
-            let mut k = 0;
-            for run in super::runs(&members) {
-                self.upload(&energy, run[0] as u64 * 8, bytemuck::cast_slice(&strains[k..k + run.len()]));
-                k += run.len();
-            }
+            // The strain energies of both go up.
+            uploads.extend(adopts);
+            uploads.sort_unstable_by_key(|&(m, _)| m);
+            let strains: Vec<(usize, Real)> = uploads.iter().map(|&(m, e)| (m, e.strain)).collect();
+            self.upload_per_member(&energy, &strains);
+        }
+    }
+
+    /// Writes one value per listed member (`(member, value)`, in member order) at the member's
+    /// index of `buffer`: one write per run of consecutive members.
+    fn upload_per_member<T: bytemuck::Pod>(&mut self, buffer: &Buffer, entries: &[(usize, T)]) {
+        let members: Vec<usize> = entries.iter().map(|&(m, _)| m).collect();
+        let mut k = 0;
+        for run in super::runs(&members) {
+            let values: Vec<T> = entries[k..k + run.len()].iter().map(|&(_, value)| value).collect();
+            self.upload(buffer, (run[0] * std::mem::size_of::<T>()) as u64, bytemuck::cast_slice(&values));
+            k += run.len();
         }
     }
 
@@ -541,7 +612,8 @@ impl GpuWorld {
 /// displacements, the committed strain energies, the trial velocities' bases.
 pub type StepKernelsOut = (Vec<DofState<Real>>, Vec<DofStep<Real>>, Vec<Real>, Vec<Real>, Vec<Real>, Vec<Real>);
 
-/// `step_commit` over the members `commit` lists, then `step_begin` over those `begin` lists,
+/// `step_commit` over the members `commit` lists, then `step_begin` over those `begin` lists
+/// as pass number `epoch` (with `adopted` and `adopt_at` for the members that adopt there),
 /// alone on an f64 device from the given buffers (`energies`: the committed and the members'
 /// strain energies), in one submission as a step's start records them; what they leave, for
 /// the parity tests with the CPU twins.
@@ -550,11 +622,12 @@ pub fn run_step_kernels(
     gpu: &Gpu,
     members: &[MemberRange],
     (commit, commit_motion): (&[usize], StepMotion<Real>),
-    (begin, begin_motion): (&[usize], StepMotion<Real>),
+    (begin, begin_motion, epoch): (&[usize], StepMotion<Real>, u32),
     committed: &[DofState<Real>],
     step: &[DofStep<Real>],
     (u, dof_out): (&[Real], &[DofOut<Real>]),
     (committed_energy, member_energy): (&[Real], &[Real]),
+    (adopted, adopt_at): (&[Real], &[u32]),
 ) -> Result<StepKernelsOut, GpuError> {
     assert_eq!(gpu.precision, Precision::F64, "the device keeps committed states in f64 only");
     let pipelines = StepPipelines::new(gpu)?;
@@ -568,6 +641,8 @@ pub fn run_step_kernels(
     let motion = |m: StepMotion<Real>| init("motion", bytemuck::cast_slice(&[m]), uniform);
     let jobs = |list: &[usize]| init("jobs", bytemuck::cast_slice(&list.iter().map(|&m| Active { member: m as u32, mode: MODE_FORCES }).collect::<Vec<_>>()), BufferUsages::STORAGE);
     let (commit_motion, begin_motion, commit_jobs, begin_jobs) = (motion(commit_motion), motion(begin_motion), jobs(commit), jobs(begin));
+    let (adopted_b, adopt_at_b) = (init("adopted", bytemuck::cast_slice(adopted), BufferUsages::STORAGE), init("adopt at", bytemuck::cast_slice(adopt_at), BufferUsages::STORAGE));
+    let epoch_b = init("epoch", bytemuck::cast_slice(&[epoch, 0, 0, 0]), uniform);
     let bindings = StepBindings {
         motions: [&begin_motion, &commit_motion],
         jobs: [&begin_jobs, &commit_jobs],
@@ -580,6 +655,7 @@ pub fn run_step_kernels(
         u_base: &u_base_b,
         dof_out: &dof_out_b,
         members: &members_b,
+        adoption: AdoptionBuffers { velocities: &adopted_b, at: &adopt_at_b, epoch: &epoch_b },
     };
     let [begin_pass, commit_pass] = pipelines.passes(gpu, &bindings);
     let mut encoder = gpu.device.create_command_encoder(&wgpu::CommandEncoderDescriptor { label: Some("step kernels") });
