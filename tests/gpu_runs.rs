@@ -551,9 +551,9 @@ fn pressed_grains_in_contact_begin_and_commit_their_steps_on_the_device() {
     // bytes a grain up over steps 6 to 30, 5 820 once such a grain begins and commits on the
     // device as a grain in flight does, 5 096 once a grain that refactorises from the stiffness
     // values the device holds sends `K̄`'s diagonal only, 3 116 after the planar blocks and
-    // the contact forces by dof, 3 012 once a grain whose committed state was the host's
+    // the contact forces by dof, 3 013 once a grain whose committed state was the host's
     // sends its velocity alone where the device's iterate and forces are the host's
-    // (`MODE_ADOPT`: 8 bytes a dof, not 24). Down, 8 520 bytes a grain over those steps while
+    // (`step_begin` adopts it: 8 bytes a dof, not 24). Down, 8 520 bytes a grain over those steps while
     // every Newton call with groups in contact read their members' stiffness values back,
     // 2 627 since the tangents of those it hands back stay on the device. The CPU's energies.
     let test = "pressed_grains_in_contact_begin_and_commit_their_steps_on_the_device";

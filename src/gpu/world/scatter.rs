@@ -4,7 +4,8 @@
 //! contact are nonzero at its nodes in contact only, and only those change from call to call:
 //! whole spans of them were a tenth of the bytes a pressed packing moved a step on lavapipe.
 
-use super::{buffer_init, split_spans, GpuWorld, Mirror};
+use super::mirror::{split_spans, Mirror};
+use super::{buffer_init, GpuWorld};
 use crate::gpu::Gpu;
 use crate::precision::Real;
 use bytemuck::{Pod, Zeroable};
