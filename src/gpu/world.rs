@@ -10,14 +10,16 @@
 //! was asked for (those that refactorise).
 
 mod contact;
+mod invert;
 mod mirror;
 mod newton;
 mod scatter;
 mod step;
 
 pub use contact::{ContactLayout, GroupContact};
+pub use invert::{invert_loops, run_newton_invert, Inverse};
 use mirror::{update_mirrors, Mirror};
-pub use newton::{invert_loops, run_newton_invert, Inverse, NewtonCall};
+pub use newton::NewtonCall;
 pub use scatter::ScatterCount;
 pub use step::{run_newton_summary, run_step_kernels, KeptIterate, KeptState, StepEnd, StepKernelsOut, StepStart, SummaryBuffers, SummaryOut};
 
@@ -261,10 +263,10 @@ struct Copy {
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum Held {
     /// Those the host read back: the fingerprint of their entries off the diagonal
-    /// (`newton::off_diagonal_print`).
+    /// (`invert::off_diagonal_print`).
     Read(u64),
     /// The tangent at the iterate where a device Newton call handed the member back, which the
-    /// host did not read: it assembles its own there ([`newton::Inverse::AtHandBack`]).
+    /// host did not read: it assembles its own there ([`invert::Inverse::AtHandBack`]).
     HandBack,
 }
 
@@ -607,7 +609,7 @@ impl GpuWorld {
     fn note_handed(&mut self, body: usize, values: &[Real]) {
         let (b, m) = self.place[body];
         let b = &mut self.batches[b];
-        b.handed[m] = Some(Held::Read(newton::off_diagonal_print(values, &b.patterns, b.pattern_start[m], b.free_range[m].1 as usize)));
+        b.handed[m] = Some(Held::Read(invert::off_diagonal_print(values, &b.patterns, b.pattern_start[m], b.free_range[m].1 as usize)));
     }
 
     /// Uploads the displacements and active lists of an evaluation pass and records its
