@@ -119,9 +119,10 @@ pub(super) struct Resident {
     committed_energy: Buffer,
     /// `step_begin`'s `adopted`, `adopt_at` and `epoch`.
     adoption: [Buffer; 3],
-    /// The number of the last `step_begin` pass queued, and `adopt_at` as the device holds it.
+    /// The number of the last `step_begin` pass queued, and the members (in order) whose
+    /// `adopt_at` on the device is the next one's (older marks name passes that ran).
     epoch: u32,
-    adopt_at: Vec<u32>,
+    marked: Vec<usize>,
     motions: [Buffer; 2],
     jobs: [Buffer; 2],
     /// `step_begin` (`[0]`) and `step_commit` (`[1]`), as `motions` and `jobs`.
@@ -225,7 +226,7 @@ impl Resident {
             committed_energy,
             adoption,
             epoch: 0,
-            adopt_at: vec![0; members],
+            marked: Vec::new(),
             motions,
             jobs,
             passes,
@@ -280,18 +281,11 @@ impl Resident {
     /// changed, `(member, pass)`.
     fn mark_adoptions(&mut self, adopting: &[usize]) -> Vec<(usize, u32)> {
         let next = self.epoch + 1;
-        let mut marks = Vec::new();
-        for (m, at) in self.adopt_at.iter_mut().enumerate() {
-            let wanted = match adopting.binary_search(&m) {
-                Ok(_) => next,
-                Err(_) if *at == next => 0,
-                Err(_) => *at,
-            };
-            if wanted != *at {
-                marks.push((m, wanted));
-                *at = wanted;
-            }
-        }
+        let set = adopting.iter().filter(|m| self.marked.binary_search(m).is_err()).map(|&m| (m, next));
+        let unset = self.marked.iter().filter(|m| adopting.binary_search(m).is_err()).map(|&m| (m, 0));
+        let mut marks: Vec<(usize, u32)> = set.chain(unset).collect();
+        marks.sort_unstable();
+        self.marked = adopting.to_vec();
         marks
     }
 }
@@ -375,6 +369,7 @@ impl GpuWorld {
             // (a retried step begins again from the state it adopted).
             let r = &mut self.batches[batch].newton.as_mut().expect("a batch with committed states").resident;
             r.epoch += 1;
+            r.marked.clear();
             let (epoch, buffer) = (r.epoch, r.adoption[2].clone());
             self.upload(&buffer, 0, bytemuck::cast_slice(&[epoch, 0, 0, 0]));
         }
