@@ -6,11 +6,13 @@
 // round of a step) is evaluated first, with `first_forces` before `newton_judge` and
 // `first_judge` after it. One workgroup per group (each group has one contact
 // problem, numbered as `uzawa_solve` numbers them); a group no longer iterating does nothing.
-// The Delassus operator stays the one the host built: no member refactorises here.
+// The Delassus blocks are built here (`delassus`, once at the call's start) from the members'
+// K̄⁻¹ as the device holds them, not sent up: no member refactorises within a call.
 // The host's increment this repeats: `ContactStep::prepare` and `ContactStep::apply`; its test:
 // `Group::converged`. CPU twins: `cpu::newton_contact_prepare`, `cpu::newton_contact_forces`,
 // `cpu::newton_contact_judge`, `cpu::newton_contact_first_forces`,
-// `cpu::newton_contact_first_judge`, which follow this file line by line.
+// `cpu::newton_contact_first_judge`, `cpu::newton_contact_delassus`, which follow this file line
+// by line.
 
 // A group: its members (batch member indices, the first its leader) and what its test needs.
 struct ContactGroup {
@@ -80,6 +82,13 @@ struct ContactCall {
 @group(0) @binding(24) var<storage, read> r: array<real>;
 @group(0) @binding(25) var<storage, read_write> contact_states: array<ContactState>;
 @group(0) @binding(26) var<uniform> call: ContactCall;
+// The staged problems' W: 3 x 3 blocks row-major in contact frames, and per point (row) its
+// entries (column point, block), all points of the call numbered one after the other.
+@group(0) @binding(27) var<storage, read_write> blocks: array<real>;
+@group(0) @binding(28) var<storage, read> row_start: array<u32>;
+@group(0) @binding(29) var<storage, read> row_entries: array<vec2<u32>>;
+// Node slot n: the batch member of its body.
+@group(0) @binding(30) var<storage, read> node_member: array<u32>;
 
 var<workgroup> go: u32;
 var<workgroup> rhs: array<real, MAX_FREE>;
@@ -356,6 +365,84 @@ fn first_judge(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id
         let m = group_members[grp.member_start + a];
         if state[m].status != FAILED {
             state[m].status = verdict;
+        }
+    }
+}
+
+// Member m's free index of batch dof d (its free dofs ascend), or NOT_FREE.
+const NOT_FREE: u32 = 0xffffffffu;
+fn free_index(m: u32, d: u32) -> u32 {
+    let row = newton[m];
+    let local = d - members[m].dof_start;
+    var low = 0u;
+    var high = row.free_count;
+    while low < high {
+        let mid = (low + high) / 2u;
+        let at = free_dofs[row.free_start + mid];
+        if at == local {
+            return mid;
+        }
+        if at < local {
+            low = mid + 1u;
+        } else {
+            high = mid;
+        }
+    }
+    return NOT_FREE;
+}
+
+// The Delassus blocks W = H K̄⁻¹ Hᵀ / θdt of group k's problem from its members' K̄⁻¹, as the
+// host's `ContactStep::build_delassus` gives them from its factorisations: block (i, j), entry
+// (c, a), sums over the terms of points i and j on one body of coef_s coef_t Fi[c]ᵀ K̄⁻¹ Fj[a]
+// (prescribed dofs respond to nothing); a frictionless column point keeps its normal column only
+// (its tangential reactions stay zero). One workgroup per group, one invocation per point (row).
+@compute @workgroup_size(NEWTON_WORKGROUP)
+fn delassus(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workgroup: vec3<u32>, @builtin(num_workgroups) count: vec3<u32>) {
+    let k = problem_index(workgroup, count);
+    if k >= call.problems {
+        return;
+    }
+    let p = problems[k];
+    let dim = call.dim;
+    for (var i = p.point_start + lane; i < p.point_end; i += NEWTON_WORKGROUP) {
+        for (var e = row_start[i]; e < row_start[i + 1u]; e++) {
+            let j = row_entries[e].x;
+            var w: array<real, 9>;
+            for (var s = term_start[i]; s < term_start[i + 1u]; s++) {
+                let m = node_member[term_slots[s]];
+                let start = newton[m].inverse_start;
+                for (var t = term_start[j]; t < term_start[j + 1u]; t++) {
+                    if node_member[term_slots[t]] != m {
+                        continue;
+                    }
+                    let coef = term_coefs[s] * term_coefs[t];
+                    for (var q = 0u; q < dim; q++) {
+                        let fs = free_index(m, node_dof[term_slots[s]] + q);
+                        if fs == NOT_FREE {
+                            continue;
+                        }
+                        for (var x = 0u; x < dim; x++) {
+                            let ft = free_index(m, node_dof[term_slots[t]] + x);
+                            if ft == NOT_FREE {
+                                continue;
+                            }
+                            let kinv = coef * inverse[start + packed(fs, ft)];
+                            for (var c = 0u; c < dim; c++) {
+                                for (var a = 0u; a < dim; a++) {
+                                    w[3u * c + a] += frames[9u * i + 3u * c + q] * kinv * frames[9u * j + 3u * a + x];
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+            let columns = select(dim, 1u, locals[j].mu == real(0.0));
+            let b = 9u * row_entries[e].y;
+            for (var c = 0u; c < 3u; c++) {
+                for (var a = 0u; a < 3u; a++) {
+                    blocks[b + 3u * c + a] = select(real(0.0), w[3u * c + a] / call.theta_dt, a < columns);
+                }
+            }
         }
     }
 }

@@ -1486,7 +1486,8 @@ fn a_device_newton_increment_that_inverts_an_element_fails_the_body() {
 /// A group in contact iterating on the device (`newton_contact`'s `prepare`, `uzawa_solve`,
 /// `forces`, the bodies' kernels, `newton_contact`'s `judge`) takes the increments of its CPU
 /// twins, to 1e-12: two bodies pressed together at three node pairs with friction (a dense W
-/// from their inverses), in 2D and 3D, until the group converges or its budget ends.
+/// from their inverses, which the device builds itself with `delassus`, and its twin to the
+/// dense product's round-off), in 2D and 3D, until the group converges or its budget ends.
 #[test]
 fn newton_contact_kernels_match_their_cpu_twins() {
     use bifirst::contact::uzawa::{Acceleration, Colours, Delassus, Fallback, Local, NodalMap, Problem, Sweep, SETTLE};
@@ -1603,6 +1604,32 @@ fn newton_contact_kernels_match_their_cpu_twins() {
                 ContactLayout::of(&[group(vec![0, 1])], std::slice::from_ref(&p), &gather, &|c| c as u32, &|m| members[m as usize].dof_start, dim, theta_dt)
             };
             let mut locals: Vec<UzawaLocal<f64>> = local.iter().map(|l| UzawaLocal { v_free: l.v_free, shift: l.shift, mu: l.mu, rho: l.rho, floor, settle: SETTLE * tolerance }).collect();
+            // `delassus`: the twin's W from the layout and the members' inverses is the dense W
+            // above to round-off (the device's, built the same way, drives the device's
+            // increments below); a frictionless column point keeps its normal column only.
+            let mut row_start = vec![0u32];
+            for row in &w.rows {
+                row_start.push(row_start[row_start.len() - 1] + row.len() as u32);
+            }
+            let row_entries: Vec<[u32; 2]> = w.rows.iter().flatten().map(|&(j, b)| [j, b]).collect();
+            for frictionless in [None, Some(1)] {
+                let mut ls = locals.clone();
+                if let Some(j) = frictionless {
+                    ls[j].mu = 0.0;
+                }
+                let mut built = vec![f64::NAN; 9 * w.blocks.len()];
+                cpu::newton_contact_delassus(&inverse_all, &free_all, &newton, &members, &layout, &staged, &gather.frames, &ls, (&row_start, &row_entries), &mut built, 0);
+                let scale = w.blocks.iter().flatten().fold(0.0f64, |a, x| a.max(x.abs()));
+                for (i, row) in w.rows.iter().enumerate() {
+                    for &(j, b) in row {
+                        for e in 0..9 {
+                            let expected = if frictionless == Some(j as usize) && e % 3 > 0 { 0.0 } else { w.blocks[b as usize][e] };
+                            let got = built[9 * b as usize + e];
+                            assert!((got - expected).abs() <= 1e-12 * scale, "{}: W({i}, {j}) entry {e}: {got:e} against {expected:e} (frictionless {frictionless:?})", kind.name());
+                        }
+                    }
+                }
+            }
             let mut ustates = [UzawaJudgeState::start(&staged[0])];
             let mut cstates = [ContactState::default()];
             let (mut r, mut dr) = (vec![0.0; 3 * n_points], vec![0.0; 3 * n_points]);

@@ -445,6 +445,67 @@ pub fn newton_contact_forces(
     s.change = change / size.max(p.floor).max(Real::MIN_POSITIVE);
 }
 
+/// Member `m`'s free index of batch dof `d` (its free dofs ascend), as `free_index` of
+/// `newton_contact.wgsl` finds it.
+fn free_index(free_dofs: &[u32], newton: &[NewtonMember<Real>], members: &[MemberRange], m: usize, d: u32) -> Option<usize> {
+    let row = newton[m];
+    free_dofs[row.free_start as usize..][..row.free_count as usize].binary_search(&(d - members[m].dof_start)).ok()
+}
+
+/// `newton_contact`'s `delassus` for group `k`: the blocks of W its problem's rows list
+/// (`row_start`, `row_entries`: `(column point, block)`), from the members' `K̄⁻¹`, the terms
+/// and frames of the points and each column point's friction in `locals`, in the shader's order
+/// of every sum.
+#[allow(clippy::too_many_arguments)]
+pub fn newton_contact_delassus(
+    inverse: &[Real],
+    free_dofs: &[u32],
+    newton: &[NewtonMember<Real>],
+    members: &[MemberRange],
+    c: &ContactLayout,
+    problems: &[UzawaProblem<Real>],
+    frames: &[Real],
+    locals: &[UzawaLocal<Real>],
+    (row_start, row_entries): (&[u32], &[[u32; 2]]),
+    blocks: &mut [Real],
+    k: usize,
+) {
+    let p = problems[k];
+    let dim = c.call.dim as usize;
+    for i in p.point_start as usize..p.point_end as usize {
+        for &[j, b] in &row_entries[row_start[i] as usize..row_start[i + 1] as usize] {
+            let j = j as usize;
+            let mut w = [0.0; 9];
+            for s in c.term_start[i] as usize..c.term_start[i + 1] as usize {
+                let m = c.node_member[c.term_slots[s] as usize] as usize;
+                let start = newton[m].inverse_start as usize;
+                for t in c.term_start[j] as usize..c.term_start[j + 1] as usize {
+                    if c.node_member[c.term_slots[t] as usize] as usize != m {
+                        continue;
+                    }
+                    let coef = c.term_coefs[s] * c.term_coefs[t];
+                    for q in 0..dim {
+                        let Some(fs) = free_index(free_dofs, newton, members, m, c.node_dof[c.term_slots[s] as usize] + q as u32) else { continue };
+                        for x in 0..dim {
+                            let Some(ft) = free_index(free_dofs, newton, members, m, c.node_dof[c.term_slots[t] as usize] + x as u32) else { continue };
+                            let kinv = coef * inverse[start + packed(fs, ft)];
+                            for cc in 0..dim {
+                                for a in 0..dim {
+                                    w[3 * cc + a] += frames[9 * i + 3 * cc + q] * kinv * frames[9 * j + 3 * a + x];
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+            let columns = if locals[j].mu == 0.0 { 1 } else { dim };
+            for (e, out) in blocks[9 * b as usize..][..9].iter_mut().enumerate() {
+                *out = if e % 3 < columns { w[e] / c.call.theta_dt } else { 0.0 };
+            }
+        }
+    }
+}
+
 /// `point_velocity` of `newton_contact.wgsl`: point `i`'s relative velocity at the end of the
 /// step in its contact frame, with the contact-free increments `x0` when given.
 fn point_velocity(c: &ContactLayout, frames: &[Real], u: &[Real], u_base: &[Real], x0: Option<&[Real]>, i: usize) -> [Real; 3] {

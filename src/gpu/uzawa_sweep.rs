@@ -364,11 +364,11 @@ pub(crate) struct Buffers {
     nodes: usize,
     node_entries: usize,
     colour_entries: usize,
-    block: Buffer,
+    pub(crate) block: Buffer,
     /// The blocks and the frames as they go up planar, for `planar_unpack`.
     unpacked: [Unpacked; 2],
-    row_start: Buffer,
-    row_entries: Buffer,
+    pub(crate) row_start: Buffer,
+    pub(crate) row_entries: Buffer,
     pub(crate) locals: Buffer,
     order: Buffer,
     live: Buffer,
@@ -416,6 +416,9 @@ pub struct UzawaSweeps {
     buffers: Option<Buffers>,
     /// What the device holds of the last round.
     layout: Layout,
+    /// Whether the blocks the device holds are its own, built from its `K̄⁻¹`
+    /// (`newton_contact`'s `delassus`), not the host's: a solve of the host's W sends them.
+    blocks_built: bool,
     /// Stride of the colour ranges in their uniform buffer (the device's offset alignment).
     range_stride: u64,
     /// Sweeps a dispatch of the staged whole solve takes (`count.sweeps`).
@@ -436,7 +439,7 @@ impl UzawaSweeps {
         let solve = gpu.pipeline(SOLVE, None)?;
         let unpack = gpu.pipeline(UNPACK, None)?;
         let range_stride = (gpu.device.limits().min_uniform_buffer_offset_alignment as u64).max(std::mem::size_of::<ColourRange>() as u64);
-        Ok(Self { gpu, pipeline, judge, solve, unpack, unpack_pending: Default::default(), buffers: None, layout: Layout::default(), range_stride, whole_sweeps: 0, submits: 0, traffic: Traffic::default() })
+        Ok(Self { gpu, pipeline, judge, solve, unpack, unpack_pending: Default::default(), buffers: None, layout: Layout::default(), blocks_built: false, range_stride, whole_sweeps: 0, submits: 0, traffic: Traffic::default() })
     }
 
     /// The most items of `bytes` each that one buffer of the device can bind.
@@ -568,7 +571,7 @@ impl UzawaSweeps {
         if problems.iter().all(|p| p.local.is_empty()) {
             return Ok(Some(outcomes));
         }
-        let Some(whole) = self.stage(problems, SOLVE_SWEEPS) else {
+        let Some(whole) = self.stage(problems, SOLVE_SWEEPS, false) else {
             return Ok(None);
         };
         let b = self.buffers.take().expect("staged");
@@ -581,10 +584,11 @@ impl UzawaSweeps {
 
     /// Uploads the problems: W, the colour orders and the node gather when they changed, the
     /// points, the problems with their states before the first sweep, and the reactions; a
-    /// whole solve may take `sweeps` sweeps per dispatch. Whether they are solved whole
-    /// ([`SOLVE_WIDEST`]), or `None` (nothing uploaded) when they do not fit the device's
-    /// buffers. f64 kernels only.
-    pub(crate) fn stage(&mut self, problems: &[Problem], sweeps: usize) -> Option<bool> {
+    /// whole solve may take `sweeps` sweeps per dispatch; W's blocks stay where the device
+    /// builds them (`built_on_device`: `newton_contact`'s `delassus`, before the sweeps). Whether
+    /// they are solved whole ([`SOLVE_WIDEST`]), or `None` (nothing uploaded) when they do not
+    /// fit the device's buffers. f64 kernels only.
+    pub(crate) fn stage(&mut self, problems: &[Problem], sweeps: usize, built_on_device: bool) -> Option<bool> {
         assert_eq!(self.gpu.precision, Precision::F64, "the device's Uzawa sweeps need f64 kernels");
         let resident = self.layout.key == key_of(problems);
         let layout = if resident { std::mem::take(&mut self.layout) } else { Layout::of(problems) };
@@ -593,8 +597,14 @@ impl UzawaSweeps {
             return None;
         };
         let b = self.buffers.take().expect("reserved");
-        if !resident || reallocated {
+        if !built_on_device && (!resident || reallocated || self.blocks_built) {
             self.upload_blocks(&b, BLOCKS, (&b.block, &layout.blocks), layout.planar.as_deref());
+        }
+        if built_on_device {
+            self.unpack_pending[BLOCKS].store(0, Ordering::Relaxed);
+        }
+        self.blocks_built = built_on_device;
+        if !resident || reallocated {
             self.upload(&b.row_start, 0, bytemuck::cast_slice(&layout.row_start));
             self.upload(&b.row_entries, 0, bytemuck::cast_slice(&layout.row_entries));
             self.upload(&b.order, 0, bytemuck::cast_slice(&layout.order));

@@ -47,8 +47,9 @@ pub struct ContactLayout {
     pub term_coefs: Vec<Real>,
     /// Per point, the obstacle's end velocity, 3 reals.
     pub obstacle: Vec<Real>,
-    /// Per node slot, the batch dof of its first component.
+    /// Per node slot, the batch dof of its first component, and the batch member of its body.
     pub node_dof: Vec<u32>,
+    pub node_member: Vec<u32>,
     pub call: ContactCall<Real>,
     /// Each group's contact state before the call: its stalls so far.
     pub states: Vec<ContactState<Real>>,
@@ -74,6 +75,7 @@ impl ContactLayout {
             l.obstacle.extend(g.obstacle.iter().flatten());
             debug_assert_eq!(g.slot_nodes.len(), (nodes.node_offsets[k + 1] - slot0) as usize);
             l.node_dof.extend(g.slot_nodes.iter().map(|&(body, node)| dof_start(member_of(g.calls[body as usize])) + node * dim as u32));
+            l.node_member.extend(g.slot_nodes.iter().map(|&(body, _)| member_of(g.calls[body as usize])));
         }
         l.call = ContactCall { problems: contacts.len() as u32, dim: dim as u32, pad: [0; 2], theta_dt };
         l
@@ -87,12 +89,13 @@ pub(super) struct ContactPipelines {
     judge: ComputePipeline,
     first_forces: ComputePipeline,
     first_judge: ComputePipeline,
+    delassus: ComputePipeline,
 }
 
 impl ContactPipelines {
     pub(super) fn new(gpu: &Gpu) -> Result<Self, crate::gpu::GpuError> {
         let at = |entry: &str| gpu.pipeline_at("newton_contact", entry, None);
-        Ok(Self { prepare: at("prepare")?, forces: at("forces")?, judge: at("judge")?, first_forces: at("first_forces")?, first_judge: at("first_judge")? })
+        Ok(Self { prepare: at("prepare")?, forces: at("forces")?, judge: at("judge")?, first_forces: at("first_forces")?, first_judge: at("first_judge")?, delassus: at("delassus")? })
     }
 }
 
@@ -103,6 +106,7 @@ pub(super) struct ContactPasses {
     judge: BindGroup,
     first_forces: BindGroup,
     first_judge: BindGroup,
+    delassus: BindGroup,
     pub(super) states: Buffer,
     problems: u32,
     /// The dofs `forces` and `first_forces` write in the contact forces: `dim` from each node
@@ -126,6 +130,7 @@ impl ContactPasses {
         let term_coefs = made("contact term coefficients", bytemuck::cast_slice(&l.term_coefs), storage);
         let obstacle = made("contact obstacle velocities", bytemuck::cast_slice(&l.obstacle), storage);
         let node_dof = made("contact node dofs", bytemuck::cast_slice(&l.node_dof), storage);
+        let node_member = made("contact node members", bytemuck::cast_slice(&l.node_member), storage);
         let states = made("contact states", bytemuck::cast_slice(&l.states), storage | BufferUsages::COPY_SRC);
         let call = made("contact call", bytemuck::bytes_of(&l.call), BufferUsages::UNIFORM);
         let n = newton;
@@ -159,11 +164,16 @@ impl ContactPasses {
             ("r", &uzawa.r),
             ("contact_states", &states),
             ("call", &call),
+            ("blocks", &uzawa.block),
+            ("row_start", &uzawa.row_start),
+            ("row_entries", &uzawa.row_entries),
+            ("node_member", &node_member),
         ];
         let bind = |pipeline: &ComputePipeline, entry: &str| gpu.bind_named(pipeline, ("newton_contact", entry, None), &all);
         let (prepare, forces, judge) = (bind(&pipelines.prepare, "prepare"), bind(&pipelines.forces, "forces"), bind(&pipelines.judge, "judge"));
         let (first_forces, first_judge) = (bind(&pipelines.first_forces, "first_forces"), bind(&pipelines.first_judge, "first_judge"));
-        Self { prepare, forces, judge, first_forces, first_judge, states, problems: l.groups.len() as u32, written: (l.node_dof.clone(), l.call.dim as usize) }
+        let delassus = bind(&pipelines.delassus, "delassus");
+        Self { prepare, forces, judge, first_forces, first_judge, delassus, states, problems: l.groups.len() as u32, written: (l.node_dof.clone(), l.call.dim as usize) }
     }
 
     fn dispatch(gpu: &Gpu, pass: &mut wgpu::ComputePass, entry: &'static str, pipeline: &ComputePipeline, group: &BindGroup, workgroups: usize) {
@@ -183,6 +193,12 @@ impl ContactPasses {
     /// `forces`, one workgroup per group.
     pub(super) fn record_forces(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass, p: &ContactPipelines) {
         Self::dispatch(gpu, pass, "forces", &p.forces, &self.forces, self.problems as usize);
+    }
+
+    /// `delassus`, one workgroup per group: W from the members' `K̄⁻¹`, after the call's
+    /// inversions and before anything reads W.
+    pub(super) fn record_delassus(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass, p: &ContactPipelines) {
+        Self::dispatch(gpu, pass, "delassus", &p.delassus, &self.delassus, self.problems as usize);
     }
 
     /// `first_forces`, one workgroup per group.

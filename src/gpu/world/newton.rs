@@ -555,6 +555,7 @@ impl GpuWorld {
             if first {
                 self.record_call_start(&mut encoder, &work);
                 self.record_inversions(&mut encoder, &work);
+                self.record_delassus(&mut encoder, &plan);
             }
             self.record_iterations(&mut encoder, &plan, first && evaluate_first, iterations);
             let (landing, tallies) = self.queue_states(&mut readback, &work, calls, dim);
@@ -704,6 +705,15 @@ impl GpuWorld {
         }
     }
 
+    /// Records the Delassus blocks of the call's groups in contact (`newton_contact`'s
+    /// `delassus`), from the inverses the call's inversions made, after the frames went up.
+    fn record_delassus(&self, encoder: &mut wgpu::CommandEncoder, plan: &CallPlan) {
+        let (Some((_, passes)), Some(pipelines)) = (plan.contact, self.contact_pipelines.as_ref()) else { return };
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("newton delassus"), timestamp_writes: None });
+        self.contact.as_ref().expect("staged").record_unpack(&mut pass);
+        passes.record_delassus(&self.gpu, &mut pass, pipelines);
+    }
+
     /// Records one submission's compute pass: the members' first evaluation and its test when
     /// they come unevaluated (`evaluate_first`), `iterations` Newton iterations, the tangents of
     /// the members in contact handed back, and the members' energies.
@@ -711,7 +721,8 @@ impl GpuWorld {
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor { label: Some("newton"), timestamp_writes: None });
         let pipelines = self.contact_pipelines.as_ref();
         let contact_of = |batch: usize| plan.contact.filter(|(at, _)| *at == batch).map(|(_, passes)| passes);
-        // W's blocks and the frames, where they went up planar, before anything reads them.
+        // The frames, where they went up planar, before anything reads them (none left after
+        // the call's first submission: `record_delassus`).
         if plan.contact.is_some() {
             self.contact.as_ref().expect("staged").record_unpack(&mut pass);
         }
@@ -924,7 +935,7 @@ impl GpuWorld {
         }
         let sweeps = self.contact.as_mut().expect("made above");
         let most = problems.iter().map(|p| p.max_iterations).max().unwrap_or(0);
-        let whole = sweeps.stage(problems, most).ok_or_else(|| GpuError::Kernel { kernel: "uzawa_solve".into(), message: "the contact problems do not fit the device's buffers".into() })?;
+        let whole = sweeps.stage(problems, most, true).ok_or_else(|| GpuError::Kernel { kernel: "uzawa_solve".into(), message: "the contact problems do not fit the device's buffers".into() })?;
         assert!(whole, "groups in contact iterate on the device only with problems solved whole");
         let precision = self.gpu.precision;
         let real = precision.size() as u64;
