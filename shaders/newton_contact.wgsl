@@ -18,10 +18,14 @@
 struct ContactGroup {
     member_start: u32,
     member_count: u32,
-    pad0: u32,
-    pad1: u32,
+    // 1: the points' step lengths are the Jacobi sweep's (`Delassus::rho`).
+    jacobi: u32,
+    pad: u32,
     // contact.tolerance: the contact forces' change must be below it.
     tolerance: real,
+    // A velocity that matters in the step (`ContactStep::velocity_scale`): the floor of the
+    // reactions is the largest step length times it.
+    velocity_scale: real,
 }
 
 // Where a group's contact stands after its last increment, written by `forces` (and
@@ -89,6 +93,8 @@ struct ContactCall {
 @group(0) @binding(29) var<storage, read> row_entries: array<vec2<u32>>;
 // Node slot n: the batch member of its body.
 @group(0) @binding(30) var<storage, read> node_member: array<u32>;
+// Per point, the step length `delassus` gave it, for the host.
+@group(0) @binding(31) var<storage, read_write> step_lengths: array<real>;
 
 var<workgroup> go: u32;
 var<workgroup> rhs: array<real, MAX_FREE>;
@@ -395,16 +401,25 @@ fn free_index(m: u32, d: u32) -> u32 {
 // host's `ContactStep::build_delassus` gives them from its factorisations: block (i, j), entry
 // (c, a), sums over the terms of points i and j on one body of coef_s coef_t Fi[c]ᵀ K̄⁻¹ Fj[a]
 // (prescribed dofs respond to nothing); a frictionless column point keeps its normal column only
-// (its tangential reactions stay zero). One workgroup per group, one invocation per point (row).
+// (its tangential reactions stay zero). Then each point's step length from its row (`Delassus::rho`:
+// one over the sum of the ∞-norms of its own block, or of every block of its row for Jacobi
+// sweeps; zero for an empty sum), and the problem's floor, the largest step length times the
+// group's velocity scale. One workgroup per group, one invocation per point (row).
 @compute @workgroup_size(NEWTON_WORKGROUP)
 fn delassus(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workgroup: vec3<u32>, @builtin(num_workgroups) count: vec3<u32>) {
     let k = problem_index(workgroup, count);
-    if k >= call.problems {
+    if lane == 0u {
+        go = u32(k < call.problems);
+    }
+    if workgroupUniformLoad(&go) == 0u {
         return;
     }
     let p = problems[k];
+    let grp = groups[k];
     let dim = call.dim;
+    var largest = real(0.0);
     for (var i = p.point_start + lane; i < p.point_end; i += NEWTON_WORKGROUP) {
+        var sum = real(0.0);
         for (var e = row_start[i]; e < row_start[i + 1u]; e++) {
             let j = row_entries[e].x;
             var w: array<real, 9>;
@@ -438,11 +453,30 @@ fn delassus(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) w
             }
             let columns = select(dim, 1u, locals[j].mu == real(0.0));
             let b = 9u * row_entries[e].y;
+            var norm = real(0.0);
             for (var c = 0u; c < 3u; c++) {
+                var row = real(0.0);
                 for (var a = 0u; a < 3u; a++) {
-                    blocks[b + 3u * c + a] = select(real(0.0), w[3u * c + a] / call.theta_dt, a < columns);
+                    let value = select(real(0.0), w[3u * c + a] / call.theta_dt, a < columns);
+                    blocks[b + 3u * c + a] = value;
+                    row += abs(value);
                 }
+                norm = max(norm, row);
+            }
+            if grp.jacobi == 1u || j == i {
+                sum += norm;
             }
         }
+        let rho = select(real(0.0), real(1.0) / sum, sum > real(0.0));
+        locals[i].rho = rho;
+        step_lengths[i] = rho;
+        largest = max(largest, rho);
+    }
+    let floor = grp.velocity_scale * reduce_max(lane, largest);
+    for (var i = p.point_start + lane; i < p.point_end; i += NEWTON_WORKGROUP) {
+        locals[i].floor = floor;
+    }
+    if lane == 0u {
+        problems[k].floor = floor;
     }
 }

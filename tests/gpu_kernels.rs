@@ -203,15 +203,15 @@ fn newton_structs_match_the_shader_layout() {
             Precision::F32 => [size_of::<ContactGroup<f32>>(), size_of::<ContactState<f32>>(), size_of::<ContactCall<f32>>()],
         };
         let (members, span) = naga_layout(&module, "ContactGroup");
-        assert_eq!((members, span as usize), (expect(&["member_start", "member_count", "pad0", "pad1"], &["tolerance"]), sizes[0]), "{}", precision.name());
+        assert_eq!((members, span as usize), (expect(&["member_start", "member_count", "jacobi", "pad"], &["tolerance", "velocity_scale"]), sizes[0]), "{}", precision.name());
         let (members, span) = naga_layout(&module, "ContactState");
         assert_eq!((members, span as usize), (expect(&["sweeps", "uzawa", "tightened", "stalls"], &["change"]), sizes[1]), "{}", precision.name());
         let (members, span) = naga_layout(&module, "ContactCall");
         assert_eq!((members, span as usize), (expect(&["problems", "dim", "pad0", "pad1"], &["theta_dt"]), sizes[2]), "{}", precision.name());
     }
-    let g = ContactGroup::<f64> { member_start: 1, member_count: 2, pad0: 3, pad1: 4, tolerance: 5.0 };
-    assert_eq!(bytemuck::cast::<_, [u32; 6]>(g)[..4], [1, 2, 3, 4], "field order");
-    assert_eq!(bytemuck::cast::<_, [f64; 3]>(g)[2], 5.0, "field order");
+    let g = ContactGroup::<f64> { member_start: 1, member_count: 2, jacobi: 3, pad: 4, tolerance: 5.0, velocity_scale: 6.0 };
+    assert_eq!(bytemuck::cast::<_, [u32; 8]>(g)[..4], [1, 2, 3, 4], "field order");
+    assert_eq!(bytemuck::cast::<_, [f64; 4]>(g)[2..], [5.0, 6.0], "field order");
     let m = NewtonMember::<f64> { inverse_start: 1, free_start: 2, free_count: 3, budget: 4, residual_tolerance: 5.0, floor: 6.0, floor_per_travel: 7.0, increment_tolerance: 8.0, increment_floor: 9.0, round_off: 10.0 };
     let words: [u32; 16] = bytemuck::cast(m);
     assert_eq!(words[..4], [1, 2, 3, 4], "field order");
@@ -1558,6 +1558,8 @@ fn newton_contact_kernels_match_their_cpu_twins() {
         let nodal = NodalMap { terms: (0..n_points).map(|i| vec![(2 * i as u32, 1.0), (2 * i as u32 + 1, -1.0)]).collect(), frames: frames.clone(), nodes: 2 * n_points };
         let slot_nodes: Vec<(u32, u32)> = nodes.iter().flat_map(|&n| [(0, n), (1, n)]).collect();
         let (tolerance, floor) = (1e-8, 1e-12);
+        // The floor `delassus` gives: the largest step length times the velocity scale.
+        let velocity_scale = floor / (0..n_points).map(|i| w.rho(i, dim, Sweep::GaussSeidel)).fold(0.0, f64::max);
         // One increment then the host; increments to convergence; solves of two sweeps, which
         // spend them every time: the group iterates on until UZAWA_STALLS in a row; the group
         // unevaluated, as in the first round of a step (`first_forces` and `first_judge`).
@@ -1597,7 +1599,17 @@ fn newton_contact_kernels_match_their_cpu_twins() {
                 NodeGather::of(std::slice::from_ref(&p))
             };
             let gather = problem_of(&local, &mut r0);
-            let group = |calls: Vec<usize>| GroupContact { calls, slot_nodes: &slot_nodes, obstacle: vec![[0.0; 3]; n_points], u_base: bases.clone(), tolerance: contact_tolerance, outcome: ContactState::default() };
+            let group = |calls: Vec<usize>| GroupContact {
+                calls,
+                slot_nodes: &slot_nodes,
+                obstacle: vec![[0.0; 3]; n_points],
+                u_base: bases.clone(),
+                tolerance: contact_tolerance,
+                velocity_scale,
+                jacobi: false,
+                outcome: ContactState::default(),
+                step_lengths: Vec::new(),
+            };
             let layout = {
                 let mut r = vec![[0.0; 3]; n_points];
                 let p = Problem { w: &w, colours: &colours, local: &local, nodal: &nodal, r: &mut r, tolerance, floor, max_iterations: max_sweeps as usize, acceleration: Acceleration::None, fallback: Fallback::None, dim: 3, pairs: &[] };
@@ -1606,30 +1618,52 @@ fn newton_contact_kernels_match_their_cpu_twins() {
             let mut locals: Vec<UzawaLocal<f64>> = local.iter().map(|l| UzawaLocal { v_free: l.v_free, shift: l.shift, mu: l.mu, rho: l.rho, floor, settle: SETTLE * tolerance }).collect();
             // `delassus`: the twin's W from the layout and the members' inverses is the dense W
             // above to round-off (the device's, built the same way, drives the device's
-            // increments below); a frictionless column point keeps its normal column only.
+            // increments below); a frictionless column point keeps its normal column only; the
+            // step lengths are the host's of that W (Gauss-Seidel and Jacobi), the floor the
+            // largest times the velocity scale. The twins then iterate with the step lengths
+            // and floor of the Gauss-Seidel case, as the device does.
             let mut row_start = vec![0u32];
             for row in &w.rows {
                 row_start.push(row_start[row_start.len() - 1] + row.len() as u32);
             }
             let row_entries: Vec<[u32; 2]> = w.rows.iter().flatten().map(|&(j, b)| [j, b]).collect();
-            for frictionless in [None, Some(1)] {
+            for (sweep, frictionless) in [(Sweep::Jacobi, None), (Sweep::GaussSeidel, Some(1)), (Sweep::GaussSeidel, None)] {
+                let mut sweep_layout = layout.clone();
+                sweep_layout.groups[0].jacobi = (sweep == Sweep::Jacobi) as u32;
                 let mut ls = locals.clone();
                 if let Some(j) = frictionless {
                     ls[j].mu = 0.0;
                 }
-                let mut built = vec![f64::NAN; 9 * w.blocks.len()];
-                cpu::newton_contact_delassus(&inverse_all, &free_all, &newton, &members, &layout, &staged, &gather.frames, &ls, (&row_start, &row_entries), &mut built, 0);
+                let mut problems = staged;
+                let (mut built, mut step_lengths) = (vec![f64::NAN; 9 * w.blocks.len()], vec![f64::NAN; n_points]);
+                cpu::newton_contact_delassus(&inverse_all, &free_all, &newton, &members, &sweep_layout, &mut problems, &gather.frames, &mut ls, (&row_start, &row_entries), (&mut built, &mut step_lengths), 0);
                 let scale = w.blocks.iter().flatten().fold(0.0f64, |a, x| a.max(x.abs()));
+                let mut expected = w.clone();
                 for (i, row) in w.rows.iter().enumerate() {
                     for &(j, b) in row {
                         for e in 0..9 {
-                            let expected = if frictionless == Some(j as usize) && e % 3 > 0 { 0.0 } else { w.blocks[b as usize][e] };
-                            let got = built[9 * b as usize + e];
-                            assert!((got - expected).abs() <= 1e-12 * scale, "{}: W({i}, {j}) entry {e}: {got:e} against {expected:e} (frictionless {frictionless:?})", kind.name());
+                            if frictionless == Some(j as usize) && e % 3 > 0 {
+                                expected.blocks[b as usize][e] = 0.0;
+                            }
+                            let (got, want) = (built[9 * b as usize + e], expected.blocks[b as usize][e]);
+                            assert!((got - want).abs() <= 1e-12 * scale, "{}: W({i}, {j}) entry {e}: {got:e} against {want:e} (frictionless {frictionless:?})", kind.name());
                         }
                     }
                 }
+                for i in 0..n_points {
+                    let want = expected.rho(i, dim, sweep);
+                    assert!((ls[i].rho - want).abs() <= 1e-12 * want && step_lengths[i] == ls[i].rho, "{} {sweep:?}: point {i}'s step length {:e} against {want:e}", kind.name(), ls[i].rho);
+                }
+                let most = ls.iter().map(|l| l.rho).fold(0.0, f64::max);
+                assert!(problems[0].floor == velocity_scale * most && ls.iter().all(|l| l.floor == problems[0].floor), "{}: the floor", kind.name());
+                if (sweep, frictionless) == (Sweep::GaussSeidel, None) {
+                    (locals, staged) = (ls, problems);
+                }
             }
+            for (l, d) in local.iter_mut().zip(&locals) {
+                l.rho = d.rho;
+            }
+            let floor = staged[0].floor;
             let mut ustates = [UzawaJudgeState::start(&staged[0])];
             let mut cstates = [ContactState::default()];
             let (mut r, mut dr) = (vec![0.0; 3 * n_points], vec![0.0; 3 * n_points]);
@@ -1734,6 +1768,8 @@ fn newton_contact_kernels_match_their_cpu_twins() {
             let device_r: Vec<f64> = device_r.iter().flatten().copied().collect();
             let (u_error, r_error) = (relative_error(&device_u, &u), relative_error(&device_r, &r));
             let outcome = contacts[0].outcome;
+            let twin_rho: Vec<f64> = locals.iter().map(|l| l.rho).collect();
+            assert!(relative_error(&contacts[0].step_lengths, &twin_rho) <= 1e-12, "{}: the step lengths of the device's W", kind.name());
             eprintln!(
                 "{} budget {budget}: statuses {:?} after {} increments (twins {:?}, {}); {} sweeps, change {:.3e}, Uzawa {}, tightened {}; u {u_error:.1e}, r {r_error:.1e}",
                 kind.name(),

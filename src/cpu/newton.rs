@@ -454,8 +454,9 @@ fn free_index(free_dofs: &[u32], newton: &[NewtonMember<Real>], members: &[Membe
 
 /// `newton_contact`'s `delassus` for group `k`: the blocks of W its problem's rows list
 /// (`row_start`, `row_entries`: `(column point, block)`), from the members' `K̄⁻¹`, the terms
-/// and frames of the points and each column point's friction in `locals`, in the shader's order
-/// of every sum.
+/// and frames of the points and each column point's friction in `locals`; then each point's
+/// step length (into `locals` and `step_lengths`) and the problem's floor (into `locals` and
+/// `problems`), in the shader's order of every sum.
 #[allow(clippy::too_many_arguments)]
 pub fn newton_contact_delassus(
     inverse: &[Real],
@@ -463,16 +464,19 @@ pub fn newton_contact_delassus(
     newton: &[NewtonMember<Real>],
     members: &[MemberRange],
     c: &ContactLayout,
-    problems: &[UzawaProblem<Real>],
+    problems: &mut [UzawaProblem<Real>],
     frames: &[Real],
-    locals: &[UzawaLocal<Real>],
+    locals: &mut [UzawaLocal<Real>],
     (row_start, row_entries): (&[u32], &[[u32; 2]]),
-    blocks: &mut [Real],
+    (blocks, step_lengths): (&mut [Real], &mut [Real]),
     k: usize,
 ) {
     let p = problems[k];
+    let grp = c.groups[k];
     let dim = c.call.dim as usize;
+    let mut largest: Real = 0.0;
     for i in p.point_start as usize..p.point_end as usize {
+        let mut sum = 0.0;
         for &[j, b] in &row_entries[row_start[i] as usize..row_start[i + 1] as usize] {
             let j = j as usize;
             let mut w = [0.0; 9];
@@ -499,11 +503,29 @@ pub fn newton_contact_delassus(
                 }
             }
             let columns = if locals[j].mu == 0.0 { 1 } else { dim };
-            for (e, out) in blocks[9 * b as usize..][..9].iter_mut().enumerate() {
-                *out = if e % 3 < columns { w[e] / c.call.theta_dt } else { 0.0 };
+            let mut norm: Real = 0.0;
+            for (cc, out) in blocks[9 * b as usize..][..9].chunks_exact_mut(3).enumerate() {
+                let mut row = 0.0;
+                for (a, out) in out.iter_mut().enumerate() {
+                    *out = if a < columns { w[3 * cc + a] / c.call.theta_dt } else { 0.0 };
+                    row += out.abs();
+                }
+                norm = norm.max(row);
+            }
+            if grp.jacobi == 1 || j == i {
+                sum += norm;
             }
         }
+        let rho = if sum > 0.0 { 1.0 / sum } else { 0.0 };
+        locals[i].rho = rho;
+        step_lengths[i] = rho;
+        largest = largest.max(rho);
     }
+    let floor = grp.velocity_scale * largest;
+    for local in &mut locals[p.point_start as usize..p.point_end as usize] {
+        local.floor = floor;
+    }
+    problems[k].floor = floor;
 }
 
 /// `point_velocity` of `newton_contact.wgsl`: point `i`'s relative velocity at the end of the

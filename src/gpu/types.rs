@@ -337,10 +337,13 @@ pub const NEWTON_WORKGROUP: usize = 64;
 pub struct ContactGroup<R> {
     pub member_start: u32,
     pub member_count: u32,
-    pub pad0: u32,
-    pub pad1: u32,
+    /// 1: its points' step lengths are those of Jacobi sweeps ([`crate::contact::uzawa::Delassus::rho`]).
+    pub jacobi: u32,
+    pub pad: u32,
     /// `contact.tolerance`, the bound on the contact forces' change.
     pub tolerance: R,
+    /// The floor of its reactions per unit step length (`ContactStep::velocity_scale`).
+    pub velocity_scale: R,
 }
 
 /// `struct ContactState` of `shaders/newton_contact.wgsl`: where a device group's contact stands.

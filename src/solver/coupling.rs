@@ -139,6 +139,9 @@ impl ContactStep {
             h.push(entries);
         }
         delassus.blocks = vec![[0.0; 9]; index.len()];
+        // A version of its own before any block is built: a device that builds W itself keys
+        // the problem's layout on it.
+        delassus.stamp();
         let colours = Colours::of(&delassus);
         // Reactions and step lengths carry over from the last step for the points found again.
         let previous: Vec<([Real; 3], Real)> = points.iter().map(|c| warm.get(&c.key()).copied().unwrap_or(([0.0; 3], 0.0))).collect();
@@ -166,20 +169,24 @@ impl ContactStep {
         Self { points, pairs, delassus, colours, per_body, h, r, local, nodal, slot_nodes, dim, velocity_scale, floor, inner: INNER_TOLERANCE, shares: Vec::new(), free_increment: Vec::new(), responses }
     }
 
-    /// Builds the Delassus blocks with the bodies' current factorisations, for a device that takes
-    /// the step's increments from the first (without the contact-free increment of
-    /// [`ContactStep::prepare`], which the device computes).
-    pub fn build_delassus_for(&mut self, bodies: &mut [&mut Body], p: &StepParams, settings: &Settings, times: &mut PhaseTimes) {
-        let started = std::time::Instant::now();
-        let solve_before = times.solve;
-        self.build_delassus(bodies, |_| true, p.theta * p.dt, settings, times);
-        times.contact += started.elapsed().as_secs_f64() - (times.solve - solve_before);
+    /// Takes the step lengths of the points from the W a device built for its increments
+    /// (`newton_contact`'s `delassus`), with the floor they give; the host's blocks, if any, are
+    /// then stale (the bodies may have refactorised since): its next increment builds them all.
+    pub fn take_device_delassus(&mut self, step_lengths: &[Real]) {
+        if step_lengths.len() != self.local.len() {
+            return;
+        }
+        for (l, &rho) in self.local.iter_mut().zip(step_lengths) {
+            l.rho = rho;
+        }
+        self.floor = self.velocity_scale * self.local.iter().map(|l| l.rho).fold(0.0, Real::max);
+        self.shares.clear();
+        self.responses.iter_mut().for_each(|r| *r = None);
     }
 
-    /// Whether the Delassus blocks of `bodies` bodies are built for the step (by the first
-    /// increment): until a body refactorises, the increments can go on without the host.
-    pub fn delassus_built(&self, bodies: usize) -> bool {
-        self.shares.len() == bodies
+    /// The floor of the reactions per unit step length ([`ContactStep::velocity_scale`]'s field).
+    pub fn velocity_scale(&self) -> Real {
+        self.velocity_scale
     }
 
     /// The most points of one colour of the Gauss-Seidel sweeps.

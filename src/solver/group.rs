@@ -358,6 +358,15 @@ impl Group<'_, '_> {
     /// The factorisations that are due, then either the increment of every body (no contact
     /// points) or the contact problem prepared: `true` when it waits to be solved.
     pub(super) fn begin_increment(&mut self, c: &Context) -> Result<bool, StepFailure> {
+        let Some(refactorized) = self.refresh_for_increment(c)? else { return Ok(false) };
+        self.prepare_contact(c, &refactorized);
+        Ok(true)
+    }
+
+    /// [`Group::begin_increment`] up to the contact problem: the factorisations refreshed, and
+    /// a group without contact incremented. Returns which bodies refactorised when the group
+    /// has contact ([`Group::prepare_contact`] next, unless the device takes the increment).
+    pub(super) fn refresh_for_increment(&mut self, c: &Context) -> Result<Option<Vec<bool>>, StepFailure> {
         if c.interrupt.is_some_and(|f| f.load(Ordering::SeqCst)) {
             return Err(StepFailure::Interrupted);
         }
@@ -368,15 +377,21 @@ impl Group<'_, '_> {
             refactorized.push(fresh);
             state.report.factorizations += fresh as usize;
         }
-        let Some(contact) = &mut self.contact else {
-            for body in bodies.iter_mut() {
-                body.newton_step(&mut state.report.wall);
-            }
-            state.report.iterations += 1;
-            return Ok(false);
-        };
-        contact.prepare(bodies, p, c.settings.expect("contact settings"), &refactorized, &mut state.report.wall);
-        Ok(true)
+        if self.contact.is_some() {
+            return Ok(Some(refactorized));
+        }
+        for body in bodies.iter_mut() {
+            body.newton_step(&mut state.report.wall);
+        }
+        state.report.iterations += 1;
+        Ok(None)
+    }
+
+    /// The contact problem of the increment, with the bodies that just refactorised
+    /// (`refactorized`).
+    pub(super) fn prepare_contact(&mut self, c: &Context, refactorized: &[bool]) {
+        let contact = self.contact.as_mut().expect("a group whose increment waits on contact");
+        contact.prepare(self.bodies, c.p, c.settings.expect("contact settings"), refactorized, &mut self.newton.report.wall);
     }
 
     /// The increment after the contact problem is solved: the reactions applied, the bodies

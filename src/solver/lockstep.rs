@@ -5,7 +5,7 @@
 
 use super::body::{coefficients, Body, StepFailure};
 use super::group::{Context, Group, GroupReport, Hold};
-use crate::contact::uzawa::{Outcome, Problem};
+use crate::contact::uzawa::{Outcome, Problem, Sweep};
 use crate::contact::Settings;
 use crate::gpu::types::ContactState;
 use crate::gpu::types::{Coefficients, NewtonState, StepSummary};
@@ -33,7 +33,6 @@ pub(super) fn newton_in_lockstep(groups: &mut [Group], world: &mut GpuWorld, c: 
     // round, unevaluated), and the batch of those in contact.
     let mut contact_batch = None;
     let mut iterating = if device_residual { evaluate_on_device_first(groups, world, c, &mut contact_batch) } else { none.clone() };
-    build_for_device(groups, &iterating, c);
     loop {
         let live: Vec<bool> = outcome.iter().map(Option::is_none).collect();
         if !live.iter().any(|&l| l) {
@@ -80,7 +79,6 @@ pub(super) fn newton_in_lockstep(groups: &mut [Group], world: &mut GpuWorld, c: 
             }
         }
         iterating = if device_residual { iterate_on_device(groups, &mut continuing, world, c, &mut contact_batch, false) } else { none.clone() };
-        build_for_device(groups, &iterating, c);
         let p = c.p;
         let needs_tangent = |b: &Body| b.needs_tangent(p);
         // Else each body's `refresh_factor` assembles its tangent on the CPU.
@@ -89,23 +87,25 @@ pub(super) fn newton_in_lockstep(groups: &mut [Group], world: &mut GpuWorld, c: 
         } else {
             groups.iter().map(|_| Ok(())).collect()
         };
-        let begun: Vec<Option<Result<bool, StepFailure>>> = groups.par_iter_mut().zip(tangents).zip(&continuing).map(|((g, tangents), &go)| go.then(|| tangents.and_then(|()| g.begin_increment(c)))).collect();
+        let begun: Vec<Option<Result<Option<Vec<bool>>, StepFailure>>> = groups.par_iter_mut().zip(tangents).zip(&continuing).map(|((g, tangents), &go)| go.then(|| tangents.and_then(|()| g.refresh_for_increment(c)))).collect();
         let mut waiting = vec![false; groups.len()];
+        let mut refactorized = vec![Vec::new(); groups.len()];
         for (k, result) in begun.into_iter().enumerate() {
             match result {
                 Some(Err(e)) => outcome[k] = Some(Err(e)),
-                Some(Ok(true)) => waiting[k] = true,
+                Some(Ok(Some(fresh))) => (waiting[k], refactorized[k]) = (true, fresh),
                 _ => {}
             }
         }
-        // A group whose bodies just refactorised (W rebuilt for them) takes this increment on
-        // the device with the next round's pass rather than on the host, where it may.
+        // A group whose bodies just refactorised takes this increment on the device with the
+        // next round's pass rather than on the host, where it may: the device builds its W.
         if device_residual {
             let deferred = iterate_on_device(groups, &mut waiting, world, c, &mut contact_batch, true);
             for (i, d) in iterating.iter_mut().zip(deferred) {
                 *i |= d;
             }
         }
+        groups.par_iter_mut().zip(&waiting).zip(&refactorized).filter(|((_, &wait), _)| wait).for_each(|((g, _), fresh)| g.prepare_contact(c, fresh));
         let solved = solve_contact(groups, &waiting, world, c, times);
         let ended: Vec<Option<Result<(), StepFailure>>> = groups.par_iter_mut().zip(solved).zip(&waiting).map(|((g, solved), &wait)| wait.then(|| solved.and_then(|o| g.end_increment(c, o)))).collect();
         for (k, result) in ended.into_iter().enumerate() {
@@ -141,7 +141,7 @@ fn evaluate_on_cpu(groups: &mut [Group], evaluating: &[bool], c: &Context) -> Ve
 /// holds; either one body without contact points whose trial displacement is not that of its
 /// last evaluation (a grain at rest takes that one again), or a group in contact as
 /// [`iterate_on_device`] takes them (problems solved whole on the device, the step's
-/// `contact_batch`), whose W [`build_for_device`] builds first. A falling grain then costs one
+/// `contact_batch`), whose W the device builds. A falling grain then costs one
 /// submission a step, not an evaluation pass, its read-back and the Newton call's upload of
 /// the same residuals; a cluster of grains in contact, one submission less.
 fn evaluate_on_device_first(groups: &[Group], world: &GpuWorld, c: &Context, contact_batch: &mut Option<usize>) -> Vec<bool> {
@@ -188,8 +188,8 @@ fn contact_groups_on_device(groups: &[Group], candidate: &dyn Fn(usize, &Group) 
 /// contact (also one whose last solve spent its sweeps: the device counts the stalls on, as
 /// [`Group::converged`] does) with problems solved whole on the device
 /// ([`crate::backend::uzawa_on_device`], colours of at most [`SOLVE_WIDEST`] points) and its
-/// bodies in the step's `contact_batch` (that of the first such group); such a group's W is
-/// built by [`build_for_device`] when no increment of the step built it yet. `refreshed`: the
+/// bodies in the step's `contact_batch` (that of the first such group); the device builds such
+/// a group's W, the host none for it. `refreshed`: the
 /// groups' factorisations were just refreshed for their next increment. They leave `continuing`
 /// for this round.
 fn iterate_on_device(groups: &[Group], continuing: &mut [bool], world: &GpuWorld, c: &Context, contact_batch: &mut Option<usize>, refreshed: bool) -> Vec<bool> {
@@ -208,15 +208,6 @@ fn iterate_on_device(groups: &[Group], continuing: &mut [bool], world: &GpuWorld
     }
     *contact_batch = batch;
     chosen
-}
-
-/// The Delassus operators of the `iterating` groups in contact that no increment of the step
-/// built yet (their first increment goes to the device), in parallel.
-fn build_for_device(groups: &mut [Group], iterating: &[bool], c: &Context) {
-    groups.par_iter_mut().zip(iterating).filter(|(g, &yes)| yes && g.contact.as_ref().is_some_and(|k| !k.delassus_built(g.bodies.len()))).for_each(|(g, _)| {
-        let contact = g.contact.as_mut().expect("filtered");
-        contact.build_delassus_for(g.bodies, c.p, c.settings.expect("contact points need contact settings"), &mut g.newton.report.wall);
-    });
 }
 
 /// Whether the round's pass over the bodies of the `live` groups that `wanted` selects goes to
@@ -327,10 +318,11 @@ struct PassLayout<'a> {
 type CallEnd = (NewtonState<Real>, Option<Real>, Option<ElementFailure>, bool, Option<(StepSummary, bool)>);
 
 /// What a pass leaves a group that iterated on the device: per call its state, strain energy,
-/// element failure and whether the device holds its tangent; per contact its outcome.
+/// element failure and whether the device holds its tangent; per contact its outcome and its
+/// points' step lengths (from the W the device built).
 struct IterationEnds {
     calls: Vec<CallEnd>,
-    contacts: Vec<ContactState<Real>>,
+    contacts: Vec<(ContactState<Real>, Vec<Real>)>,
 }
 
 /// One device pass over the bodies of the `live` groups that `wanted` selects: the tangent and
@@ -361,7 +353,10 @@ fn device_pass(groups: &mut [Group], live: &[bool], kind: PassKind, world: &mut 
     let passed =
         if calls.is_empty() { world.evaluate(list, coefficients(p), times) } else { world.newton(calls, problems, contacts, list, Coefficients { motion: c.velocity_scale * p.dt, ..coefficients(p) }, (dim, p.theta * p.dt), c.interrupt, times) };
     let failures: Vec<Option<ElementFailure>> = list.iter().map(|e| e.failure).collect();
-    let ends = IterationEnds { calls: calls.iter_mut().map(|call| (call.outcome, call.strain_energy, call.failure, call.tangent_held, call.summary.map(|s| (s, call.positions)))).collect(), contacts: contacts.iter().map(|g| g.outcome).collect() };
+    let ends = IterationEnds {
+        calls: calls.iter_mut().map(|call| (call.outcome, call.strain_energy, call.failure, call.tangent_held, call.summary.map(|s| (s, call.positions)))).collect(),
+        contacts: contacts.iter_mut().map(|g| (g.outcome, std::mem::take(&mut g.step_lengths))).collect(),
+    };
     // The calls that were to keep their step's end on the device and did not converge there.
     let unkept: Vec<usize> = calls.iter().zip(&asked).filter(|(call, &asked)| asked && call.summary.is_none()).map(|(call, _)| call.body).collect();
     let PassLayout { call_ranges, evaluations_start, .. } = layout;
@@ -473,9 +468,19 @@ fn iterations_share<'a>(g: &'a mut Group, inverses: Vec<Option<Inverse>>, kind: 
         .collect();
     let contact = contact.as_mut().map(|contact| {
         let settings = c.settings.expect("contact points need contact settings");
-        let obstacle = contact.obstacle_velocities();
+        let (obstacle, velocity_scale) = (contact.obstacle_velocities(), contact.velocity_scale());
         let (problem, slot_nodes) = contact.problem_and_slots(settings);
-        let group = GroupContact { calls: Vec::new(), slot_nodes, obstacle, u_base, tolerance: settings.tolerance, outcome: ContactState { stalls: newton.uzawa_stalls as u32, ..ContactState::default() } };
+        let group = GroupContact {
+            calls: Vec::new(),
+            slot_nodes,
+            obstacle,
+            u_base,
+            tolerance: settings.tolerance,
+            velocity_scale,
+            jacobi: settings.sweep == Sweep::Jacobi,
+            outcome: ContactState { stalls: newton.uzawa_stalls as u32, ..ContactState::default() },
+            step_lengths: Vec::new(),
+        };
         (problem, group)
     });
     (calls, contact, Vec::new())
@@ -520,12 +525,15 @@ fn finish_iterations(g: &mut Group, (range, index): (std::ops::Range<usize>, Opt
             result = Err(e);
         }
     }
-    if let (Some(j), true) = (index, iterations > 0) {
-        let o = ends.contacts[j];
-        g.newton.record_device_solve(&o);
+    if let Some(j) = index {
+        let (o, step_lengths) = &ends.contacts[j];
         let contact = g.contact.as_mut().expect("a group with a contact outcome has contact");
-        for _ in 0..o.tightened {
-            contact.tighten();
+        contact.take_device_delassus(step_lengths);
+        if iterations > 0 {
+            g.newton.record_device_solve(o);
+            for _ in 0..o.tightened {
+                contact.tighten();
+            }
         }
     }
     result

@@ -28,9 +28,16 @@ pub struct GroupContact<'a> {
     pub u_base: Vec<Vec<Real>>,
     /// `contact.tolerance`.
     pub tolerance: Real,
+    /// The floor of its reactions per unit step length (`ContactStep::velocity_scale`), and
+    /// whether its step lengths are those of Jacobi sweeps.
+    pub velocity_scale: Real,
+    pub jacobi: bool,
     /// In: its Uzawa stalls so far in the step (`stalls`, the rest zero); out: where its
     /// contact stood after the last increment.
     pub outcome: ContactState<Real>,
+    /// Out: its points' step lengths, from the W the device built (`newton_contact`'s
+    /// `delassus`).
+    pub step_lengths: Vec<Real>,
 }
 
 /// What `newton_contact` reads of a call's groups, besides the batch's buffers and the Uzawa
@@ -63,7 +70,7 @@ impl ContactLayout {
     pub fn of(contacts: &[GroupContact], staged: &[Problem], nodes: &NodeGather, member_of: &dyn Fn(usize) -> u32, dof_start: &dyn Fn(u32) -> u32, dim: usize, theta_dt: Real) -> Self {
         let mut l = ContactLayout { term_start: vec![0], ..Default::default() };
         for (k, g) in contacts.iter().enumerate() {
-            l.groups.push(ContactGroup { member_start: l.group_members.len() as u32, member_count: g.calls.len() as u32, pad0: 0, pad1: 0, tolerance: g.tolerance });
+            l.groups.push(ContactGroup { member_start: l.group_members.len() as u32, member_count: g.calls.len() as u32, jacobi: g.jacobi as u32, pad: 0, tolerance: g.tolerance, velocity_scale: g.velocity_scale });
             l.group_members.extend(g.calls.iter().map(|&c| member_of(c)));
             l.states.push(ContactState { stalls: g.outcome.stalls, ..ContactState::default() });
             let slot0 = nodes.node_offsets[k];
@@ -108,6 +115,8 @@ pub(super) struct ContactPasses {
     first_judge: BindGroup,
     delassus: BindGroup,
     pub(super) states: Buffer,
+    /// The points' step lengths `delassus` gives (for the host: `GroupContact::step_lengths`).
+    pub(super) step_lengths: Buffer,
     problems: u32,
     /// The dofs `forces` and `first_forces` write in the contact forces: `dim` from each node
     /// slot's first (`ContactLayout::node_dof`).
@@ -133,6 +142,8 @@ impl ContactPasses {
         let node_member = made("contact node members", bytemuck::cast_slice(&l.node_member), storage);
         let states = made("contact states", bytemuck::cast_slice(&l.states), storage | BufferUsages::COPY_SRC);
         let call = made("contact call", bytemuck::bytes_of(&l.call), BufferUsages::UNIFORM);
+        let points = l.term_start.len() - 1;
+        let step_lengths = super::buffer(gpu, "contact step lengths", (points.max(1) * std::mem::size_of::<Real>()).next_multiple_of(8), storage | BufferUsages::COPY_SRC);
         let n = newton;
         // Every resource of `newton_contact` by the name the kernel gives it; each entry point's
         // bind group takes those it uses (naga's reflection, `Gpu::bind_named`).
@@ -168,12 +179,13 @@ impl ContactPasses {
             ("row_start", &uzawa.row_start),
             ("row_entries", &uzawa.row_entries),
             ("node_member", &node_member),
+            ("step_lengths", &step_lengths),
         ];
         let bind = |pipeline: &ComputePipeline, entry: &str| gpu.bind_named(pipeline, ("newton_contact", entry, None), &all);
         let (prepare, forces, judge) = (bind(&pipelines.prepare, "prepare"), bind(&pipelines.forces, "forces"), bind(&pipelines.judge, "judge"));
         let (first_forces, first_judge) = (bind(&pipelines.first_forces, "first_forces"), bind(&pipelines.first_judge, "first_judge"));
         let delassus = bind(&pipelines.delassus, "delassus");
-        Self { prepare, forces, judge, first_forces, first_judge, delassus, states, problems: l.groups.len() as u32, written: (l.node_dof.clone(), l.call.dim as usize) }
+        Self { prepare, forces, judge, first_forces, first_judge, delassus, states, step_lengths, problems: l.groups.len() as u32, written: (l.node_dof.clone(), l.call.dim as usize) }
     }
 
     fn dispatch(gpu: &Gpu, pass: &mut wgpu::ComputePass, entry: &'static str, pipeline: &ComputePipeline, group: &BindGroup, workgroups: usize) {

@@ -122,13 +122,20 @@ fn unpack_iterate(precision: Precision, call: &mut NewtonCall, [flags_at, u_at, 
 
 /// Takes the reactions of the groups in contact and their states from a submission's read-back
 /// (where each lands: `(reactions, states)`).
-fn unpack_contact(precision: Precision, problems: &mut [Problem], contacts: &mut [GroupContact], (r_at, states_at): (usize, usize), bytes: &[u8]) {
+fn unpack_contact(precision: Precision, problems: &mut [Problem], contacts: &mut [GroupContact], (r_at, states_at, rho_at): (usize, usize, Option<usize>), bytes: &[u8]) {
     let real = precision.size();
     let mut at = r_at;
     for p in problems.iter_mut() {
         let end = at + p.r.len() * 3 * real;
         super::copy_from_device(precision, &bytes[at..end], bytemuck::cast_slice_mut(p.r));
         at = end;
+    }
+    if let Some(mut at) = rho_at {
+        for (p, g) in problems.iter().zip(contacts.iter_mut()) {
+            let end = at + p.local.len() * real;
+            g.step_lengths = super::from_device(precision, &bytes[at..end]);
+            at = end;
+        }
     }
     let size = std::mem::size_of::<ContactState<Real>>();
     for (k, g) in contacts.iter_mut().enumerate() {
@@ -561,7 +568,9 @@ impl GpuWorld {
             let (landing, tallies) = self.queue_states(&mut readback, &work, calls, dim);
             let contact_landing = contact.as_ref().map(|(_, passes)| {
                 let r = readback.queue_buffer(&self.contact.as_ref().expect("staged").buffers().r, (points * 3 * precision.size()) as u64);
-                (r, readback.queue_buffer(&passes.states, (contacts.len() * std::mem::size_of::<ContactState<Real>>()) as u64))
+                let states = readback.queue_buffer(&passes.states, (contacts.len() * std::mem::size_of::<ContactState<Real>>()) as u64);
+                // The step lengths, once: W stays the one the call's first submission built.
+                (r, states, first.then(|| readback.queue_buffer(&passes.step_lengths, (points * precision.size()) as u64)))
             });
             let mut iterating = false;
             self.read_back_into(&target, encoder, &readback, "newton_update", times, t0, |bytes| {
@@ -655,13 +664,14 @@ impl GpuWorld {
     /// The read-back buffer of a call, grown when its submissions need more: per member its
     /// failure flags and state, per dof its displacement and internal force, its strain energy
     /// (every span a multiple of 8 bytes), after an evaluation pass's read-back when one shares
-    /// it; with groups in contact (`(points, groups)`) their reactions and states.
+    /// it; with groups in contact (`(points, groups)`) their reactions, states and step lengths.
     fn newton_target(&mut self, work: &[BatchCalls], list: &[Evaluation], contact: Option<ContactTarget>) -> Buffer {
         let real = self.gpu.precision.size();
         let total = |f: fn(&crate::gpu::types::MemberRange) -> u32| -> usize { work.iter().map(|(b, mine, _)| mine.iter().map(|&(_, m)| f(&self.batches[*b].members[m]) as usize).sum::<usize>()).sum() };
         let total_dofs = total(|r| r.dofs);
         let total_members: usize = work.iter().map(|(_, mine, _)| mine.len()).sum();
-        let contact_bytes = contact.map_or(0, |(points, groups)| (points * 3 * real + groups * std::mem::size_of::<ContactState<Real>>() + 16) as u64);
+        // (their reactions, states and step lengths)
+        let contact_bytes = contact.map_or(0, |(points, groups)| (points * 4 * real + groups * std::mem::size_of::<ContactState<Real>>() + 24) as u64);
         let per_member = 16 + std::mem::size_of::<NewtonState<Real>>() + summary_len(3) * real + 6 * 4;
         // (a kept call's displacements fit in the room of another's displacements and forces)
         let tallies = work.len() * TALLY_LEN * real;
