@@ -173,9 +173,7 @@ impl ContactStep {
     /// (`newton_contact`'s `delassus`), with the floor they give; the host's blocks, if any, are
     /// then stale (the bodies may have refactorised since): its next increment builds them all.
     pub fn take_device_delassus(&mut self, step_lengths: &[Real]) {
-        if step_lengths.len() != self.local.len() {
-            return;
-        }
+        debug_assert_eq!(step_lengths.len(), self.local.len(), "a step length per point");
         for (l, &rho) in self.local.iter_mut().zip(step_lengths) {
             l.rho = rho;
         }
@@ -529,33 +527,41 @@ mod tests {
     use super::*;
     use crate::solver::grains_many;
 
-    /// When one body of a group refactorises, the Delassus blocks solved again for that body
-    /// alone are those of a build from scratch, to the bit.
-    #[test]
-    fn delassus_solved_again_for_one_body_is_that_of_a_fresh_build() {
+    /// Sixteen grains pressed by the wall to their last step: the simulation, that step's points
+    /// (every body one group, so that the points' body indices hold), the bodies they touch,
+    /// and the step's parameters. Each body has begun the step and factorised.
+    fn pressed_points() -> (crate::solver::Simulation, Vec<ContactPoint>, Vec<usize>, StepParams) {
         let mut sim = grains_many(&["packing.count=16", "packing.wall_velocity=20.0", "time.end=0.05", "output.scene_every=0"]);
         sim.start();
         while !sim.finished() {
             sim.advance().expect("step");
         }
-        // The last step's points, every body one group (so that the points' body indices hold).
         let points: Vec<ContactPoint> = sim.contact_points.clone();
         let touched: std::collections::BTreeSet<u32> = points.iter().flat_map(|c| c.terms().iter().map(|t| t.body)).collect();
         assert!(points.len() > 4 && touched.len() > 2, "the case has points on several grains: {} points, {} grains", points.len(), touched.len());
         let p = StepParams { dt: 0.005, xi: 1.0, theta: 1.0, residual_tolerance: 1e-8, increment_tolerance: 1e-8, max_iterations: 20 };
-        let contact_settings = sim.contact.as_ref().expect("contact").settings.clone();
         let mut times = PhaseTimes::default();
-        let mut bodies: Vec<&mut Body> = sim.bodies.iter_mut().collect();
-        for body in bodies.iter_mut() {
+        for body in sim.bodies.iter_mut() {
             body.begin_step(&p, &[0.0; 3], 0.0);
             body.evaluate(&p, &mut times).expect("evaluation");
             body.refresh_factor(&p, &mut times).expect("factorisation");
         }
+        (sim, points, touched.into_iter().map(|b| b as usize).collect(), p)
+    }
+
+    /// When one body of a group refactorises, the Delassus blocks solved again for that body
+    /// alone are those of a build from scratch, to the bit.
+    #[test]
+    fn delassus_solved_again_for_one_body_is_that_of_a_fresh_build() {
+        let (mut sim, points, touched, p) = pressed_points();
+        let contact_settings = sim.contact.as_ref().expect("contact").settings.clone();
+        let mut times = PhaseTimes::default();
+        let mut bodies: Vec<&mut Body> = sim.bodies.iter_mut().collect();
         let mut kept = ContactStep::new(points.clone(), &bodies, &p, &HashMap::new(), 1.0);
         let none = vec![false; bodies.len()];
         kept.prepare(&mut bodies, &p, &contact_settings, &none, &mut times);
         // One touched body refactorises at another step length.
-        let changed = *touched.iter().nth(1).expect("several grains") as usize;
+        let changed = touched[1];
         let other = StepParams { dt: 0.004, ..p };
         bodies[changed].refresh_factor(&other, &mut times).expect("factorisation");
         let mut refactorized = none.clone();
@@ -564,5 +570,30 @@ mod tests {
         let mut fresh = ContactStep::new(points, &bodies, &p, &HashMap::new(), 1.0);
         fresh.prepare(&mut bodies, &p, &contact_settings, &none, &mut times);
         assert_eq!(kept.delassus.blocks, fresh.delassus.blocks);
+    }
+
+    /// After a device built W for the group's increments (and took a body's refactorisation,
+    /// which the host's blocks do not know of), the step lengths and floor are the device's,
+    /// and the host's next increment builds every body's share: its W is that of a build from
+    /// scratch, to the bit.
+    #[test]
+    fn a_host_increment_after_the_devices_w_builds_every_share_again() {
+        let (mut sim, points, touched, p) = pressed_points();
+        let contact_settings = sim.contact.as_ref().expect("contact").settings.clone();
+        let mut times = PhaseTimes::default();
+        let mut bodies: Vec<&mut Body> = sim.bodies.iter_mut().collect();
+        let mut kept = ContactStep::new(points.clone(), &bodies, &p, &HashMap::new(), 1.0);
+        let none = vec![false; bodies.len()];
+        kept.prepare(&mut bodies, &p, &contact_settings, &none, &mut times);
+        bodies[touched[1]].refresh_factor(&StepParams { dt: 0.004, ..p }, &mut times).expect("factorisation");
+        let device: Vec<Real> = (0..points.len()).map(|i| 1.0 + i as Real).collect();
+        kept.take_device_delassus(&device);
+        assert!(kept.local.iter().zip(&device).all(|(l, &rho)| l.rho == rho));
+        assert_eq!(kept.floor, kept.velocity_scale() * points.len() as Real);
+        kept.prepare(&mut bodies, &p, &contact_settings, &none, &mut times);
+        let mut fresh = ContactStep::new(points, &bodies, &p, &HashMap::new(), 1.0);
+        fresh.prepare(&mut bodies, &p, &contact_settings, &none, &mut times);
+        assert_eq!(kept.delassus.blocks, fresh.delassus.blocks);
+        assert!(kept.local.iter().zip(&fresh.local).all(|(a, b)| a.rho == b.rho) && kept.floor == fresh.floor);
     }
 }
