@@ -136,6 +136,15 @@ fn node_force(n: u32) -> vec3<real> {
     return f;
 }
 
+// Whether group k (of the rows of workgroups) exists; the same for every invocation of the
+// workgroup.
+fn exists(lane: u32, k: u32) -> bool {
+    if lane == 0u {
+        go = u32(k < call.problems);
+    }
+    return workgroupUniformLoad(&go) == 1u;
+}
+
 // Whether group k (of the rows of workgroups) exists and is still iterating; the same for every
 // invocation of the workgroup.
 fn iterating(lane: u32, k: u32) -> bool {
@@ -309,10 +318,7 @@ fn first_forces(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_i
 @compute @workgroup_size(NEWTON_WORKGROUP)
 fn first_judge(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workgroup: vec3<u32>, @builtin(num_workgroups) count: vec3<u32>) {
     let k = problem_index(workgroup, count);
-    if lane == 0u {
-        go = u32(k < call.problems);
-    }
-    if workgroupUniformLoad(&go) == 0u {
+    if !exists(lane, k) {
         return;
     }
     let p = problems[k];
@@ -408,10 +414,7 @@ fn free_index(m: u32, d: u32) -> u32 {
 @compute @workgroup_size(NEWTON_WORKGROUP)
 fn delassus(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workgroup: vec3<u32>, @builtin(num_workgroups) count: vec3<u32>) {
     let k = problem_index(workgroup, count);
-    if lane == 0u {
-        go = u32(k < call.problems);
-    }
-    if workgroupUniformLoad(&go) == 0u {
+    if !exists(lane, k) {
         return;
     }
     let p = problems[k];

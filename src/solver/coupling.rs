@@ -549,10 +549,10 @@ mod tests {
         (sim, points, touched.into_iter().map(|b| b as usize).collect(), p)
     }
 
-    /// When one body of a group refactorises, the Delassus blocks solved again for that body
-    /// alone are those of a build from scratch, to the bit.
-    #[test]
-    fn delassus_solved_again_for_one_body_is_that_of_a_fresh_build() {
+    /// The pressed packing's last step: W built, then `change` (a refactorisation and what
+    /// follows it; it returns which bodies the next increment counts as refactorised), then
+    /// the next increment's W; beside a build from scratch of the same points.
+    fn rebuilt_and_fresh(change: impl FnOnce(&mut ContactStep, &mut [&mut Body], &[usize], StepParams) -> Vec<bool>) -> (ContactStep, ContactStep) {
         let (mut sim, points, touched, p) = pressed_points();
         let contact_settings = sim.contact.as_ref().expect("contact").settings.clone();
         let mut times = PhaseTimes::default();
@@ -560,15 +560,24 @@ mod tests {
         let mut kept = ContactStep::new(points.clone(), &bodies, &p, &HashMap::new(), 1.0);
         let none = vec![false; bodies.len()];
         kept.prepare(&mut bodies, &p, &contact_settings, &none, &mut times);
-        // One touched body refactorises at another step length.
-        let changed = touched[1];
-        let other = StepParams { dt: 0.004, ..p };
-        bodies[changed].refresh_factor(&other, &mut times).expect("factorisation");
-        let mut refactorized = none.clone();
-        refactorized[changed] = true;
+        let refactorized = change(&mut kept, &mut bodies, &touched, p);
         kept.prepare(&mut bodies, &p, &contact_settings, &refactorized, &mut times);
         let mut fresh = ContactStep::new(points, &bodies, &p, &HashMap::new(), 1.0);
         fresh.prepare(&mut bodies, &p, &contact_settings, &none, &mut times);
+        (kept, fresh)
+    }
+
+    /// One touched body refactorises at another step length.
+    fn refactorise_one(bodies: &mut [&mut Body], touched: &[usize], p: StepParams) -> Vec<bool> {
+        bodies[touched[1]].refresh_factor(&StepParams { dt: 0.004, ..p }, &mut PhaseTimes::default()).expect("factorisation");
+        (0..bodies.len()).map(|b| b == touched[1]).collect()
+    }
+
+    /// When one body of a group refactorises, the Delassus blocks solved again for that body
+    /// alone are those of a build from scratch, to the bit.
+    #[test]
+    fn delassus_solved_again_for_one_body_is_that_of_a_fresh_build() {
+        let (kept, fresh) = rebuilt_and_fresh(|_, bodies, touched, p| refactorise_one(bodies, touched, p));
         assert_eq!(kept.delassus.blocks, fresh.delassus.blocks);
     }
 
@@ -578,21 +587,15 @@ mod tests {
     /// scratch, to the bit.
     #[test]
     fn a_host_increment_after_the_devices_w_builds_every_share_again() {
-        let (mut sim, points, touched, p) = pressed_points();
-        let contact_settings = sim.contact.as_ref().expect("contact").settings.clone();
-        let mut times = PhaseTimes::default();
-        let mut bodies: Vec<&mut Body> = sim.bodies.iter_mut().collect();
-        let mut kept = ContactStep::new(points.clone(), &bodies, &p, &HashMap::new(), 1.0);
-        let none = vec![false; bodies.len()];
-        kept.prepare(&mut bodies, &p, &contact_settings, &none, &mut times);
-        bodies[touched[1]].refresh_factor(&StepParams { dt: 0.004, ..p }, &mut times).expect("factorisation");
-        let device: Vec<Real> = (0..points.len()).map(|i| 1.0 + i as Real).collect();
-        kept.take_device_delassus(&device);
-        assert!(kept.local.iter().zip(&device).all(|(l, &rho)| l.rho == rho));
-        assert_eq!(kept.floor, kept.velocity_scale() * points.len() as Real);
-        kept.prepare(&mut bodies, &p, &contact_settings, &none, &mut times);
-        let mut fresh = ContactStep::new(points, &bodies, &p, &HashMap::new(), 1.0);
-        fresh.prepare(&mut bodies, &p, &contact_settings, &none, &mut times);
+        let (kept, fresh) = rebuilt_and_fresh(|kept, bodies, touched, p| {
+            refactorise_one(bodies, touched, p);
+            let device: Vec<Real> = (0..kept.points.len()).map(|i| 1.0 + i as Real).collect();
+            kept.take_device_delassus(&device);
+            assert!(kept.local.iter().zip(&device).all(|(l, &rho)| l.rho == rho));
+            assert_eq!(kept.floor, kept.velocity_scale() * device.len() as Real);
+            // The device's call took the refactorisation: no body is marked.
+            vec![false; bodies.len()]
+        });
         assert_eq!(kept.delassus.blocks, fresh.delassus.blocks);
         assert!(kept.local.iter().zip(&fresh.local).all(|(a, b)| a.rho == b.rho) && kept.floor == fresh.floor);
     }
