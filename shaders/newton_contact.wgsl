@@ -95,6 +95,10 @@ struct ContactCall {
 @group(0) @binding(30) var<storage, read> node_member: array<u32>;
 // Per point, the step length `delassus` gave it, for the host.
 @group(0) @binding(31) var<storage, read_write> step_lengths: array<real>;
+// Node slot n, component c: the free index of that dof in its member's K̄⁻¹ at dim n + c,
+// NOT_FREE for a prescribed one.
+@group(0) @binding(32) var<storage, read> node_free: array<u32>;
+const NOT_FREE: u32 = 0xffffffffu;
 
 var<workgroup> go: u32;
 var<workgroup> rhs: array<real, MAX_FREE>;
@@ -381,28 +385,6 @@ fn first_judge(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id
     }
 }
 
-// Member m's free index of batch dof d (its free dofs ascend), or NOT_FREE.
-const NOT_FREE: u32 = 0xffffffffu;
-fn free_index(m: u32, d: u32) -> u32 {
-    let row = newton[m];
-    let local = d - members[m].dof_start;
-    var low = 0u;
-    var high = row.free_count;
-    while low < high {
-        let mid = (low + high) / 2u;
-        let at = free_dofs[row.free_start + mid];
-        if at == local {
-            return mid;
-        }
-        if at < local {
-            low = mid + 1u;
-        } else {
-            high = mid;
-        }
-    }
-    return NOT_FREE;
-}
-
 // The Delassus blocks W = H K̄⁻¹ Hᵀ / θdt of group k's problem from its members' K̄⁻¹, as the
 // host's `ContactStep::build_delassus` gives them from its factorisations: block (i, j), entry
 // (c, a), sums over the terms of points i and j on one body of coef_s coef_t Fi[c]ᵀ K̄⁻¹ Fj[a]
@@ -435,12 +417,12 @@ fn delassus(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) w
                     }
                     let coef = term_coefs[s] * term_coefs[t];
                     for (var q = 0u; q < dim; q++) {
-                        let fs = free_index(m, node_dof[term_slots[s]] + q);
+                        let fs = node_free[dim * term_slots[s] + q];
                         if fs == NOT_FREE {
                             continue;
                         }
                         for (var x = 0u; x < dim; x++) {
-                            let ft = free_index(m, node_dof[term_slots[t]] + x);
+                            let ft = node_free[dim * term_slots[t] + x];
                             if ft == NOT_FREE {
                                 continue;
                             }

@@ -445,12 +445,8 @@ pub fn newton_contact_forces(
     s.change = change / size.max(p.floor).max(Real::MIN_POSITIVE);
 }
 
-/// Member `m`'s free index of batch dof `d` (its free dofs ascend), as `free_index` of
-/// `newton_contact.wgsl` finds it.
-fn free_index(free_dofs: &[u32], newton: &[NewtonMember<Real>], members: &[MemberRange], m: usize, d: u32) -> Option<usize> {
-    let row = newton[m];
-    free_dofs[row.free_start as usize..][..row.free_count as usize].binary_search(&(d - members[m].dof_start)).ok()
-}
+/// A node slot's component that is prescribed (`ContactLayout::node_free`).
+pub const NOT_FREE: u32 = u32::MAX;
 
 /// `newton_contact`'s `delassus` for group `k`: the blocks of W its problem's rows list
 /// (`row_start`, `row_entries`: `(column point, block)`), from the members' `K̄⁻¹`, the terms
@@ -460,9 +456,7 @@ fn free_index(free_dofs: &[u32], newton: &[NewtonMember<Real>], members: &[Membe
 #[allow(clippy::too_many_arguments)]
 pub fn newton_contact_delassus(
     inverse: &[Real],
-    free_dofs: &[u32],
     newton: &[NewtonMember<Real>],
-    members: &[MemberRange],
     c: &ContactLayout,
     problems: &mut [UzawaProblem<Real>],
     frames: &[Real],
@@ -489,10 +483,16 @@ pub fn newton_contact_delassus(
                     }
                     let coef = c.term_coefs[s] * c.term_coefs[t];
                     for q in 0..dim {
-                        let Some(fs) = free_index(free_dofs, newton, members, m, c.node_dof[c.term_slots[s] as usize] + q as u32) else { continue };
+                        let fs = c.node_free[dim * c.term_slots[s] as usize + q];
+                        if fs == NOT_FREE {
+                            continue;
+                        }
                         for x in 0..dim {
-                            let Some(ft) = free_index(free_dofs, newton, members, m, c.node_dof[c.term_slots[t] as usize] + x as u32) else { continue };
-                            let kinv = coef * inverse[start + packed(fs, ft)];
+                            let ft = c.node_free[dim * c.term_slots[t] as usize + x];
+                            if ft == NOT_FREE {
+                                continue;
+                            }
+                            let kinv = coef * inverse[start + packed(fs as usize, ft as usize)];
                             for cc in 0..dim {
                                 for a in 0..dim {
                                     w[3 * cc + a] += frames[9 * i + 3 * cc + q] * kinv * frames[9 * j + 3 * a + x];

@@ -16,7 +16,7 @@ mod newton;
 mod scatter;
 mod step;
 
-pub use contact::{ContactLayout, GroupContact};
+pub use contact::{delassus_loops, ContactLayout, GroupContact};
 pub use invert::{invert_loops, run_newton_invert, Inverse};
 use mirror::{update_mirrors, Mirror};
 pub use newton::NewtonCall;

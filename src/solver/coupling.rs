@@ -11,6 +11,7 @@ use crate::contact::mirrored::{colour_pairs, mirrored_pairs};
 use crate::contact::uzawa::{self, Colours, Delassus, Local, NodalMap, Outcome, Problem};
 use crate::contact::{uzawa_step, ContactPoint, Settings, Status, WarmStart};
 use crate::gpu::uzawa_sweep::{self, solve_loops_per_sweep};
+use crate::gpu::world::delassus_loops;
 use crate::policy::{PhaseTimes, TIGHTEST_INNER};
 use crate::precision::Real;
 use rayon::prelude::*;
@@ -182,7 +183,8 @@ impl ContactStep {
         self.responses.iter_mut().for_each(|r| *r = None);
     }
 
-    /// The floor of the reactions per unit step length ([`ContactStep::velocity_scale`]'s field).
+    /// A velocity that matters in this step (the fastest body or obstacle, or what gravity adds
+    /// in one step): the floor of the reactions per unit step length.
     pub fn velocity_scale(&self) -> Real {
         self.velocity_scale
     }
@@ -193,9 +195,12 @@ impl ContactStep {
     }
 
     /// Whether a device solves this problem whole, one workgroup for all its sweeps
-    /// ([`uzawa_sweep::solved_whole`], the rule its staging follows).
+    /// ([`uzawa_sweep::solved_whole`], the rule its staging follows), and on a software adapter
+    /// builds its W within the adapter's loop guard ([`delassus_loops`]): a group's increments
+    /// go to the device only then.
     pub fn solved_whole(&self, software: bool) -> bool {
-        uzawa_sweep::solved_whole(self.widest_colour(), || solve_loops_per_sweep(&self.delassus, &self.colours, &self.nodal), software)
+        let built = || !software || delassus_loops(&self.delassus, &self.nodal, &self.slot_nodes, self.dim) <= uzawa_sweep::SOFTWARE_LOOP_BUDGET;
+        uzawa_sweep::solved_whole(self.widest_colour(), || solve_loops_per_sweep(&self.delassus, &self.colours, &self.nodal), software) && built()
     }
 
     /// Each point's obstacle velocity at the end of the step, for a device that takes the
@@ -565,6 +570,23 @@ mod tests {
         let mut fresh = ContactStep::new(points, &bodies, &p, &HashMap::new(), 1.0);
         fresh.prepare(&mut bodies, &p, &contact_settings, &none, &mut times);
         (kept, fresh)
+    }
+
+    /// Sixteen grains pressed as one group build their W on a software adapter within its loop
+    /// guard (under a fifth of it), and a problem of the same rows with sixty times the points
+    /// per lane would not: such a group stays on the host there.
+    #[test]
+    fn a_pressed_group_builds_its_w_within_a_software_adapters_loop_guard() {
+        let (mut sim, points, _, p) = pressed_points();
+        let bodies: Vec<&mut Body> = sim.bodies.iter_mut().collect();
+        let step = ContactStep::new(points, &bodies, &p, &HashMap::new(), 1.0);
+        let loops = delassus_loops(&step.delassus, &step.nodal, &step.slot_nodes, 2);
+        assert!(loops * 5 < uzawa_sweep::SOFTWARE_LOOP_BUDGET, "{loops} loop iterations");
+        let rows = step.delassus.rows.len();
+        let many = Delassus { rows: (0..60 * 64).map(|i| step.delassus.rows[i % rows].clone()).collect(), ..Default::default() };
+        let terms = NodalMap { terms: (0..60 * 64).map(|i| step.nodal.terms[i % rows].clone()).collect(), frames: Vec::new(), nodes: step.nodal.nodes };
+        assert!(delassus_loops(&many, &terms, &step.slot_nodes, 2) > uzawa_sweep::SOFTWARE_LOOP_BUDGET);
+        assert!(step.solved_whole(true) && step.solved_whole(false));
     }
 
     /// One touched body refactorises at another step length.

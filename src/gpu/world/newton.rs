@@ -950,7 +950,11 @@ impl GpuWorld {
         let precision = self.gpu.precision;
         let real = precision.size() as u64;
         let b = &self.batches[batch];
-        let layout = ContactLayout::of(contacts, problems, sweeps.staged_nodes(), &|c| self.place[calls[c].body].1 as u32, &|m| b.members[m as usize].dof_start, dim, theta_dt);
+        let free_of = |m: u32, d: u32| {
+            let (start, count) = b.free_range[m as usize];
+            b.free_dofs[start as usize..][..count as usize].binary_search(&d).ok().map(|f| f as u32)
+        };
+        let layout = ContactLayout::of(contacts, problems, sweeps.staged_nodes(), &|c| self.place[calls[c].body].1 as u32, &|m| b.members[m as usize].dof_start, &free_of, dim, theta_dt);
         let mut up = 0;
         let n = b.newton.as_ref().expect("made before staging");
         let passes = ContactPasses::new(&self.gpu, self.contact_pipelines.as_ref().expect("made above"), &layout, b, n, sweeps.buffers(), &mut up);
