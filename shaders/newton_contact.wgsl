@@ -95,9 +95,8 @@ struct ContactCall {
 @group(0) @binding(30) var<storage, read> node_member: array<u32>;
 // Per point, the step length `delassus` gave it, for the host.
 @group(0) @binding(31) var<storage, read_write> step_lengths: array<real>;
-// Node slot n, component c: the free index of that dof in its member's K̄⁻¹ at dim n + c,
-// NOT_FREE for a prescribed one.
-@group(0) @binding(32) var<storage, read> node_free: array<u32>;
+// Per batch dof: its free index in its member's K̄⁻¹, NOT_FREE for a prescribed one.
+@group(0) @binding(32) var<storage, read> free_of: array<u32>;
 const NOT_FREE: u32 = 0xffffffffu;
 
 var<workgroup> go: u32;
@@ -417,12 +416,12 @@ fn delassus(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) w
                     }
                     let coef = term_coefs[s] * term_coefs[t];
                     for (var q = 0u; q < dim; q++) {
-                        let fs = node_free[dim * term_slots[s] + q];
+                        let fs = free_of[node_dof[term_slots[s]] + q];
                         if fs == NOT_FREE {
                             continue;
                         }
                         for (var x = 0u; x < dim; x++) {
-                            let ft = node_free[dim * term_slots[t] + x];
+                            let ft = free_of[node_dof[term_slots[t]] + x];
                             if ft == NOT_FREE {
                                 continue;
                             }

@@ -1613,7 +1613,7 @@ fn newton_contact_kernels_match_their_cpu_twins() {
             let layout = {
                 let mut r = vec![[0.0; 3]; n_points];
                 let p = Problem { w: &w, colours: &colours, local: &local, nodal: &nodal, r: &mut r, tolerance, floor, max_iterations: max_sweeps as usize, acceleration: Acceleration::None, fallback: Fallback::None, dim: 3, pairs: &[] };
-                ContactLayout::of(&[group(vec![0, 1])], std::slice::from_ref(&p), &gather, &|c| c as u32, &|m| members[m as usize].dof_start, &|m, d| free[m as usize].binary_search(&d).ok().map(|f| f as u32), dim, theta_dt)
+                ContactLayout::of(&[group(vec![0, 1])], std::slice::from_ref(&p), &gather, &|c| c as u32, &|m| members[m as usize].dof_start, dim, theta_dt)
             };
             let mut locals: Vec<UzawaLocal<f64>> = local.iter().map(|l| UzawaLocal { v_free: l.v_free, shift: l.shift, mu: l.mu, rho: l.rho, floor, settle: SETTLE * tolerance }).collect();
             // `delassus`: the twin's W from the layout and the members' inverses is the dense W
@@ -1622,6 +1622,9 @@ fn newton_contact_kernels_match_their_cpu_twins() {
             // step lengths are the host's of that W (Gauss-Seidel and Jacobi), the floor the
             // largest times the velocity scale. The twins then iterate with the step lengths
             // and floor of the Gauss-Seidel case, as the device does.
+            // Each batch dof's free index in its member's inverse (the two members one after
+            // the other).
+            let free_of: Vec<u32> = (0..2).flat_map(|b| (0..cases[b].u.len()).map(move |d| free_index(b, d).map_or(cpu::NOT_FREE, |f| f as u32))).collect();
             let mut row_start = vec![0u32];
             for row in &w.rows {
                 row_start.push(row_start[row_start.len() - 1] + row.len() as u32);
@@ -1636,7 +1639,7 @@ fn newton_contact_kernels_match_their_cpu_twins() {
                 }
                 let mut problems = staged;
                 let (mut built, mut step_lengths) = (vec![f64::NAN; 9 * w.blocks.len()], vec![f64::NAN; n_points]);
-                cpu::newton_contact_delassus(&inverse_all, &newton, &sweep_layout, &mut problems, &gather.frames, &mut ls, (&row_start, &row_entries), (&mut built, &mut step_lengths), 0);
+                cpu::newton_contact_delassus(&inverse_all, (&newton, &free_of), &sweep_layout, &mut problems, &gather.frames, &mut ls, (&row_start, &row_entries), (&mut built, &mut step_lengths), 0);
                 let scale = w.blocks.iter().flatten().fold(0.0f64, |a, x| a.max(x.abs()));
                 let mut expected = w.clone();
                 for (i, row) in w.rows.iter().enumerate() {

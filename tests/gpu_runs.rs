@@ -554,8 +554,8 @@ fn pressed_grains_in_contact_begin_and_commit_their_steps_on_the_device() {
     // the contact forces by dof, 3 013 once a grain whose committed state was the host's
     // sends its velocity alone where the device's iterate and forces are the host's
     // (`step_begin` adopts it: 8 bytes a dof, not 24), 2 354 once the device builds W from its
-    // own `K̄⁻¹` (`newton_contact`'s `delassus`), 2 401 with the free indices of the node slots
-    // for it (`ContactLayout::node_free`). Down, 8 520 bytes a grain over those steps while
+    // own `K̄⁻¹` (`newton_contact`'s `delassus`; 2 401 while each call sent its node slots'
+    // free indices, which the world now holds). Down, 8 520 bytes a grain over those steps while
     // every Newton call with groups in contact read their members' stiffness values back,
     // 2 627 since the tangents of those it hands back stay on the device, 2 671 with the step
     // lengths of the device's W (8 bytes a point a call). The CPU's energies.
@@ -574,7 +574,7 @@ fn pressed_grains_in_contact_begin_and_commit_their_steps_on_the_device() {
     eprintln!("{up:.0} bytes a grain up and {down:.0} down over steps 6-30; energies differ by {:.2e}", energy_difference(&cpu, &device));
     assert!(device.series("/contact", "active").iter().any(|&a| a > 2.0), "the grains touch");
     assert!(energy_difference(&cpu, &device) <= 1e-9);
-    assert!(up <= 2450.0, "{up:.0} bytes a grain up over steps 6-30");
+    assert!(up <= 2400.0, "{up:.0} bytes a grain up over steps 6-30");
     assert!(down <= 2750.0, "{down:.0} bytes a grain down over steps 6-30");
 }
 

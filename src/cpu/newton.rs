@@ -445,18 +445,19 @@ pub fn newton_contact_forces(
     s.change = change / size.max(p.floor).max(Real::MIN_POSITIVE);
 }
 
-/// A node slot's component that is prescribed (`ContactLayout::node_free`).
+/// A prescribed dof's free index (`newton_contact`'s `free_of`).
 pub const NOT_FREE: u32 = u32::MAX;
 
 /// `newton_contact`'s `delassus` for group `k`: the blocks of W its problem's rows list
-/// (`row_start`, `row_entries`: `(column point, block)`), from the members' `K̄⁻¹`, the terms
-/// and frames of the points and each column point's friction in `locals`; then each point's
+/// (`row_start`, `row_entries`: `(column point, block)`), from the members' `K̄⁻¹` (at each
+/// batch dof's free index, `free_of`), the terms and frames of the points and each column
+/// point's friction in `locals`; then each point's
 /// step length (into `locals` and `step_lengths`) and the problem's floor (into `locals` and
 /// `problems`), in the shader's order of every sum.
 #[allow(clippy::too_many_arguments)]
 pub fn newton_contact_delassus(
     inverse: &[Real],
-    newton: &[NewtonMember<Real>],
+    (newton, free_of): (&[NewtonMember<Real>], &[u32]),
     c: &ContactLayout,
     problems: &mut [UzawaProblem<Real>],
     frames: &[Real],
@@ -483,12 +484,12 @@ pub fn newton_contact_delassus(
                     }
                     let coef = c.term_coefs[s] * c.term_coefs[t];
                     for q in 0..dim {
-                        let fs = c.node_free[dim * c.term_slots[s] as usize + q];
+                        let fs = free_of[c.node_dof[c.term_slots[s] as usize] as usize + q];
                         if fs == NOT_FREE {
                             continue;
                         }
                         for x in 0..dim {
-                            let ft = c.node_free[dim * c.term_slots[t] as usize + x];
+                            let ft = free_of[c.node_dof[c.term_slots[t] as usize] as usize + x];
                             if ft == NOT_FREE {
                                 continue;
                             }

@@ -57,9 +57,6 @@ pub struct ContactLayout {
     /// Per node slot, the batch dof of its first component, and the batch member of its body.
     pub node_dof: Vec<u32>,
     pub node_member: Vec<u32>,
-    /// Per node slot, `dim` entries: each component's free index in its member's `K̄⁻¹`, or
-    /// [`crate::cpu::NOT_FREE`] (prescribed).
-    pub node_free: Vec<u32>,
     pub call: ContactCall<Real>,
     /// Each group's contact state before the call: its stalls so far.
     pub states: Vec<ContactState<Real>>,
@@ -67,10 +64,10 @@ pub struct ContactLayout {
 
 impl ContactLayout {
     /// The layout of `contacts` whose problems `staged` the Uzawa solve holds with the node
-    /// gather `nodes`; `member_of(call)` is a call's batch member, `dof_start(member)` its
-    /// first dof and `free_of(member, dof)` the free index of one of its dofs.
+    /// gather `nodes`; `member_of(call)` is a call's batch member and `dof_start(member)` its
+    /// first dof.
     #[allow(clippy::too_many_arguments)]
-    pub fn of(contacts: &[GroupContact], staged: &[Problem], nodes: &NodeGather, member_of: &dyn Fn(usize) -> u32, dof_start: &dyn Fn(u32) -> u32, free_of: &dyn Fn(u32, u32) -> Option<u32>, dim: usize, theta_dt: Real) -> Self {
+    pub fn of(contacts: &[GroupContact], staged: &[Problem], nodes: &NodeGather, member_of: &dyn Fn(usize) -> u32, dof_start: &dyn Fn(u32) -> u32, dim: usize, theta_dt: Real) -> Self {
         let mut l = ContactLayout { term_start: vec![0], ..Default::default() };
         for (k, g) in contacts.iter().enumerate() {
             l.groups.push(ContactGroup { member_start: l.group_members.len() as u32, member_count: g.calls.len() as u32, jacobi: g.jacobi as u32, pad: 0, tolerance: g.tolerance, velocity_scale: g.velocity_scale });
@@ -86,10 +83,6 @@ impl ContactLayout {
             debug_assert_eq!(g.slot_nodes.len(), (nodes.node_offsets[k + 1] - slot0) as usize);
             l.node_dof.extend(g.slot_nodes.iter().map(|&(body, node)| dof_start(member_of(g.calls[body as usize])) + node * dim as u32));
             l.node_member.extend(g.slot_nodes.iter().map(|&(body, _)| member_of(g.calls[body as usize])));
-            for &(body, node) in g.slot_nodes {
-                let member = member_of(g.calls[body as usize]);
-                l.node_free.extend((0..dim as u32).map(|c| free_of(member, node * dim as u32 + c).unwrap_or(crate::cpu::NOT_FREE)));
-            }
         }
         l.call = ContactCall { problems: contacts.len() as u32, dim: dim as u32, pad: [0; 2], theta_dt };
         l
@@ -164,7 +157,6 @@ impl ContactPasses {
         let obstacle = made("contact obstacle velocities", bytemuck::cast_slice(&l.obstacle), storage);
         let node_dof = made("contact node dofs", bytemuck::cast_slice(&l.node_dof), storage);
         let node_member = made("contact node members", bytemuck::cast_slice(&l.node_member), storage);
-        let node_free = made("contact node free indices", bytemuck::cast_slice(&l.node_free), storage);
         let states = made("contact states", bytemuck::cast_slice(&l.states), storage | BufferUsages::COPY_SRC);
         let call = made("contact call", bytemuck::bytes_of(&l.call), BufferUsages::UNIFORM);
         let points = l.term_start.len() - 1;
@@ -205,7 +197,7 @@ impl ContactPasses {
             ("row_entries", &uzawa.row_entries),
             ("node_member", &node_member),
             ("step_lengths", &step_lengths),
-            ("node_free", &node_free),
+            ("free_of", &n.free_of),
         ];
         let bind = |pipeline: &ComputePipeline, entry: &str| gpu.bind_named(pipeline, ("newton_contact", entry, None), &all);
         let (prepare, forces, judge) = (bind(&pipelines.prepare, "prepare"), bind(&pipelines.forces, "forces"), bind(&pipelines.judge, "judge"));

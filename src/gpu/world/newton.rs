@@ -143,6 +143,17 @@ fn unpack_contact(precision: Precision, problems: &mut [Problem], contacts: &mut
     }
 }
 
+/// Per dof of batch `b`, its free index in its member's `K̄⁻¹`, or [`crate::cpu::NOT_FREE`].
+fn free_index_of_dofs(b: &Batch) -> Vec<u32> {
+    let mut free_of = vec![crate::cpu::NOT_FREE; b.members.iter().map(|r| (r.dof_start + r.dofs) as usize).max().unwrap_or(0)];
+    for (r, &(start, count)) in b.members.iter().zip(&b.free_range) {
+        for (f, &d) in b.free_dofs[start as usize..][..count as usize].iter().enumerate() {
+            free_of[(r.dof_start + d) as usize] = f as u32;
+        }
+    }
+    free_of
+}
+
 /// What the read-back of a call's groups in contact holds: their points and groups.
 type ContactTarget = (usize, usize);
 
@@ -237,6 +248,9 @@ pub(super) struct NewtonBuffers {
     /// The inversions a call staged, recorded at the head of its first submission.
     invert: Option<(Pass, u32)>,
     pub(super) free: Buffer,
+    /// Per dof, its free index in its member's `K̄⁻¹` ([`crate::cpu::NOT_FREE`] if prescribed):
+    /// where `newton_contact`'s `delassus` reads a node's response.
+    pub(super) free_of: Buffer,
     pub(super) newton: Buffer,
     pub(super) state: Buffer,
     /// Per dof: the contact forces (zero but for groups in contact), and for those groups the
@@ -382,6 +396,7 @@ impl NewtonBuffers {
         let write = storage | BufferUsages::COPY_DST;
         let inverse = buffer(gpu, "inverse", b.inverse_entries * real, write);
         let free = super::buffer_init(gpu, "free dofs", bytemuck::cast_slice(&b.free_dofs), storage);
+        let free_of = super::buffer_init(gpu, "free index of dof", bytemuck::cast_slice(&free_index_of_dofs(b)), storage);
         let newton = buffer(gpu, "newton members", members * std::mem::size_of::<NewtonMember<Real>>(), write);
         let state = buffer(gpu, "newton state", members * std::mem::size_of::<NewtonState<Real>>(), write | BufferUsages::COPY_SRC);
         let u_start = buffer(gpu, "u start", dofs * real, write);
@@ -454,6 +469,7 @@ impl NewtonBuffers {
             invert: None,
             inverse,
             free,
+            free_of,
             newton,
             state,
             contact,
@@ -629,9 +645,11 @@ impl GpuWorld {
         }
         let pipelines = self.newton_pipelines.as_ref().expect("made above");
         let made = NewtonBuffers::new(&self.gpu, pipelines, &self.batches[batch], &self.coefficients)?;
-        // The templates of a call's start and the reference coordinates, once.
+        // The templates of a call's start, the reference coordinates and each dof's free index,
+        // once.
         let b = &self.batches[batch];
-        self.traffic.up += (b.members.len() * (std::mem::size_of::<NewtonState<Real>>() + 8) + b.reference.len() * self.gpu.precision.size()) as u64;
+        let dofs = b.members.iter().map(|r| (r.dof_start + r.dofs) as usize).max().unwrap_or(0);
+        self.traffic.up += (b.members.len() * (std::mem::size_of::<NewtonState<Real>>() + 8) + b.reference.len() * self.gpu.precision.size() + 4 * dofs) as u64;
         self.batches[batch].newton = Some(made);
         Ok(())
     }
@@ -950,11 +968,7 @@ impl GpuWorld {
         let precision = self.gpu.precision;
         let real = precision.size() as u64;
         let b = &self.batches[batch];
-        let free_of = |m: u32, d: u32| {
-            let (start, count) = b.free_range[m as usize];
-            b.free_dofs[start as usize..][..count as usize].binary_search(&d).ok().map(|f| f as u32)
-        };
-        let layout = ContactLayout::of(contacts, problems, sweeps.staged_nodes(), &|c| self.place[calls[c].body].1 as u32, &|m| b.members[m as usize].dof_start, &free_of, dim, theta_dt);
+        let layout = ContactLayout::of(contacts, problems, sweeps.staged_nodes(), &|c| self.place[calls[c].body].1 as u32, &|m| b.members[m as usize].dof_start, dim, theta_dt);
         let mut up = 0;
         let n = b.newton.as_ref().expect("made before staging");
         let passes = ContactPasses::new(&self.gpu, self.contact_pipelines.as_ref().expect("made above"), &layout, b, n, sweeps.buffers(), &mut up);
