@@ -1624,7 +1624,7 @@ fn newton_contact_kernels_match_their_cpu_twins() {
             // and floor of the Gauss-Seidel case, as the device does.
             // Each batch dof's free index in its member's inverse (the two members one after
             // the other).
-            let free_of: Vec<u32> = (0..2).flat_map(|b| (0..cases[b].u.len()).map(move |d| free_index(b, d).map_or(cpu::NOT_FREE, |f| f as u32))).collect();
+            let free_of: Vec<u32> = (0..2).flat_map(|b| (0..cases[b].u.len()).map(move |d| free_index(b, d).map_or(bifirst::gpu::types::NOT_FREE, |f| f as u32))).collect();
             let mut row_start = vec![0u32];
             for row in &w.rows {
                 row_start.push(row_start[row_start.len() - 1] + row.len() as u32);

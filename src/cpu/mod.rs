@@ -28,7 +28,7 @@ pub use crate::contact::uzawa::uzawa_sweep;
 pub use crate::element::{element_energy, element_force_tangent};
 pub use newton::{
     newton_compact, newton_compact_host, newton_contact_delassus, newton_contact_first_forces, newton_contact_first_judge, newton_contact_forces, newton_contact_judge, newton_contact_prepare, newton_finish, newton_invert, newton_judge,
-    newton_summary, newton_tally, newton_update, SummaryInputs, NOT_FREE,
+    newton_summary, newton_tally, newton_update, SummaryInputs,
 };
 pub use step::{step_begin, step_commit, Adoption};
 pub use uzawa::{planar_unpack, uzawa_judge, uzawa_solve};

@@ -6,8 +6,8 @@
 use super::uzawa::{global, triple};
 use crate::contact::uzawa::SETTLE;
 use crate::gpu::types::{
-    packed, packed_len, summary_len, Active, Coefficients, DofOut, DofState, DofStep, Inversion, MemberRange, NewtonMember, NewtonState, StepMotion, NEWTON_CONVERGED, NEWTON_FAILED, NEWTON_HOST, NEWTON_ITERATING, NEWTON_WORKGROUP, NO_FAILURE,
-    TALLY_LEN, TALLY_ROW,
+    packed, packed_len, summary_len, Active, Coefficients, DofOut, DofState, DofStep, Inversion, MemberRange, NewtonMember, NewtonState, StepMotion, NEWTON_CONVERGED, NEWTON_FAILED, NEWTON_HOST, NEWTON_ITERATING, NEWTON_WORKGROUP, NOT_FREE,
+    NO_FAILURE, TALLY_LEN, TALLY_ROW,
 };
 use crate::gpu::uzawa_sweep::{NodeGather, UzawaJudgeState, UzawaLocal, UzawaProblem, JUDGE_CONVERGED, JUDGE_LIVE};
 use crate::gpu::ContactLayout;
@@ -444,9 +444,6 @@ pub fn newton_contact_forces(
     s.stalls = if solved.status == JUDGE_CONVERGED { 0 } else { s.stalls + 1 };
     s.change = change / size.max(p.floor).max(Real::MIN_POSITIVE);
 }
-
-/// A prescribed dof's free index (`newton_contact`'s `free_of`).
-pub const NOT_FREE: u32 = u32::MAX;
 
 /// `newton_contact`'s `delassus` for group `k`: the blocks of W its problem's rows list
 /// (`row_start`, `row_entries`: `(column point, block)`), from the members' `K̄⁻¹` (at each

@@ -326,6 +326,9 @@ pub const NEWTON_HOST: u32 = 2;
 pub const NEWTON_FAILED: u32 = 3;
 /// `MAX_FREE` of `newton.wgsl`: the most free dofs a body iterating on the device may have.
 pub const NEWTON_MAX_FREE: usize = 1024;
+
+/// A prescribed dof's free index (`newton_contact`'s `free_of`: `NOT_FREE`).
+pub const NOT_FREE: u32 = u32::MAX;
 /// `NEWTON_WORKGROUP` of `newton.wgsl`: the invocations of a member's reductions.
 pub const NEWTON_WORKGROUP: usize = 64;
 

@@ -143,9 +143,9 @@ fn unpack_contact(precision: Precision, problems: &mut [Problem], contacts: &mut
     }
 }
 
-/// Per dof of batch `b`, its free index in its member's `K̄⁻¹`, or [`crate::cpu::NOT_FREE`].
+/// Per dof of batch `b`, its free index in its member's `K̄⁻¹`, or [`crate::gpu::types::NOT_FREE`].
 fn free_index_of_dofs(b: &Batch) -> Vec<u32> {
-    let mut free_of = vec![crate::cpu::NOT_FREE; b.members.iter().map(|r| (r.dof_start + r.dofs) as usize).max().unwrap_or(0)];
+    let mut free_of = vec![crate::gpu::types::NOT_FREE; b.members.iter().map(|r| (r.dof_start + r.dofs) as usize).max().unwrap_or(0)];
     for (r, &(start, count)) in b.members.iter().zip(&b.free_range) {
         for (f, &d) in b.free_dofs[start as usize..][..count as usize].iter().enumerate() {
             free_of[(r.dof_start + d) as usize] = f as u32;
@@ -248,7 +248,7 @@ pub(super) struct NewtonBuffers {
     /// The inversions a call staged, recorded at the head of its first submission.
     invert: Option<(Pass, u32)>,
     pub(super) free: Buffer,
-    /// Per dof, its free index in its member's `K̄⁻¹` ([`crate::cpu::NOT_FREE`] if prescribed):
+    /// Per dof, its free index in its member's `K̄⁻¹` ([`crate::gpu::types::NOT_FREE`] if prescribed):
     /// where `newton_contact`'s `delassus` reads a node's response.
     pub(super) free_of: Buffer,
     pub(super) newton: Buffer,
