@@ -145,7 +145,7 @@ fn unpack_contact(precision: Precision, problems: &mut [Problem], contacts: &mut
 
 /// Per dof of batch `b`, its free index in its member's `K̄⁻¹`, or [`crate::gpu::types::NOT_FREE`].
 fn free_index_of_dofs(b: &Batch) -> Vec<u32> {
-    let mut free_of = vec![crate::gpu::types::NOT_FREE; b.members.iter().map(|r| (r.dof_start + r.dofs) as usize).max().unwrap_or(0)];
+    let mut free_of = vec![crate::gpu::types::NOT_FREE; b.u_host.len()];
     for (r, &(start, count)) in b.members.iter().zip(&b.free_range) {
         for (f, &d) in b.free_dofs[start as usize..][..count as usize].iter().enumerate() {
             free_of[(r.dof_start + d) as usize] = f as u32;
@@ -648,8 +648,7 @@ impl GpuWorld {
         // The templates of a call's start, the reference coordinates and each dof's free index,
         // once.
         let b = &self.batches[batch];
-        let dofs = b.members.iter().map(|r| (r.dof_start + r.dofs) as usize).max().unwrap_or(0);
-        self.traffic.up += (b.members.len() * (std::mem::size_of::<NewtonState<Real>>() + 8) + b.reference.len() * self.gpu.precision.size() + 4 * dofs) as u64;
+        self.traffic.up += (b.members.len() * (std::mem::size_of::<NewtonState<Real>>() + 8) + b.reference.len() * self.gpu.precision.size() + 4 * b.u_host.len()) as u64;
         self.batches[batch].newton = Some(made);
         Ok(())
     }
