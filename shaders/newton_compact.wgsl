@@ -10,6 +10,10 @@
 // device hands back to the host (HOST), into the list of the tangent and `assemble_csr`
 // passes that follow, their count into the z of those dispatches: the host then renews their
 // factorisations without a tangent pass of its own. CPU twin: `cpu::newton_compact_host`.
+//
+// `refactor`: the members of that list that refactorise within the call (REFACTOR), into the
+// same list, for the tangent, `assemble_csr` and `newton_invert`'s `refactor` that follow.
+// CPU twin: `cpu::newton_compact_refactor`.
 
 @group(0) @binding(0) var<storage, read> call: array<Active>;
 @group(0) @binding(1) var<storage, read> state: array<NewtonState>;
@@ -33,6 +37,11 @@ fn main(@builtin(local_invocation_index) lane: u32) {
 @compute @workgroup_size(NEWTON_WORKGROUP)
 fn host(@builtin(local_invocation_index) lane: u32) {
     compact(lane, HOST);
+}
+
+@compute @workgroup_size(NEWTON_WORKGROUP)
+fn refactor(@builtin(local_invocation_index) lane: u32) {
+    compact(lane, REFACTOR);
 }
 
 // The members of `call` whose status is `wanted`, in order, into `jobs`; their count into

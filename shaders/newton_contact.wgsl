@@ -7,12 +7,13 @@
 // `first_judge` after it. One workgroup per group (each group has one contact
 // problem, numbered as `uzawa_solve` numbers them); a group no longer iterating does nothing.
 // The Delassus blocks are built here (`delassus`, once at the call's start) from the members'
-// K̄⁻¹ as the device holds them, not sent up: no member refactorises within a call.
+// K̄⁻¹ as the device holds them, not sent up, and again (`rebuild`) for a group whose members
+// refactorised within the call.
 // The host's increment this repeats: `ContactStep::prepare` and `ContactStep::apply`; its test:
 // `Group::converged`. CPU twins: `cpu::newton_contact_prepare`, `cpu::newton_contact_forces`,
 // `cpu::newton_contact_judge`, `cpu::newton_contact_first_forces`,
-// `cpu::newton_contact_first_judge`, `cpu::newton_contact_delassus`, which follow this file line
-// by line.
+// `cpu::newton_contact_first_judge`, `cpu::newton_contact_delassus`,
+// `cpu::newton_contact_rebuild`, which follow this file line by line.
 
 // A group: its members (batch member indices, the first its leader) and what its test needs.
 struct ContactGroup {
@@ -20,7 +21,9 @@ struct ContactGroup {
     member_count: u32,
     // 1: the points' step lengths are the Jacobi sweep's (`Delassus::rho`).
     jacobi: u32,
-    pad: u32,
+    // 1: a member whose residual contracts too slowly refactorises within the call (REFACTOR)
+    // rather than handing the group back.
+    refactor: u32,
     // contact.tolerance: the contact forces' change must be below it.
     tolerance: real,
     // A velocity that matters in the step (`ContactStep::velocity_scale`): the floor of the
@@ -241,13 +244,15 @@ fn forces(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) wor
 // After `newton_judge`: the group's verdict for all its members, as `Group::converged` gives
 // it. Converged when every member passed its own test and the contact forces settled with a
 // converged solve; the host takes the group (every member HOST) when a member needs it or
-// failed, a member's residual contracted less than tenfold (the host refactorises it, as it
-// would one that passed its own test), a solve was cut short (still live: a software adapter's
-// dispatches), UZAWA_STALLS solves in a row spent their sweeps (the host then gives the step
-// up), or the budget is spent; else every member iterates on (after a solve that spent its
-// sweeps too, as the host's Newton loop goes on), and when only the increments are left after
-// TIGHTEN_AFTER iterations the problem is solved ten times tighter from then on (down to
-// TIGHTEST_INNER of the contact tolerance). A group that stopped earlier keeps its verdict. One
+// failed, a solve was cut short (still live: a software adapter's dispatches), UZAWA_STALLS
+// solves in a row spent their sweeps (the host then gives the step up), or the budget is
+// spent; else every member iterates on (after a solve that spent its sweeps too, as the host's
+// Newton loop goes on), and when only the increments are left after TIGHTEN_AFTER iterations
+// the problem is solved ten times tighter from then on (down to TIGHTEST_INNER of the contact
+// tolerance). A member whose residual contracted less than tenfold (one that passed its own
+// test too) is refactorised, as `Body::refresh_factor` does: within the call (REFACTOR) where
+// the group may (`refactor`; newton_judge's HOST for it alone then does not count), else by
+// the host, which takes the group. A group that stopped earlier keeps its verdict. One
 // invocation per group.
 @compute @workgroup_size(NEWTON_WORKGROUP)
 fn judge(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) count: vec3<u32>) {
@@ -265,9 +270,10 @@ fn judge(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) 
         let s = state[group_members[grp.member_start + a]];
         all_converged = all_converged && s.status == CONVERGED;
         all_balanced = all_balanced && s.balanced == 1u;
-        to_host = to_host || s.status == HOST || s.status == FAILED;
-        // A member that passed its own test while the group goes on is refactorised by the host
-        // as any other whose residual contracts less than tenfold (`Body::refresh_factor`).
+        // (newton_judge hands a member to the host for a residual that is not finite, a spent
+        // budget, tested below, or a slow contraction)
+        let lost = s.status == HOST && (grp.refactor == 0u || !(abs(s.residual) <= REAL_MAX));
+        to_host = to_host || lost || s.status == FAILED;
         slow = slow || s.residual > real(REFACTOR_CONTRACTION) * max(s.previous_residual, REAL_MIN_POSITIVE);
     }
     let c = contact_states[k];
@@ -278,7 +284,7 @@ fn judge(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) 
         verdict = HOST;
     } else if all_converged && settled {
         verdict = CONVERGED;
-    } else if c.uzawa == UZAWA_LIVE || c.stalls >= UZAWA_STALLS || iterations >= newton[lead].budget || slow {
+    } else if c.uzawa == UZAWA_LIVE || c.stalls >= UZAWA_STALLS || iterations >= newton[lead].budget || (slow && grp.refactor == 0u) {
         verdict = HOST;
     } else if iterations >= TIGHTEN_AFTER && settled && all_balanced {
         problems[k].tolerance = max(real(0.1) * problems[k].tolerance, real(TIGHTEST_INNER) * grp.tolerance);
@@ -286,8 +292,10 @@ fn judge(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) 
     }
     for (var a = 0u; a < grp.member_count; a++) {
         let m = group_members[grp.member_start + a];
-        if state[m].status != FAILED {
-            state[m].status = verdict;
+        let s = state[m];
+        if s.status != FAILED {
+            let refactors = verdict == ITERATING && s.residual > real(REFACTOR_CONTRACTION) * max(s.previous_residual, REAL_MIN_POSITIVE);
+            state[m].status = select(verdict, REFACTOR, refactors);
         }
     }
 }
@@ -398,6 +406,42 @@ fn delassus(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) w
     if !exists(lane, k) {
         return;
     }
+    build_w(lane, k);
+}
+
+// After a refactorisation within the call (`newton_invert`'s `refactor`): W of each group with
+// a member in REFACTOR built again from the new K̄⁻¹, as `delassus` builds it, and those members
+// ITERATING again.
+@compute @workgroup_size(NEWTON_WORKGROUP)
+fn rebuild(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workgroup: vec3<u32>, @builtin(num_workgroups) count: vec3<u32>) {
+    let k = problem_index(workgroup, count);
+    if lane == 0u {
+        var refactoring = false;
+        if k < call.problems {
+            let grp = groups[k];
+            for (var a = 0u; a < grp.member_count; a++) {
+                refactoring = refactoring || state[group_members[grp.member_start + a]].status == REFACTOR;
+            }
+        }
+        go = u32(refactoring);
+    }
+    if workgroupUniformLoad(&go) == 0u {
+        return;
+    }
+    build_w(lane, k);
+    if lane == 0u {
+        let grp = groups[k];
+        for (var a = 0u; a < grp.member_count; a++) {
+            let m = group_members[grp.member_start + a];
+            if state[m].status == REFACTOR {
+                state[m].status = ITERATING;
+            }
+        }
+    }
+}
+
+// Group k's W: every block its rows list, then each point's step length and the floor.
+fn build_w(lane: u32, k: u32) {
     let p = problems[k];
     let grp = groups[k];
     let dim = call.dim;

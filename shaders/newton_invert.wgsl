@@ -8,6 +8,13 @@
 // entries are those of `values`. A K̄ that is not positive definite leaves NaN, which the iterations'
 // residual hands to the host. One workgroup per listed member; each entry is summed by one
 // invocation in a fixed order. CPU twin: `cpu::newton_invert`.
+//
+// `refactor`: within a Newton call, for each member of its refactorisation list (REFACTOR, the
+// list `newton_compact`'s `refactor` made, one workgroup each, `workgroup.z`), K̄ = ξ K + c1 M
+// from the stiffness values the tangent pass just assembled at its iterate and the masses of
+// its free dofs (`Body::factorize_effective`), inverted as above; its displacement into
+// `u_factored` (the host factorises there too) and one more in its `refactors`. CPU twin:
+// `cpu::newton_invert_refactor`.
 
 struct Inversion {
     member: u32,
@@ -27,6 +34,16 @@ struct Inversion {
 @group(0) @binding(4) var<storage, read> inversions: array<Inversion>;
 @group(0) @binding(5) var<storage, read> values: array<real>;
 @group(0) @binding(6) var<storage, read> members: array<MemberRange>;
+// `refactor`'s: its list, each member's pattern start in `patterns`, the free dofs, the step's
+// masses, c1, the iterate and where it goes, the members' states.
+@group(0) @binding(7) var<storage, read> jobs: array<Active>;
+@group(0) @binding(8) var<storage, read> pattern_of: array<u32>;
+@group(0) @binding(9) var<storage, read> free_dofs: array<u32>;
+@group(0) @binding(10) var<storage, read> step: array<DofStep>;
+@group(0) @binding(11) var<uniform> coefficients: Coefficients;
+@group(0) @binding(12) var<storage, read> u: array<real>;
+@group(0) @binding(13) var<storage, read_write> u_factored: array<real>;
+@group(0) @binding(14) var<storage, read_write> state: array<NewtonState>;
 
 var<workgroup> column: array<real, MAX_FREE>;
 var<workgroup> pivot: real;
@@ -58,7 +75,45 @@ fn main(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workg
         }
     }
     storageBarrier();
-    // L, column by column: the pivot, the column below it, the trailing triangle.
+    invert_in_place(lane, at, n);
+}
+
+@compute @workgroup_size(NEWTON_WORKGROUP)
+fn refactor(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workgroup: vec3<u32>) {
+    let m = jobs[workgroup.z].member;
+    let row = newton[m];
+    let range = members[m];
+    let n = row.free_count;
+    let at = row.inverse_start;
+    let first = pattern_of[m];
+    let rows = first + n + 1u;
+    for (var e = lane; e < n * (n + 1u) / 2u; e += NEWTON_WORKGROUP) {
+        inverse[at + e] = real(0.0);
+    }
+    storageBarrier();
+    for (var j = lane; j < n; j += NEWTON_WORKGROUP) {
+        for (var k = patterns[first + j]; k < patterns[first + j + 1u]; k++) {
+            let i = patterns[rows + k];
+            var value = values[range.nonzero_start + k];
+            if i == j {
+                value += coefficients.c1 * step[range.dof_start + free_dofs[row.free_start + j]].mass;
+            }
+            inverse[at + packed(i, j)] = value;
+        }
+    }
+    storageBarrier();
+    invert_in_place(lane, at, n);
+    for (var d = lane; d < range.dofs; d += NEWTON_WORKGROUP) {
+        u_factored[range.dof_start + d] = u[range.dof_start + d];
+    }
+    if lane == 0u {
+        state[m].refactors += 1u;
+    }
+}
+
+// K̄⁻¹ in place of K̄ (the lower triangle of an n x n slot at `at`): L, column by column (the
+// pivot, the column below it, the trailing triangle), L⁻¹, then L⁻ᵀ L⁻¹.
+fn invert_in_place(lane: u32, at: u32, n: u32) {
     for (var k = 0u; k < n; k++) {
         if lane == 0u {
             let d = sqrt(inverse[at + packed(k, k)]);

@@ -277,13 +277,18 @@ impl Logger {
     /// `/state`, the full state a run can continue from: at the scene's cadence, and (`last`)
     /// at the last finished step of the run, however it ends.
     fn saved(&mut self, sim: &Simulation, last: bool) -> Result<(), OutputError> {
-        // With a cadence, the initial state too (a restarted run's is in the log it came from).
-        let due = self.saved_every > 0 && sim.step().is_multiple_of(self.saved_every) && (sim.step() > sim.first_step().1 || sim.step() == 0);
-        if self.saved_step == Some(sim.step()) || !(last || due) {
+        if !self.saves(sim, last) {
             return Ok(());
         }
         self.saved_step = Some(sim.step());
         self.log.write("/state", sim.t(), &sim.saved_state())
+    }
+
+    /// Whether [`Logger::saved`] writes the state now.
+    fn saves(&self, sim: &Simulation, last: bool) -> bool {
+        // With a cadence, the initial state too (a restarted run's is in the log it came from).
+        let due = self.saved_every > 0 && sim.step().is_multiple_of(self.saved_every) && (sim.step() > sim.first_step().1 || sim.step() == 0);
+        self.saved_step != Some(sim.step()) && (last || due)
     }
 
     /// The 3D view and the VTU frame when their cadence says so, or when `last`.
@@ -471,7 +476,9 @@ pub fn run_scene(loaded: &LoadedScene, out: &Path, options: &RunOptions, monitor
             if synced {
                 logger.frames(&sim, true)?;
                 logger.contacts(&sim, true)?;
-                logger.saved(&sim, true)?;
+                if !logger.saves(&sim, true) || sim.sync_factors().is_ok() {
+                    logger.saved(&sim, true)?;
+                }
             }
             let level = if matches!(stop, Stop::Interrupted) { Level::Warning } else { Level::Error };
             let message = stop.to_string();
@@ -592,6 +599,11 @@ fn step_until_stopped(loaded: &LoadedScene, sim: &mut Simulation, logger: &mut L
         let logged = report.step % every == 0 || sim.finished();
         if logger.reads_states(sim, logged, sim.finished()) || monitor.reads_states() {
             if let Err(e) = sim.sync_states() {
+                return Ok(Some((Stop::Device(e.to_string()), report)));
+            }
+        }
+        if logger.saves(sim, sim.finished()) {
+            if let Err(e) = sim.sync_factors() {
                 return Ok(Some((Stop::Device(e.to_string()), report)));
             }
         }

@@ -170,11 +170,12 @@ fn kernel_structs_match_the_shader_layouts() {
 fn newton_structs_match_the_shader_layout() {
     let u32_fields = ["inverse_start", "free_start", "free_count", "budget"];
     let real_fields = ["residual_tolerance", "floor", "floor_per_travel", "increment_tolerance", "increment_floor", "round_off"];
-    let state_u32 = ["status", "iterations", "moved", "balanced"];
+    let state_u32 = ["status", "iterations", "moved", "balanced", "refactors", "pad"];
     let state_real = ["residual", "previous_residual", "increment"];
     for precision in PRECISIONS {
         let real = precision.size() as u32;
-        let layout = |u: &[&str], r: &[&str]| -> Vec<(String, u32)> { u.iter().enumerate().map(|(i, f)| (f.to_string(), 4 * i as u32)).chain(r.iter().enumerate().map(|(i, f)| (f.to_string(), 16 + real * i as u32))).collect() };
+        // The u32 fields, then the reals (8-byte aligned in f64).
+        let layout = |u: &[&str], r: &[&str]| -> Vec<(String, u32)> { u.iter().enumerate().map(|(i, f)| (f.to_string(), 4 * i as u32)).chain(r.iter().enumerate().map(|(i, f)| (f.to_string(), 4 * u.len() as u32 + real * i as u32))).collect() };
         let sizes = match precision {
             Precision::F64 => [std::mem::size_of::<NewtonMember<f64>>(), std::mem::size_of::<NewtonState<f64>>()],
             Precision::F32 => [std::mem::size_of::<NewtonMember<f32>>(), std::mem::size_of::<NewtonState<f32>>()],
@@ -203,15 +204,18 @@ fn newton_structs_match_the_shader_layout() {
             Precision::F32 => [size_of::<ContactGroup<f32>>(), size_of::<ContactState<f32>>(), size_of::<ContactCall<f32>>()],
         };
         let (members, span) = naga_layout(&module, "ContactGroup");
-        assert_eq!((members, span as usize), (expect(&["member_start", "member_count", "jacobi", "pad"], &["tolerance", "velocity_scale"]), sizes[0]), "{}", precision.name());
+        assert_eq!((members, span as usize), (expect(&["member_start", "member_count", "jacobi", "refactor"], &["tolerance", "velocity_scale"]), sizes[0]), "{}", precision.name());
         let (members, span) = naga_layout(&module, "ContactState");
         assert_eq!((members, span as usize), (expect(&["sweeps", "uzawa", "tightened", "stalls"], &["change"]), sizes[1]), "{}", precision.name());
         let (members, span) = naga_layout(&module, "ContactCall");
         assert_eq!((members, span as usize), (expect(&["problems", "dim", "pad0", "pad1"], &["theta_dt"]), sizes[2]), "{}", precision.name());
     }
-    let g = ContactGroup::<f64> { member_start: 1, member_count: 2, jacobi: 3, pad: 4, tolerance: 5.0, velocity_scale: 6.0 };
+    let g = ContactGroup::<f64> { member_start: 1, member_count: 2, jacobi: 3, refactor: 4, tolerance: 5.0, velocity_scale: 6.0 };
     assert_eq!(bytemuck::cast::<_, [u32; 8]>(g)[..4], [1, 2, 3, 4], "field order");
     assert_eq!(bytemuck::cast::<_, [f64; 4]>(g)[2..], [5.0, 6.0], "field order");
+    let state = NewtonState::<f64> { status: 1, iterations: 2, moved: 3, balanced: 4, refactors: 5, pad: 6, residual: 7.0, previous_residual: 8.0, increment: 9.0 };
+    assert_eq!(bytemuck::cast::<_, [u32; 12]>(state)[..6], [1, 2, 3, 4, 5, 6], "field order");
+    assert_eq!(bytemuck::cast::<_, [f64; 6]>(state)[3..], [7.0, 8.0, 9.0], "field order");
     let m = NewtonMember::<f64> { inverse_start: 1, free_start: 2, free_count: 3, budget: 4, residual_tolerance: 5.0, floor: 6.0, floor_per_travel: 7.0, increment_tolerance: 8.0, increment_floor: 9.0, round_off: 10.0 };
     let words: [u32; 16] = bytemuck::cast(m);
     assert_eq!(words[..4], [1, 2, 3, 4], "field order");
@@ -1498,7 +1502,7 @@ fn newton_contact_kernels_match_their_cpu_twins() {
     let gpu = Arc::new(gpu);
     let (theta_dt, c1) = (1e-3, 1e6);
     let coefficients = Coefficients { factor: 1.0, c1, motion: 0.0 };
-    let (mut tightened, mut stall_cases) = (0, 0);
+    let (mut tightened, mut stall_cases, mut refactored) = (0, 0, 0);
     for (k, kind) in [ElementKind::Tri3, ElementKind::Tet4].into_iter().enumerate() {
         let cases = two_bodies(ElementVariant { kind, formulation: Formulation::Displacement, material: "neo_hookean" }, 700 + k as u64);
         let dim = kind.dim();
@@ -1506,8 +1510,17 @@ fn newton_contact_kernels_match_their_cpu_twins() {
         let starts: Vec<Vec<f64>> = cases.iter().map(|c| c.u.iter().map(|&x| 0.9 * x).collect()).collect();
         let bases: Vec<Vec<f64>> = starts.clone();
         let inverses: Vec<Vec<f64>> = cases.iter().map(|c| effective_inverse(c, coefficients)).collect();
+        // A factorisation three times too stiff in its mass term: the increments fall short, the
+        // residual contracts too slowly, and the members refactorise.
+        let stale_inverses: Vec<Vec<f64>> = cases.iter().map(|c| effective_inverse(c, Coefficients { c1: 3.0 * c1, ..coefficients })).collect();
+        // The batch's patterns as the world lays them out, for `newton_invert`'s `refactor`.
+        let patterns: Vec<u32> = cases.iter().flat_map(|c| c.pattern.col_ptr.iter().chain(&c.pattern.row_idx).copied()).collect();
+        let pattern_of = [0, (cases[0].pattern.col_ptr.len() + cases[0].pattern.row_idx.len()) as u32];
         let free: Vec<Vec<u32>> = cases.iter().map(|c| c.dofs.free_pairs().map(|(d, _)| d as u32).collect()).collect();
         let free_index = |b: usize, d: usize| free[b].iter().position(|&x| x as usize == d);
+        // Within a call only where the device inverts these members (a software adapter's loop
+        // guard, `GpuWorld::inverts`); else a slow contraction hands the group back.
+        let inverts = free.iter().all(|f| world_of(&gpu, &cases).inverts(f.len()));
         // Three points, each node j of body 0 against node j of body 1 (free nodes only).
         let nodes: Vec<u32> = (0..(cases[0].u.len() / dim) as u32).filter(|&n| (0..dim).all(|c| free_index(0, n as usize * dim + c).is_some() && free_index(1, n as usize * dim + c).is_some())).take(3).collect();
         let angle = |i: usize| 0.3 + 0.7 * i as f64;
@@ -1562,8 +1575,10 @@ fn newton_contact_kernels_match_their_cpu_twins() {
         let velocity_scale = floor / (0..n_points).map(|i| w.rho(i, dim, Sweep::GaussSeidel)).fold(0.0, f64::max);
         // One increment then the host; increments to convergence; solves of two sweeps, which
         // spend them every time: the group iterates on until UZAWA_STALLS in a row; the group
-        // unevaluated, as in the first round of a step (`first_forces` and `first_judge`).
-        for (budget, contact_tolerance, max_sweeps, evaluated) in [(1u32, 1e-6, 400u32, true), (12, 1e-6, 400, true), (12, 1e-6, 2, true), (12, 1e-6, 400, false)] {
+        // unevaluated, as in the first round of a step (`first_forces` and `first_judge`); a stale
+        // factorisation, which the members make anew within the call (`refactor`: the tangent
+        // at the iterate, `newton_invert`'s `refactor`, `rebuild`).
+        for (budget, contact_tolerance, max_sweeps, evaluated, stale) in [(1u32, 1e-6, 400u32, true, false), (12, 1e-6, 400, true, false), (12, 1e-6, 2, true, false), (12, 1e-6, 400, false, false), (12, 1e-6, 400, true, true)] {
             let member = |b: usize, inverse_start: u32, free_start: u32| NewtonMember {
                 inverse_start,
                 free_start,
@@ -1581,9 +1596,14 @@ fn newton_contact_kernels_match_their_cpu_twins() {
             // The twins over the batch's arrays: the two members one after the other.
             let n0 = cases[0].u.len();
             let cat = |v: &[Vec<f64>]| -> Vec<f64> { v.concat() };
-            let members = [MemberRange { dof_start: 0, dofs: n0 as u32, ..Default::default() }, MemberRange { dof_start: n0 as u32, dofs: cases[1].u.len() as u32, ..Default::default() }];
+            let nnz0 = cases[0].pattern.nnz() as u32;
+            let members = [
+                MemberRange { dof_start: 0, dofs: n0 as u32, nonzero_start: 0, nonzeros: nnz0, ..Default::default() },
+                MemberRange { dof_start: n0 as u32, dofs: cases[1].u.len() as u32, nonzero_start: nnz0, nonzeros: cases[1].pattern.nnz() as u32, ..Default::default() },
+            ];
             let newton = [member(0, 0, 0), member(1, inverses[0].len() as u32, free[0].len() as u32)];
-            let (inverse_all, free_all) = (cat(&inverses), [free[0].clone(), free[1].clone()].concat());
+            let member_inverses = if stale { &stale_inverses } else { &inverses };
+            let (mut inverse_all, free_all) = (cat(member_inverses), [free[0].clone(), free[1].clone()].concat());
             let (u_start, u_base) = (cat(&starts), cat(&bases));
             let step_all: Vec<DofStep<f64>> = steps.concat();
             let mut u = cat(&[cases[0].u.clone(), cases[1].u.clone()]);
@@ -1607,6 +1627,7 @@ fn newton_contact_kernels_match_their_cpu_twins() {
                 tolerance: contact_tolerance,
                 velocity_scale,
                 jacobi: false,
+                refactor: stale && inverts,
                 outcome: ContactState::default(),
                 step_lengths: Vec::new(),
             };
@@ -1630,6 +1651,8 @@ fn newton_contact_kernels_match_their_cpu_twins() {
                 row_start.push(row_start[row_start.len() - 1] + row.len() as u32);
             }
             let row_entries: Vec<[u32; 2]> = w.rows.iter().flatten().map(|&(j, b)| [j, b]).collect();
+            // (the twins then iterate with the W they built, as the device with its own)
+            let mut w_now = w.clone();
             for (sweep, frictionless) in [(Sweep::Jacobi, None), (Sweep::GaussSeidel, Some(1)), (Sweep::GaussSeidel, None)] {
                 let mut sweep_layout = layout.clone();
                 sweep_layout.groups[0].jacobi = (sweep == Sweep::Jacobi) as u32;
@@ -1649,29 +1672,35 @@ fn newton_contact_kernels_match_their_cpu_twins() {
                                 expected.blocks[b as usize][e] = 0.0;
                             }
                             let (got, want) = (built[9 * b as usize + e], expected.blocks[b as usize][e]);
-                            assert!((got - want).abs() <= 1e-12 * scale, "{}: W({i}, {j}) entry {e}: {got:e} against {want:e} (frictionless {frictionless:?})", kind.name());
+                            // (the dense W is that of the exact factorisation)
+                            assert!(stale || (got - want).abs() <= 1e-12 * scale, "{}: W({i}, {j}) entry {e}: {got:e} against {want:e} (frictionless {frictionless:?})", kind.name());
                         }
                     }
                 }
                 for i in 0..n_points {
                     let want = expected.rho(i, dim, sweep);
-                    assert!((ls[i].rho - want).abs() <= 1e-12 * want && step_lengths[i] == ls[i].rho, "{} {sweep:?}: point {i}'s step length {:e} against {want:e}", kind.name(), ls[i].rho);
+                    assert!((stale || (ls[i].rho - want).abs() <= 1e-12 * want) && step_lengths[i] == ls[i].rho, "{} {sweep:?}: point {i}'s step length {:e} against {want:e}", kind.name(), ls[i].rho);
                 }
                 let most = ls.iter().map(|l| l.rho).fold(0.0, f64::max);
                 assert!(problems[0].floor == velocity_scale * most && ls.iter().all(|l| l.floor == problems[0].floor), "{}: the floor", kind.name());
                 if (sweep, frictionless) == (Sweep::GaussSeidel, None) {
                     (locals, staged) = (ls, problems);
+                    for (b, block) in w_now.blocks.iter_mut().enumerate() {
+                        block.copy_from_slice(&built[9 * b..9 * b + 9]);
+                    }
                 }
             }
             for (l, d) in local.iter_mut().zip(&locals) {
                 l.rho = d.rho;
             }
-            let floor = staged[0].floor;
+            let mut floor = staged[0].floor;
             let mut ustates = [UzawaJudgeState::start(&staged[0])];
             let mut cstates = [ContactState::default()];
             let (mut r, mut dr) = (vec![0.0; 3 * n_points], vec![0.0; 3 * n_points]);
             let call = [Active { member: 0, mode: 1 }, Active { member: 1, mode: 1 }];
             let (mut jobs, mut left) = (call, call.len());
+            let in_contact = [Active { member: 0, mode: MODE_TANGENT }, Active { member: 1, mode: MODE_TANGENT }];
+            let (mut values_all, mut u_factored) = (vec![0.0; patterns.len()], vec![f64::NAN; u.len()]);
             if !evaluated {
                 // The evaluation at u is `first`; its test with the contact forces of the
                 // reactions the step starts from, then the group's verdict.
@@ -1691,7 +1720,7 @@ fn newton_contact_kernels_match_their_cpu_twins() {
                     l.v_free = d.v_free;
                 }
                 let mut scratch = vec![[0.0; 3]; n_points];
-                let p = Problem { w: &w, colours: &colours, local: &local, nodal: &nodal, r: &mut scratch, tolerance, floor, max_iterations: max_sweeps as usize, acceleration: Acceleration::None, fallback: Fallback::None, dim: 3, pairs: &[] };
+                let p = Problem { w: &w_now, colours: &colours, local: &local, nodal: &nodal, r: &mut scratch, tolerance, floor, max_iterations: max_sweeps as usize, acceleration: Acceleration::None, fallback: Fallback::None, dim: 3, pairs: &[] };
                 cpu::uzawa_solve(&p, &staged, &mut ustates, &gather, &mut r, &mut dr, max_sweeps, 0);
                 cpu::newton_contact_forces(&state, &mut contact, &layout, &staged, &gather, &ustates, &r, &mut cstates, 0);
                 for m in 0..2 {
@@ -1704,10 +1733,29 @@ fn newton_contact_kernels_match_their_cpu_twins() {
                     cpu::newton_judge(&free_all, &newton, &mut state, &out, &u, &u_start, &step_all, coefficients, &[u32::MAX; 4], &members, &contact, m);
                 }
                 cpu::newton_contact_judge(&newton, &mut state, &layout, &mut staged, &mut cstates, 0);
+                // The members sent to REFACTOR: their tangents at the iterate, K̄⁻¹ of them, W
+                // again.
+                let mut refactoring = [Active::default(); 2];
+                let count = cpu::newton_compact_refactor(&in_contact, &state, &mut refactoring);
+                for a in &refactoring[..count] {
+                    let (m, r) = (a.member as usize, members[a.member as usize]);
+                    let dofs = r.dof_start as usize..(r.dof_start + r.dofs) as usize;
+                    values_all[r.nonzero_start as usize..(r.nonzero_start + r.nonzeros) as usize].copy_from_slice(&stiffness_values(&cases[m], &u[dofs], coefficients));
+                    cpu::newton_invert_refactor(&mut inverse_all, (&newton, &members, &free_all), (&values_all, &step_all, c1), (&patterns, &pattern_of), (&u, &mut u_factored), &mut state, m);
+                }
+                let (mut built, mut lengths) = (vec![0.0; 9 * w.blocks.len()], vec![0.0; n_points]);
+                if cpu::newton_contact_rebuild(&inverse_all, (&newton, &free_of), &mut state, &layout, &mut staged, &gather.frames, &mut locals, (&row_start, &row_entries), (&mut built, &mut lengths), 0) {
+                    for (b, block) in w_now.blocks.iter_mut().enumerate() {
+                        block.copy_from_slice(&built[9 * b..9 * b + 9]);
+                    }
+                    for (l, d) in local.iter_mut().zip(&locals) {
+                        l.rho = d.rho;
+                    }
+                    floor = staged[0].floor;
+                }
             }
             // `newton_compact`'s `host`: the members the call hands back, whose stiffness values
             // at the last iterate the device computes and holds.
-            let in_contact = [Active { member: 0, mode: MODE_TANGENT }, Active { member: 1, mode: MODE_TANGENT }];
             let mut handed = [Active::default(); 2];
             let handed_back = cpu::newton_compact_host(&in_contact, &state, &mut handed);
             let twin_handed: Vec<bool> = (0..2).map(|b| handed[..handed_back].iter().any(|a| a.member as usize == b)).collect();
@@ -1725,7 +1773,7 @@ fn newton_contact_kernels_match_their_cpu_twins() {
                     body: b,
                     taken: 0,
                     factor: 1,
-                    inverse: Some(Inverse::Dense(inverses[b].clone())),
+                    inverse: Some(Inverse::Dense(member_inverses[b].clone())),
                     member: member(b, 0, 0),
                     residual: evaluated.then(|| residual0(b)),
                     u,
@@ -1751,13 +1799,29 @@ fn newton_contact_kernels_match_their_cpu_twins() {
             let mut contacts = [group(vec![0, 1])];
             world.newton(&mut calls, &mut problems, &mut contacts, &mut [], coefficients, (dim, theta_dt), None, &mut Default::default()).expect("device Newton with contact");
             let got: Vec<NewtonState<f64>> = calls.iter().map(|c| c.outcome).collect();
-            assert!(calls.iter().all(|c| c.failure.is_none()));
+            assert!(calls.iter().all(|c| c.failure.is_none()), "{}: failures {:?}, states {:?}, twins {:?}", kind.name(), calls.iter().map(|c| c.failure).collect::<Vec<_>>(), calls.iter().map(|c| c.outcome).collect::<Vec<_>>(), state);
             let held: Vec<bool> = calls.iter().map(|c| c.tangent_held).collect();
             drop(calls);
+            // Where each member refactorised last, as the twins' `u_factored`.
+            for m in 0..2 {
+                assert_eq!(got[m].refactors, state[m].refactors, "{} member {m}: refactorisations within the call", kind.name());
+                if state[m].refactors > 0 {
+                    let dofs = members[m].dof_start as usize..(members[m].dof_start + members[m].dofs) as usize;
+                    let at = world.factored_at(&[m], &mut Default::default()).expect("read back");
+                    assert!(relative_error(&at[0], &u_factored[dofs]) <= 1e-12, "{} member {m}: where it refactorised", kind.name());
+                }
+            }
+            if stale && inverts {
+                assert!(state.iter().all(|s| s.refactors > 0), "{}: a stale factorisation is made anew within the call", kind.name());
+                refactored += 1;
+            } else {
+                assert!(state.iter().all(|s| s.refactors == 0), "{}: no member refactorises", kind.name());
+            }
             // Two sweeps may also do once the reactions settle (Tet4): stalls or not, the device
             // follows the twins.
             let stalled = cstates[0].uzawa == JUDGE_SPENT;
-            assert_eq!(handed_back, if budget == 1 || stalled { 2 } else { 0 }, "{}: the twins hand both members back, none when they converge", kind.name());
+            let slow_to_host = stale && !inverts;
+            assert_eq!(handed_back, if budget == 1 || stalled || slow_to_host { 2 } else { 0 }, "{}: the twins hand both members back, none when they converge", kind.name());
             for (m, &held) in held.iter().enumerate() {
                 assert_eq!(held, twin_handed[m], "{} member {m}: the device holds a tangent for a member handed back, and says so only then", kind.name());
                 if held {
@@ -1795,7 +1859,7 @@ fn newton_contact_kernels_match_their_cpu_twins() {
             assert_eq!((outcome.sweeps, outcome.uzawa, outcome.tightened), (cstates[0].sweeps, cstates[0].uzawa, cstates[0].tightened), "{}", kind.name());
             assert!((outcome.change - cstates[0].change).abs() <= 1e-12 * cstates[0].change.max(1.0));
             assert!(u_error <= 1e-12 && r_error <= 1e-12, "{}: u {u_error:.1e}, r {r_error:.1e}", kind.name());
-            assert!(r.iter().step_by(3).any(|&rn| rn > 0.0), "the points press");
+            assert!(slow_to_host || r.iter().step_by(3).any(|&rn| rn > 0.0), "the points press");
             assert_eq!(outcome.stalls, cstates[0].stalls, "{}", kind.name());
             tightened += cstates[0].tightened;
             if stalled {
@@ -1805,7 +1869,7 @@ fn newton_contact_kernels_match_their_cpu_twins() {
                 continue;
             }
             assert_eq!(cstates[0].uzawa, JUDGE_CONVERGED);
-            if budget == 1 {
+            if budget == 1 || slow_to_host {
                 assert_eq!((state[0].iterations, state[0].status), (1, NEWTON_HOST), "one increment, then the host");
             } else {
                 assert!(state[0].iterations > 1, "{}: several increments on the device", kind.name());
@@ -1814,6 +1878,7 @@ fn newton_contact_kernels_match_their_cpu_twins() {
     }
     assert!(tightened > 0, "a group whose increments alone stayed above their bound was solved tighter on the device");
     assert!(stall_cases > 0, "a group whose solves spent their sweeps iterated on the device until UZAWA_STALLS");
+    assert!(refactored > 0, "a group whose members refactorised within the call");
 }
 
 /// `--uzawa gpu` let hertz_cylinder's cylinder sink into its plane on lavapipe (509 Newton

@@ -34,6 +34,10 @@ struct NewtonState {
     moved: u32,
     // Whether the last evaluation's residual met its tolerance (`Body::balanced`).
     balanced: u32,
+    // Times the member's K̄⁻¹ was made anew in this call (REFACTOR), and its displacement at the
+    // last of them in `u_factored`: the host factorises there too.
+    refactors: u32,
+    pad: u32,
     // Residual norms of the last evaluation and of the one before, and the last increment's norm.
     residual: real,
     previous_residual: real,
@@ -48,6 +52,10 @@ const CONVERGED = 1u;
 const HOST = 2u;
 // The element kernel rejected the state (`failure`).
 const FAILED = 3u;
+// A member of a group in contact whose residual contracted less than tenfold: the device makes
+// its K̄⁻¹ anew at this iterate (`newton_invert`'s `refactor`) and builds its group's W again
+// (`newton_contact`'s `rebuild`), which sets it ITERATING again, all within the call.
+const REFACTOR = 4u;
 
 // The module's prelude sets MAX_FREE (the most free dofs a member may have: `newton_update`
 // keeps the right-hand side in workgroup memory), NEWTON_WORKGROUP, REFACTOR_CONTRACTION

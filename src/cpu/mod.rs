@@ -12,8 +12,8 @@
 //! | `uzawa_sweep` | [`uzawa_sweep`] |
 //! | `uzawa_judge`, `uzawa_solve` | [`uzawa_judge`], [`uzawa_solve`] |
 //! | `planar_unpack` | [`planar_unpack`] |
-//! | `newton_update`, `newton_judge`, `newton_compact` (`main`, `host`), `newton_finish`, `newton_summary`, `newton_tally`, `newton_invert` | [`newton_update`], [`newton_judge`], [`newton_compact`], [`newton_compact_host`], [`newton_finish`], [`newton_summary`], [`newton_tally`], [`newton_invert`] |
-//! | `newton_contact` (`prepare`, `forces`, `judge`, `first_forces`, `first_judge`, `delassus`) | [`newton_contact_prepare`], [`newton_contact_forces`], [`newton_contact_judge`], [`newton_contact_first_forces`], [`newton_contact_first_judge`], [`newton_contact_delassus`] |
+//! | `newton_update`, `newton_judge`, `newton_compact` (`main`, `host`, `refactor`), `newton_finish`, `newton_summary`, `newton_tally`, `newton_invert` (`main`, `refactor`) | [`newton_update`], [`newton_judge`], [`newton_compact`], [`newton_compact_host`], [`newton_compact_refactor`], [`newton_finish`], [`newton_summary`], [`newton_tally`], [`newton_invert`], [`newton_invert_refactor`] |
+//! | `newton_contact` (`prepare`, `forces`, `judge`, `first_forces`, `first_judge`, `delassus`, `rebuild`) | [`newton_contact_prepare`], [`newton_contact_forces`], [`newton_contact_judge`], [`newton_contact_first_forces`], [`newton_contact_first_judge`], [`newton_contact_delassus`], [`newton_contact_rebuild`] |
 //! | `step_begin`, `step_commit` | [`step_begin`], [`step_commit`] |
 //! | `scatter_reals` | [`scatter_reals`] |
 //! | `peak_copy` | [`peak_copy`] |
@@ -27,8 +27,8 @@ pub use crate::contact::law::uzawa_step;
 pub use crate::contact::uzawa::uzawa_sweep;
 pub use crate::element::{element_energy, element_force_tangent};
 pub use newton::{
-    newton_compact, newton_compact_host, newton_contact_delassus, newton_contact_first_forces, newton_contact_first_judge, newton_contact_forces, newton_contact_judge, newton_contact_prepare, newton_finish, newton_invert, newton_judge,
-    newton_summary, newton_tally, newton_update, SummaryInputs,
+    newton_compact, newton_compact_host, newton_compact_refactor, newton_contact_delassus, newton_contact_first_forces, newton_contact_first_judge, newton_contact_forces, newton_contact_judge, newton_contact_prepare, newton_contact_rebuild,
+    newton_finish, newton_invert, newton_invert_refactor, newton_judge, newton_summary, newton_tally, newton_update, SummaryInputs,
 };
 pub use step::{step_begin, step_commit, Adoption};
 pub use uzawa::{planar_unpack, uzawa_judge, uzawa_solve};

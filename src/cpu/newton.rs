@@ -6,8 +6,8 @@
 use super::uzawa::{global, triple};
 use crate::contact::uzawa::SETTLE;
 use crate::gpu::types::{
-    packed, packed_len, summary_len, Active, Coefficients, DofOut, DofState, DofStep, Inversion, MemberRange, NewtonMember, NewtonState, StepMotion, NEWTON_CONVERGED, NEWTON_FAILED, NEWTON_HOST, NEWTON_ITERATING, NEWTON_WORKGROUP, NOT_FREE,
-    NO_FAILURE, TALLY_LEN, TALLY_ROW,
+    packed, packed_len, summary_len, Active, Coefficients, DofOut, DofState, DofStep, Inversion, MemberRange, NewtonMember, NewtonState, StepMotion, NEWTON_CONVERGED, NEWTON_FAILED, NEWTON_HOST, NEWTON_ITERATING, NEWTON_REFACTOR, NEWTON_WORKGROUP,
+    NOT_FREE, NO_FAILURE, TALLY_LEN, TALLY_ROW,
 };
 use crate::gpu::uzawa_sweep::{NodeGather, UzawaJudgeState, UzawaLocal, UzawaProblem, JUDGE_CONVERGED, JUDGE_LIVE};
 use crate::gpu::ContactLayout;
@@ -65,6 +65,49 @@ pub fn newton_invert(inverse: &mut [Real], newton: &[NewtonMember<Real>], effect
             slot[packed(i, j)] = value;
         }
     }
+    invert_in_place(slot, n);
+}
+
+/// `newton_invert`'s `refactor` for member `m` of the call's refactorisation list: its `K̄⁻¹`
+/// from the stiffness values the tangent pass assembled (`values`, where `members` places them)
+/// plus `c1` times the masses of its free dofs on the diagonal (`step`), over its pattern
+/// (`pattern_of[m]` in `patterns`); its displacement into `u_factored`, one more refactorisation
+/// in its state.
+#[allow(clippy::too_many_arguments)]
+pub fn newton_invert_refactor(
+    inverse: &mut [Real],
+    (newton, members, free_dofs): (&[NewtonMember<Real>], &[MemberRange], &[u32]),
+    (values, step, c1): (&[Real], &[DofStep<Real>], Real),
+    (patterns, pattern_of): (&[u32], &[u32]),
+    (u, u_factored): (&[Real], &mut [Real]),
+    state: &mut [NewtonState<Real>],
+    m: usize,
+) {
+    let (row, range) = (newton[m], members[m]);
+    let n = row.free_count as usize;
+    let slot = &mut inverse[row.inverse_start as usize..][..packed_len(n)];
+    let first = pattern_of[m] as usize;
+    let (starts, rows) = (&patterns[first..][..n + 1], &patterns[first + n + 1..]);
+    slot.fill(0.0);
+    for j in 0..n {
+        for k in starts[j] as usize..starts[j + 1] as usize {
+            let i = rows[k] as usize;
+            let mut value = values[range.nonzero_start as usize + k];
+            if i == j {
+                value += c1 * step[(range.dof_start + free_dofs[row.free_start as usize + j]) as usize].mass;
+            }
+            slot[packed(i, j)] = value;
+        }
+    }
+    invert_in_place(slot, n);
+    let dofs = range.dof_start as usize..(range.dof_start + range.dofs) as usize;
+    u_factored[dofs.clone()].copy_from_slice(&u[dofs]);
+    state[m].refactors += 1;
+}
+
+/// `invert_in_place` of `newton_invert.wgsl`: `K̄⁻¹` in place of `K̄` (lower triangles, [`packed`]):
+/// L, L⁻¹, then L⁻ᵀ L⁻¹, every sum in the shader's order.
+fn invert_in_place(slot: &mut [Real], n: usize) {
     for k in 0..n {
         let d = slot[packed(k, k)].sqrt();
         slot[packed(k, k)] = d;
@@ -351,6 +394,13 @@ pub fn newton_compact_host(call: &[Active], state: &[NewtonState<Real>], jobs: &
     compact(call, state, jobs, NEWTON_HOST)
 }
 
+/// `newton_compact`'s `refactor`: the members of the list that refactorise within the call, in
+/// its order, into `jobs` (the list of the tangent passes and `newton_invert`'s `refactor`);
+/// returns their count.
+pub fn newton_compact_refactor(call: &[Active], state: &[NewtonState<Real>], jobs: &mut [Active]) -> usize {
+    compact(call, state, jobs, NEWTON_REFACTOR)
+}
+
 /// The members of `call` whose status is `wanted`, in order, into `jobs`; returns their count.
 fn compact(call: &[Active], state: &[NewtonState<Real>], jobs: &mut [Active], wanted: u32) -> usize {
     let mut at = 0;
@@ -634,19 +684,22 @@ pub fn newton_contact_first_judge(state: &mut [NewtonState<Real>], u: &[Real], u
     }
 }
 
-/// `newton_contact`'s `judge` for group `k`: one verdict for all its members, and its problem
-/// solved tighter when only the increments are left.
+/// `newton_contact`'s `judge` for group `k`: one verdict for all its members, its problem
+/// solved tighter when only the increments are left, and where the group may, its members whose
+/// residual contracted too slowly refactorising within the call.
 pub fn newton_contact_judge(newton: &[NewtonMember<Real>], state: &mut [NewtonState<Real>], c: &ContactLayout, problems: &mut [UzawaProblem<Real>], contact_states: &mut [crate::gpu::types::ContactState<Real>], k: usize) {
     let grp = c.groups[k];
     let list = &c.group_members[grp.member_start as usize..][..grp.member_count as usize];
     let lead = list[0] as usize;
+    let slow_one = |s: &NewtonState<Real>| s.residual > REFACTOR_CONTRACTION * s.previous_residual.max(Real::MIN_POSITIVE);
     let (mut all_converged, mut all_balanced, mut to_host, mut slow) = (true, true, false, false);
     for &m in list {
         let s = state[m as usize];
         all_converged &= s.status == NEWTON_CONVERGED;
         all_balanced &= s.balanced == 1;
-        to_host |= s.status == NEWTON_HOST || s.status == NEWTON_FAILED;
-        slow |= s.residual > REFACTOR_CONTRACTION * s.previous_residual.max(Real::MIN_POSITIVE);
+        let lost = s.status == NEWTON_HOST && (grp.refactor == 0 || !s.residual.is_finite());
+        to_host |= lost || s.status == NEWTON_FAILED;
+        slow |= slow_one(&s);
     }
     let cs = contact_states[k];
     let settled = cs.change <= grp.tolerance && cs.uzawa == JUDGE_CONVERGED;
@@ -655,7 +708,7 @@ pub fn newton_contact_judge(newton: &[NewtonMember<Real>], state: &mut [NewtonSt
         NEWTON_HOST
     } else if all_converged && settled {
         NEWTON_CONVERGED
-    } else if cs.uzawa == JUDGE_LIVE || cs.stalls as usize >= UZAWA_STALLS || iterations >= newton[lead].budget || slow {
+    } else if cs.uzawa == JUDGE_LIVE || cs.stalls as usize >= UZAWA_STALLS || iterations >= newton[lead].budget || (slow && grp.refactor == 0) {
         NEWTON_HOST
     } else {
         if iterations as usize >= TIGHTEN_AFTER && settled && all_balanced {
@@ -666,8 +719,39 @@ pub fn newton_contact_judge(newton: &[NewtonMember<Real>], state: &mut [NewtonSt
         NEWTON_ITERATING
     };
     for &m in list {
-        if state[m as usize].status != NEWTON_FAILED {
-            state[m as usize].status = verdict;
+        let s = &mut state[m as usize];
+        if s.status != NEWTON_FAILED {
+            s.status = if verdict == NEWTON_ITERATING && slow_one(s) { NEWTON_REFACTOR } else { verdict };
         }
     }
+}
+
+/// `newton_contact`'s `rebuild` for group `k`: where a member refactorised within the call, W,
+/// the step lengths and the floor again ([`newton_contact_delassus`]), and those members
+/// iterating again; returns whether it built W.
+#[allow(clippy::too_many_arguments)]
+pub fn newton_contact_rebuild(
+    inverse: &[Real],
+    (newton, free_of): (&[NewtonMember<Real>], &[u32]),
+    state: &mut [NewtonState<Real>],
+    c: &ContactLayout,
+    problems: &mut [UzawaProblem<Real>],
+    frames: &[Real],
+    locals: &mut [UzawaLocal<Real>],
+    rows: (&[u32], &[[u32; 2]]),
+    out: (&mut [Real], &mut [Real]),
+    k: usize,
+) -> bool {
+    let grp = c.groups[k];
+    let list = &c.group_members[grp.member_start as usize..][..grp.member_count as usize];
+    if !list.iter().any(|&m| state[m as usize].status == NEWTON_REFACTOR) {
+        return false;
+    }
+    newton_contact_delassus(inverse, (newton, free_of), c, problems, frames, locals, rows, out, k);
+    for &m in list {
+        if state[m as usize].status == NEWTON_REFACTOR {
+            state[m as usize].status = NEWTON_ITERATING;
+        }
+    }
+    true
 }

@@ -296,6 +296,10 @@ pub struct NewtonState<R> {
     pub moved: u32,
     /// Whether the last evaluation's residual met its tolerance (`Body::balanced`).
     pub balanced: u32,
+    /// Times the device made the member's `K̄⁻¹` anew within the call ([`NEWTON_REFACTOR`]); its
+    /// displacement at the last of them is in the batch's `u_factored`.
+    pub refactors: u32,
+    pub pad: u32,
     pub residual: R,
     pub previous_residual: R,
     pub increment: R,
@@ -319,11 +323,14 @@ pub struct Inversion {
 /// the element kernel found nothing wrong.
 pub const NO_FAILURE: u32 = u32::MAX;
 
-/// `NewtonState.status`: still iterating, converged, handed to the host, element failure.
+/// `NewtonState.status`: still iterating, converged, handed to the host, element failure,
+/// refactorising within the call (a member of a group in contact, between `newton_contact`'s
+/// `judge` and its `rebuild`).
 pub const NEWTON_ITERATING: u32 = 0;
 pub const NEWTON_CONVERGED: u32 = 1;
 pub const NEWTON_HOST: u32 = 2;
 pub const NEWTON_FAILED: u32 = 3;
+pub const NEWTON_REFACTOR: u32 = 4;
 /// `MAX_FREE` of `newton.wgsl`: the most free dofs a body iterating on the device may have.
 pub const NEWTON_MAX_FREE: usize = 1024;
 
@@ -342,7 +349,9 @@ pub struct ContactGroup<R> {
     pub member_count: u32,
     /// 1: its points' step lengths are those of Jacobi sweeps ([`crate::contact::uzawa::Delassus::rho`]).
     pub jacobi: u32,
-    pub pad: u32,
+    /// 1: a member whose residual contracts too slowly refactorises within the call
+    /// ([`NEWTON_REFACTOR`]) instead of handing the group back.
+    pub refactor: u32,
     /// `contact.tolerance`, the bound on the contact forces' change.
     pub tolerance: R,
     /// The floor of its reactions per unit step length (`ContactStep::velocity_scale`).

@@ -294,6 +294,8 @@ enum Source {
     TallyRows,
     /// The sums of a call's kept members (`newton_tally`).
     Tally,
+    /// Where a device Newton call last refactorised each member (`NewtonBuffers::u_factored`).
+    Factored,
 }
 
 /// The copies of one pass into the read-back buffer, each landing 8-byte aligned after the last.
@@ -833,6 +835,7 @@ impl GpuWorld {
                 Source::CommittedEnergy => b.newton.as_ref().expect("a batch whose committed states are read has them").resident.committed_energy(),
                 Source::TallyRows => &b.newton.as_ref().expect("a batch whose summaries are read has them").rows,
                 Source::Tally => &b.newton.as_ref().expect("a batch whose summaries are read has them").tally,
+                Source::Factored => &b.newton.as_ref().expect("a batch whose refactorisations are read has them").u_factored,
             };
             encoder.copy_buffer_to_buffer(source, c.source.start, target, c.target, c.source.end - c.source.start);
         }

@@ -272,6 +272,10 @@ pub struct Workspace {
     /// Whether the factorisation was made where the device held its tangent (the last
     /// [`Body::refresh_factor`] took `device_tangent`).
     pub(super) factored_at_hand_back: bool,
+    /// The coefficients of a factorisation the device made within a Newton call (version
+    /// `factor_version`), which the host has not made yet: its own factor is the one before
+    /// ([`Body::factorize_at`] makes it where the device did).
+    pub(super) factor_on_device: Option<Coefficients<Real>>,
     /// Residual norm of the previous evaluation in this step, and the ratio of the last one to it.
     pub(super) previous_residual: Option<Real>,
     pub(super) contraction: Option<Real>,
@@ -379,6 +383,7 @@ impl Body {
                 tangent_current: false,
                 device_tangent: None,
                 factored_at_hand_back: false,
+                factor_on_device: None,
                 previous_residual: None,
                 contraction: None,
                 trial_held: None,
@@ -909,6 +914,36 @@ impl Body {
         Ok(true)
     }
 
+    /// A device Newton call made the body's `K̄⁻¹` anew within the call, `refactors` times, at
+    /// a step's `coefficients` (`NewtonState::refactors`): a new version of its factorisation,
+    /// counted as the host counts its own, which the host makes only when it needs it
+    /// ([`Body::factorize_at`]).
+    pub fn note_device_factorization(&mut self, coefficients: Coefficients<Real>) {
+        self.work.factor_version += 1;
+        self.work.factor_on_device = Some(coefficients);
+        self.work.factored_at_hand_back = false;
+    }
+
+    /// Whether the device holds a factorisation the host has not made yet
+    /// ([`Body::note_device_factorization`]).
+    pub fn factor_on_device(&self) -> bool {
+        self.work.factor_on_device.is_some()
+    }
+
+    /// The host's factorisation where the device made the body's last one within a Newton
+    /// call (`u`, `GpuWorld::factored_at`), from its own tangent there, as
+    /// [`Body::refresh_factor`] would have at that iterate: its later increments and W use what
+    /// the device's did (the two tangents of the same displacements agree to round-off). Not
+    /// counted again; the body's evaluation is left as it is.
+    pub fn factorize_at(&mut self, u: &[Real], times: &mut PhaseTimes) -> Result<(), StepFailure> {
+        let c = self.work.factor_on_device.expect("a factorisation the device made");
+        self.cpu_elements(u, true, times)?;
+        let t0 = Instant::now();
+        assemble_csr(&self.work.element_results, &self.def.gather.csr_start, &self.def.gather.csr, c, &mut self.work.values);
+        times.assembly += t0.elapsed().as_secs_f64();
+        self.factorize_effective(c.c1, times)
+    }
+
     /// Whether [`Body::refresh_factor`] would refactorise now.
     pub fn needs_factorization(&self, p: &StepParams) -> bool {
         !(self.factor_kept_for(p) && self.work.contraction.is_none_or(|r| r <= REFACTOR_CONTRACTION))
@@ -948,6 +983,7 @@ impl Body {
         // The values now hold K̄, not ξ K.
         self.work.tangent_current = false;
         self.work.factor_c1 = None;
+        self.work.factor_on_device = None;
         let t0 = Instant::now();
         let result = self.work.solver.factorize(&self.work.values).map_err(|e| StepFailure::Linear { body: self.def.name.clone(), error: self.factor_failure(e) });
         times.factorization += t0.elapsed().as_secs_f64();
@@ -974,6 +1010,7 @@ impl Body {
     /// The coefficient `c1` and the values `K̄` of the factorisation kept for the next step, if
     /// any (what a restart must factorise again to repeat the run).
     pub fn kept_factor(&self) -> Option<(Real, &[Real])> {
+        debug_assert!(self.work.factor_on_device.is_none(), "the host's factorisation is behind the device's (Body::factorize_at)");
         let c1 = self.work.factor_c1.filter(|_| self.def.reuse_factorization && !self.work.tangent_current)?;
         Some((c1, &self.work.values))
     }
@@ -985,6 +1022,7 @@ impl Body {
         }
         self.work.values.copy_from_slice(values);
         self.work.tangent_current = false;
+        self.work.factor_on_device = None;
         self.work.factor_version += 1;
         self.work.factored_at_hand_back = false;
         self.work.solver.factorize(&self.work.values).map_err(|e| e.to_string())?;
@@ -1000,6 +1038,7 @@ impl Body {
     /// Solves `K̄ x = rhs` in place (free dofs) with the last factorisation, for one or more
     /// column-major right-hand sides.
     pub fn solve_effective(&mut self, rhs: &mut [Real], times: &mut PhaseTimes) {
+        debug_assert!(self.work.factor_on_device.is_none(), "the host's factorisation is behind the device's (Body::factorize_at)");
         let t0 = Instant::now();
         self.work.solver.solve_columns(rhs, self.def.dofs.free_count);
         times.solve += t0.elapsed().as_secs_f64();

@@ -87,6 +87,9 @@ pub(super) fn newton_in_lockstep(groups: &mut [Group], world: &mut GpuWorld, c: 
         } else {
             groups.iter().map(|_| Ok(())).collect()
         };
+        // A group without contact takes its increment in `refresh_for_increment`.
+        let stepping: Vec<bool> = groups.iter().zip(&continuing).map(|(g, &go)| go && g.contact.is_none()).collect();
+        fail_groups(factors_from_device(groups, &stepping, world, c, times), &mut continuing, &mut outcome);
         let begun: Vec<Option<Result<Option<Vec<bool>>, StepFailure>>> = groups.par_iter_mut().zip(tangents).zip(&continuing).map(|((g, tangents), &go)| go.then(|| tangents.and_then(|()| g.refresh_for_increment(c)))).collect();
         let mut waiting = vec![false; groups.len()];
         let mut refactorized = vec![Vec::new(); groups.len()];
@@ -105,6 +108,7 @@ pub(super) fn newton_in_lockstep(groups: &mut [Group], world: &mut GpuWorld, c: 
                 *i |= d;
             }
         }
+        fail_groups(factors_from_device(groups, &waiting, world, c, times), &mut waiting, &mut outcome);
         groups.par_iter_mut().zip(&waiting).zip(&refactorized).filter(|((_, &wait), _)| wait).for_each(|((g, _), fresh)| g.prepare_contact(c, fresh));
         let solved = solve_contact(groups, &waiting, world, c, times);
         let ended: Vec<Option<Result<(), StepFailure>>> = groups.par_iter_mut().zip(solved).zip(&waiting).map(|((g, solved), &wait)| wait.then(|| solved.and_then(|o| g.end_increment(c, o)))).collect();
@@ -116,6 +120,55 @@ pub(super) fn newton_in_lockstep(groups: &mut [Group], world: &mut GpuWorld, c: 
         first = false;
     }
     outcome.into_iter().map(|o| o.expect("every group has an outcome")).collect()
+}
+
+/// The host's own factorisations of the `chosen` groups' bodies whose last one the device made
+/// within a Newton call ([`Body::factor_on_device`]) and that the host is about to solve with
+/// (no refactorisation due): where the device made them, whose displacements come back in one
+/// read ([`GpuWorld::factored_at`]), in parallel. A body whose call converged on the device
+/// needs none until then. Returns each group's result.
+fn factors_from_device(groups: &mut [Group], chosen: &[bool], world: &mut GpuWorld, c: &Context, times: &mut PhaseTimes) -> Vec<Result<(), StepFailure>> {
+    let mut results: Vec<Result<(), StepFailure>> = groups.iter().map(|_| Ok(())).collect();
+    let wanted: Vec<(usize, usize)> = groups.iter().enumerate().filter(|&(k, _)| chosen[k]).flat_map(|(k, g)| g.bodies.iter().enumerate().filter(|(_, b)| b.factor_on_device() && !b.needs_factorization(c.p)).map(move |(j, _)| (k, j))).collect();
+    if wanted.is_empty() {
+        return results;
+    }
+    let ids: Vec<usize> = wanted.iter().map(|&(k, j)| groups[k].ids[j]).collect();
+    let at = match world.factored_at(&ids, times) {
+        Ok(at) => at,
+        Err(e) => {
+            for &(k, _) in &wanted {
+                results[k] = Err(groups[k].bodies[0].device_failure(&e));
+            }
+            return results;
+        }
+    };
+    let mut by_group: Vec<Vec<(usize, Vec<Real>)>> = groups.iter().map(|_| Vec::new()).collect();
+    for (&(k, j), u) in wanted.iter().zip(at) {
+        by_group[k].push((j, u));
+    }
+    groups.par_iter_mut().zip(by_group).zip(results.par_iter_mut()).for_each(|((g, mine), result)| {
+        for (j, u) in mine {
+            if let (Ok(()), Err(e)) = (&*result, g.bodies[j].factorize_at(&u, &mut g.newton.report.wall)) {
+                *result = Err(e);
+            }
+        }
+    });
+    for &(k, j) in &wanted {
+        if !groups[k].bodies[j].factor_on_device() {
+            world.note_factorized(groups[k].ids[j], groups[k].bodies[j].factor_version());
+        }
+    }
+    results
+}
+
+/// The groups whose `results` are errors end with them, and leave `live`.
+fn fail_groups(results: Vec<Result<(), StepFailure>>, live: &mut [bool], outcome: &mut [Option<Result<GroupReport, StepFailure>>]) {
+    for (k, result) in results.into_iter().enumerate() {
+        if let Err(e) = result {
+            (live[k], outcome[k]) = (false, Some(Err(e)));
+        }
+    }
 }
 
 /// The forces and residuals of the `evaluating` groups' bodies on the CPU twins, in parallel.
@@ -338,6 +391,7 @@ fn device_pass(groups: &mut [Group], live: &[bool], kind: PassKind, world: &mut 
         return results;
     }
     let mut inverses = missing_inverses(groups, kind.iterating, world);
+    let held: &GpuWorld = world;
     let dim = groups.first().and_then(|g| g.bodies.first()).map_or(2, |b| b.def.dim);
     // Each group's share, made in parallel, then laid end to end.
     let shares: Vec<PassShare> = groups
@@ -345,11 +399,13 @@ fn device_pass(groups: &mut [Group], live: &[bool], kind: PassKind, world: &mut 
         .zip(&chosen)
         .zip(inverses.par_iter_mut())
         .zip(kind.iterating)
-        .map(|(((g, chosen), inverses), &on_device)| if on_device { iterations_share(g, std::mem::take(inverses), kind, c) } else { (Vec::new(), None, evaluations_share(g, chosen, kind, c)) })
+        .map(|(((g, chosen), inverses), &on_device)| if on_device { iterations_share(g, std::mem::take(inverses), kind, c, held) } else { (Vec::new(), None, evaluations_share(g, chosen, kind, c)) })
         .collect();
     let mut layout = lay_out(shares, kind.iterating);
     let PassLayout { list, calls, problems, contacts, .. } = &mut layout;
     let asked: Vec<bool> = calls.iter().map(|call| call.keep).collect();
+    // The factorisation each body held before the call, to number those the device made in it.
+    let factors: Vec<(usize, u64)> = calls.iter().map(|call| (call.body, call.factor)).collect();
     let passed =
         if calls.is_empty() { world.evaluate(list, coefficients(p), times) } else { world.newton(calls, problems, contacts, list, Coefficients { motion: c.velocity_scale * p.dt, ..coefficients(p) }, (dim, p.theta * p.dt), c.interrupt, times) };
     let failures: Vec<Option<ElementFailure>> = list.iter().map(|e| e.failure).collect();
@@ -372,6 +428,13 @@ fn device_pass(groups: &mut [Group], live: &[bool], kind: PassKind, world: &mut 
             _ => finish_evaluations(g, chosen, &failures[evaluations_start[k]..], passed, kind, c),
         };
     });
+    for (k, g) in groups.iter().enumerate().filter(|&(k, _)| kind.iterating[k]) {
+        for ((body, &id), &(_, before)) in g.bodies.iter().zip(g.ids).zip(&factors[call_ranges[k].0.clone()]) {
+            if body.factor_version() != before {
+                world.note_factorized(id, body.factor_version());
+            }
+        }
+    }
     results
 }
 
@@ -446,8 +509,10 @@ fn evaluations_share<'a>(g: &'a mut Group, chosen: &[bool], kind: PassKind, c: &
     g.bodies.iter_mut().zip(g.ids).zip(chosen).filter(|(_, &yes)| yes).map(|((body, &id), _)| body.device_evaluation(id, kind.with_tangent(body, in_contact, c), !kind.tangent)).collect()
 }
 
-/// The calls of a group that iterates on the device, with its contact problem if it has one.
-fn iterations_share<'a>(g: &'a mut Group, inverses: Vec<Option<Inverse>>, kind: PassKind, c: &Context) -> PassShare<'a> {
+/// The calls of a group that iterates on the device, with its contact problem if it has one;
+/// a member of such a group refactorises within the call where the device can invert `K̄` of
+/// every member (`world`).
+fn iterations_share<'a>(g: &'a mut Group, inverses: Vec<Option<Inverse>>, kind: PassKind, c: &Context, world: &GpuWorld) -> PassShare<'a> {
     let p = c.p;
     let taken = g.newton.report.iterations;
     let Group { ids, bodies, contact, newton, .. } = g;
@@ -455,6 +520,7 @@ fn iterations_share<'a>(g: &'a mut Group, inverses: Vec<Option<Inverse>>, kind: 
     // A free body that nothing is near may leave its step's end on the device.
     let alone = contact.is_none() && bodies.len() == 1;
     let hold = |id: usize| if alone { c.hold.map_or(Hold::No, |hold| hold[id]) } else { Hold::No };
+    let refactor = bodies.iter().all(|b| world.inverts(b.dofs().free_count));
     let calls: Vec<NewtonCall> = bodies
         .iter_mut()
         .zip(ids.iter())
@@ -478,6 +544,7 @@ fn iterations_share<'a>(g: &'a mut Group, inverses: Vec<Option<Inverse>>, kind: 
             tolerance: settings.tolerance,
             velocity_scale,
             jacobi: settings.sweep == Sweep::Jacobi,
+            refactor,
             outcome: ContactState { stalls: newton.uzawa_stalls as u32, ..ContactState::default() },
             step_lengths: Vec::new(),
         };
@@ -521,6 +588,10 @@ fn finish_iterations(g: &mut Group, (range, index): (std::ops::Range<usize>, Opt
     state.report.bodies_iterated += if kind.unevaluated { iterations } else { iterations.saturating_sub(1) } * g.bodies.len();
     let mut result = Ok(());
     for (body, (end, strain, failure, tangent_held, summary)) in g.bodies.iter_mut().zip(&ends.calls[range]) {
+        if end.refactors > 0 {
+            body.note_device_factorization(coefficients(c.p));
+            state.report.factorizations += end.refactors as usize;
+        }
         if let (Ok(()), Err(e)) = (&result, body.finish_device_newton(c.p, end, *strain, *failure, *tangent_held, *summary)) {
             result = Err(e);
         }

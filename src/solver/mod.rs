@@ -815,6 +815,21 @@ impl Simulation {
         take_committed_of(&mut self.bodies, self.world.as_mut(), &held, &mut PhaseTimes::default())
     }
 
+    /// Makes the host's factorisations where the device made the bodies' last ones within a
+    /// Newton call ([`Body::factor_on_device`]), their displacements there in one read: a saved
+    /// state holds the host's (a restart factorises them again).
+    pub fn sync_factors(&mut self) -> Result<(), StepFailure> {
+        let pending: Vec<usize> = (0..self.bodies.len()).filter(|&b| self.bodies[b].factor_on_device()).collect();
+        let Some(world) = self.world.as_mut().filter(|_| !pending.is_empty()) else { return Ok(()) };
+        let mut times = PhaseTimes::default();
+        let at = world.factored_at(&pending, &mut times).map_err(|e| self.bodies[pending[0]].device_failure(&e))?;
+        for (&b, u) in pending.iter().zip(at) {
+            self.bodies[b].factorize_at(&u, &mut times)?;
+            world.note_factorized(b, self.bodies[b].factor_version());
+        }
+        Ok(())
+    }
+
     /// Energy bookkeeping of a converged step (before commit): external work, friction (as
     /// [`ContactStats`] counts it) and numerical dissipation, and the obstacles' reactions.
     /// Returns the largest nodal speed at the step's end.

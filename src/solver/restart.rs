@@ -156,6 +156,7 @@ impl Simulation {
     /// The state after the last finished step.
     pub fn saved_state(&self) -> SavedState {
         assert!(self.bodies.iter().all(|b| b.held_state().is_none()), "the states are the host's (Simulation::sync_states)");
+        assert!(self.bodies.iter().all(|b| !b.factor_on_device()), "the factorisations are the host's (Simulation::sync_factors)");
         SavedState {
             t: self.t,
             step: self.step,

@@ -32,6 +32,10 @@ pub struct GroupContact<'a> {
     /// whether its step lengths are those of Jacobi sweeps.
     pub velocity_scale: Real,
     pub jacobi: bool,
+    /// Whether a member whose residual contracts too slowly refactorises within the call (the
+    /// device's `K̄⁻¹` from its tangent there, and W again) rather than handing the group back:
+    /// where the device can invert every member's `K̄` ([`crate::gpu::GpuWorld::inverts`]).
+    pub refactor: bool,
     /// In: its Uzawa stalls so far in the step (`stalls`, the rest zero); out: where its
     /// contact stood after the last increment.
     pub outcome: ContactState<Real>,
@@ -70,7 +74,7 @@ impl ContactLayout {
     pub fn of(contacts: &[GroupContact], staged: &[Problem], nodes: &NodeGather, member_of: &dyn Fn(usize) -> u32, dof_start: &dyn Fn(u32) -> u32, dim: usize, theta_dt: Real) -> Self {
         let mut l = ContactLayout { term_start: vec![0], ..Default::default() };
         for (k, g) in contacts.iter().enumerate() {
-            l.groups.push(ContactGroup { member_start: l.group_members.len() as u32, member_count: g.calls.len() as u32, jacobi: g.jacobi as u32, pad: 0, tolerance: g.tolerance, velocity_scale: g.velocity_scale });
+            l.groups.push(ContactGroup { member_start: l.group_members.len() as u32, member_count: g.calls.len() as u32, jacobi: g.jacobi as u32, refactor: g.refactor as u32, tolerance: g.tolerance, velocity_scale: g.velocity_scale });
             l.group_members.extend(g.calls.iter().map(|&c| member_of(c)));
             l.states.push(ContactState { stalls: g.outcome.stalls, ..ContactState::default() });
             let slot0 = nodes.node_offsets[k];
@@ -114,12 +118,13 @@ pub(super) struct ContactPipelines {
     first_forces: ComputePipeline,
     first_judge: ComputePipeline,
     delassus: ComputePipeline,
+    rebuild: ComputePipeline,
 }
 
 impl ContactPipelines {
     pub(super) fn new(gpu: &Gpu) -> Result<Self, crate::gpu::GpuError> {
         let at = |entry: &str| gpu.pipeline_at("newton_contact", entry, None);
-        Ok(Self { prepare: at("prepare")?, forces: at("forces")?, judge: at("judge")?, first_forces: at("first_forces")?, first_judge: at("first_judge")?, delassus: at("delassus")? })
+        Ok(Self { prepare: at("prepare")?, forces: at("forces")?, judge: at("judge")?, first_forces: at("first_forces")?, first_judge: at("first_judge")?, delassus: at("delassus")?, rebuild: at("rebuild")? })
     }
 }
 
@@ -131,6 +136,7 @@ pub(super) struct ContactPasses {
     first_forces: BindGroup,
     first_judge: BindGroup,
     delassus: BindGroup,
+    rebuild: BindGroup,
     pub(super) states: Buffer,
     /// The points' step lengths `delassus` gives (for the host: `GroupContact::step_lengths`).
     pub(super) step_lengths: Buffer,
@@ -202,8 +208,8 @@ impl ContactPasses {
         let bind = |pipeline: &ComputePipeline, entry: &str| gpu.bind_named(pipeline, ("newton_contact", entry, None), &all);
         let (prepare, forces, judge) = (bind(&pipelines.prepare, "prepare"), bind(&pipelines.forces, "forces"), bind(&pipelines.judge, "judge"));
         let (first_forces, first_judge) = (bind(&pipelines.first_forces, "first_forces"), bind(&pipelines.first_judge, "first_judge"));
-        let delassus = bind(&pipelines.delassus, "delassus");
-        Self { prepare, forces, judge, first_forces, first_judge, delassus, states, step_lengths, problems: l.groups.len() as u32, written: (l.node_dof.clone(), l.call.dim as usize) }
+        let (delassus, rebuild) = (bind(&pipelines.delassus, "delassus"), bind(&pipelines.rebuild, "rebuild"));
+        Self { prepare, forces, judge, first_forces, first_judge, delassus, rebuild, states, step_lengths, problems: l.groups.len() as u32, written: (l.node_dof.clone(), l.call.dim as usize) }
     }
 
     fn dispatch(gpu: &Gpu, pass: &mut wgpu::ComputePass, entry: &'static str, pipeline: &ComputePipeline, group: &BindGroup, workgroups: usize) {
@@ -229,6 +235,12 @@ impl ContactPasses {
     /// inversions and before anything reads W.
     pub(super) fn record_delassus(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass, p: &ContactPipelines) {
         Self::dispatch(gpu, pass, "delassus", &p.delassus, &self.delassus, self.problems as usize);
+    }
+
+    /// `rebuild`, one workgroup per group: W again where a member refactorised within the call,
+    /// after its `K̄⁻¹` and before the next iteration reads W.
+    pub(super) fn record_rebuild(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass, p: &ContactPipelines) {
+        Self::dispatch(gpu, pass, "rebuild", &p.rebuild, &self.rebuild, self.problems as usize);
     }
 
     /// `first_forces`, one workgroup per group.

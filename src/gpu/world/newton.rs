@@ -50,13 +50,14 @@ pub(super) const KEPT_COUNT: usize = 13;
 type BatchCalls = (usize, Vec<(usize, usize)>, [u32; 3]);
 
 /// What the submissions of a [`GpuWorld::newton`] call record: its batches' calls, the passes of
-/// its groups in contact (their batch), the solve dispatches per increment and the number of
-/// groups in contact.
+/// its groups in contact (their batch), the solve dispatches per increment, the number of
+/// groups in contact and whether any may refactorise within the call.
 struct CallPlan<'a> {
     work: &'a [BatchCalls],
     contact: Option<&'a (usize, ContactPasses)>,
     solves: usize,
     contacts: usize,
+    refactor: bool,
 }
 
 /// Where a call's results land in a read-back: its state, then (absent for a kept call) its
@@ -122,7 +123,7 @@ fn unpack_iterate(precision: Precision, call: &mut NewtonCall, [flags_at, u_at, 
 
 /// Takes the reactions of the groups in contact and their states from a submission's read-back
 /// (where each lands: `(reactions, states)`).
-fn unpack_contact(precision: Precision, problems: &mut [Problem], contacts: &mut [GroupContact], (r_at, states_at, rho_at): (usize, usize, Option<usize>), bytes: &[u8]) {
+fn unpack_contact(precision: Precision, problems: &mut [Problem], contacts: &mut [GroupContact], (r_at, states_at, rho_at): (usize, usize, usize), bytes: &[u8]) {
     let real = precision.size();
     let mut at = r_at;
     for p in problems.iter_mut() {
@@ -130,12 +131,11 @@ fn unpack_contact(precision: Precision, problems: &mut [Problem], contacts: &mut
         super::copy_from_device(precision, &bytes[at..end], bytemuck::cast_slice_mut(p.r));
         at = end;
     }
-    if let Some(mut at) = rho_at {
-        for (p, g) in problems.iter().zip(contacts.iter_mut()) {
-            let end = at + p.local.len() * real;
-            g.step_lengths = super::from_device(precision, &bytes[at..end]);
-            at = end;
-        }
+    let mut at = rho_at;
+    for (p, g) in problems.iter().zip(contacts.iter_mut()) {
+        let end = at + p.local.len() * real;
+        g.step_lengths = super::from_device(precision, &bytes[at..end]);
+        at = end;
     }
     let size = std::mem::size_of::<ContactState<Real>>();
     for (k, g) in contacts.iter_mut().enumerate() {
@@ -223,18 +223,55 @@ struct HostTangents {
     compact: Pass,
     tangent: Pass,
     csr: Pass,
+    /// The same list and passes for the members that refactorise within the call
+    /// (`newton_compact`'s `refactor`), then their `K̄⁻¹` (`newton_invert`'s `refactor`, the
+    /// third dispatch).
+    compact_refactor: Pass,
+    invert_refactor: Pass,
 }
 
 impl HostTangents {
-    fn new(gpu: &Gpu, pipelines: &NewtonPipelines, b: &Batch, tangent: &Pass, state: &Buffer) -> Self {
+    fn new(gpu: &Gpu, pipelines: &NewtonPipelines, b: &Batch, tangent: &Pass, (n, coefficients): (&NewtonBuffers, &Buffer)) -> Self {
         let write = BufferUsages::STORAGE | BufferUsages::COPY_DST;
         let members = b.members.len();
         let call = buffer(gpu, "host tangents call", members * 8, write);
         let jobs = buffer(gpu, "host tangents jobs", members * 8, write);
         let dispatch = buffer(gpu, "host tangents dispatch", DISPATCH_WORDS * 4, write | BufferUsages::INDIRECT);
         let (tangent, csr) = (tangent.with_jobs(gpu, &jobs), b.csr.with_jobs(gpu, &jobs));
-        let compact = Pass::bound(gpu, pipelines.compact_host.clone(), ("newton_compact", "host"), None, &[("call", &call), ("state", state), ("jobs", &jobs), ("dispatch", &dispatch)]);
-        Self { call, dispatch, compact, tangent, csr }
+        let listing = [("call", &call), ("state", &n.state), ("jobs", &jobs), ("dispatch", &dispatch)];
+        let compact = Pass::bound(gpu, pipelines.compact_host.clone(), ("newton_compact", "host"), None, &listing);
+        let compact_refactor = Pass::bound(gpu, pipelines.compact_refactor.clone(), ("newton_compact", "refactor"), None, &listing);
+        let invert_refactor = Pass::bound(
+            gpu,
+            pipelines.invert_refactor.clone(),
+            ("newton_invert", "refactor"),
+            None,
+            &[
+                ("inverse", &n.inverse),
+                ("newton", &n.newton),
+                ("patterns", &n.patterns),
+                ("values", &b.values),
+                ("members", &b.member_buffer),
+                ("jobs", &jobs),
+                ("pattern_of", &n.pattern_of),
+                ("free_dofs", &n.free),
+                ("step", &b.step),
+                ("coefficients", coefficients),
+                ("u", &b.u),
+                ("u_factored", &n.u_factored),
+                ("state", &n.state),
+            ],
+        );
+        Self { call, dispatch, compact, tangent, csr, compact_refactor, invert_refactor }
+    }
+
+    /// Records the refactorisations within an iteration, after the groups' verdicts: the list
+    /// of members in REFACTOR, their tangents and stiffness values at the iterate, their `K̄⁻¹`.
+    fn record_refactor(&self, gpu: &Gpu, pass: &mut wgpu::ComputePass) {
+        self.compact_refactor.dispatch(gpu, pass, 1);
+        self.tangent.dispatch_indirect(gpu, pass, &self.dispatch, 0);
+        self.csr.dispatch_indirect(gpu, pass, &self.dispatch, 12);
+        self.invert_refactor.dispatch_indirect(gpu, pass, &self.dispatch, 24);
     }
 }
 
@@ -243,8 +280,13 @@ impl HostTangents {
 /// bodies pays nothing).
 pub(super) struct NewtonBuffers {
     pub(super) inverse: Buffer,
-    /// The batch's distinct stiffness patterns (`Batch::patterns`), for `newton_invert`.
+    /// The batch's distinct stiffness patterns (`Batch::patterns`), for `newton_invert`, and
+    /// where each member's starts (`Batch::pattern_start`), for its `refactor`.
     pub(super) patterns: Buffer,
+    pattern_of: Buffer,
+    /// Per dof, the displacement at which the device last refactorised its member within a
+    /// call ([`GpuWorld::factored_at`]).
+    pub(super) u_factored: Buffer,
     /// The inversions a call staged, recorded at the head of its first submission.
     invert: Option<(Pass, u32)>,
     pub(super) free: Buffer,
@@ -365,6 +407,8 @@ pub(super) struct NewtonPipelines {
     judge: ComputePipeline,
     compact: ComputePipeline,
     compact_host: ComputePipeline,
+    compact_refactor: ComputePipeline,
+    invert_refactor: ComputePipeline,
     finish: ComputePipeline,
     summary: ComputePipeline,
     tally: ComputePipeline,
@@ -379,6 +423,8 @@ impl NewtonPipelines {
             judge: gpu.pipeline_at("newton_judge", "main", None)?,
             compact: gpu.pipeline_at("newton_compact", "main", None)?,
             compact_host: gpu.pipeline_at("newton_compact", "host", None)?,
+            compact_refactor: gpu.pipeline_at("newton_compact", "refactor", None)?,
+            invert_refactor: gpu.pipeline_at("newton_invert", "refactor", None)?,
             finish: gpu.pipeline_at("newton_finish", "main", None)?,
             summary: gpu.pipeline_at("newton_summary", "main", None)?,
             tally: gpu.pipeline_at("newton_tally", "main", None)?,
@@ -425,6 +471,8 @@ impl NewtonBuffers {
         let (summary, boxes) = (buffer(gpu, "summary", members * summary_len(3) * real, storage | BufferUsages::COPY_SRC), buffer(gpu, "boxes", members * 6 * 4, storage | BufferUsages::COPY_SRC));
         let (rows, tally) = (buffer(gpu, "tally rows", members * TALLY_ROW * real, storage | BufferUsages::COPY_SRC), buffer(gpu, "tally", TALLY_LEN * real, storage | BufferUsages::COPY_SRC));
         let (reference, patterns) = (super::buffer_init(gpu, "reference", &super::to_device(gpu.precision, &b.reference), storage), super::buffer_init(gpu, "patterns", bytemuck::cast_slice(&b.patterns), storage));
+        let pattern_of = super::buffer_init(gpu, "pattern of member", bytemuck::cast_slice(&b.pattern_start), storage);
+        let u_factored = buffer(gpu, "u factored", dofs * real, storage | BufferUsages::COPY_SRC);
         let summarise = Pass::bound(
             gpu,
             pipelines.summary.clone(),
@@ -466,6 +514,8 @@ impl NewtonBuffers {
             tally,
             add_up,
             patterns,
+            pattern_of,
+            u_factored,
             invert: None,
             inverse,
             free,
@@ -562,7 +612,7 @@ impl GpuWorld {
         };
         let points = problems.iter().map(|p| p.local.len()).sum::<usize>();
         let target = self.newton_target(&work, list, contact.as_ref().map(|_| (points, contacts.len())));
-        let plan = CallPlan { work: &work, contact: contact.as_ref(), solves, contacts: contacts.len() };
+        let plan = CallPlan { work: &work, contact: contact.as_ref(), solves, contacts: contacts.len(), refactor: contacts.iter().any(|g| g.refactor) };
         let mut t0 = started;
         let mut iterations = calls.iter().map(|c| c.member.budget.saturating_sub(c.taken)).max().unwrap_or(0).min(ITERATIONS_PER_SUBMIT);
         let evaluate_first = calls.first().is_some_and(|c| c.residual.is_none());
@@ -585,8 +635,9 @@ impl GpuWorld {
             let contact_landing = contact.as_ref().map(|(_, passes)| {
                 let r = readback.queue_buffer(&self.contact.as_ref().expect("staged").buffers().r, (points * 3 * precision.size()) as u64);
                 let states = readback.queue_buffer(&passes.states, (contacts.len() * std::mem::size_of::<ContactState<Real>>()) as u64);
-                // The step lengths, once: W stays the one the call's first submission built.
-                (r, states, first.then(|| readback.queue_buffer(&passes.step_lengths, (points * precision.size()) as u64)))
+                // The step lengths of the last W (`delassus`, or `rebuild` after a refactorisation
+                // within the call).
+                (r, states, readback.queue_buffer(&passes.step_lengths, (points * precision.size()) as u64))
             });
             let mut iterating = false;
             self.read_back_into(&target, encoder, &readback, "newton_update", times, t0, |bytes| {
@@ -624,12 +675,31 @@ impl GpuWorld {
 
     /// Marks the members of groups in contact (`(call, member)` of `batch`) that the device
     /// handed back: it holds their tangents at the `u` returned ([`NewtonCall::tangent_held`]).
+    /// A member that refactorised within the call holds the device's tangent of that iterate,
+    /// which the host did not read, and a `K̄⁻¹` of no version of the host's until the host
+    /// factorises there too ([`GpuWorld::note_factorized`]).
     fn note_held_tangents(&mut self, batch: usize, calls: &mut [NewtonCall], in_contact: &[(usize, usize)]) {
+        let b = &mut self.batches[batch];
         for &(i, m) in in_contact {
             if calls[i].outcome.status == NEWTON_HOST {
                 calls[i].tangent_held = true;
-                self.batches[batch].handed[m] = Some(super::Held::HandBack);
+                b.handed[m] = Some(super::Held::HandBack);
+            } else if calls[i].outcome.refactors > 0 {
+                b.handed[m] = None;
             }
+            if calls[i].outcome.refactors > 0 {
+                b.newton.as_mut().expect("staged").inverse_version[m] = None;
+            }
+        }
+    }
+
+    /// The device's `K̄⁻¹` of a body is that of this version of its factorisations: one the
+    /// device made within a Newton call ([`NewtonState::refactors`]), which the host numbers, or
+    /// the host's own of it ([`GpuWorld::factored_at`]).
+    pub fn note_factorized(&mut self, body: usize, factor: u64) {
+        let (b, m) = self.place[body];
+        if let Some(n) = self.batches[b].newton.as_mut() {
+            n.inverse_version[m] = Some(factor);
         }
     }
 
@@ -645,10 +715,10 @@ impl GpuWorld {
         }
         let pipelines = self.newton_pipelines.as_ref().expect("made above");
         let made = NewtonBuffers::new(&self.gpu, pipelines, &self.batches[batch], &self.coefficients)?;
-        // The templates of a call's start, the reference coordinates and each dof's free index,
-        // once.
+        // The templates of a call's start, the reference coordinates, each dof's free index and
+        // each member's pattern start, once.
         let b = &self.batches[batch];
-        self.traffic.up += (b.members.len() * (std::mem::size_of::<NewtonState<Real>>() + 8) + b.reference.len() * self.gpu.precision.size() + 4 * b.u_host.len()) as u64;
+        self.traffic.up += (b.members.len() * (std::mem::size_of::<NewtonState<Real>>() + 12) + b.reference.len() * self.gpu.precision.size() + 4 * b.u_host.len()) as u64;
         self.batches[batch].newton = Some(made);
         Ok(())
     }
@@ -792,6 +862,12 @@ impl GpuWorld {
                 n.judge.dispatch_indirect(&self.gpu, &mut pass, &n.dispatch, 36);
                 if let (Some(c), Some(p)) = (mine, pipelines) {
                     c.record_judge(&self.gpu, &mut pass, p);
+                    // The members the verdicts send to REFACTOR: K̄⁻¹ at this iterate and their
+                    // groups' W again, before the next iteration's list.
+                    if plan.refactor {
+                        n.host_tangents.as_ref().expect("staged").record_refactor(&self.gpu, &mut pass);
+                        c.record_rebuild(&self.gpu, &mut pass, p);
+                    }
                 }
                 n.compact.dispatch(&self.gpu, &mut pass, 1);
             }
@@ -912,6 +988,31 @@ impl GpuWorld {
         })
     }
 
+    /// The displacements at which the device last refactorised each of `bodies` within a
+    /// Newton call ([`NewtonState::refactors`]), in one submission: where the host makes the
+    /// same factorisation when it needs its own (its next increment, a saved state), not after
+    /// every call.
+    pub fn factored_at(&mut self, bodies: &[usize], times: &mut PhaseTimes) -> Result<Vec<Vec<Real>>, GpuError> {
+        let real = self.gpu.precision.size();
+        let mut readback = ReadBack::default();
+        let at: Vec<(usize, usize)> = bodies
+            .iter()
+            .map(|&body| {
+                let (b, m) = self.place[body];
+                let dofs = super::dof_span(&self.batches[b].members, &[m]);
+                (readback.queue(b, Source::Factored, (dofs.start * real) as u64..(dofs.end * real) as u64) as usize, dofs.len())
+            })
+            .collect();
+        let target = self.newton_target_of(readback.end);
+        let encoder = self.encoder("factored at");
+        let precision = self.gpu.precision;
+        let mut out = Vec::with_capacity(bodies.len());
+        self.read_back_into(&target, encoder, &readback, "newton_invert", times, Instant::now(), |bytes| {
+            out = at.iter().map(|&(at, n)| super::from_device(precision, &bytes[at..at + n * real])).collect();
+        })?;
+        Ok(out)
+    }
+
     /// After a call: the device's displacements are the host's now, and the mirror follows, so
     /// that the next pass does not send them back. The contact forces the device computed for
     /// the groups in contact (`contact`: their batch and passes) are not the host's: those at
@@ -994,7 +1095,7 @@ impl GpuWorld {
         let n = b.newton.as_ref().expect("made before staging");
         if n.host_tangents.is_none() {
             let super::Deferred::Ready(tangent) = &b.tangent else { unreachable!("made ready above") };
-            let made = HostTangents::new(&self.gpu, self.newton_pipelines.as_ref().expect("made with the batch's buffers"), b, tangent, &n.state);
+            let made = HostTangents::new(&self.gpu, self.newton_pipelines.as_ref().expect("made with the batch's buffers"), b, tangent, (n, &self.coefficients));
             self.batches[batch].newton.as_mut().expect("made before staging").host_tangents = Some(made);
         }
         let mut mine: Vec<(usize, usize)> = contacts.iter().flat_map(|g| &g.calls).map(|&c| (c, self.place[calls[c].body].1)).collect();

@@ -98,6 +98,7 @@ impl Body {
     /// of this size, the values factorised, `K̄`, while the body holds them (no newer tangent:
     /// [`Body::kept_factor`]); else `K̄⁻¹` ([`Body::effective_inverse`]).
     pub fn device_inverse(&mut self, inverts: bool, times: &mut PhaseTimes) -> Inverse {
+        debug_assert!(self.work.factor_on_device.is_none(), "the device holds this version");
         if inverts && !self.work.tangent_current {
             if self.work.factored_at_hand_back {
                 Inverse::AtHandBack(self.work.values.clone())
