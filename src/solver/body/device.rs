@@ -163,6 +163,7 @@ impl Body {
             taken: taken as u32,
             factor: self.work.factor_version,
             inverse,
+            unfactored: false,
             member,
             residual,
             u: &mut self.work.trial.u,
