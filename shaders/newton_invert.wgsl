@@ -13,8 +13,8 @@
 // list `newton_compact`'s `refactor` made, one workgroup each, `workgroup.z`), K̄ = ξ K + c1 M
 // from the stiffness values the tangent pass just assembled at its iterate and the masses of
 // its free dofs (`Body::factorize_effective`), inverted as above; its displacement into
-// `u_factored` (the host factorises there too), one more in its `refactors`, and a member
-// without a factorisation before ITERATING again. CPU twin: `cpu::newton_invert_refactor`.
+// `u_factored` (the host factorises there too) and one more in its `refactors`. CPU twin:
+// `cpu::newton_invert_refactor`.
 
 struct Inversion {
     member: u32,
@@ -106,11 +106,8 @@ fn refactor(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) w
     for (var d = lane; d < range.dofs; d += NEWTON_WORKGROUP) {
         u_factored[range.dof_start + d] = u[range.dof_start + d];
     }
-    // A member's first factorisation (a member alone) iterates on at once; one of a group in
-    // contact once `newton_contact`'s `rebuild` has built its group's W again.
     if lane == 0u {
         state[m].refactors += 1u;
-        state[m].status = select(REFACTOR, ITERATING, state[m].unfactored == 1u);
     }
 }
 

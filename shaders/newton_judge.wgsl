@@ -3,11 +3,8 @@
 // round-off floor, the last increment against increment_tolerance x the step's displacement
 // (or the scene's motion) plus the round-off of u. A member that passes is CONVERGED; one that
 // fails goes on ITERATING while its factorisation contracts the residual at least tenfold
-// (REFACTOR_CONTRACTION) and its budget lasts, else the HOST takes over (a member of a group
-// in contact may refactorise within the call instead: `newton_contact`'s `judge`); a member
-// without a factorisation yet (`NewtonState.unfactored`) makes one within the call at its
-// first evaluation unless that converges (REFACTOR); an element failure of the evaluation
-// makes it FAILED. One workgroup per member. CPU twin: `cpu::newton_judge`.
+// (REFACTOR_CONTRACTION) and its budget lasts, else the HOST takes over; an element failure
+// of the evaluation makes it FAILED. One workgroup per member. CPU twin: `cpu::newton_judge`.
 
 const NO_FAILURE = 0xffffffffu;
 
@@ -88,11 +85,7 @@ fn main(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workg
     s.balanced = u32(residual <= tolerance);
     if residual <= tolerance && s.increment <= allowed {
         s.status = CONVERGED;
-    } else if !is_finite(residual) || s.iterations >= row.budget {
-        s.status = HOST;
-    } else if s.unfactored == 1u && s.refactors == 0u {
-        s.status = REFACTOR;
-    } else if contraction > real(REFACTOR_CONTRACTION) {
+    } else if !is_finite(residual) || s.iterations >= row.budget || contraction > real(REFACTOR_CONTRACTION) {
         s.status = HOST;
     }
     s.previous_residual = s.residual;

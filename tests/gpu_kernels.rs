@@ -11,7 +11,7 @@ use bifirst::element::{ElementOutput, Formulation, Patches, ReferenceGeometry};
 use bifirst::gpu::shaders::{is_decoupled, is_element_kernel, validate, ElementVariant, SHADERS};
 use bifirst::gpu::types::{
     packed, packed_len, summary_len, Active, Coefficients, ContactCall, ContactGroup, ContactState, DofOut, DofState, DofStep, Inversion, MaterialParams, MemberRange, NewtonMember, NewtonState, StepMotion, StepSummary, MODE_TANGENT,
-    NEWTON_CONVERGED, NEWTON_HOST, NEWTON_ITERATING, NEWTON_REFACTOR, NO_MEMBER, TALLY_ROW,
+    NEWTON_CONVERGED, NEWTON_HOST, NEWTON_ITERATING, NO_MEMBER, TALLY_ROW,
 };
 use bifirst::gpu::uzawa_step::{UzawaPoint, UzawaStepKernel};
 use bifirst::gpu::{ElementFailure, Evaluation, GpuWorld, Inverse, NewtonCall, WorldBody};
@@ -170,7 +170,7 @@ fn kernel_structs_match_the_shader_layouts() {
 fn newton_structs_match_the_shader_layout() {
     let u32_fields = ["inverse_start", "free_start", "free_count", "budget"];
     let real_fields = ["residual_tolerance", "floor", "floor_per_travel", "increment_tolerance", "increment_floor", "round_off"];
-    let state_u32 = ["status", "iterations", "moved", "balanced", "refactors", "unfactored"];
+    let state_u32 = ["status", "iterations", "moved", "balanced", "refactors", "pad"];
     let state_real = ["residual", "previous_residual", "increment"];
     for precision in PRECISIONS {
         let real = precision.size() as u32;
@@ -213,7 +213,7 @@ fn newton_structs_match_the_shader_layout() {
     let g = ContactGroup::<f64> { member_start: 1, member_count: 2, jacobi: 3, refactor: 4, tolerance: 5.0, velocity_scale: 6.0 };
     assert_eq!(bytemuck::cast::<_, [u32; 8]>(g)[..4], [1, 2, 3, 4], "field order");
     assert_eq!(bytemuck::cast::<_, [f64; 4]>(g)[2..], [5.0, 6.0], "field order");
-    let state = NewtonState::<f64> { status: 1, iterations: 2, moved: 3, balanced: 4, refactors: 5, unfactored: 6, residual: 7.0, previous_residual: 8.0, increment: 9.0 };
+    let state = NewtonState::<f64> { status: 1, iterations: 2, moved: 3, balanced: 4, refactors: 5, pad: 6, residual: 7.0, previous_residual: 8.0, increment: 9.0 };
     assert_eq!(bytemuck::cast::<_, [u32; 12]>(state)[..6], [1, 2, 3, 4, 5, 6], "field order");
     assert_eq!(bytemuck::cast::<_, [f64; 6]>(state)[3..], [7.0, 8.0, 9.0], "field order");
     let m = NewtonMember::<f64> { inverse_start: 1, free_start: 2, free_count: 3, budget: 4, residual_tolerance: 5.0, floor: 6.0, floor_per_travel: 7.0, increment_tolerance: 8.0, increment_floor: 9.0, round_off: 10.0 };
@@ -1261,7 +1261,6 @@ fn newton_kernels_match_their_cpu_twins() {
     let Some(gpu) = gpu_or_skip("newton_kernels_match_their_cpu_twins", Precision::F64) else { return };
     let gpu = Arc::new(gpu);
     let coefficients = Coefficients { factor: 1.0, c1: 1e6, motion: 0.0 };
-    let mut first_factorisations = 0;
     for (k, kind) in [ElementKind::Tri3, ElementKind::Quad4, ElementKind::Tet4, ElementKind::Hex8].into_iter().enumerate() {
         let cases = two_bodies(ElementVariant { kind, formulation: Formulation::Displacement, material: "neo_hookean" }, 400 + k as u64);
         // The step started from 0.9 u at rest: Newton goes from u towards the balance of inertia
@@ -1276,17 +1275,7 @@ fn newton_kernels_match_their_cpu_twins() {
         // `evaluated`: the call brings the evaluation of its iterates, else the device makes it
         // and judges it first (the first round of a step), as the twins do. `motion`: the
         // call's floor of the increment bound, above the members' own (1e-3) or not.
-        // `unfactored`: the members have no factorisation yet; they make one at their first
-        // evaluation (`NewtonState::unfactored`: the tangent there, `newton_invert`'s
-        // `refactor`), the device as the twins.
-        let patterns: Vec<Vec<u32>> = cases.iter().map(|c| [c.pattern.col_ptr.clone(), c.pattern.row_idx.clone()].concat()).collect();
-        for (budgets, tolerance, evaluated, motion, unfactored) in
-            [([1u32, 3], 0.0, true, 0.0, false), ([25, 25], 1e-9, true, 0.0, false), ([25, 25], 1e-9, true, 5e-2, false), ([1, 3], 0.0, false, 0.0, false), ([25, 25], 1e-9, false, 5e-2, false), ([25, 25], 1e-9, false, 5e-2, true)]
-        {
-            // (on a software adapter only where its loop guard lets `newton_invert` through)
-            if unfactored && !free.iter().all(|f| world_of(&gpu, &cases).inverts(f.len())) {
-                continue;
-            }
+        for (budgets, tolerance, evaluated, motion) in [([1u32, 3], 0.0, true, 0.0), ([25, 25], 1e-9, true, 0.0), ([25, 25], 1e-9, true, 5e-2), ([1, 3], 0.0, false, 0.0), ([25, 25], 1e-9, false, 5e-2)] {
             let coefficients = Coefficients { motion, ..coefficients };
             let member = |b: usize| NewtonMember {
                 inverse_start: 0,
@@ -1305,22 +1294,12 @@ fn newton_kernels_match_their_cpu_twins() {
             // The twins, one member at a time.
             let mut expected = Vec::new();
             for (b, c) in cases.iter().enumerate() {
-                let range = [MemberRange { dof_start: 0, dofs: c.u.len() as u32, nonzero_start: 0, nonzeros: c.pattern.nnz() as u32, ..Default::default() }];
+                let range = [MemberRange { dof_start: 0, dofs: c.u.len() as u32, ..Default::default() }];
                 let before = if evaluated { residual0(b) } else { f64::MAX };
-                let mut state = [NewtonState { status: NEWTON_ITERATING, residual: before, previous_residual: before, unfactored: unfactored as u32, ..Default::default() }];
+                let mut state = [NewtonState { status: NEWTON_ITERATING, residual: before, previous_residual: before, ..Default::default() }];
                 let (mut u, mut out) = (c.u.clone(), first[b].clone());
-                let mut inverse = if unfactored { vec![f64::NAN; inverses[b].len()] } else { inverses[b].clone() };
-                let mut u_factored = vec![f64::NAN; u.len()];
-                // A member sent to REFACTOR: its tangent at the iterate, `K̄⁻¹` of it.
-                let mut refactor = |state: &mut [NewtonState<f64>; 1], inverse: &mut Vec<f64>, u: &[f64]| {
-                    if state[0].status == NEWTON_REFACTOR {
-                        let values = stiffness_values(c, u, coefficients);
-                        cpu::newton_invert_refactor(inverse, (&[member(b)], &range, &free[b]), (&values, &steps[b], coefficients.c1), (&patterns[b], &[0]), (u, &mut u_factored), state, 0);
-                    }
-                };
                 if !evaluated {
                     cpu::newton_judge(&free[b], &[member(b)], &mut state, &out, &u, &starts[b], &steps[b], coefficients, &[u32::MAX; 2], &range, &pushes[b], 0);
-                    refactor(&mut state, &mut inverse, &u);
                 }
                 let call = [Active { member: 0, mode: 1 }];
                 let (mut jobs, mut left) = (call, call.len());
@@ -1328,13 +1307,10 @@ fn newton_kernels_match_their_cpu_twins() {
                     left = cpu::newton_compact(&call, &state, &mut jobs, left);
                     left > 0
                 } {
-                    cpu::newton_update(&inverse, &free[b], &[member(b)], &mut state, &out, &mut u, &range, &pushes[b], 0);
+                    cpu::newton_update(&inverses[b], &free[b], &[member(b)], &mut state, &out, &mut u, &range, &pushes[b], 0);
                     out = cpu_residual(c, &u, &steps[b], coefficients);
                     cpu::newton_judge(&free[b], &[member(b)], &mut state, &out, &u, &starts[b], &steps[b], coefficients, &[u32::MAX; 2], &range, &pushes[b], 0);
-                    refactor(&mut state, &mut inverse, &u);
                 }
-                assert_eq!(state[0].refactors, unfactored as u32, "{} body {b}: the twins' first factorisation", kind.name());
-                first_factorisations += state[0].refactors;
                 expected.push((state[0], u, out));
             }
             // The device, both members in one call.
@@ -1351,8 +1327,7 @@ fn newton_kernels_match_their_cpu_twins() {
                     body: b,
                     taken: 0,
                     factor: 1,
-                    inverse: (!unfactored).then(|| Inverse::Dense(inverses[b].clone())),
-                    unfactored,
+                    inverse: Some(Inverse::Dense(inverses[b].clone())),
                     member: member(b),
                     residual: evaluated.then(|| residual0(b)),
                     u,
@@ -1399,7 +1374,7 @@ fn newton_kernels_match_their_cpu_twins() {
                     state.iterations
                 );
                 assert_eq!(failure, None);
-                assert_eq!((state.status, state.iterations, state.moved, state.refactors), (want.status, want.iterations, want.moved, want.refactors), "{} body {b}", kind.name());
+                assert_eq!((state.status, state.iterations, state.moved), (want.status, want.iterations, want.moved), "{} body {b}", kind.name());
                 assert!(u_error <= 1e-12 && f_error <= 1e-12 && g_error <= 1e-12 && r_error <= 1e-12 && du_error <= 1e-12, "{} body {b}", kind.name());
             }
             if tolerance == 0.0 {
@@ -1409,7 +1384,6 @@ fn newton_kernels_match_their_cpu_twins() {
             }
         }
     }
-    assert!(first_factorisations > 0, "members without a factorisation made their first on the device");
 }
 
 /// A device Newton call for one body of a batch of 400 read back the failure flags of the whole
@@ -1436,7 +1410,6 @@ fn a_device_newton_call_for_one_body_of_a_large_batch_reads_back_only_its_own() 
         taken: 0,
         factor: 1,
         inverse: Some(Inverse::Dense(inverse.clone())),
-        unfactored: false,
         member,
         residual: Some(residual0),
         u: &mut u,
@@ -1492,7 +1465,6 @@ fn a_device_newton_increment_that_inverts_an_element_fails_the_body() {
         taken: 0,
         factor: 1,
         inverse: Some(Inverse::Dense(inverse)),
-        unfactored: false,
         member,
         residual: Some(1.0),
         u: &mut u,
@@ -1802,7 +1774,6 @@ fn newton_contact_kernels_match_their_cpu_twins() {
                     taken: 0,
                     factor: 1,
                     inverse: Some(Inverse::Dense(member_inverses[b].clone())),
-                    unfactored: false,
                     member: member(b, 0, 0),
                     residual: evaluated.then(|| residual0(b)),
                     u,

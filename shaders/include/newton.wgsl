@@ -37,9 +37,7 @@ struct NewtonState {
     // Times the member's K̄⁻¹ was made anew in this call (REFACTOR), and its displacement at the
     // last of them in `u_factored`: the host factorises there too.
     refactors: u32,
-    // 1: the member has no factorisation for the step yet (the call's start says so): it makes
-    // one at its first evaluation unless that converges.
-    unfactored: u32,
+    pad: u32,
     // Residual norms of the last evaluation and of the one before, and the last increment's norm.
     residual: real,
     previous_residual: real,

@@ -80,7 +80,6 @@ pub(super) fn newton_rows(options: &BenchOptions, gpus: &[Arc<Gpu>], peaks: &[Pe
                         taken: 0,
                         factor: 1,
                         inverse,
-                        unfactored: false,
                         member,
                         residual: Some(residual0),
                         u,

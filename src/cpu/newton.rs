@@ -72,8 +72,7 @@ pub fn newton_invert(inverse: &mut [Real], newton: &[NewtonMember<Real>], effect
 /// from the stiffness values the tangent pass assembled (`values`, where `members` places them)
 /// plus `c1` times the masses of its free dofs on the diagonal (`step`), over its pattern
 /// (`pattern_of[m]` in `patterns`); its displacement into `u_factored`, one more refactorisation
-/// in its state, and a member without a factorisation before (`NewtonState::unfactored`)
-/// iterating again.
+/// in its state.
 #[allow(clippy::too_many_arguments)]
 pub fn newton_invert_refactor(
     inverse: &mut [Real],
@@ -104,7 +103,6 @@ pub fn newton_invert_refactor(
     let dofs = range.dof_start as usize..(range.dof_start + range.dofs) as usize;
     u_factored[dofs.clone()].copy_from_slice(&u[dofs]);
     state[m].refactors += 1;
-    state[m].status = if state[m].unfactored == 1 { NEWTON_ITERATING } else { NEWTON_REFACTOR };
 }
 
 /// `invert_in_place` of `newton_invert.wgsl`: `K̄⁻¹` in place of `K̄` (lower triangles, [`packed`]):
@@ -237,11 +235,7 @@ pub fn newton_judge(
     s.balanced = (residual <= tolerance) as u32;
     if residual <= tolerance && s.increment <= allowed {
         s.status = NEWTON_CONVERGED;
-    } else if !residual.is_finite() || s.iterations >= row.budget {
-        s.status = NEWTON_HOST;
-    } else if s.unfactored == 1 && s.refactors == 0 {
-        s.status = NEWTON_REFACTOR;
-    } else if contraction > REFACTOR_CONTRACTION {
+    } else if !residual.is_finite() || s.iterations >= row.budget || contraction > REFACTOR_CONTRACTION {
         s.status = NEWTON_HOST;
     }
     s.previous_residual = s.residual;

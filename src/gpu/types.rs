@@ -299,9 +299,7 @@ pub struct NewtonState<R> {
     /// Times the device made the member's `K̄⁻¹` anew within the call ([`NEWTON_REFACTOR`]); its
     /// displacement at the last of them is in the batch's `u_factored`.
     pub refactors: u32,
-    /// 1: the member has no factorisation for the step yet (set by the call's start): it makes
-    /// one at its first evaluation unless that converges.
-    pub unfactored: u32,
+    pub pad: u32,
     pub residual: R,
     pub previous_residual: R,
     pub increment: R,

@@ -790,12 +790,6 @@ impl Body {
         self.work.still
     }
 
-    /// Whether external forces act on the body in the step (gravity, surface loads): without
-    /// them a body mostly converges at its first evaluation (at rest, or carried along).
-    pub fn loaded(&self) -> bool {
-        self.work.f_ext.iter().any(|&f| f != 0.0)
-    }
-
     /// Velocity of dof `d` implied by the trial displacement (eq. 15).
     pub fn trial_velocity(&self, p: &StepParams, d: usize) -> Real {
         (self.work.trial.u[d] - self.committed.state.u[d] - p.dt * (1.0 - p.theta) * self.committed.state.v[d]) / (p.theta * p.dt)
@@ -926,7 +920,6 @@ impl Body {
     /// ([`Body::factorize_at`]).
     pub fn note_device_factorization(&mut self, coefficients: Coefficients<Real>) {
         self.work.factor_version += 1;
-        self.work.factor_c1 = Some(coefficients.c1);
         self.work.factor_on_device = Some(coefficients);
         self.work.factored_at_hand_back = false;
     }
@@ -966,13 +959,6 @@ impl Body {
     /// it factorises first, at the iterate about to be evaluated.
     pub fn lacks_factor(&self, p: &StepParams) -> bool {
         self.def.dofs.free_count > 0 && !self.factor_kept_for(p)
-    }
-
-    /// Whether the body keeps factorisations and has made none in the run (nor taken one from a
-    /// saved state): its first may be the device's (`NewtonCall::unfactored`). A body without
-    /// one after a cut-back factorises on the host's path.
-    pub fn never_factorized(&self) -> bool {
-        self.def.reuse_factorization && self.def.dofs.free_count > 0 && self.work.factor_version == 0
     }
 
     /// Whether [`Body::refresh_factor`] needs a tangent it does not have: a GPU world computes

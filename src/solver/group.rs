@@ -28,8 +28,6 @@ pub struct GroupReport {
     /// Newton increments its bodies took on the device ([`GpuWorld::newton`]).
     pub device_iterations: usize,
     pub factorizations: usize,
-    /// Of `factorizations`, those the device made within its Newton calls.
-    pub device_factorizations: usize,
     pub residual_norm: Real,
     pub wall: PhaseTimes,
 }

@@ -5,7 +5,6 @@
 
 use super::body::{coefficients, Body, StepFailure};
 use super::group::{Context, Group, GroupReport, Hold};
-use super::StepParams;
 use crate::contact::uzawa::{Outcome, Problem, Sweep};
 use crate::contact::Settings;
 use crate::gpu::types::ContactState;
@@ -202,12 +201,7 @@ fn evaluate_on_device_first(groups: &[Group], world: &GpuWorld, c: &Context, con
     let p = c.p;
     let software = world.software();
     let fits = |b: &Body, id: usize| world.newton_capable(id) && b.iterates_on_device(p) && world.newton_inverse_current(id, b.factor_version());
-    // A body alone that has not factorised yet makes its first on the device, at its first
-    // evaluation, where the device inverts one of its size; only under external forces: one
-    // without them mostly converges at its first evaluation, which an evaluation pass gives for
-    // fewer bytes than a Newton call.
-    let unfactored = |b: &Body, id: usize| world.newton_capable(id) && b.never_factorized() && b.loaded() && world.inverts(b.dofs().free_count);
-    let alone = |g: &Group| g.bodies.len() == 1 && (fits(g.bodies[0], g.ids[0]) || unfactored(g.bodies[0], g.ids[0])) && !g.bodies[0].evaluation_holds(p);
+    let alone = |g: &Group| g.bodies.len() == 1 && fits(g.bodies[0], g.ids[0]) && !g.bodies[0].evaluation_holds(p);
     let mut chosen: Vec<bool> = groups.par_iter().map(|g| p.max_iterations > 0 && g.contact.is_none() && alone(g)).collect();
     let solvable = |_: usize, g: &Group| p.max_iterations > 0 && g.contact.as_ref().is_some_and(|k| k.solved_whole(software)) && g.bodies.iter().zip(g.ids).all(|(b, &id)| fits(b, id));
     let (in_contact, batch) = contact_groups_on_device(groups, &solvable, world, c, *contact_batch);
@@ -396,7 +390,7 @@ fn device_pass(groups: &mut [Group], live: &[bool], kind: PassKind, world: &mut 
     if !chosen.iter().flatten().any(|&x| x) && !kind.iterating.contains(&true) {
         return results;
     }
-    let mut inverses = missing_inverses(groups, kind.iterating, world, c.p);
+    let mut inverses = missing_inverses(groups, kind.iterating, world);
     let held: &GpuWorld = world;
     let dim = groups.first().and_then(|g| g.bodies.first()).map_or(2, |b| b.def.dim);
     // Each group's share, made in parallel, then laid end to end.
@@ -459,7 +453,7 @@ fn take_back_unconverged(groups: &mut [Group], unkept: &[usize], world: &mut Gpu
         return Ok(());
     }
     let ids: Vec<usize> = held.iter().map(|&(id, _)| id).collect();
-    let (states, _, _) = world.read_kept(&ids, &[], &[], times)?;
+    let (states, _) = world.read_kept(&ids, &[], times)?;
     for ((_, (k, j)), kept) in held.iter().zip(states) {
         groups[*k].bodies[*j].take_committed_mid_step(c.p, &kept);
     }
@@ -495,7 +489,7 @@ fn evaluations_of_pass(groups: &mut [Group], live: &[bool], kind: PassKind, c: &
 /// `K̄⁻¹` of each factorisation of the `iterating` groups' bodies that the device lacks (after a
 /// step that refactorised many grains: all of them), in parallel: `K̄` for the device to invert
 /// where the body holds the values it factorised ([`Body::device_inverse`]).
-fn missing_inverses(groups: &mut [Group], iterating: &[bool], world: &GpuWorld, p: &StepParams) -> Vec<Vec<Option<Inverse>>> {
+fn missing_inverses(groups: &mut [Group], iterating: &[bool], world: &GpuWorld) -> Vec<Vec<Option<Inverse>>> {
     groups
         .par_iter_mut()
         .zip(iterating)
@@ -504,8 +498,7 @@ fn missing_inverses(groups: &mut [Group], iterating: &[bool], world: &GpuWorld, 
                 return Vec::new();
             }
             let wall = &mut g.newton.report.wall;
-            // (a body without a factorisation makes its first on the device)
-            g.bodies.iter_mut().zip(g.ids).map(|(b, &id)| (!world.newton_inverse_current(id, b.factor_version()) && !b.lacks_factor(p)).then(|| b.device_inverse(world.inverts(b.dofs().free_count), wall))).collect()
+            g.bodies.iter_mut().zip(g.ids).map(|(b, &id)| (!world.newton_inverse_current(id, b.factor_version())).then(|| b.device_inverse(world.inverts(b.dofs().free_count), wall))).collect()
         })
         .collect()
 }
@@ -518,8 +511,7 @@ fn evaluations_share<'a>(g: &'a mut Group, chosen: &[bool], kind: PassKind, c: &
 
 /// The calls of a group that iterates on the device, with its contact problem if it has one;
 /// a member of such a group refactorises within the call where the device can invert `K̄` of
-/// every member (`world`); a body alone that has not factorised yet in the run makes its first
-/// there, at its first evaluation (an unevaluated call).
+/// every member (`world`).
 fn iterations_share<'a>(g: &'a mut Group, inverses: Vec<Option<Inverse>>, kind: PassKind, c: &Context, world: &GpuWorld) -> PassShare<'a> {
     let p = c.p;
     let taken = g.newton.report.iterations;
@@ -534,13 +526,9 @@ fn iterations_share<'a>(g: &'a mut Group, inverses: Vec<Option<Inverse>>, kind: 
         .zip(ids.iter())
         .zip(inverses)
         .map(|((body, &id), inverse)| {
-            // (a kept call's state does not come back, nor would its factorisation)
-            let (unfactored, first) = (body.lacks_factor(p), body.never_factorized());
-            let hold = if body.may_step_on_device() && !unfactored { hold(id) } else { Hold::No };
+            let hold = if body.may_step_on_device() { hold(id) } else { Hold::No };
             let mut call = body.newton_call(id, p, taken, inverse, !kind.unevaluated);
             (call.keep, call.positions) = (hold != Hold::No, hold == Hold::AllButPositions);
-            call.unfactored = unfactored && first && alone && kind.unevaluated && refactor;
-            assert!(call.unfactored || !unfactored, "a body without a factorisation goes to the device only alone, unevaluated, where it inverts");
             call
         })
         .collect();
@@ -603,7 +591,6 @@ fn finish_iterations(g: &mut Group, (range, index): (std::ops::Range<usize>, Opt
         if end.refactors > 0 {
             body.note_device_factorization(coefficients(c.p));
             state.report.factorizations += end.refactors as usize;
-            state.report.device_factorizations += end.refactors as usize;
         }
         if let (Ok(()), Err(e)) = (&result, body.finish_device_newton(c.p, end, *strain, *failure, *tangent_held, *summary)) {
             result = Err(e);

@@ -67,8 +67,6 @@ pub struct StepReport {
     pub device_iterations: usize,
     /// Numeric factorisations, summed over bodies, iterations and sub-steps.
     pub factorizations: usize,
-    /// Of `factorizations`, those the device made within its Newton calls.
-    pub device_factorizations: usize,
     /// Contact totals over the step (sub-steps added up; penetration the largest).
     pub contact: ContactStats,
     pub wall: PhaseTimes,
@@ -113,7 +111,6 @@ impl StepReport {
             self.bodies_iterated += g.bodies_iterated;
             self.device_iterations += g.device_iterations;
             self.factorizations += g.factorizations;
-            self.device_factorizations += g.device_factorizations;
             self.residual_norm = self.residual_norm.max(g.residual_norm);
             self.wall += g.wall;
         }
@@ -260,21 +257,14 @@ fn placer<'a>(bodies: &'a [Body], u: impl Fn(&Body) -> &[Real] + Sync + 'a) -> i
 }
 
 /// The committed states the device keeps of the listed bodies (each held), back into the host's.
-fn take_committed_of(bodies: &mut [Body], world: Option<&mut GpuWorld>, held: &[usize], factors: bool, times: &mut PhaseTimes) -> Result<(), StepFailure> {
+fn take_committed_of(bodies: &mut [Body], world: Option<&mut GpuWorld>, held: &[usize], times: &mut PhaseTimes) -> Result<(), StepFailure> {
     if held.is_empty() {
         return Ok(());
     }
     let world = world.expect("a state kept on a device");
-    // With `factors`, the host's factorisations of those whose last the device made (grains
-    // that newly touch something: the host mostly iterates them next), in the same read.
-    let factored: Vec<usize> = held.iter().copied().filter(|&b| factors && bodies[b].factor_on_device()).collect();
-    let (states, _, at) = world.read_kept(held, &[], &factored, times).map_err(|e| bodies[held[0]].device_failure(&e))?;
+    let (states, _) = world.read_kept(held, &[], times).map_err(|e| bodies[held[0]].device_failure(&e))?;
     for (&b, kept) in held.iter().zip(states) {
         bodies[b].take_committed(&kept);
-    }
-    for (&b, u) in factored.iter().zip(at) {
-        bodies[b].factorize_at(&u, times)?;
-        world.note_factorized(b, bodies[b].factor_version());
     }
     Ok(())
 }
@@ -289,7 +279,7 @@ fn take_step_ends(bodies: &mut [Body], world: Option<&mut GpuWorld>, needed: &[b
     let world = world.expect("a step's end kept on a device");
     let failure = |e: crate::gpu::GpuError| bodies[held[0]].device_failure(&e);
     let starts: Vec<usize> = held.iter().copied().filter(|&b| bodies[b].held_state().is_some()).collect();
-    let (states, ends, _) = world.read_kept(&starts, &held, &[], times).map_err(failure)?;
+    let (states, ends) = world.read_kept(&starts, &held, times).map_err(failure)?;
     for (&b, kept) in starts.iter().zip(states) {
         bodies[b].take_committed_mid_step(p, &kept);
     }
@@ -809,12 +799,12 @@ impl Simulation {
         // The searches place bodies at the host's displacements; a body with contact points is
         // the host's from here on.
         let unplaceable: Vec<usize> = (0..self.bodies.len()).filter(|&b| detection.needed[b] && !self.bodies[b].positions_current()).collect();
-        take_committed_of(&mut self.bodies, self.world.as_mut(), &unplaceable, true, times)?;
+        take_committed_of(&mut self.bodies, self.world.as_mut(), &unplaceable, times)?;
         let points = detection.points(model, config, &placer(&self.bodies, |b| &b.committed.state.u), dim, margin);
         let mut touching: Vec<usize> = points.iter().flat_map(|c| c.terms()).map(|t| t.body as usize).filter(|&b| self.bodies[b].held_state().is_some()).collect();
         touching.sort_unstable();
         touching.dedup();
-        take_committed_of(&mut self.bodies, self.world.as_mut(), &touching, true, times)?;
+        take_committed_of(&mut self.bodies, self.world.as_mut(), &touching, times)?;
         Ok((points, velocity_scale))
     }
 
@@ -822,7 +812,7 @@ impl Simulation {
     /// this (logged states, VTU frames, probes, restarts, the end of a run).
     pub fn sync_states(&mut self) -> Result<(), StepFailure> {
         let held: Vec<usize> = (0..self.bodies.len()).filter(|&b| self.bodies[b].held_state().is_some()).collect();
-        take_committed_of(&mut self.bodies, self.world.as_mut(), &held, false, &mut PhaseTimes::default())
+        take_committed_of(&mut self.bodies, self.world.as_mut(), &held, &mut PhaseTimes::default())
     }
 
     /// Makes the host's factorisations where the device made the bodies' last ones within a

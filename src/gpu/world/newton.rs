@@ -49,20 +49,15 @@ pub(super) const KEPT_COUNT: usize = 13;
 /// member order, and the workgroups of the energy pass over them.
 type BatchCalls = (usize, Vec<(usize, usize)>, [u32; 3]);
 
-/// A batch and some of its calls' `(call, member)` pairs, in member order.
-type BatchMembers = (usize, Vec<(usize, usize)>);
-
 /// What the submissions of a [`GpuWorld::newton`] call record: its batches' calls, the passes of
 /// its groups in contact (their batch), the solve dispatches per increment, the number of
-/// groups in contact, whether a member may refactorise within the call, and the batches whose
-/// host tangents' lists it staged ([`HostTangents`]).
+/// groups in contact and whether any may refactorise within the call.
 struct CallPlan<'a> {
     work: &'a [BatchCalls],
     contact: Option<&'a (usize, ContactPasses)>,
     solves: usize,
     contacts: usize,
     refactor: bool,
-    tangents: &'a [usize],
 }
 
 /// Where a call's results land in a read-back: its state, then (absent for a kept call) its
@@ -172,10 +167,6 @@ pub struct NewtonCall<'a> {
     /// does not hold that version's yet ([`GpuWorld::newton_inverse_current`]).
     pub factor: u64,
     pub inverse: Option<Inverse>,
-    /// The body has no factorisation for the step (no `inverse`): the device makes one at its
-    /// first evaluation unless that converges ([`NewtonState::unfactored`]), from its tangent
-    /// there, as [`NewtonState::refactors`] then says. Unevaluated calls only.
-    pub unfactored: bool,
     /// The body's tolerances and the step's budget (`inverse_start`, `free_start` and
     /// `free_count` are the world's to set).
     pub member: NewtonMember<Real>,
@@ -208,24 +199,23 @@ pub struct NewtonCall<'a> {
     /// the same submission: the step's energy balance then needs no pass of its own).
     pub strain_energy: Option<Real>,
     pub failure: Option<ElementFailure>,
-    /// Out, for a member of a group in contact, or one without a factorisation yet, that the
-    /// device hands back to the host ([`NEWTON_HOST`]): the device holds its stiffness values
-    /// `ξ K` at the `u` returned (computed after the iterations, not read back), so that the
-    /// `K̄` the host makes there goes up by its diagonal ([`Inverse::AtHandBack`]).
+    /// Out, for a member of a group in contact that the device hands back to the host
+    /// ([`NEWTON_HOST`]): the device holds its stiffness values `ξ K` at the `u` returned
+    /// (computed after the iterations, not read back), so that the `K̄` the host makes there
+    /// goes up by its diagonal ([`Inverse::AtHandBack`]).
     pub tangent_held: bool,
 }
 
-/// The tangents of the members of groups in contact, and of members without a factorisation
-/// yet ([`NewtonCall::unfactored`]), that a call hands back to the host: `newton_compact`'s `host`
-/// entry lists them, and the tangent kernel and `assemble_csr` run over that list after the
-/// iterations. Their stiffness values stay on the device ([`NewtonCall::tangent_held`]): the
-/// host assembles its own to factorise (a grain's tangent costs the CPU less than its
-/// factorisation, and reading them cost half the bytes of a pressed packing's steps), and `K̄`
-/// goes back up by its diagonal. The same passes give the tangents of those that refactorise
-/// within the call.
+/// The tangents of the members of groups in contact that a call hands back to the host
+/// (mostly a factorisation that contracts too slowly, which the host renews at that iterate):
+/// `newton_compact`'s `host` entry lists them, and the tangent kernel and `assemble_csr` run
+/// over that list after the iterations. Their stiffness values stay on the device
+/// ([`NewtonCall::tangent_held`]): the host assembles its own to factorise (a grain's tangent
+/// costs the CPU less than its factorisation, and reading them cost half the bytes of a
+/// pressed packing's steps), and `K̄` goes back up by its diagonal.
 struct HostTangents {
-    /// The members of the call's groups in contact and those without a factorisation yet (mode
-    /// TANGENT); those handed back or refactorising go into a list the passes are bound to.
+    /// The members of the call's groups in contact (mode TANGENT); those handed back go into
+    /// a list the passes are bound to.
     call: Buffer,
     /// The indirect dispatches of the tangent and `assemble_csr`, then the list's length
     /// (the layout of [`DISPATCH_WORDS`]).
@@ -339,15 +329,14 @@ pub(super) struct NewtonBuffers {
     update: Pass,
     judge: Pass,
     compact: Pass,
-    /// Made by the first call with groups in contact or members without a factorisation.
+    /// Made by the first call with groups in contact.
     host_tangents: Option<HostTangents>,
-    /// Each member's state at the start of an unevaluated call (twice: the second without a
-    /// factorisation yet, [`NewtonState::unfactored`]) and its flags without a failure, which the
-    /// device copies into `state` and the batch's `failure` for the call's runs of members
-    /// (`start_runs`: first member, count, unfactored) at its first submission.
+    /// Each member's state at the start of an unevaluated call and its flags without a failure,
+    /// which the device copies into `state` and the batch's `failure` for the call's runs of
+    /// members (`start_runs`: first member, count) at its first submission.
     initial_state: Buffer,
     no_failure: Buffer,
-    start_runs: Vec<(usize, usize, bool)>,
+    start_runs: Vec<(usize, usize)>,
     /// The call's list as last uploaded, and how many of its first are kept.
     call_host: Vec<Active>,
     call_kept: usize,
@@ -510,9 +499,7 @@ impl NewtonBuffers {
         );
         let add_up = Pass::bound(gpu, pipelines.tally.clone(), ("newton_tally", "main"), None, &[("call", &call), ("dispatch", &dispatch), ("state", &state), ("rows", &rows), ("tally", &tally)]);
         let initial = NewtonState::<Real> { status: NEWTON_ITERATING, residual: Real::MAX, previous_residual: Real::MAX, ..NewtonState::default() };
-        let unfactored = NewtonState::<Real> { unfactored: 1, ..initial };
-        let templates: Vec<NewtonState<Real>> = [vec![initial; members], vec![unfactored; members]].concat();
-        let initial_state = super::buffer_init(gpu, "initial newton state", bytemuck::cast_slice(&templates), BufferUsages::COPY_SRC);
+        let initial_state = super::buffer_init(gpu, "initial newton state", bytemuck::cast_slice(&vec![initial; members]), BufferUsages::COPY_SRC);
         let no_failure = super::buffer_init(gpu, "no failure", bytemuck::cast_slice(&vec![NO_FAILURE; 2 * members]), BufferUsages::COPY_SRC);
         Ok(Self {
             initial_state,
@@ -553,10 +540,8 @@ impl NewtonBuffers {
             compact,
             host_tangents: None,
             newton_host: vec![NewtonMember { residual_tolerance: Real::NAN, ..NewtonMember::default() }; members],
-            // (wgpu zero-fills a new buffer: a run's first call sends no start displacements
-            // and contact forces that are still zero)
-            start_host: vec![0.0; dofs],
-            contact_host: vec![0.0; dofs],
+            start_host: vec![Real::NAN; dofs],
+            contact_host: vec![Real::NAN; dofs],
             inverse_version: vec![None; members],
             resident,
         })
@@ -619,15 +604,15 @@ impl GpuWorld {
             Some(sweeps) if contact.is_some() => sweeps.whole_dispatches(problems.iter().map(|p| p.max_iterations).max().unwrap_or(0)),
             _ => 0,
         };
-        // Per batch, the members whose tangents the device may compute, `(call, member)`: those
-        // of the groups in contact (handed back, or refactorising within the call) and those
-        // without a factorisation yet.
-        let listed = self.stage_host_tangents(&work, calls, contacts, contact.as_ref().map(|(batch, _)| *batch))?;
+        // The members of the groups in contact, `(call, member)`, whose tangents the device
+        // computes when it hands them back.
+        let in_contact = match &contact {
+            Some((batch, _)) => self.stage_host_tangents(*batch, calls, contacts)?,
+            None => Vec::new(),
+        };
         let points = problems.iter().map(|p| p.local.len()).sum::<usize>();
         let target = self.newton_target(&work, list, contact.as_ref().map(|_| (points, contacts.len())));
-        let refactor = contacts.iter().any(|g| g.refactor) || calls.iter().any(|c| c.unfactored);
-        let tangents: Vec<usize> = listed.iter().map(|(batch, _)| *batch).collect();
-        let plan = CallPlan { work: &work, contact: contact.as_ref(), solves, contacts: contacts.len(), refactor, tangents: &tangents };
+        let plan = CallPlan { work: &work, contact: contact.as_ref(), solves, contacts: contacts.len(), refactor: contacts.iter().any(|g| g.refactor) };
         let mut t0 = started;
         let mut iterations = calls.iter().map(|c| c.member.budget.saturating_sub(c.taken)).max().unwrap_or(0).min(ITERATIONS_PER_SUBMIT);
         let evaluate_first = calls.first().is_some_and(|c| c.residual.is_none());
@@ -672,8 +657,8 @@ impl GpuWorld {
             if evaluated.is_some() {
                 self.note_handed_evaluations(list);
             }
-            for (batch, mine) in &listed {
-                self.note_held_tangents(*batch, calls, mine);
+            if let Some((batch, _)) = &contact {
+                self.note_held_tangents(*batch, calls, &in_contact);
             }
             first = false;
             if !iterating || interrupt.is_some_and(|f| f.load(Ordering::SeqCst)) {
@@ -733,7 +718,7 @@ impl GpuWorld {
         // The templates of a call's start, the reference coordinates, each dof's free index and
         // each member's pattern start, once.
         let b = &self.batches[batch];
-        self.traffic.up += (b.members.len() * (2 * std::mem::size_of::<NewtonState<Real>>() + 12) + b.reference.len() * self.gpu.precision.size() + 4 * b.u_host.len()) as u64;
+        self.traffic.up += (b.members.len() * (std::mem::size_of::<NewtonState<Real>>() + 12) + b.reference.len() * self.gpu.precision.size() + 4 * b.u_host.len()) as u64;
         self.batches[batch].newton = Some(made);
         Ok(())
     }
@@ -797,9 +782,8 @@ impl GpuWorld {
         for (batch, mine, _) in work {
             let (b, n) = (&self.batches[*batch], self.batches[*batch].newton.as_ref().expect("staged"));
             encoder.copy_buffer_to_buffer(&n.call, 0, &n.jobs, 0, 8 * mine.len() as u64);
-            for &(first, count, unfactored) in &n.start_runs {
-                let template = if unfactored { b.members.len() + first } else { first };
-                encoder.copy_buffer_to_buffer(&n.initial_state, template as u64 * state, &n.state, first as u64 * state, count as u64 * state);
+            for &(first, count) in &n.start_runs {
+                encoder.copy_buffer_to_buffer(&n.initial_state, first as u64 * state, &n.state, first as u64 * state, count as u64 * state);
                 encoder.copy_buffer_to_buffer(&n.no_failure, 8 * first as u64, &b.failure, 8 * first as u64, 8 * count as u64);
             }
         }
@@ -858,9 +842,6 @@ impl GpuWorld {
                 if let (Some(c), Some(p)) = (mine, pipelines) {
                     c.record_first_judge(&self.gpu, &mut pass, p);
                 }
-                // A member without a factorisation yet that did not converge: `K̄⁻¹` at its first
-                // evaluation.
-                self.record_refactor(&mut pass, plan, *batch);
                 n.compact.dispatch(&self.gpu, &mut pass, 1);
             }
         }
@@ -881,18 +862,18 @@ impl GpuWorld {
                 n.judge.dispatch_indirect(&self.gpu, &mut pass, &n.dispatch, 36);
                 if let (Some(c), Some(p)) = (mine, pipelines) {
                     c.record_judge(&self.gpu, &mut pass, p);
-                }
-                // The members the verdicts send to REFACTOR: K̄⁻¹ at this iterate and their
-                // groups' W again, before the next iteration's list.
-                self.record_refactor(&mut pass, plan, *batch);
-                if let (Some(c), Some(p), true) = (mine, pipelines, plan.refactor) {
-                    c.record_rebuild(&self.gpu, &mut pass, p);
+                    // The members the verdicts send to REFACTOR: K̄⁻¹ at this iterate and their
+                    // groups' W again, before the next iteration's list.
+                    if plan.refactor {
+                        n.host_tangents.as_ref().expect("staged").record_refactor(&self.gpu, &mut pass);
+                        c.record_rebuild(&self.gpu, &mut pass, p);
+                    }
                 }
                 n.compact.dispatch(&self.gpu, &mut pass, 1);
             }
         }
-        for &batch in plan.tangents {
-            let h = self.batches[batch].newton.as_ref().and_then(|n| n.host_tangents.as_ref()).expect("staged");
+        if let Some((batch, _)) = plan.contact {
+            let h = self.batches[*batch].newton.as_ref().and_then(|n| n.host_tangents.as_ref()).expect("staged");
             h.compact.dispatch(&self.gpu, &mut pass, 1);
             h.tangent.dispatch_indirect(&self.gpu, &mut pass, &h.dispatch, 0);
             h.csr.dispatch_indirect(&self.gpu, &mut pass, &h.dispatch, 12);
@@ -903,14 +884,6 @@ impl GpuWorld {
             n.finish.dispatch(&self.gpu, &mut pass, mine.len().div_ceil(WORKGROUP) as u32);
             n.summarise.dispatch(&self.gpu, &mut pass, mine.len().div_ceil(WORKGROUP) as u32);
             n.add_up.dispatch(&self.gpu, &mut pass, 1);
-        }
-    }
-
-    /// The refactorisations within an iteration of `batch`'s members ([`HostTangents::record_refactor`]),
-    /// where the call has any.
-    fn record_refactor(&self, pass: &mut wgpu::ComputePass, plan: &CallPlan, batch: usize) {
-        if plan.refactor && plan.tangents.contains(&batch) {
-            self.batches[batch].newton.as_ref().and_then(|n| n.host_tangents.as_ref()).expect("staged").record_refactor(&self.gpu, pass);
         }
     }
 
@@ -1113,33 +1086,10 @@ impl GpuWorld {
         Ok((batch, passes))
     }
 
-    /// Stages, per batch of the call's `work`, the list of members whose tangents the device may
-    /// compute ([`HostTangents`]): those of the groups in contact (all in `contact_batch`),
-    /// which it hands back or refactorises within the call, and those without a factorisation
-    /// yet ([`NewtonCall::unfactored`]), in mode TANGENT, with the
-    /// dispatches' extent. Returns each such batch with those members, `(call, member)` in
-    /// member order.
-    fn stage_host_tangents(&mut self, work: &[BatchCalls], calls: &[NewtonCall], contacts: &[GroupContact], contact_batch: Option<usize>) -> Result<Vec<BatchMembers>, GpuError> {
-        let in_contact: Vec<usize> = contacts.iter().flat_map(|g| g.calls.iter().copied()).collect();
-        let mut listed = Vec::new();
-        for (batch, members, _) in work {
-            let mut mine: Vec<(usize, usize)> = members.iter().copied().filter(|&(i, _)| calls[i].unfactored).collect();
-            if contact_batch == Some(*batch) {
-                mine.extend(in_contact.iter().map(|&c| (c, self.place[calls[c].body].1)));
-            }
-            if mine.is_empty() {
-                continue;
-            }
-            mine.sort_unstable_by_key(|&(_, m)| m);
-            self.stage_tangent_list(*batch, &mine)?;
-            listed.push((*batch, mine));
-        }
-        Ok(listed)
-    }
-
-    /// Makes a batch's [`HostTangents`] unless it has them, and uploads its list `mine`
-    /// (`(call, member)`, member order) and the dispatches' extent.
-    fn stage_tangent_list(&mut self, batch: usize, mine: &[(usize, usize)]) -> Result<(), GpuError> {
+    /// Stages the tangents of the members of a call's groups in contact (all in `batch`) that
+    /// the device hands back ([`HostTangents`]): their list, in mode TANGENT, and the
+    /// dispatches' extent. Returns those members, `(call, member)` in member order.
+    fn stage_host_tangents(&mut self, batch: usize, calls: &[NewtonCall], contacts: &[GroupContact]) -> Result<Vec<(usize, usize)>, GpuError> {
         self.batches[batch].tangent.ready()?;
         let b = &self.batches[batch];
         let n = b.newton.as_ref().expect("made before staging");
@@ -1148,6 +1098,8 @@ impl GpuWorld {
             let made = HostTangents::new(&self.gpu, self.newton_pipelines.as_ref().expect("made with the batch's buffers"), b, tangent, (n, &self.coefficients));
             self.batches[batch].newton.as_mut().expect("made before staging").host_tangents = Some(made);
         }
+        let mut mine: Vec<(usize, usize)> = contacts.iter().flat_map(|g| &g.calls).map(|&c| (c, self.place[calls[c].body].1)).collect();
+        mine.sort_unstable_by_key(|&(_, m)| m);
         let b = &self.batches[batch];
         let list: Vec<Active> = mine.iter().map(|&(_, m)| Active { member: m as u32, mode: MODE_TANGENT }).collect();
         let most = |f: fn(&crate::gpu::types::MemberRange) -> u32| mine.iter().map(|&(_, m)| f(&b.members[m]) as usize).max().unwrap_or(0);
@@ -1158,7 +1110,7 @@ impl GpuWorld {
         let (call, arguments) = (h.call.clone(), h.dispatch.clone());
         self.upload(&call, 0, bytemuck::cast_slice(&list));
         self.upload(&arguments, 0, bytemuck::cast_slice(&dispatch));
-        Ok(())
+        Ok(mine)
     }
 
     /// Uploads what the listed calls (`(call, member)`, member order) of one batch need: stale
@@ -1218,19 +1170,10 @@ impl GpuWorld {
         // residuals.
         n.start_runs.clear();
         let unevaluated = mine.iter().all(|&(i, _)| calls[i].residual.is_none());
-        let unfactored: Vec<bool> = mine.iter().map(|&(i, _)| calls[i].unfactored).collect();
-        debug_assert!(unevaluated || !unfactored.contains(&true), "a call without a factorisation is unevaluated");
         for run in super::runs(&members) {
             let first = run[0] as u64;
             if unevaluated {
-                // (split where the template changes)
-                let mut at = 0;
-                while at < run.len() {
-                    let flag = unfactored[k + at];
-                    let len = unfactored[k + at..k + run.len()].iter().take_while(|&&u| u == flag).count();
-                    n.start_runs.push((run[at], len, flag));
-                    at += len;
-                }
+                n.start_runs.push((run[0], run.len()));
             } else {
                 uploads.push((n.state.clone(), first * state_size, bytemuck::cast_slice(&states[k..k + run.len()]).to_vec()));
                 uploads.push((b.failure.clone(), 8 * first, bytemuck::cast_slice(&vec![NO_FAILURE; 2 * run.len()]).to_vec()));

@@ -385,11 +385,9 @@ impl GpuWorld {
     /// after the commit that is waiting (recorded at the head of the same submission); and the
     /// last device Newton iterates, internal forces and strain energies of the bodies `iterates`
     /// (kept calls that converged: [`crate::gpu::NewtonCall::keep`]), as their calls left them.
-    /// One submission, which also brings where the device last refactorised the bodies
-    /// `factored` ([`GpuWorld::factored_at`]). Both are the host's from here on: the device's sums
+    /// One submission. Both are the host's from here on: the device's sums
     /// ([`GpuWorld::step_tally`], [`GpuWorld::held_strain`]) no longer count them.
-    #[allow(clippy::type_complexity)]
-    pub fn read_kept(&mut self, committed: &[usize], iterates: &[usize], factored: &[usize], times: &mut PhaseTimes) -> Result<(Vec<KeptState>, Vec<KeptIterate>, Vec<Vec<Real>>), GpuError> {
+    pub fn read_kept(&mut self, committed: &[usize], iterates: &[usize], times: &mut PhaseTimes) -> Result<(Vec<KeptState>, Vec<KeptIterate>), GpuError> {
         if !committed.is_empty() {
             for batch in 0..self.batches.len() {
                 if let Some((list, motion)) = self.batches[batch].newton.as_mut().and_then(|n| n.resident.pending.take()) {
@@ -406,15 +404,14 @@ impl GpuWorld {
         };
         let per_member = |size: usize| move |_: &Batch, m: usize| (m * size) as u64..((m + 1) * size) as u64;
         let (states, reals, energy, row) = (per_dof(state), per_dof(real), per_member(real), per_member(TALLY_ROW * real));
-        let requests: [SpanRequest; 6] = [
+        let requests: [SpanRequest; 5] = [
             (committed, super::Source::Committed, &states),
             (committed, super::Source::CommittedEnergy, &energy),
             (iterates, super::Source::Displacement, &reals),
             (iterates, super::Source::NewtonForces, &reals),
             (iterates, super::Source::TallyRows, &row),
-            (factored, super::Source::Factored, &reals),
         ];
-        let [states, energies, u, f, rows, at]: [Vec<Vec<u8>>; 6] = self.read_member_spans(&requests, times)?.try_into().expect("six requests");
+        let [states, energies, u, f, rows]: [Vec<Vec<u8>>; 5] = self.read_member_spans(&requests, times)?.try_into().expect("five requests");
         let energies: Vec<Real> = energies.iter().map(|b| bytemuck::pod_read_unaligned(b)).collect();
         for e in &energies {
             self.held.0 = self.held.0.saturating_sub(1);
@@ -426,7 +423,7 @@ impl GpuWorld {
         }
         let kept = states.iter().zip(energies).map(|(b, e)| KeptState { states: bytemuck::pod_collect_to_vec(b), strain: e }).collect();
         let iterates = u.iter().zip(&f).zip(&rows).map(|((u, f), row)| KeptIterate { u: bytemuck::pod_collect_to_vec(u), f_int: bytemuck::pod_collect_to_vec(f), strain: row[1] }).collect();
-        Ok((kept, iterates, at.iter().map(|b| bytemuck::pod_collect_to_vec(b)).collect()))
+        Ok((kept, iterates))
     }
 
     /// What the step's ends that the device keeps add up to ([`GpuWorld::read_kept`] takes

@@ -163,7 +163,6 @@ impl Body {
             taken: taken as u32,
             factor: self.work.factor_version,
             inverse,
-            unfactored: false,
             member,
             residual,
             u: &mut self.work.trial.u,
