@@ -540,8 +540,10 @@ impl NewtonBuffers {
             compact,
             host_tangents: None,
             newton_host: vec![NewtonMember { residual_tolerance: Real::NAN, ..NewtonMember::default() }; members],
-            start_host: vec![Real::NAN; dofs],
-            contact_host: vec![Real::NAN; dofs],
+            // (wgpu zero-fills a new buffer: a run's first call sends no start displacements
+            // and contact forces that are still zero)
+            start_host: vec![0.0; dofs],
+            contact_host: vec![0.0; dofs],
             inverse_version: vec![None; members],
             resident,
         })
