@@ -133,10 +133,6 @@ fn store_pair_tensor(slot: u32, f: Mat3, st: StressTangent, dv: real) {
     }
 }
 
-fn is_finite(x: real) -> bool {
-    return abs(x) <= REAL_MAX;
-}
-
 // Index of entry (row, col), row <= col, in the packed upper triangle.
 fn packed(row: u32, col: u32) -> u32 {
     return row * NDOF - row * (row + 1u) / 2u + col;

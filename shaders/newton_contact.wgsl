@@ -272,9 +272,9 @@ fn judge(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) 
         all_balanced = all_balanced && s.balanced == 1u;
         // (newton_judge hands a member to the host for a residual that is not finite, a spent
         // budget, tested below, or a slow contraction)
-        let lost = s.status == HOST && (grp.refactor == 0u || !(abs(s.residual) <= REAL_MAX));
+        let lost = s.status == HOST && (grp.refactor == 0u || !is_finite(s.residual));
         to_host = to_host || lost || s.status == FAILED;
-        slow = slow || s.residual > real(REFACTOR_CONTRACTION) * max(s.previous_residual, REAL_MIN_POSITIVE);
+        slow = slow || contracts_slowly(s);
     }
     let c = contact_states[k];
     let settled = c.change <= grp.tolerance && c.uzawa == UZAWA_CONVERGED;
@@ -294,10 +294,15 @@ fn judge(@builtin(global_invocation_id) id: vec3<u32>, @builtin(num_workgroups) 
         let m = group_members[grp.member_start + a];
         let s = state[m];
         if s.status != FAILED {
-            let refactors = verdict == ITERATING && s.residual > real(REFACTOR_CONTRACTION) * max(s.previous_residual, REAL_MIN_POSITIVE);
-            state[m].status = select(verdict, REFACTOR, refactors);
+            state[m].status = select(verdict, REFACTOR, verdict == ITERATING && contracts_slowly(s));
         }
     }
+}
+
+// Whether a member's last evaluation contracted its residual less than tenfold
+// (`Body::refresh_factor`'s rule).
+fn contracts_slowly(s: NewtonState) -> bool {
+    return s.residual > real(REFACTOR_CONTRACTION) * max(s.previous_residual, REAL_MIN_POSITIVE);
 }
 
 // A group's first evaluation of a step, before `newton_judge`: the contact forces of the

@@ -23,10 +23,6 @@ const NO_FAILURE = 0xffffffffu;
 
 var<workgroup> go: u32;
 
-fn is_finite(x: real) -> bool {
-    return abs(x) <= REAL_MAX;
-}
-
 @compute @workgroup_size(NEWTON_WORKGROUP)
 fn main(@builtin(local_invocation_index) lane: u32, @builtin(workgroup_id) workgroup: vec3<u32>) {
     let m = jobs[workgroup.z].member;

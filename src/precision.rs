@@ -47,7 +47,8 @@ impl Precision {
             Precision::F32 => ("3.4028234663852886e38", "1.1754943508222875e-38"),
             Precision::F64 => ("1.7976931348623157e308", "2.2250738585072014e-308"),
         };
-        format!("alias real = {};\nconst REAL_MAX = real({max});\nconst REAL_MIN_POSITIVE = real({min_positive});\n", self.name())
+        // (`is_finite`: false for an infinity and for NaN, which compares false)
+        format!("alias real = {};\nconst REAL_MAX = real({max});\nconst REAL_MIN_POSITIVE = real({min_positive});\nfn is_finite(x: real) -> bool {{\n    return abs(x) <= REAL_MAX;\n}}\n", self.name())
     }
 }
 

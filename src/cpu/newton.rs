@@ -691,7 +691,7 @@ pub fn newton_contact_judge(newton: &[NewtonMember<Real>], state: &mut [NewtonSt
     let grp = c.groups[k];
     let list = &c.group_members[grp.member_start as usize..][..grp.member_count as usize];
     let lead = list[0] as usize;
-    let slow_one = |s: &NewtonState<Real>| s.residual > REFACTOR_CONTRACTION * s.previous_residual.max(Real::MIN_POSITIVE);
+    let contracts_slowly = |s: &NewtonState<Real>| s.residual > REFACTOR_CONTRACTION * s.previous_residual.max(Real::MIN_POSITIVE);
     let (mut all_converged, mut all_balanced, mut to_host, mut slow) = (true, true, false, false);
     for &m in list {
         let s = state[m as usize];
@@ -699,7 +699,7 @@ pub fn newton_contact_judge(newton: &[NewtonMember<Real>], state: &mut [NewtonSt
         all_balanced &= s.balanced == 1;
         let lost = s.status == NEWTON_HOST && (grp.refactor == 0 || !s.residual.is_finite());
         to_host |= lost || s.status == NEWTON_FAILED;
-        slow |= slow_one(&s);
+        slow |= contracts_slowly(&s);
     }
     let cs = contact_states[k];
     let settled = cs.change <= grp.tolerance && cs.uzawa == JUDGE_CONVERGED;
@@ -721,7 +721,7 @@ pub fn newton_contact_judge(newton: &[NewtonMember<Real>], state: &mut [NewtonSt
     for &m in list {
         let s = &mut state[m as usize];
         if s.status != NEWTON_FAILED {
-            s.status = if verdict == NEWTON_ITERATING && slow_one(s) { NEWTON_REFACTOR } else { verdict };
+            s.status = if verdict == NEWTON_ITERATING && contracts_slowly(s) { NEWTON_REFACTOR } else { verdict };
         }
     }
 }

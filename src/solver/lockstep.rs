@@ -124,39 +124,22 @@ pub(super) fn newton_in_lockstep(groups: &mut [Group], world: &mut GpuWorld, c: 
 
 /// The host's own factorisations of the `chosen` groups' bodies whose last one the device made
 /// within a Newton call ([`Body::factor_on_device`]) and that the host is about to solve with
-/// (no refactorisation due): where the device made them, whose displacements come back in one
-/// read ([`GpuWorld::factored_at`]), in parallel. A body whose call converged on the device
-/// needs none until then. Returns each group's result.
+/// (no refactorisation due), where the device made them ([`super::factorize_where_the_device_did`]).
+/// A body whose call converged on the device needs none until then. Returns each group's result.
 fn factors_from_device(groups: &mut [Group], chosen: &[bool], world: &mut GpuWorld, c: &Context, times: &mut PhaseTimes) -> Vec<Result<(), StepFailure>> {
     let mut results: Vec<Result<(), StepFailure>> = groups.iter().map(|_| Ok(())).collect();
-    let wanted: Vec<(usize, usize)> = groups.iter().enumerate().filter(|&(k, _)| chosen[k]).flat_map(|(k, g)| g.bodies.iter().enumerate().filter(|(_, b)| b.factor_on_device() && !b.needs_factorization(c.p)).map(move |(j, _)| (k, j))).collect();
-    if wanted.is_empty() {
-        return results;
-    }
-    let ids: Vec<usize> = wanted.iter().map(|&(k, j)| groups[k].ids[j]).collect();
-    let at = match world.factored_at(&ids, times) {
-        Ok(at) => at,
-        Err(e) => {
-            for &(k, _) in &wanted {
-                results[k] = Err(groups[k].bodies[0].device_failure(&e));
-            }
-            return results;
-        }
-    };
-    let mut by_group: Vec<Vec<(usize, Vec<Real>)>> = groups.iter().map(|_| Vec::new()).collect();
-    for (&(k, j), u) in wanted.iter().zip(at) {
-        by_group[k].push((j, u));
-    }
-    groups.par_iter_mut().zip(by_group).zip(results.par_iter_mut()).for_each(|((g, mine), result)| {
-        for (j, u) in mine {
-            if let (Ok(()), Err(e)) = (&*result, g.bodies[j].factorize_at(&u, &mut g.newton.report.wall)) {
-                *result = Err(e);
+    let (mut owners, mut wanted): (Vec<usize>, Vec<(usize, &mut Body)>) = (Vec::new(), Vec::new());
+    for (k, g) in groups.iter_mut().enumerate().filter(|(k, _)| chosen[*k]) {
+        for (&id, body) in g.ids.iter().zip(g.bodies.iter_mut()) {
+            if body.factor_on_device() && !body.needs_factorization(c.p) {
+                owners.push(k);
+                wanted.push((id, &mut **body));
             }
         }
-    });
-    for &(k, j) in &wanted {
-        if !groups[k].bodies[j].factor_on_device() {
-            world.note_factorized(groups[k].ids[j], groups[k].bodies[j].factor_version());
+    }
+    for (k, made) in owners.into_iter().zip(super::factorize_where_the_device_did(world, &mut wanted, times)) {
+        if let (Ok(()), Err(e)) = (&results[k], made) {
+            results[k] = Err(e);
         }
     }
     results

@@ -269,6 +269,40 @@ fn take_committed_of(bodies: &mut [Body], world: Option<&mut GpuWorld>, held: &[
     Ok(())
 }
 
+/// The host's own factorisations of `bodies` (`(id, body)`) where the device made their last ones
+/// within a Newton call ([`Body::factor_on_device`]): their iterates there in one read
+/// ([`GpuWorld::factored_at`]), then each body's own tangent there, in parallel; the device then
+/// holds those versions. Returns each body's result (a device error is every body's).
+fn factorize_where_the_device_did(world: &mut GpuWorld, bodies: &mut [(usize, &mut Body)], times: &mut PhaseTimes) -> Vec<Result<(), StepFailure>> {
+    if bodies.is_empty() {
+        return Vec::new();
+    }
+    let ids: Vec<usize> = bodies.iter().map(|(id, _)| *id).collect();
+    let at = match world.factored_at(&ids, times) {
+        Ok(at) => at,
+        Err(e) => return bodies.iter().map(|(_, b)| Err(b.device_failure(&e))).collect(),
+    };
+    let made: Vec<(Result<(), StepFailure>, PhaseTimes)> = bodies
+        .par_iter_mut()
+        .zip(at)
+        .map(|((_, body), u)| {
+            let mut spent = PhaseTimes::default();
+            (body.factorize_at(&u, &mut spent), spent)
+        })
+        .collect();
+    bodies
+        .iter()
+        .zip(made)
+        .map(|((id, body), (result, spent))| {
+            *times += spent;
+            if result.is_ok() {
+                world.note_factorized(*id, body.factor_version());
+            }
+            result
+        })
+        .collect()
+}
+
 /// The step's ends the device keeps of the `needed` bodies, back into the host's (and their
 /// committed states first, where the device keeps those too).
 fn take_step_ends(bodies: &mut [Body], world: Option<&mut GpuWorld>, needed: &[bool], p: &StepParams, times: &mut PhaseTimes) -> Result<(), StepFailure> {
@@ -819,15 +853,9 @@ impl Simulation {
     /// Newton call ([`Body::factor_on_device`]), their displacements there in one read: a saved
     /// state holds the host's (a restart factorises them again).
     pub fn sync_factors(&mut self) -> Result<(), StepFailure> {
-        let pending: Vec<usize> = (0..self.bodies.len()).filter(|&b| self.bodies[b].factor_on_device()).collect();
-        let Some(world) = self.world.as_mut().filter(|_| !pending.is_empty()) else { return Ok(()) };
-        let mut times = PhaseTimes::default();
-        let at = world.factored_at(&pending, &mut times).map_err(|e| self.bodies[pending[0]].device_failure(&e))?;
-        for (&b, u) in pending.iter().zip(at) {
-            self.bodies[b].factorize_at(&u, &mut times)?;
-            world.note_factorized(b, self.bodies[b].factor_version());
-        }
-        Ok(())
+        let Some(world) = self.world.as_mut() else { return Ok(()) };
+        let mut pending: Vec<(usize, &mut Body)> = self.bodies.iter_mut().enumerate().filter(|(_, b)| b.factor_on_device()).collect();
+        factorize_where_the_device_did(world, &mut pending, &mut PhaseTimes::default()).into_iter().collect()
     }
 
     /// Energy bookkeeping of a converged step (before commit): external work, friction (as
